@@ -1,0 +1,169 @@
+//! Cameras: where each pixel's ray starts and which way it goes, in the host's world.
+//!
+//! A [`Camera`] is a rigid `world_from_camera` placement plus a [`Projection`] (Blender's
+//! perspective camera with its full intrinsics, equirectangular, VR180, ODS). Camera space is
+//! Blender's and nerfstudio's: looking down −Z, +Y up, +X right. Raster space is the image's:
+//! `x` right, `y` *down*, pixel centres at `i + 0.5`.
+//!
+//! Alignment to a field (`C_t = N⁻¹ C_o`) is not done here: the scene carries each world ray
+//! into every field instance's frame (see [`crate::scene`]), so several fields with their own
+//! object transforms can be marched jointly.
+
+mod equirect;
+mod perspective;
+mod shot;
+mod stereo;
+
+pub use equirect::Equirect;
+pub use perspective::{Perspective, SensorFit};
+pub use shot::{Shot, ShotFrame};
+pub use stereo::{Eye, Ods, Vr180};
+
+use glam::{DMat4, DVec3};
+
+use crate::error::{Error, Result};
+use crate::image::Window;
+
+/// A ray in the host's world, one per pixel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    /// Where the ray starts (world units).
+    pub origin: DVec3,
+    /// Unit direction (world).
+    pub dir: DVec3,
+    /// Camera-space depth per unit of ray distance: `dot(dir, camera −Z)` for a perspective
+    /// camera (so `Z = t · z_per_t` is what Blender's Z pass holds), 1 for panoramic cameras.
+    pub z_per_t: f64,
+}
+
+/// A ray in camera space, as a projection produces it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraRay {
+    /// Origin in camera space (non-zero for stereo eyes).
+    pub origin: DVec3,
+    /// Unit direction in camera space.
+    pub dir: DVec3,
+    /// See [`Ray::z_per_t`].
+    pub z_per_t: f64,
+}
+
+/// How camera-space rays leave the camera.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Projection {
+    /// Blender's perspective camera.
+    Perspective(Perspective),
+    /// Equirectangular (latitude-longitude) panorama, nerfstudio's convention.
+    Equirect(Equirect),
+    /// VR180 stereo: two half-sphere fisheye-like equirect halves side by side.
+    Vr180(Vr180),
+    /// Omni-directional stereo: left eye stacked over right.
+    Ods(Ods),
+}
+
+impl Projection {
+    /// The output image size in pixels (for stereo layouts, both eyes together).
+    pub fn resolution(&self) -> (u32, u32) {
+        match self {
+            Projection::Perspective(p) => p.resolution(),
+            Projection::Equirect(p) => p.resolution(),
+            Projection::Vr180(p) => p.resolution(),
+            Projection::Ods(p) => p.resolution(),
+        }
+    }
+
+    /// The camera-space ray through raster position (`x`, `y`) (pixel centres at `i + 0.5`),
+    /// or `None` where the projection has no ray.
+    pub fn camera_ray(&self, x: f64, y: f64) -> Option<CameraRay> {
+        match self {
+            Projection::Perspective(p) => p.camera_ray(x, y),
+            Projection::Equirect(p) => p.camera_ray(x, y),
+            Projection::Vr180(p) => p.camera_ray(x, y),
+            Projection::Ods(p) => p.camera_ray(x, y),
+        }
+    }
+}
+
+/// A placed camera: rigid `world_from_camera` and a projection.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Camera {
+    world_from_camera: DMat4,
+    projection: Projection,
+}
+
+impl Camera {
+    /// A camera at `world_from_camera` (Blender's `matrix_world`). Scale on the camera object
+    /// is removed, as Blender's renderer does; a matrix with NaN/inf, zero scale or a
+    /// projective row is refused.
+    pub fn new(world_from_camera: DMat4, projection: Projection) -> Result<Self> {
+        let m = world_from_camera;
+        if !m.is_finite() {
+            return Err(Error::invalid(
+                "camera matrix_world",
+                "contains NaN or infinity",
+            ));
+        }
+        if m.row(3) != glam::DVec4::new(0.0, 0.0, 0.0, 1.0) {
+            return Err(Error::invalid(
+                "camera matrix_world",
+                format!("bottom row is {:?}, expected [0, 0, 0, 1]", m.row(3)),
+            ));
+        }
+        let x = m.x_axis.truncate();
+        let y = m.y_axis.truncate();
+        let z = m.z_axis.truncate();
+        let (lx, ly, lz) = (x.length(), y.length(), z.length());
+        let smallest = lx.min(ly).min(lz);
+        if smallest <= 1e-12 * lx.max(ly).max(lz).max(1.0) || x.cross(y).dot(z) <= 0.0 {
+            return Err(Error::invalid(
+                "camera matrix_world",
+                "degenerate or mirrored rotation",
+            ));
+        }
+        // Orthonormalise (Gram-Schmidt, keeping the view axis −Z exact).
+        let zn = z / lz;
+        let xn = (x - zn * x.dot(zn)).normalize();
+        let yn = zn.cross(xn);
+        let rigid = DMat4::from_cols(
+            xn.extend(0.0),
+            yn.extend(0.0),
+            zn.extend(0.0),
+            m.w_axis,
+        );
+        Ok(Camera {
+            world_from_camera: rigid,
+            projection,
+        })
+    }
+
+    /// The rigid camera placement.
+    pub fn world_from_camera(&self) -> DMat4 {
+        self.world_from_camera
+    }
+
+    /// The projection.
+    pub fn projection(&self) -> &Projection {
+        &self.projection
+    }
+
+    /// The output image size in pixels.
+    pub fn resolution(&self) -> (u32, u32) {
+        self.projection.resolution()
+    }
+
+    /// The whole image as a render window.
+    pub fn full_window(&self) -> Window {
+        let (w, h) = self.resolution();
+        Window::new(0, 0, w, h)
+    }
+
+    /// The world ray through raster position (`x`, `y`) (top-left origin, pixel centres at
+    /// `i + 0.5`), or `None` where the projection has none.
+    pub fn ray(&self, x: f64, y: f64) -> Option<Ray> {
+        let r = self.projection.camera_ray(x, y)?;
+        Some(Ray {
+            origin: self.world_from_camera.transform_point3(r.origin),
+            dir: self.world_from_camera.transform_vector3(r.dir),
+            z_per_t: r.z_per_t,
+        })
+    }
+}

@@ -1,0 +1,39 @@
+//! Radiance fields: what the marcher samples.
+//!
+//! A [`Field`] answers *batched* density and radiance queries in its own frame and says,
+//! conservatively, where it may have density. The [`Occupancy`] structure is built from that
+//! answer and lets the marcher skip empty space. Implementations: [`Analytic`] (spheres,
+//! boxes and Gaussian blobs with closed-form ray integrals, the ground truth for accuracy).
+
+mod aabb;
+mod analytic;
+mod occupancy;
+mod sh;
+
+pub use aabb::Aabb;
+pub use analytic::{Analytic, Primitive, Shape};
+pub use occupancy::Occupancy;
+pub use sh::ShColor;
+
+use glam::Vec3;
+
+/// A radiance field in its own frame ("field space").
+///
+/// Queries are batched: the marcher gathers a tile's samples and asks once, so an
+/// implementation can vectorise and the per-call cost (a virtual call, a lock) is amortised.
+pub trait Field: Send + Sync {
+    /// A box outside of which the density is exactly zero.
+    fn bounds(&self) -> Aabb;
+
+    /// Volume density σ (per field-space unit of length, ≥ 0, finite) at each point.
+    /// `sigma.len() == points.len()`.
+    fn density(&self, points: &[Vec3], sigma: &mut [f32]);
+
+    /// Linear RGB radiance (≥ 0) at each point seen along each unit direction `dirs[i]`.
+    /// `rgb.len() == points.len() == dirs.len()`.
+    fn radiance(&self, points: &[Vec3], dirs: &[Vec3], rgb: &mut [Vec3]);
+
+    /// Whether the density may be non-zero anywhere in `region`. Must be *conservative*:
+    /// `false` only where the density is exactly zero throughout.
+    fn may_be_occupied(&self, region: &Aabb) -> bool;
+}

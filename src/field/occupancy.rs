@@ -1,0 +1,3 @@
+//! PLACEHOLDER — the field helper replaces this file.
+/// Occupancy.
+pub struct Occupancy;

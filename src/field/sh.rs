@@ -1,0 +1,3 @@
+//! PLACEHOLDER — the field helper replaces this file.
+/// ShColor.
+pub struct ShColor;

@@ -1,0 +1,27 @@
+//! nerfx: trained radiance fields in compositing pipelines.
+//!
+//! Data flows one way: a **shot** (camera per frame, from Blender) gives [`camera::Camera`]s,
+//! cameras give world-space [`camera::Ray`]s, the [`scene::Scene`] carries them into each
+//! field's frame, the [`render`] marcher samples the [`field::Field`]s along them and
+//! composites the samples into [`image::Planes`], which are written as EXR and PNG.
+//!
+//! ```
+//! use nerfx::{demo, render::{render, Outputs, RenderSettings, Quality}};
+//! let (scene, camera) = demo::scene_and_camera(64, 36).unwrap();
+//! let settings = RenderSettings::new(Quality::Draft.params(), Outputs::all());
+//! let planes = render(&scene, &camera, camera.full_window(), &settings).unwrap();
+//! assert_eq!(planes.width, 64);
+//! ```
+#![deny(missing_docs)]
+
+// pub mod bench;
+pub mod camera;
+// pub mod demo;
+pub mod error;
+pub mod field;
+pub mod image;
+pub mod reference;
+pub mod render;
+pub mod scene;
+
+pub use error::{Error, Result};

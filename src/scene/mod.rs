@@ -1,0 +1,1 @@
+//! Scenes: field instances placed in the host's world, rendered jointly.

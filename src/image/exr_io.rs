@@ -1,3 +1,322 @@
-//! PLACEHOLDER — the image helper replaces this file.
-/// Write.
-pub fn write_exr() {}
+//! OpenEXR output of render planes, and a small reader for checking and comparing them.
+//!
+//! One single-part scanline file, 32-bit float, ZIP compression (lossless, 16 lines per block),
+//! because every compositor reads that and f32 keeps depth exact. Channel names follow the
+//! conventions compositors use to sort channels into layers (Nuke and Natron split a name at
+//! its last `.` into `layer.channel`):
+//!
+//! | plane                 | channel        | layer in a compositor |
+//! |-----------------------|----------------|-----------------------|
+//! | `rgb` (premultiplied) | `R`, `G`, `B`  | `rgba`                |
+//! | `alpha` (Σ wᵢ)        | `A`            | `rgba`                |
+//! | `depth_z`             | `Z`            | `depth` (Nuke `depth.Z`) |
+//! | `depth_ray`           | `depth.ray`    | `depth`               |
+//! | `depth_median`        | `depth.median` | `depth`               |
+//!
+//! The accumulation *is* the alpha (EXR colour is premultiplied, as the render's is), so it is
+//! not written twice. Only the planes present are written.
+//!
+//! Depth where nothing was hit is `inf` in the planes; many compositing operations turn `inf`
+//! into NaN (`inf·0`, `inf − inf`), so it is written as [`BACKGROUND_DEPTH`] = 10¹⁰ instead,
+//! the value Blender writes for the background in its Z pass. Depth merges against Blender
+//! renders then see the same "far" on both sides.
+
+use std::path::Path;
+
+use exr::prelude::{
+    AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, SmallVec,
+    WritableImage,
+};
+
+use crate::error::{Error, Result};
+use crate::image::{Plane, Planes};
+
+/// Depth written where nothing was hit (the plane holds `inf` there): Blender's background
+/// value in its Z pass.
+pub const BACKGROUND_DEPTH: f32 = 1.0e10;
+
+/// Writes the present `planes` to `path` as a scanline f32 EXR (channel names in the module
+/// docs).
+///
+/// Errors: [`Error::Invalid`] when no plane is present, the image is empty, or a plane's size
+/// disagrees with `planes`; [`Error::Io`] naming `path` when the file cannot be written.
+pub fn write_exr(path: &Path, planes: &Planes) -> Result<()> {
+    let channels = channels_of(planes)?;
+    let layer = Layer::new(
+        (planes.width as usize, planes.height as usize),
+        LayerAttributes {
+            software_name: Some("nerfx".into()),
+            ..LayerAttributes::default()
+        },
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(channels),
+    );
+    Image::from_layer(layer)
+        .write()
+        .to_file(path)
+        .map_err(|e| match e {
+            exr::error::Error::Io(source) => Error::io(path, source),
+            other => Error::invalid(format!("EXR {}", path.display()), other.to_string()),
+        })
+}
+
+/// Reads every channel of every layer of the EXR at `path` as f32 planes (f16 and u32 samples
+/// are converted), in the file's order. Channels of a named part are prefixed with
+/// `part.`; the names of a single-part file are as stored (`R`, `depth.ray`, ...).
+///
+/// Errors: [`Error::Io`] when the file cannot be read, [`Error::Format`] when it is not a flat
+/// (non-deep) EXR this reader understands.
+pub fn read_exr_channels(path: &Path) -> Result<Vec<(String, Plane)>> {
+    let image = exr::prelude::read_all_flat_layers_from_file(path).map_err(|e| match e {
+        exr::error::Error::Io(source) => Error::io(path, source),
+        other => Error::format(path, "", other.to_string()),
+    })?;
+    let mut out = Vec::new();
+    for layer in image.layer_data {
+        let prefix = match &layer.attributes.layer_name {
+            Some(name) => format!("{name}."),
+            None => String::new(),
+        };
+        for channel in layer.channel_data.list {
+            let data = match channel.sample_data {
+                FlatSamples::F16(v) => v.into_iter().map(|h| h.to_f32()).collect(),
+                FlatSamples::F32(v) => v,
+                FlatSamples::U32(v) => v.into_iter().map(|u| u as f32).collect(),
+            };
+            let plane = Plane {
+                width: layer.size.0 as u32,
+                height: layer.size.1 as u32,
+                data,
+            };
+            out.push((format!("{prefix}{}", channel.name), plane));
+        }
+    }
+    Ok(out)
+}
+
+/// The EXR channels for the present planes, checked against the image size.
+fn channels_of(planes: &Planes) -> Result<SmallVec<[AnyChannel<FlatSamples>; 4]>> {
+    if planes.width == 0 || planes.height == 0 {
+        return Err(Error::invalid(
+            "EXR output",
+            format!("empty image {}×{}", planes.width, planes.height),
+        ));
+    }
+    let mut named: Vec<(&str, &Plane, bool)> = Vec::new();
+    if let Some([r, g, b]) = &planes.rgb {
+        named.extend([("R", r, false), ("G", g, false), ("B", b, false)]);
+    }
+    let depths = [
+        ("Z", &planes.depth_z),
+        ("depth.ray", &planes.depth_ray),
+        ("depth.median", &planes.depth_median),
+    ];
+    named.extend(planes.alpha.iter().map(|a| ("A", a, false)));
+    named.extend(
+        depths
+            .iter()
+            .filter_map(|(name, plane)| plane.as_ref().map(|p| (*name, p, true))),
+    );
+    if named.is_empty() {
+        return Err(Error::invalid("EXR output", "no plane to write"));
+    }
+    let expected = planes.width as usize * planes.height as usize;
+    named
+        .into_iter()
+        .map(|(name, plane, is_depth)| {
+            if plane.width != planes.width
+                || plane.height != planes.height
+                || plane.data.len() != expected
+            {
+                return Err(Error::invalid(
+                    format!("EXR output: channel {name}"),
+                    format!(
+                        "plane is {}×{} with {} samples, image is {}×{}",
+                        plane.width,
+                        plane.height,
+                        plane.data.len(),
+                        planes.width,
+                        planes.height
+                    ),
+                ));
+            }
+            let data = if is_depth {
+                plane
+                    .data
+                    .iter()
+                    .map(|&d| {
+                        if d == f32::INFINITY {
+                            BACKGROUND_DEPTH
+                        } else {
+                            d
+                        }
+                    })
+                    .collect()
+            } else {
+                plane.data.clone()
+            };
+            Ok(AnyChannel::new(name, FlatSamples::F32(data)))
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::PathBuf;
+
+    /// A unique path in the temp directory, removed on drop.
+    struct TempFile(PathBuf);
+
+    impl TempFile {
+        fn new(tag: &str) -> Self {
+            let nanos = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map(|d| d.as_nanos())
+                .unwrap_or(0);
+            TempFile(std::env::temp_dir().join(format!(
+                "nerfx-exr-{tag}-{}-{nanos}.exr",
+                std::process::id()
+            )))
+        }
+    }
+
+    impl Drop for TempFile {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_file(&self.0);
+        }
+    }
+
+    /// A plane whose samples are a distinct, non-trivial function of the pixel and `seed`
+    /// (negative, tiny and large values included, so bit exactness is really tested).
+    fn pattern(w: u32, h: u32, seed: f32) -> Plane {
+        let data = (0..w * h)
+            .map(|i| ((i as f32 * 0.731 + seed).sin() * 3.7).powi(3) * 1.0e-3_f32.powf(seed))
+            .collect();
+        Plane {
+            width: w,
+            height: h,
+            data,
+        }
+    }
+
+    fn find<'a>(channels: &'a [(String, Plane)], name: &str) -> &'a Plane {
+        &channels
+            .iter()
+            .find(|(n, _)| n == name)
+            .unwrap_or_else(|| panic!("channel {name} missing"))
+            .1
+    }
+
+    #[test]
+    fn round_trip_is_bit_exact_and_names_channels() {
+        let (w, h) = (37, 23);
+        let mut depth_z = pattern(w, h, 0.4);
+        depth_z.data[5] = f32::INFINITY;
+        let planes = Planes {
+            width: w,
+            height: h,
+            rgb: Some([pattern(w, h, 0.1), pattern(w, h, 0.2), pattern(w, h, 0.3)]),
+            alpha: Some(pattern(w, h, 0.5)),
+            depth_z: Some(depth_z.clone()),
+            depth_ray: Some(pattern(w, h, 0.6)),
+            depth_median: Some(pattern(w, h, 0.7)),
+        };
+        let file = TempFile::new("roundtrip");
+        write_exr(&file.0, &planes).unwrap();
+        let channels = read_exr_channels(&file.0).unwrap();
+
+        let mut names: Vec<&str> = channels.iter().map(|(n, _)| n.as_str()).collect();
+        names.sort_unstable();
+        assert_eq!(
+            names,
+            ["A", "B", "G", "R", "Z", "depth.median", "depth.ray"]
+        );
+        let [r, g, b] = planes.rgb.as_ref().unwrap();
+        let expect: [(&str, &Plane); 6] = [
+            ("R", r),
+            ("G", g),
+            ("B", b),
+            ("A", planes.alpha.as_ref().unwrap()),
+            ("depth.ray", planes.depth_ray.as_ref().unwrap()),
+            ("depth.median", planes.depth_median.as_ref().unwrap()),
+        ];
+        for (name, want) in expect {
+            let got = find(&channels, name);
+            assert_eq!((got.width, got.height), (w, h), "{name}");
+            let same = got
+                .data
+                .iter()
+                .zip(&want.data)
+                .all(|(a, b)| a.to_bits() == b.to_bits());
+            assert!(same, "channel {name} differs");
+        }
+        // Z: bit exact except the background sample, which becomes Blender's 1e10.
+        let z = find(&channels, "Z");
+        for (i, (got, want)) in z.data.iter().zip(&depth_z.data).enumerate() {
+            let want = if i == 5 { 1.0e10 } else { *want };
+            assert_eq!(got.to_bits(), want.to_bits(), "Z sample {i}");
+        }
+    }
+
+    #[test]
+    fn only_present_planes_are_written() {
+        let planes = Planes {
+            width: 3,
+            height: 2,
+            rgb: None,
+            alpha: None,
+            depth_z: None,
+            depth_ray: Some(Plane::filled(3, 2, f32::INFINITY)),
+            depth_median: None,
+        };
+        let file = TempFile::new("ray-only");
+        write_exr(&file.0, &planes).unwrap();
+        let channels = read_exr_channels(&file.0).unwrap();
+        assert_eq!(channels.len(), 1);
+        assert_eq!(channels[0].0, "depth.ray");
+        assert!(channels[0].1.data.iter().all(|&d| d == 1.0e10));
+    }
+
+    #[test]
+    fn missing_directory_is_an_io_error_naming_the_path() {
+        let dir = TempFile::new("no-such-dir");
+        let path = dir.0.join("out.exr");
+        let planes = Planes {
+            width: 2,
+            height: 2,
+            rgb: None,
+            alpha: Some(Plane::filled(2, 2, 1.0)),
+            depth_z: None,
+            depth_ray: None,
+            depth_median: None,
+        };
+        match write_exr(&path, &planes) {
+            Err(Error::Io { path: p, .. }) => assert_eq!(p, path),
+            other => panic!("expected an Io error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn refuses_no_planes_and_mismatched_sizes() {
+        let mut planes = Planes {
+            width: 4,
+            height: 2,
+            rgb: None,
+            alpha: None,
+            depth_z: None,
+            depth_ray: None,
+            depth_median: None,
+        };
+        let file = TempFile::new("refused");
+        assert!(matches!(
+            write_exr(&file.0, &planes),
+            Err(Error::Invalid { .. })
+        ));
+        planes.alpha = Some(Plane::filled(2, 4, 1.0));
+        assert!(matches!(
+            write_exr(&file.0, &planes),
+            Err(Error::Invalid { .. })
+        ));
+    }
+}

@@ -4,6 +4,6 @@ mod exr_io;
 mod plane;
 mod png;
 
-pub use exr_io::write_exr;
+pub use exr_io::{read_exr_channels, write_exr, BACKGROUND_DEPTH};
 pub use plane::{Plane, Planes, Window};
-pub use png::write_png_preview;
+pub use png::{encode_png_rgba8, write_png_preview};

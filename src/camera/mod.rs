@@ -15,9 +15,9 @@ mod shot;
 mod stereo;
 
 pub use equirect::Equirect;
-pub use perspective::{Perspective, SensorFit};
-pub use shot::{Shot, ShotFrame};
-pub use stereo::{Eye, Ods, Vr180};
+pub use perspective::{BlenderIntrinsics, Perspective, SensorFit};
+pub use shot::{Shot, ShotCamera, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, SHOT_VERSION};
+pub use stereo::{Eye, Ods, Vr180, DEFAULT_IPD};
 
 use glam::{DMat4, DVec3};
 
@@ -123,12 +123,7 @@ impl Camera {
         let zn = z / lz;
         let xn = (x - zn * x.dot(zn)).normalize();
         let yn = zn.cross(xn);
-        let rigid = DMat4::from_cols(
-            xn.extend(0.0),
-            yn.extend(0.0),
-            zn.extend(0.0),
-            m.w_axis,
-        );
+        let rigid = DMat4::from_cols(xn.extend(0.0), yn.extend(0.0), zn.extend(0.0), m.w_axis);
         Ok(Camera {
             world_from_camera: rigid,
             projection,

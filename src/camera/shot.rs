@@ -1,5 +1,740 @@
-//! PLACEHOLDER — the camera helper replaces this file.
-/// Shot.
-pub struct Shot;
-/// Frame.
-pub struct ShotFrame;
+//! The nerfx **shot file**: what the Blender add-on writes per frame (camera placement and
+//! intrinsics, the NeRF object's matrix `N`), JSON, schema version 1.
+//!
+//! ```json
+//! {"version": 1, "fps": 24, "fps_base": 1.0,
+//!  "resolution_x": 1920, "resolution_y": 1080, "resolution_percentage": 100,
+//!  "pixel_aspect_x": 1, "pixel_aspect_y": 1,
+//!  "nerf_object": "NeRF",
+//!  "frames": [{"frame": 1001,
+//!     "camera": {"matrix_world": [[1,0,0,0],[0,1,0,0],[0,0,1,5],[0,0,0,1]],
+//!                "type": "PERSP", "lens": 50, "sensor_width": 36, "sensor_height": 24,
+//!                "sensor_fit": "AUTO", "shift_x": 0, "shift_y": 0,
+//!                "clip_start": 0.1, "clip_end": 1000, "stereo": null},
+//!     "objects": {"NeRF": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}}]}
+//! ```
+//!
+//! Matrices are lists of four **rows** (Blender's `matrix_world` read row by row). `type` is
+//! `PERSP` or `PANO`; a `PANO` camera needs `"panorama_type": "EQUIRECTANGULAR"` (the full
+//! sphere) and may carry `"stereo": {"mode": "ODS"|"VR180", "eye": "left"|"right"|"both",
+//! "ipd": 0.064}`; the resolution is then per eye. For `PERSP`, `lens`, `sensor_width`,
+//! `sensor_height` and `sensor_fit` are required. Optional, with Blender's defaults:
+//! `fps_base` (1), `resolution_percentage` (100), `pixel_aspect_x/y` (1), `shift_x/y` (0),
+//! `clip_start` (0.1), `clip_end` (1000), `stereo` (none). Unknown fields are ignored.
+//!
+//! Reading parses the text with serde into a JSON tree, then walks it with typed accessors
+//! that know where they are, so that every message names the file, the frame index and the
+//! field (`shot.json: frames[3].camera.lens: expected a number > 0, got 0`); a derived
+//! `Deserialize` could not say *which* field had the wrong type. Python's `json` writes
+//! non-finite floats as bare `NaN`/`Infinity`, which is not JSON: those tokens are read as
+//! `null` so that the refusal can name the field. Writing goes through private `Serialize`
+//! structs, after checking that every number is finite.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use glam::DMat4;
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+use serde_json::{Map, Value};
+
+use super::{
+    BlenderIntrinsics, Camera, Equirect, Eye, Ods, Perspective, Projection, SensorFit, Vr180,
+};
+use crate::error::{Error, Result};
+
+/// The shot-file schema version this code reads and writes.
+pub const SHOT_VERSION: u64 = 1;
+
+/// A shot: output format and, per frame, the camera and the object matrices.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Shot {
+    /// Frames per second (`scene.render.fps`); the true rate is `fps / fps_base`.
+    pub fps: f64,
+    /// `scene.render.fps_base`.
+    pub fps_base: f64,
+    /// Output width before the percentage (per eye for stereo).
+    pub resolution_x: u32,
+    /// Output height before the percentage (per eye for stereo).
+    pub resolution_y: u32,
+    /// Resolution scale in percent.
+    pub resolution_percentage: u32,
+    /// Pixel aspect X (perspective cameras only).
+    pub pixel_aspect_x: f64,
+    /// Pixel aspect Y (perspective cameras only).
+    pub pixel_aspect_y: f64,
+    /// Name of the NeRF stand-in object, whose matrix `N` every frame carries.
+    pub nerf_object: String,
+    /// The frames, in file order; frame numbers are unique.
+    pub frames: Vec<ShotFrame>,
+    /// The file the shot was read from, used in messages (empty when built in memory); not
+    /// written.
+    pub source: PathBuf,
+}
+
+/// One frame of a shot.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShotFrame {
+    /// Blender's frame number.
+    pub frame: i64,
+    /// The camera at this frame.
+    pub camera: ShotCamera,
+    /// World matrices of named objects (`matrix_world`) at this frame.
+    pub objects: BTreeMap<String, DMat4>,
+}
+
+/// A Blender camera at one frame, as the shot file stores it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShotCamera {
+    /// The camera object's `matrix_world` (camera to world).
+    pub world_from_camera: DMat4,
+    /// Perspective or equirectangular panorama.
+    pub kind: ShotCameraKind,
+    /// Focal length (mm).
+    pub lens: f64,
+    /// Sensor width (mm).
+    pub sensor_width: f64,
+    /// Sensor height (mm).
+    pub sensor_height: f64,
+    /// Sensor fit.
+    pub sensor_fit: SensorFit,
+    /// Horizontal shift, in units of the fitted side.
+    pub shift_x: f64,
+    /// Vertical shift, in units of the fitted side.
+    pub shift_y: f64,
+    /// Near clip distance (Blender units).
+    pub clip_start: f64,
+    /// Far clip distance (Blender units).
+    pub clip_end: f64,
+    /// Stereo settings of a panoramic camera; `None` for a mono camera.
+    pub stereo: Option<ShotStereo>,
+}
+
+/// The camera types a shot file may hold.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ShotCameraKind {
+    /// `"type": "PERSP"`.
+    Perspective,
+    /// `"type": "PANO"` with `"panorama_type": "EQUIRECTANGULAR"`.
+    Equirect,
+}
+
+/// Stereo layout of a panoramic camera.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ShotStereo {
+    /// ODS or VR180.
+    pub mode: StereoMode,
+    /// Which eye(s).
+    pub eye: Eye,
+    /// Interpupillary distance in scene units.
+    pub ipd: f64,
+}
+
+/// Which stereo panorama.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, serde::Deserialize)]
+pub enum StereoMode {
+    /// Omni-directional stereo (`"ODS"`), eyes stacked left over right.
+    #[serde(rename = "ODS")]
+    Ods,
+    /// VR180 (`"VR180"`), eyes side by side.
+    #[serde(rename = "VR180")]
+    Vr180,
+}
+
+impl Shot {
+    /// Reads and validates a shot file.
+    pub fn read(path: impl AsRef<Path>) -> Result<Shot> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        Shot::from_json_str(&text, path)
+    }
+
+    /// Parses and validates shot JSON; `path_for_errors` names the source in messages.
+    pub fn from_json_str(text: &str, path_for_errors: impl AsRef<Path>) -> Result<Shot> {
+        let path = path_for_errors.as_ref();
+        let root: Value = serde_json::from_str(&non_finite_tokens_to_null(text)).map_err(|e| {
+            Error::format(
+                path,
+                format!("line {} column {}", e.line(), e.column()),
+                format!("not valid JSON: {e}"),
+            )
+        })?;
+        let top = Node::root(&root, path)?;
+        let version = top.get::<u64>("version", "an integer")?;
+        if version != SHOT_VERSION {
+            return Err(top.error(
+                "version",
+                format!(
+                    "version {version} is not supported; this nerfx reads version {SHOT_VERSION}"
+                ),
+            ));
+        }
+        let mut shot = Shot {
+            fps: top.positive("fps")?,
+            fps_base: top.positive_or("fps_base", 1.0)?,
+            resolution_x: top.count("resolution_x")?,
+            resolution_y: top.count("resolution_y")?,
+            resolution_percentage: if top.map.contains_key("resolution_percentage") {
+                top.count("resolution_percentage")?
+            } else {
+                100
+            },
+            pixel_aspect_x: top.positive_or("pixel_aspect_x", 1.0)?,
+            pixel_aspect_y: top.positive_or("pixel_aspect_y", 1.0)?,
+            nerf_object: top.get::<String>("nerf_object", "a string")?,
+            frames: Vec::new(),
+            source: path.to_path_buf(),
+        };
+        let frames = top.array("frames")?;
+        if frames.is_empty() {
+            return Err(top.error("frames", "expected at least one frame"));
+        }
+        for (i, value) in frames.iter().enumerate() {
+            let node = Node::new(value, path, format!("frames[{i}]"))?;
+            let frame = read_frame(&node, &shot.nerf_object)?;
+            if let Some(j) = shot.frames.iter().position(|f| f.frame == frame.frame) {
+                return Err(node.error(
+                    "frame",
+                    format!("frame {} is already given by frames[{j}]", frame.frame),
+                ));
+            }
+            shot.frames.push(frame);
+        }
+        // Build every camera once, so that a bad matrix or resolution is reported now, with
+        // its location, rather than mid-render.
+        for frame in &shot.frames {
+            frame.camera(&shot)?;
+        }
+        Ok(shot)
+    }
+
+    /// Writes the shot as JSON (schema version 1). Refuses non-finite numbers, which JSON
+    /// cannot hold.
+    pub fn write(&self, path: impl AsRef<Path>) -> Result<()> {
+        let path = path.as_ref();
+        let text = self.to_json_string(path)?;
+        std::fs::write(path, text).map_err(|e| Error::io(path, e))
+    }
+
+    /// The frame numbered `frame`; the error names the file and the frames it holds.
+    pub fn frame(&self, frame: i64) -> Result<&ShotFrame> {
+        if let Some(f) = self.frames.iter().find(|f| f.frame == frame) {
+            return Ok(f);
+        }
+        let first = self.frames.iter().map(|f| f.frame).min();
+        let last = self.frames.iter().map(|f| f.frame).max();
+        let held = match (first, last) {
+            (Some(a), Some(b)) => format!("{} frames, {a} to {b}", self.frames.len()),
+            _ => "no frames".to_string(),
+        };
+        Err(Error::format(
+            &self.source,
+            "frames",
+            format!("frame {frame} is not in the shot (it holds {held})"),
+        ))
+    }
+
+    /// Frames per second: `fps / fps_base`.
+    pub fn frame_rate(&self) -> f64 {
+        self.fps / self.fps_base
+    }
+
+    fn to_json_string(&self, path: &Path) -> Result<String> {
+        let what = |loc: String| format!("{}: {loc}", path.display());
+        let finite = |loc: String, v: f64| -> Result<f64> {
+            if v.is_finite() {
+                Ok(v)
+            } else {
+                Err(Error::invalid(
+                    what(loc),
+                    format!("{v} cannot be written to JSON"),
+                ))
+            }
+        };
+        let matrix = |loc: String, m: &DMat4| -> Result<[[f64; 4]; 4]> {
+            if m.is_finite() {
+                Ok(m.transpose().to_cols_array_2d())
+            } else {
+                Err(Error::invalid(what(loc), "matrix contains NaN or infinity"))
+            }
+        };
+        let mut frames = Vec::with_capacity(self.frames.len());
+        for (i, f) in self.frames.iter().enumerate() {
+            let c = &f.camera;
+            let at = |field: &str| format!("frames[{i}].camera.{field}");
+            let mut objects = BTreeMap::new();
+            for (name, m) in &f.objects {
+                objects.insert(
+                    name.as_str(),
+                    matrix(format!("frames[{i}].objects.{name}"), m)?,
+                );
+            }
+            let (kind, panorama_type) = match c.kind {
+                ShotCameraKind::Perspective => ("PERSP", None),
+                ShotCameraKind::Equirect => ("PANO", Some("EQUIRECTANGULAR")),
+            };
+            if let Some(s) = &c.stereo {
+                finite(at("stereo.ipd"), s.ipd)?;
+            }
+            frames.push(RawFrame {
+                frame: f.frame,
+                camera: RawCamera {
+                    matrix_world: matrix(at("matrix_world"), &c.world_from_camera)?,
+                    kind,
+                    panorama_type,
+                    lens: finite(at("lens"), c.lens)?,
+                    sensor_width: finite(at("sensor_width"), c.sensor_width)?,
+                    sensor_height: finite(at("sensor_height"), c.sensor_height)?,
+                    sensor_fit: c.sensor_fit,
+                    shift_x: finite(at("shift_x"), c.shift_x)?,
+                    shift_y: finite(at("shift_y"), c.shift_y)?,
+                    clip_start: finite(at("clip_start"), c.clip_start)?,
+                    clip_end: finite(at("clip_end"), c.clip_end)?,
+                    stereo: c.stereo,
+                },
+                objects,
+            });
+        }
+        let raw = RawShot {
+            version: SHOT_VERSION,
+            fps: finite("fps".into(), self.fps)?,
+            fps_base: finite("fps_base".into(), self.fps_base)?,
+            resolution_x: self.resolution_x,
+            resolution_y: self.resolution_y,
+            resolution_percentage: self.resolution_percentage,
+            pixel_aspect_x: finite("pixel_aspect_x".into(), self.pixel_aspect_x)?,
+            pixel_aspect_y: finite("pixel_aspect_y".into(), self.pixel_aspect_y)?,
+            nerf_object: &self.nerf_object,
+            frames,
+        };
+        serde_json::to_string_pretty(&raw)
+            .map_err(|e| Error::invalid(what("shot".into()), e.to_string()))
+    }
+}
+
+impl ShotFrame {
+    /// The camera of this frame, with the shot's output format: Blender's perspective camera,
+    /// an equirectangular panorama, or ODS/VR180 for a stereo panorama.
+    pub fn camera(&self, shot: &Shot) -> Result<Camera> {
+        let index = shot.frames.iter().position(|f| f.frame == self.frame);
+        let loc = match index {
+            Some(i) => format!("frames[{i}].camera"),
+            None => format!("frame {}: camera", self.frame),
+        };
+        let in_context = |e: Error| match e {
+            Error::Invalid { what, message } => {
+                Error::format(&shot.source, &loc, format!("{what}: {message}"))
+            }
+            other => other,
+        };
+        let c = &self.camera;
+        let intrinsics = c.intrinsics(shot);
+        let projection = match (c.kind, c.stereo) {
+            (ShotCameraKind::Perspective, None) => {
+                Projection::Perspective(Perspective::from_blender(&intrinsics).map_err(in_context)?)
+            }
+            (ShotCameraKind::Perspective, Some(_)) => {
+                return Err(Error::format(
+                    &shot.source,
+                    format!("{loc}.stereo"),
+                    "ODS and VR180 need a panoramic camera (type PANO, EQUIRECTANGULAR)",
+                ))
+            }
+            (ShotCameraKind::Equirect, stereo) => {
+                let (w, h) = intrinsics.effective_resolution().map_err(in_context)?;
+                match stereo {
+                    None => Projection::Equirect(Equirect::new(w, h).map_err(in_context)?),
+                    Some(s) => match s.mode {
+                        StereoMode::Ods => {
+                            Projection::Ods(Ods::new(w, h, s.eye, s.ipd).map_err(in_context)?)
+                        }
+                        StereoMode::Vr180 => {
+                            Projection::Vr180(Vr180::new(w, h, s.eye, s.ipd).map_err(in_context)?)
+                        }
+                    },
+                }
+            }
+        };
+        Camera::new(c.world_from_camera, projection).map_err(in_context)
+    }
+
+    /// The world matrix of the object `name` at this frame.
+    pub fn object_matrix(&self, name: &str) -> Result<DMat4> {
+        self.objects.get(name).copied().ok_or_else(|| {
+            let names: Vec<&str> = self.objects.keys().map(String::as_str).collect();
+            Error::invalid(
+                format!("frame {}", self.frame),
+                format!("no object named {name:?} (objects: {})", names.join(", ")),
+            )
+        })
+    }
+}
+
+impl ShotCamera {
+    /// The camera's intrinsics together with the shot's output format.
+    pub fn intrinsics(&self, shot: &Shot) -> BlenderIntrinsics {
+        BlenderIntrinsics {
+            lens: self.lens,
+            sensor_width: self.sensor_width,
+            sensor_height: self.sensor_height,
+            sensor_fit: self.sensor_fit,
+            shift_x: self.shift_x,
+            shift_y: self.shift_y,
+            resolution_x: shot.resolution_x,
+            resolution_y: shot.resolution_y,
+            resolution_percentage: shot.resolution_percentage,
+            pixel_aspect_x: shot.pixel_aspect_x,
+            pixel_aspect_y: shot.pixel_aspect_y,
+        }
+    }
+}
+
+fn read_frame(node: &Node, nerf_object: &str) -> Result<ShotFrame> {
+    let frame = node.get::<i64>("frame", "an integer frame number")?;
+    let cam = node.object("camera")?;
+    let camera = read_camera(&cam)?;
+    let objs = node.object("objects")?;
+    let mut objects = BTreeMap::new();
+    for key in objs.map.keys() {
+        let m = objs.matrix(key)?;
+        if !(m.determinant().abs() > 1e-300) {
+            return Err(objs.error(
+                key,
+                "matrix is singular (zero scale?); it cannot be inverted",
+            ));
+        }
+        objects.insert(key.clone(), m);
+    }
+    if !objects.contains_key(nerf_object) {
+        return Err(node.error(
+            "objects",
+            format!("no matrix for the NeRF object {nerf_object:?} (see \"nerf_object\")"),
+        ));
+    }
+    Ok(ShotFrame {
+        frame,
+        camera,
+        objects,
+    })
+}
+
+fn read_camera(cam: &Node) -> Result<ShotCamera> {
+    let kind = match cam.get::<String>("type", "a string")?.as_str() {
+        "PERSP" => ShotCameraKind::Perspective,
+        "PANO" => match cam.get::<String>("panorama_type", "a string")?.as_str() {
+            "EQUIRECTANGULAR" => ShotCameraKind::Equirect,
+            other => {
+                return Err(cam.error(
+                    "panorama_type",
+                    format!("{other} is not supported; expected EQUIRECTANGULAR"),
+                ))
+            }
+        },
+        other => {
+            return Err(cam.error(
+                "type",
+                format!("{other} cameras are not supported; expected PERSP or PANO"),
+            ))
+        }
+    };
+    let defaults = BlenderIntrinsics::default();
+    let persp = kind == ShotCameraKind::Perspective;
+    // Lens and sensor only matter for a perspective camera: required there, defaulted else.
+    let lens_field = |key: &str, default: f64| {
+        if persp {
+            cam.positive(key)
+        } else {
+            cam.positive_or(key, default)
+        }
+    };
+    let camera = ShotCamera {
+        world_from_camera: cam.matrix("matrix_world")?,
+        kind,
+        lens: lens_field("lens", defaults.lens)?,
+        sensor_width: lens_field("sensor_width", defaults.sensor_width)?,
+        sensor_height: lens_field("sensor_height", defaults.sensor_height)?,
+        sensor_fit: if persp || cam.opt("sensor_fit").is_some() {
+            cam.get::<SensorFit>(
+                "sensor_fit",
+                "one of \"AUTO\", \"HORIZONTAL\", \"VERTICAL\"",
+            )?
+        } else {
+            SensorFit::Auto
+        },
+        shift_x: cam.number_or("shift_x", 0.0)?,
+        shift_y: cam.number_or("shift_y", 0.0)?,
+        clip_start: cam.positive_or("clip_start", 0.1)?,
+        clip_end: cam.positive_or("clip_end", 1000.0)?,
+        stereo: match cam.opt("stereo") {
+            None => None,
+            Some(_) => {
+                let s = cam.object("stereo")?;
+                Some(ShotStereo {
+                    mode: s.get::<StereoMode>("mode", "\"ODS\" or \"VR180\"")?,
+                    eye: s.get::<Eye>("eye", "\"left\", \"right\" or \"both\"")?,
+                    ipd: s.number_or("ipd", super::DEFAULT_IPD)?,
+                })
+            }
+        },
+    };
+    if camera.clip_end <= camera.clip_start {
+        return Err(cam.error(
+            "clip_end",
+            format!(
+                "{} is not beyond clip_start {}",
+                camera.clip_end, camera.clip_start
+            ),
+        ));
+    }
+    Ok(camera)
+}
+
+/// A JSON object being read, with its location for messages.
+struct Node<'a> {
+    map: &'a Map<String, Value>,
+    path: &'a Path,
+    /// JSON path of this object, e.g. `frames[3].camera`; empty at the top.
+    loc: String,
+}
+
+impl<'a> Node<'a> {
+    fn root(value: &'a Value, path: &'a Path) -> Result<Self> {
+        Node::new(value, path, String::new())
+    }
+
+    fn new(value: &'a Value, path: &'a Path, loc: String) -> Result<Self> {
+        match value {
+            Value::Object(map) => Ok(Node { map, path, loc }),
+            other => Err(Error::format(
+                path,
+                loc,
+                format!("expected a JSON object, got {}", kind_of(other)),
+            )),
+        }
+    }
+
+    fn field_loc(&self, key: &str) -> String {
+        if self.loc.is_empty() {
+            key.to_string()
+        } else {
+            format!("{}.{key}", self.loc)
+        }
+    }
+
+    fn error(&self, key: &str, message: impl Into<String>) -> Error {
+        Error::format(self.path, self.field_loc(key), message)
+    }
+
+    /// The value at `key`; JSON `null` counts as absent.
+    fn opt(&self, key: &str) -> Option<&'a Value> {
+        self.map.get(key).filter(|v| !v.is_null())
+    }
+
+    fn required(&self, key: &str, expected: &str) -> Result<&'a Value> {
+        match self.map.get(key) {
+            None => Err(self.error(key, format!("missing; expected {expected}"))),
+            Some(Value::Null) => Err(self.error(
+                key,
+                format!("expected {expected}, got null (or NaN/Infinity, which JSON cannot hold)"),
+            )),
+            Some(v) => Ok(v),
+        }
+    }
+
+    /// A required value of type `T`, described as `expected` in messages.
+    fn get<T: DeserializeOwned>(&self, key: &str, expected: &str) -> Result<T> {
+        let v = self.required(key, expected)?;
+        T::deserialize(v)
+            .map_err(|_| self.error(key, format!("expected {expected}, got {}", short(v))))
+    }
+
+    fn number_or(&self, key: &str, default: f64) -> Result<f64> {
+        if self.map.contains_key(key) {
+            self.get::<f64>(key, "a finite number")
+        } else {
+            Ok(default)
+        }
+    }
+
+    fn positive(&self, key: &str) -> Result<f64> {
+        let v = self.get::<f64>(key, "a number > 0")?;
+        if v > 0.0 {
+            Ok(v)
+        } else {
+            Err(self.error(key, format!("expected a number > 0, got {v}")))
+        }
+    }
+
+    fn positive_or(&self, key: &str, default: f64) -> Result<f64> {
+        if self.map.contains_key(key) {
+            self.positive(key)
+        } else {
+            Ok(default)
+        }
+    }
+
+    /// A whole number ≥ 1 that fits in `u32`.
+    fn count(&self, key: &str) -> Result<u32> {
+        let v = self.get::<u64>(key, "a whole number ≥ 1")?;
+        match u32::try_from(v) {
+            Ok(n) if n >= 1 => Ok(n),
+            _ => Err(self.error(key, format!("expected a whole number ≥ 1, got {v}"))),
+        }
+    }
+
+    fn array(&self, key: &str) -> Result<&'a Vec<Value>> {
+        match self.required(key, "a list")? {
+            Value::Array(a) => Ok(a),
+            other => Err(self.error(key, format!("expected a list, got {}", kind_of(other)))),
+        }
+    }
+
+    fn object(&self, key: &str) -> Result<Node<'a>> {
+        let v = self.required(key, "an object")?;
+        Node::new(v, self.path, self.field_loc(key))
+    }
+
+    /// A 4×4 matrix as four rows of four finite numbers, affine (bottom row 0 0 0 1).
+    fn matrix(&self, key: &str) -> Result<DMat4> {
+        let loc = self.field_loc(key);
+        let rows = match self.required(key, "a 4×4 matrix (four rows)")? {
+            Value::Array(rows) if rows.len() == 4 => rows,
+            other => {
+                return Err(self.error(
+                    key,
+                    format!("expected a 4×4 matrix (four rows), got {}", short(other)),
+                ))
+            }
+        };
+        let mut m = [[0.0f64; 4]; 4];
+        for (r, row) in rows.iter().enumerate() {
+            let cells = match row {
+                Value::Array(cells) if cells.len() == 4 => cells,
+                other => {
+                    return Err(Error::format(
+                        self.path,
+                        format!("{loc}[{r}]"),
+                        format!("expected a row of four numbers, got {}", short(other)),
+                    ))
+                }
+            };
+            for (c, cell) in cells.iter().enumerate() {
+                m[r][c] = match cell.as_f64() {
+                    Some(x) if x.is_finite() => x,
+                    _ => {
+                        return Err(Error::format(
+                            self.path,
+                            format!("{loc}[{r}][{c}]"),
+                            format!(
+                                "expected a finite number, got {} (NaN or infinity in the matrix?)",
+                                short(cell)
+                            ),
+                        ))
+                    }
+                };
+            }
+        }
+        if m[3] != [0.0, 0.0, 0.0, 1.0] {
+            return Err(self.error(
+                key,
+                format!("bottom row is {:?}, expected [0, 0, 0, 1]", m[3]),
+            ));
+        }
+        // Rows in the file; glam is column-major.
+        Ok(DMat4::from_cols_array_2d(&m).transpose())
+    }
+}
+
+fn kind_of(v: &Value) -> &'static str {
+    match v {
+        Value::Null => "null",
+        Value::Bool(_) => "a boolean",
+        Value::Number(_) => "a number",
+        Value::String(_) => "a string",
+        Value::Array(_) => "a list",
+        Value::Object(_) => "an object",
+    }
+}
+
+/// A value for a message, cut short.
+fn short(v: &Value) -> String {
+    let s = v.to_string();
+    if s.chars().count() > 40 {
+        format!("{}…", s.chars().take(40).collect::<String>())
+    } else {
+        s
+    }
+}
+
+/// Replaces the bare tokens `NaN`, `Infinity` and `-Infinity` outside strings (what Python's
+/// `json` writes for non-finite floats) by `null`, so that the schema walk can name the field.
+fn non_finite_tokens_to_null(text: &str) -> std::borrow::Cow<'_, str> {
+    if !(text.contains("NaN") || text.contains("Infinity")) {
+        return text.into();
+    }
+    let mut out = String::with_capacity(text.len());
+    let (mut in_string, mut escaped) = (false, false);
+    let mut rest = text;
+    while let Some(ch) = rest.chars().next() {
+        if in_string {
+            if escaped {
+                escaped = false;
+            } else if ch == '\\' {
+                escaped = true;
+            } else if ch == '"' {
+                in_string = false;
+            }
+        } else if ch == '"' {
+            in_string = true;
+        } else if let Some(token) = ["NaN", "-Infinity", "Infinity"]
+            .iter()
+            .find(|t| rest.starts_with(**t))
+        {
+            out.push_str("null");
+            rest = &rest[token.len()..];
+            continue;
+        }
+        out.push(ch);
+        rest = &rest[ch.len_utf8()..];
+    }
+    out.into()
+}
+
+#[derive(Serialize)]
+struct RawShot<'a> {
+    version: u64,
+    fps: f64,
+    fps_base: f64,
+    resolution_x: u32,
+    resolution_y: u32,
+    resolution_percentage: u32,
+    pixel_aspect_x: f64,
+    pixel_aspect_y: f64,
+    nerf_object: &'a str,
+    frames: Vec<RawFrame<'a>>,
+}
+
+#[derive(Serialize)]
+struct RawFrame<'a> {
+    frame: i64,
+    camera: RawCamera,
+    objects: BTreeMap<&'a str, [[f64; 4]; 4]>,
+}
+
+#[derive(Serialize)]
+struct RawCamera {
+    matrix_world: [[f64; 4]; 4],
+    #[serde(rename = "type")]
+    kind: &'static str,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    panorama_type: Option<&'static str>,
+    lens: f64,
+    sensor_width: f64,
+    sensor_height: f64,
+    sensor_fit: SensorFit,
+    shift_x: f64,
+    shift_y: f64,
+    clip_start: f64,
+    clip_end: f64,
+    stereo: Option<ShotStereo>,
+}

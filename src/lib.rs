@@ -16,9 +16,10 @@
 
 // pub mod bench;
 pub mod camera;
-// pub mod demo;
+pub mod demo;
 pub mod error;
 pub mod field;
+pub mod frames;
 pub mod image;
 pub mod reference;
 pub mod render;

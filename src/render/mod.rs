@@ -1,1 +1,230 @@
 //! The tiled ray marcher.
+//!
+//! [`render`] splits the window into tiles and marches them in parallel (rayon), each with
+//! per-thread scratch ([`march`]); [`composite`] holds the pure compositing formulas;
+//! [`Quality`] presets set the dials; [`render_naive`] is the uniform-step baseline the
+//! benchmark compares against.
+
+mod composite;
+mod march;
+mod naive;
+mod quality;
+
+pub use composite::{crossing_depth, opacity, Pieces};
+pub use naive::render_naive;
+pub use quality::{MarchParams, Quality};
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::image::{Plane, Planes, Window};
+use crate::scene::Scene;
+use march::{march_tile, InstancePlan, PixelResult, Scratch};
+
+/// Which planes to produce. Work for planes nobody asked for is not done (no colour
+/// queries without `rgb`, no median log without `depth_median`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Outputs {
+    /// Premultiplied RGB.
+    pub rgb: bool,
+    /// Accumulation.
+    pub alpha: bool,
+    /// Expected depth as camera Z.
+    pub depth_z: bool,
+    /// Expected depth as ray distance.
+    pub depth_ray: bool,
+    /// Median depth (ray distance).
+    pub depth_median: bool,
+}
+
+impl Outputs {
+    /// Every plane.
+    pub fn all() -> Self {
+        Outputs {
+            rgb: true,
+            alpha: true,
+            depth_z: true,
+            depth_ray: true,
+            depth_median: true,
+        }
+    }
+
+    /// Premultiplied RGBA only.
+    pub fn rgba() -> Self {
+        Outputs {
+            rgb: true,
+            alpha: true,
+            depth_z: false,
+            depth_ray: false,
+            depth_median: false,
+        }
+    }
+}
+
+/// Everything a render needs besides the scene and camera.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RenderSettings {
+    /// The marcher's dials (usually a [`Quality`] preset's).
+    pub march: MarchParams,
+    /// Which planes to produce.
+    pub outputs: Outputs,
+    /// Tile side in pixels.
+    pub tile_size: u32,
+}
+
+impl RenderSettings {
+    /// Settings with 16-pixel tiles.
+    pub fn new(march: MarchParams, outputs: Outputs) -> Self {
+        RenderSettings {
+            march,
+            outputs,
+            tile_size: 16,
+        }
+    }
+}
+
+/// The most pixels one render call produces (a 16k × 16k window).
+const MAX_WINDOW_PIXELS: usize = 1 << 28;
+
+/// What a render did, for benchmarks and logs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RenderStats {
+    /// Pixels rendered.
+    pub pixels: u64,
+    /// Density queries (regular and refinement samples, summed over instances).
+    pub density_samples: u64,
+    /// Radiance queries.
+    pub color_samples: u64,
+}
+
+impl RenderStats {
+    fn add(mut self, other: RenderStats) -> RenderStats {
+        self.pixels += other.pixels;
+        self.density_samples += other.density_samples;
+        self.color_samples += other.color_samples;
+        self
+    }
+}
+
+/// Renders `window` (clamped to the camera's image) of `scene` seen by `camera`.
+pub fn render(
+    scene: &Scene,
+    camera: &Camera,
+    window: Window,
+    settings: &RenderSettings,
+) -> Result<Planes> {
+    render_with_progress(scene, camera, window, settings, &|_| {}).map(|(planes, _)| planes)
+}
+
+/// [`render`], calling `on_tile(pixels)` as each tile finishes (from any thread) and
+/// returning what the render did.
+pub fn render_with_progress(
+    scene: &Scene,
+    camera: &Camera,
+    window: Window,
+    settings: &RenderSettings,
+    on_tile: &(dyn Fn(u64) + Sync),
+) -> Result<(Planes, RenderStats)> {
+    let window = checked_window(camera, window)?;
+    let plans = InstancePlan::for_scene(scene, &settings.march);
+    let tiles = tiles(window, settings.tile_size.max(1));
+    let results: Vec<(Window, Vec<PixelResult>, RenderStats)> = tiles
+        .into_par_iter()
+        .map_init(Scratch::default, |scratch, tile| {
+            let mut out = Vec::with_capacity(tile.area());
+            let stats = march_tile(
+                scene,
+                &plans,
+                camera,
+                tile,
+                &settings.march,
+                &settings.outputs,
+                scratch,
+                &mut out,
+            );
+            on_tile(tile.area() as u64);
+            (tile, out, stats)
+        })
+        .collect();
+    let stats = results
+        .iter()
+        .fold(RenderStats::default(), |acc, r| acc.add(r.2));
+    let tiles: Vec<_> = results.into_iter().map(|(w, px, _)| (w, px)).collect();
+    Ok((assemble(window, &tiles, &settings.outputs), stats))
+}
+
+/// The window clamped to the image; refuses empty and absurdly large ones.
+fn checked_window(camera: &Camera, window: Window) -> Result<Window> {
+    let window = window.intersect(&camera.full_window());
+    if window.area() > MAX_WINDOW_PIXELS {
+        return Err(Error::invalid(
+            "render window",
+            format!(
+                "{}×{} pixels is more than one render may produce ({MAX_WINDOW_PIXELS})",
+                window.width(),
+                window.height()
+            ),
+        ));
+    }
+    Ok(window)
+}
+
+fn tiles(window: Window, size: u32) -> Vec<Window> {
+    let mut tiles = Vec::new();
+    for y in (window.y0..window.y1).step_by(size as usize) {
+        for x in (window.x0..window.x1).step_by(size as usize) {
+            tiles.push(Window::new(
+                x,
+                y,
+                (x + size).min(window.x1),
+                (y + size).min(window.y1),
+            ));
+        }
+    }
+    tiles
+}
+
+/// Gathers tiles' pixels into the requested planes.
+fn assemble(window: Window, tiles: &[(Window, Vec<PixelResult>)], outputs: &Outputs) -> Planes {
+    let (w, h) = (window.width(), window.height());
+    let plane = |on: bool| on.then(|| Plane::filled(w, h, 0.0));
+    let mut planes = Planes {
+        width: w,
+        height: h,
+        rgb: outputs.rgb.then(|| {
+            [
+                Plane::filled(w, h, 0.0),
+                Plane::filled(w, h, 0.0),
+                Plane::filled(w, h, 0.0),
+            ]
+        }),
+        alpha: plane(outputs.alpha),
+        depth_z: plane(outputs.depth_z),
+        depth_ray: plane(outputs.depth_ray),
+        depth_median: plane(outputs.depth_median),
+    };
+    for (tile, pixels) in tiles {
+        for (i, px) in pixels.iter().enumerate() {
+            let x = tile.x0 - window.x0 + i as u32 % tile.width();
+            let y = tile.y0 - window.y0 + i as u32 / tile.width();
+            let at = y as usize * w as usize + x as usize;
+            if let Some(rgb) = &mut planes.rgb {
+                for (c, plane) in rgb.iter_mut().enumerate() {
+                    plane.data[at] = px.rgb[c];
+                }
+            }
+            let set = |p: &mut Option<Plane>, v: f32| {
+                if let Some(p) = p {
+                    p.data[at] = v;
+                }
+            };
+            set(&mut planes.alpha, px.alpha);
+            set(&mut planes.depth_z, px.depth_z);
+            set(&mut planes.depth_ray, px.depth_ray);
+            set(&mut planes.depth_median, px.depth_median);
+        }
+    }
+    planes
+}

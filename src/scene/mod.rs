@@ -1,1 +1,35 @@
-//! Scenes: field instances placed in the host's world, rendered jointly.
+//! Scenes: field instances placed in the host's world, marched jointly.
+//!
+//! An [`Instance`] is a field with its object transform (`world_from_field`, the NeRF object's
+//! `matrix_world` in Blender, `N`) and an optional crop box in field space. A world ray is
+//! carried into each instance's frame once per pixel ([`Instance::local_ray`]); distances stay
+//! in *world* units along it, so several instances share one march: their densities add and
+//! their colours mix by density, which gives correct mutual occlusion and transparency.
+//!
+//! Why world units: with `field_from_world = N⁻¹`, a world ray `o + t·d` (|d| = 1) maps to
+//! `N⁻¹o + t·N⁻¹d`. With `k = |N⁻¹d|` the local unit direction is `N⁻¹d / k` and the local
+//! distance is `u = k·t`; a local density σ per field unit is `k·σ` per world unit. This is
+//! DESIGN's `C_t = N⁻¹ C_o` with renormalised directions, and depth comes out in world units
+//! for free — also when `N` carries non-uniform scale.
+
+mod crop;
+mod file;
+mod instance;
+
+pub use crop::CropBox;
+pub use file::{FieldSource, InstanceDesc, LoadedScene, SceneDesc};
+pub use instance::{FieldHandle, Instance, LocalRay};
+
+/// The fields to render together.
+#[derive(Clone, Default)]
+pub struct Scene {
+    /// The instances, marched jointly.
+    pub instances: Vec<Instance>,
+}
+
+impl Scene {
+    /// A scene of the given instances.
+    pub fn new(instances: Vec<Instance>) -> Self {
+        Scene { instances }
+    }
+}

@@ -1,0 +1,464 @@
+//! The per-tile marcher: estimator (occupancy segments, step policy, refinement) and
+//! integrator (pieces → planes), batched across a tile.
+//!
+//! A tile's rays advance together in *chunks*. Each round, every live ray lays up to
+//! [`CHUNK`] sample positions ("nodes") along its occupied segments; the tile asks each field
+//! once for all of them; nodes whose neighbours' densities disagree (a surface, a steep
+//! gradient) are bisected — again batched across the tile — until they agree or the depth
+//! limit is hit. Between two nodes the density is taken as their mean (the trapezoid rule,
+//! exact for piecewise-constant fields once an edge is bracketed). The pieces are composited
+//! in order; only then is colour asked for, and only at nodes whose weight matters. A ray
+//! leaves the batch when its transmittance falls below the threshold or its segments end.
+
+use std::sync::Arc;
+
+use glam::{DVec3, Vec3};
+
+use super::composite::{crossing_depth, Pieces};
+use super::{MarchParams, Outputs, RenderStats};
+use crate::camera::{Camera, Ray};
+use crate::field::Occupancy;
+use crate::image::Window;
+use crate::scene::{LocalRay, Scene};
+
+/// Nodes each live ray lays per round.
+const CHUNK: usize = 24;
+
+/// What one pixel ends up with.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(super) struct PixelResult {
+    pub rgb: [f32; 3],
+    pub alpha: f32,
+    pub depth_ray: f32,
+    pub depth_z: f32,
+    pub depth_median: f32,
+}
+
+/// Per instance, what the marcher needs that does not change per ray.
+pub(super) struct InstancePlan {
+    occupancy: Arc<Occupancy>,
+    /// Base step in field units.
+    base_step: f64,
+}
+
+impl InstancePlan {
+    pub(super) fn for_scene(scene: &Scene, params: &MarchParams) -> Vec<InstancePlan> {
+        scene
+            .instances
+            .iter()
+            .map(|inst| InstancePlan {
+                occupancy: inst.handle().occupancy(params.occupancy_resolution),
+                base_step: inst.field().bounds().diagonal() as f64
+                    / params.steps_per_diagonal.max(1.0) as f64,
+            })
+            .collect()
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    t: f64,
+    /// Total density per world unit.
+    sigma: f64,
+    /// Where this node's per-instance densities start in `Scratch::inst_sigma`.
+    slot: u32,
+    /// Bisection level that created it (0 for regular nodes).
+    level: u8,
+    /// No piece joins this node to the one before it (a segment starts here).
+    starts_run: bool,
+    /// Colour weight gathered this round.
+    weight: f64,
+}
+
+/// A node to be evaluated.
+#[derive(Clone, Copy, Debug)]
+struct Pending {
+    ray: u32,
+    t: f64,
+    level: u8,
+    starts_run: bool,
+}
+
+#[derive(Clone, Debug, Default)]
+struct RayState {
+    ray: Option<Ray>,
+    pieces: Pieces,
+    rgb: DVec3,
+    /// Occupied world segments `[segments_start, segments_end)` in `Scratch::segments`.
+    segments_start: usize,
+    segments_end: usize,
+    /// Next node position inside the current segment; `None`: at the segment's start.
+    next_t: Option<f64>,
+    live: bool,
+    /// Median-depth log `[t, δ, σ, T_enter]` range in `Scratch::log` is per ray.
+    log: Vec<[f64; 4]>,
+}
+
+/// Per-thread scratch reused from tile to tile: no allocation per sample.
+#[derive(Default)]
+pub(super) struct Scratch {
+    rays: Vec<RayState>,
+    /// `local[ray · n_instances + i]`.
+    local: Vec<Option<LocalRay>>,
+    segments: Vec<[f64; 2]>,
+    occupied: Vec<[f32; 2]>,
+    nodes: Vec<Vec<Node>>,
+    inst_sigma: Vec<f64>,
+    inst_sigma_prev: Vec<f64>,
+    pending: Vec<Pending>,
+    points: Vec<Vec3>,
+    dirs: Vec<Vec3>,
+    owners: Vec<(u32, f64)>,
+    field_out: Vec<f32>,
+    rgb_out: Vec<Vec3>,
+    stats: RenderStats,
+}
+
+/// Marches one tile. `out` receives the tile's pixels row by row.
+pub(super) fn march_tile(
+    scene: &Scene,
+    plans: &[InstancePlan],
+    camera: &Camera,
+    tile: Window,
+    params: &MarchParams,
+    outputs: &Outputs,
+    s: &mut Scratch,
+    out: &mut Vec<PixelResult>,
+) -> RenderStats {
+    let n_inst = scene.instances.len();
+    let n_rays = tile.area();
+    setup_rays(scene, plans, camera, tile, s);
+
+    while s.rays.iter().take(n_rays).any(|r| r.live) {
+        // Each live ray keeps its last node (the start of its next piece), then lays more.
+        std::mem::swap(&mut s.inst_sigma, &mut s.inst_sigma_prev);
+        s.inst_sigma.clear();
+        s.pending.clear();
+        for r in 0..n_rays {
+            let carried = s.nodes[r].last().copied().filter(|_| s.rays[r].live);
+            s.nodes[r].clear();
+            if let Some(mut node) = carried {
+                let slot = node.slot as usize;
+                node.slot = s.inst_sigma.len() as u32;
+                s.inst_sigma
+                    .extend_from_slice(&s.inst_sigma_prev[slot..slot + n_inst]);
+                node.weight = 0.0;
+                node.level = 0;
+                s.nodes[r].push(node);
+            }
+            lay_nodes(r, plans, params, s);
+        }
+        evaluate_pending(scene, n_inst, s);
+
+        // Bisect steps whose ends disagree, level by level, batched across the tile.
+        for level in 0..params.refine_depth.min(u8::MAX as u32) as u8 {
+            s.pending.clear();
+            for (r, nodes) in s.nodes.iter().enumerate() {
+                for pair in nodes.windows(2) {
+                    let (a, b) = (pair[0], pair[1]);
+                    if b.starts_run || a.level.max(b.level) != level {
+                        continue;
+                    }
+                    let jump = (b.sigma - a.sigma).abs() * (b.t - a.t);
+                    if jump > params.refine_tolerance as f64 {
+                        s.pending.push(Pending {
+                            ray: r as u32,
+                            t: 0.5 * (a.t + b.t),
+                            level: level + 1,
+                            starts_run: false,
+                        });
+                    }
+                }
+            }
+            if s.pending.is_empty() {
+                break;
+            }
+            evaluate_pending(scene, n_inst, s);
+        }
+
+        // Integrate the pieces, in order.
+        for r in 0..n_rays {
+            if !s.rays[r].live {
+                continue;
+            }
+            integrate(&mut s.rays[r], &mut s.nodes[r], params, outputs);
+        }
+
+        if outputs.rgb {
+            shade(scene, n_inst, params, s);
+        }
+    }
+
+    out.clear();
+    out.extend(s.rays[..n_rays].iter().map(|st| finish(st, outputs)));
+    RenderStats {
+        pixels: n_rays as u64,
+        ..std::mem::take(&mut s.stats)
+    }
+}
+
+/// Builds each pixel's world ray, its local rays and its occupied world segments.
+fn setup_rays(
+    scene: &Scene,
+    plans: &[InstancePlan],
+    camera: &Camera,
+    tile: Window,
+    s: &mut Scratch,
+) {
+    let n_inst = scene.instances.len();
+    let n_rays = tile.area();
+    s.rays.resize_with(n_rays, RayState::default);
+    s.nodes.resize_with(n_rays, Vec::new);
+    s.local.clear();
+    s.segments.clear();
+    for (r, state) in s.rays.iter_mut().enumerate().take(n_rays) {
+        let x = tile.x0 + (r % tile.width() as usize) as u32;
+        let y = tile.y0 + (r / tile.width() as usize) as u32;
+        let ray = camera.ray(x as f64 + 0.5, y as f64 + 0.5);
+        state.ray = ray;
+        state.pieces = Pieces::new();
+        state.rgb = DVec3::ZERO;
+        state.next_t = None;
+        state.log.clear();
+        s.nodes[r].clear();
+        let first_segment = s.segments.len();
+        for (inst, plan) in scene.instances.iter().zip(plans) {
+            let local = ray.and_then(|ray| inst.local_ray(&ray, 0.0, f64::INFINITY));
+            s.local.push(local);
+            if let Some(lr) = local {
+                let k = lr.units_per_world as f64;
+                s.occupied.clear();
+                let length = ((lr.t_far - lr.t_near) * k) as f32;
+                plan.occupancy
+                    .segments(lr.origin, lr.dir, 0.0, length, &mut s.occupied);
+                s.segments.extend(s.occupied.iter().map(|&[u0, u1]| {
+                    [
+                        (lr.t_near + u0 as f64 / k).max(lr.t_near),
+                        (lr.t_near + u1 as f64 / k).min(lr.t_far),
+                    ]
+                }));
+            }
+        }
+        debug_assert_eq!(s.local.len(), (r + 1) * n_inst);
+        // Union of the instances' segments.
+        let segs = &mut s.segments[first_segment..];
+        segs.sort_unstable_by(|a, b| a[0].total_cmp(&b[0]));
+        let mut merged = first_segment;
+        for i in first_segment..s.segments.len() {
+            let seg = s.segments[i];
+            if merged > first_segment && seg[0] <= s.segments[merged - 1][1] {
+                let last = &mut s.segments[merged - 1];
+                last[1] = last[1].max(seg[1]);
+            } else if seg[1] >= seg[0] {
+                s.segments[merged] = seg;
+                merged += 1;
+            }
+        }
+        s.segments.truncate(merged);
+        state.segments_start = first_segment;
+        state.segments_end = merged;
+        state.live = merged > first_segment;
+    }
+}
+
+/// The step at world distance `t` on ray `r`: the finest base step among the instances the
+/// ray is inside at `t`, grown with distance by the cone.
+fn step_at(r: usize, t: f64, plans: &[InstancePlan], params: &MarchParams, s: &Scratch) -> f64 {
+    let n_inst = plans.len();
+    let (mut here, mut anywhere) = (f64::INFINITY, f64::INFINITY);
+    for (i, plan) in plans.iter().enumerate() {
+        if let Some(lr) = &s.local[r * n_inst + i] {
+            let step = plan.base_step / lr.units_per_world as f64;
+            anywhere = anywhere.min(step);
+            if t >= lr.t_near && t <= lr.t_far {
+                here = here.min(step);
+            }
+        }
+    }
+    // Segments lie inside instances, so `here` is finite but for rounding at their ends.
+    let base = if here.is_finite() { here } else { anywhere };
+    let grown = (params.cone as f64 * t).min(base * params.max_step_factor.max(1.0) as f64);
+    base.max(grown).max(f64::MIN_POSITIVE)
+}
+
+/// Lays up to [`CHUNK`] regular nodes for ray `r` into `s.pending`.
+fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
+    if !s.rays[r].live {
+        return;
+    }
+    let mut laid = 0;
+    while laid < CHUNK {
+        let state = &s.rays[r];
+        if state.segments_start >= state.segments_end {
+            break;
+        }
+        let [a, b] = s.segments[state.segments_start];
+        let (t, starts_run) = match state.next_t {
+            Some(t) => (t, false),
+            None => (a, true),
+        };
+        let next = if t >= b {
+            None
+        } else {
+            Some((t + step_at(r, t, plans, params, s)).min(b))
+        };
+        let state = &mut s.rays[r];
+        match next {
+            Some(n) if n > t => state.next_t = Some(n),
+            _ => {
+                state.segments_start += 1;
+                state.next_t = None;
+            }
+        }
+        s.pending.push(Pending {
+            ray: r as u32,
+            t,
+            level: 0,
+            starts_run,
+        });
+        laid += 1;
+    }
+}
+
+/// Evaluates every pending node's density (one batched call per instance) and inserts the
+/// nodes, in order, into their rays' node lists.
+fn evaluate_pending(scene: &Scene, n_inst: usize, s: &mut Scratch) {
+    let first_slot = s.inst_sigma.len();
+    s.inst_sigma
+        .resize(first_slot + s.pending.len() * n_inst, 0.0);
+    for (i, inst) in scene.instances.iter().enumerate() {
+        s.points.clear();
+        s.owners.clear();
+        for (p, pending) in s.pending.iter().enumerate() {
+            let local = &s.local[pending.ray as usize * n_inst + i];
+            if let Some(lr) = local {
+                if pending.t >= lr.t_near && pending.t <= lr.t_far {
+                    s.points.push(lr.at(pending.t));
+                    s.owners.push((p as u32, lr.units_per_world as f64));
+                }
+            }
+        }
+        if s.points.is_empty() {
+            continue;
+        }
+        s.field_out.clear();
+        s.field_out.resize(s.points.len(), 0.0);
+        inst.field().density(&s.points, &mut s.field_out);
+        s.stats.density_samples += s.points.len() as u64;
+        for (&(p, k), &sigma) in s.owners.iter().zip(&s.field_out) {
+            // Sanitise: NaN or negative densities count as empty, infinities as huge.
+            let sigma = if sigma > 0.0 {
+                sigma.min(f32::MAX) as f64 * k
+            } else {
+                0.0
+            };
+            s.inst_sigma[first_slot + p as usize * n_inst + i] = sigma;
+        }
+    }
+    for (p, pending) in s.pending.iter().enumerate() {
+        let slot = first_slot + p * n_inst;
+        let sigma = s.inst_sigma[slot..slot + n_inst].iter().sum();
+        let node = Node {
+            t: pending.t,
+            sigma,
+            slot: slot as u32,
+            level: pending.level,
+            starts_run: pending.starts_run,
+            weight: 0.0,
+        };
+        let nodes = &mut s.nodes[pending.ray as usize];
+        if nodes.last().is_none_or(|last| last.t <= node.t) {
+            nodes.push(node);
+        } else {
+            let at = nodes.partition_point(|n| n.t <= node.t);
+            nodes.insert(at, node);
+        }
+    }
+}
+
+/// Composites a ray's nodes, in order, until it is opaque enough; distributes each piece's
+/// weight to its two nodes in proportion to their densities (their share of its colour).
+fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, outputs: &Outputs) {
+    let min_t = params.min_transmittance as f64;
+    for i in 1..nodes.len() {
+        let (a, b) = (nodes[i - 1], nodes[i]);
+        if b.starts_run {
+            continue;
+        }
+        let sum = a.sigma + b.sigma;
+        let delta = b.t - a.t;
+        let t_enter = state.pieces.transmittance();
+        let w = state.pieces.add(a.t, delta, 0.5 * sum);
+        if w > 0.0 {
+            if outputs.depth_median {
+                state.log.push([a.t, delta, 0.5 * sum, t_enter]);
+            }
+            nodes[i - 1].weight += w * a.sigma / sum;
+            nodes[i].weight += w * b.sigma / sum;
+        }
+        if state.pieces.transmittance() < min_t {
+            state.live = false;
+            // Nothing after this node counts.
+            for n in &mut nodes[i + 1..] {
+                n.weight = 0.0;
+            }
+            return;
+        }
+    }
+    if state.segments_start >= state.segments_end {
+        state.live = false;
+    }
+}
+
+/// Evaluates colour where the weight matters and adds it to the rays' colours.
+fn shade(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
+    let min_w = params.min_color_weight as f64;
+    for (i, inst) in scene.instances.iter().enumerate() {
+        s.points.clear();
+        s.dirs.clear();
+        s.owners.clear();
+        for (r, nodes) in s.nodes.iter().enumerate() {
+            let Some(lr) = &s.local[r * n_inst + i] else {
+                continue;
+            };
+            for node in nodes.iter().filter(|n| n.weight > min_w) {
+                let share = node.weight * s.inst_sigma[node.slot as usize + i] / node.sigma;
+                if share > 0.0 {
+                    s.points.push(lr.at(node.t));
+                    s.dirs.push(lr.dir);
+                    s.owners.push((r as u32, share));
+                }
+            }
+        }
+        if s.points.is_empty() {
+            continue;
+        }
+        s.rgb_out.clear();
+        s.rgb_out.resize(s.points.len(), Vec3::ZERO);
+        inst.field().radiance(&s.points, &s.dirs, &mut s.rgb_out);
+        s.stats.color_samples += s.points.len() as u64;
+        for (&(r, share), c) in s.owners.iter().zip(&s.rgb_out) {
+            let c = c.as_dvec3().max(DVec3::ZERO);
+            if c.is_finite() {
+                s.rays[r as usize].rgb += c * share;
+            }
+        }
+    }
+}
+
+fn finish(state: &RayState, outputs: &Outputs) -> PixelResult {
+    let alpha = state.pieces.accumulation();
+    let depth = state.pieces.expected_depth();
+    let z_per_t = state.ray.map_or(1.0, |r| r.z_per_t);
+    PixelResult {
+        rgb: state.rgb.as_vec3().to_array(),
+        alpha: alpha as f32,
+        depth_ray: depth as f32,
+        depth_z: (depth * z_per_t) as f32,
+        depth_median: if outputs.depth_median {
+            crossing_depth(&state.log, 0.5 * alpha) as f32
+        } else {
+            f32::INFINITY
+        },
+    }
+}

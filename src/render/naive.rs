@@ -1,0 +1,137 @@
+//! The baseline: a uniform-step marcher with no empty-space skipping, no early termination,
+//! no refinement, colour at every sample. The benchmark measures the real marcher against it.
+
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+
+use super::composite::{crossing_depth, Pieces};
+use super::march::PixelResult;
+use super::{assemble, checked_window, Outputs, RenderStats};
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::image::{Planes, Window};
+use crate::scene::Scene;
+
+/// Renders with a fixed world-space `step`, sampling each step at its midpoint over the span
+/// of all the instances' bounds a ray crosses.
+pub fn render_naive(
+    scene: &Scene,
+    camera: &Camera,
+    window: Window,
+    step: f64,
+    outputs: &Outputs,
+) -> Result<(Planes, RenderStats)> {
+    if !(step > 0.0 && step.is_finite()) {
+        return Err(Error::invalid("naive step", format!("{step} is not > 0")));
+    }
+    let window = checked_window(camera, window)?;
+    let rows: Vec<(Window, Vec<PixelResult>, u64)> = (window.y0..window.y1)
+        .into_par_iter()
+        .map(|y| {
+            let row = Window::new(window.x0, y, window.x1, y + 1);
+            let mut samples = 0;
+            let pixels = (row.x0..row.x1)
+                .map(|x| naive_pixel(scene, camera, x, y, step, outputs, &mut samples))
+                .collect();
+            (row, pixels, samples)
+        })
+        .collect();
+    let samples: u64 = rows.iter().map(|r| r.2).sum();
+    let stats = RenderStats {
+        pixels: window.area() as u64,
+        density_samples: samples,
+        color_samples: if outputs.rgb { samples } else { 0 },
+    };
+    let rows: Vec<_> = rows.into_iter().map(|(w, px, _)| (w, px)).collect();
+    Ok((assemble(window, &rows, outputs), stats))
+}
+
+fn naive_pixel(
+    scene: &Scene,
+    camera: &Camera,
+    x: u32,
+    y: u32,
+    step: f64,
+    outputs: &Outputs,
+    samples: &mut u64,
+) -> PixelResult {
+    let mut result = PixelResult {
+        depth_ray: f32::INFINITY,
+        depth_z: f32::INFINITY,
+        depth_median: f32::INFINITY,
+        ..Default::default()
+    };
+    let Some(ray) = camera.ray(x as f64 + 0.5, y as f64 + 0.5) else {
+        return result;
+    };
+    let locals: Vec<_> = scene
+        .instances
+        .iter()
+        .map(|inst| inst.local_ray(&ray, 0.0, f64::INFINITY))
+        .collect();
+    let near = locals
+        .iter()
+        .flatten()
+        .map(|l| l.t_near)
+        .fold(f64::INFINITY, f64::min);
+    let far = locals.iter().flatten().map(|l| l.t_far).fold(0.0, f64::max);
+    if !(near < far) {
+        return result;
+    }
+    let n = ((far - near) / step).ceil() as usize;
+    let ts: Vec<f64> = (0..n).map(|j| near + (j as f64 + 0.5) * step).collect();
+    let mut sigma = vec![0.0f64; n];
+    let mut rgb = vec![DVec3::ZERO; n];
+    let (mut points, mut dirs, mut idx) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut dens, mut cols) = (Vec::new(), Vec::new());
+    for (inst, local) in scene.instances.iter().zip(&locals) {
+        let Some(lr) = local else { continue };
+        points.clear();
+        idx.clear();
+        for (j, &t) in ts.iter().enumerate() {
+            if t >= lr.t_near && t <= lr.t_far {
+                points.push(lr.at(t));
+                idx.push(j);
+            }
+        }
+        dens.clear();
+        dens.resize(points.len(), 0.0f32);
+        inst.field().density(&points, &mut dens);
+        *samples += points.len() as u64;
+        dirs.clear();
+        dirs.resize(points.len(), lr.dir);
+        cols.clear();
+        cols.resize(points.len(), Vec3::ZERO);
+        if outputs.rgb {
+            inst.field().radiance(&points, &dirs, &mut cols);
+        }
+        for ((&j, &d), c) in idx.iter().zip(&dens).zip(&cols) {
+            let s = if d > 0.0 {
+                d as f64 * lr.units_per_world as f64
+            } else {
+                0.0
+            };
+            sigma[j] += s;
+            rgb[j] += c.as_dvec3() * s;
+        }
+    }
+    let mut pieces = Pieces::new();
+    let mut color = DVec3::ZERO;
+    let mut log = Vec::new();
+    for j in 0..n {
+        let t_enter = pieces.transmittance();
+        let w = pieces.add(ts[j] - 0.5 * step, step, sigma[j]);
+        if w > 0.0 {
+            color += rgb[j] / sigma[j] * w;
+            log.push([ts[j] - 0.5 * step, step, sigma[j], t_enter]);
+        }
+    }
+    let alpha = pieces.accumulation();
+    let depth = pieces.expected_depth();
+    result.rgb = color.as_vec3().to_array();
+    result.alpha = alpha as f32;
+    result.depth_ray = depth as f32;
+    result.depth_z = (depth * ray.z_per_t) as f32;
+    result.depth_median = crossing_depth(&log, 0.5 * alpha) as f32;
+    result
+}

@@ -1,0 +1,78 @@
+//! Quality presets: how finely to march, when to stop, how fine the occupancy grid is.
+
+use serde::{Deserialize, Serialize};
+
+/// A named quality level. Each maps to [`MarchParams`]; the benchmark (`nerfx bench`)
+/// measures each for time and error against the exact reference.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Quality {
+    /// Interactive: coarse steps, early stop at 1 % transmittance.
+    Draft,
+    /// Look development.
+    Preview,
+    /// Final frames: converged to the reference within the benchmark's targets.
+    Final,
+}
+
+/// The marcher's dials.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MarchParams {
+    /// Base step: each field's bounding-box diagonal divided by this (in field units).
+    pub steps_per_diagonal: f32,
+    /// Step growth with world distance from the camera: `δ = max(base, cone·t)`.
+    pub cone: f32,
+    /// The step never exceeds `base · max_step_factor`.
+    pub max_step_factor: f32,
+    /// A ray stops once its transmittance falls below this.
+    pub min_transmittance: f32,
+    /// Occupancy grid cells per side at the finest level.
+    pub occupancy_resolution: u32,
+    /// A step whose density jump `|σ_b − σ_a|·δ` (optical depth) exceeds this is bisected…
+    pub refine_tolerance: f32,
+    /// …at most this many times.
+    pub refine_depth: u32,
+    /// Colour is evaluated only at samples whose weight exceeds this.
+    pub min_color_weight: f32,
+}
+
+impl Quality {
+    /// The preset's parameters.
+    pub fn params(self) -> MarchParams {
+        match self {
+            Quality::Draft => MarchParams {
+                steps_per_diagonal: 96.0,
+                cone: 1.0 / 256.0,
+                max_step_factor: 4.0,
+                min_transmittance: 1e-2,
+                occupancy_resolution: 64,
+                refine_tolerance: 2e-2,
+                refine_depth: 3,
+                min_color_weight: 1e-3,
+            },
+            Quality::Preview => MarchParams {
+                steps_per_diagonal: 192.0,
+                cone: 1.0 / 512.0,
+                max_step_factor: 2.0,
+                min_transmittance: 1e-3,
+                occupancy_resolution: 128,
+                refine_tolerance: 5e-3,
+                refine_depth: 5,
+                min_color_weight: 1e-4,
+            },
+            Quality::Final => MarchParams {
+                steps_per_diagonal: 384.0,
+                cone: 0.0,
+                max_step_factor: 1.0,
+                min_transmittance: 1e-4,
+                occupancy_resolution: 256,
+                refine_tolerance: 1e-3,
+                refine_depth: 8,
+                min_color_weight: 1e-5,
+            },
+        }
+    }
+
+    /// All presets, coarse to fine.
+    pub const ALL: [Quality; 3] = [Quality::Draft, Quality::Preview, Quality::Final];
+}

@@ -1,0 +1,149 @@
+//! The scene file: which fields, where, and how they are cropped.
+//!
+//! ```json
+//! { "instances": [
+//!     { "name": "environment", "field": { "analytic": { "primitives": [] } } },
+//!     { "name": "statue", "field": { "analytic": { "primitives": [] } },
+//!       "object": "NeRF",
+//!       "crop": { "center": [0, 0, 0], "scale": [2, 2, 2], "rotation": [0, 0, 0] } } ] }
+//! ```
+//! An instance is placed by `world_from_field` (row-major 4×4, default identity) or, when
+//! `object` is given, by that object's `matrix_world` in the shot, read per frame.
+
+use std::path::Path;
+
+use glam::DMat4;
+use serde::{Deserialize, Serialize};
+
+use super::instance::FieldHandle;
+use super::{CropBox, Instance, Scene};
+use crate::error::{Error, Result};
+use crate::field::Analytic;
+
+/// Where an instance's field comes from.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum FieldSource {
+    /// Analytic primitives, inline.
+    Analytic(Analytic),
+}
+
+/// One instance in a scene file.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InstanceDesc {
+    /// Name, for messages.
+    pub name: String,
+    /// The field.
+    pub field: FieldSource,
+    /// Fixed placement, row-major (used when `object` is absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub world_from_field: Option<[[f64; 4]; 4]>,
+    /// Take the placement per frame from this object of the shot.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub object: Option<String>,
+    /// Crop box in field space.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub crop: Option<CropBox>,
+}
+
+/// A scene file.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneDesc {
+    /// The instances, rendered jointly.
+    pub instances: Vec<InstanceDesc>,
+}
+
+/// A scene file with its fields loaded once, ready to be placed frame after frame.
+#[derive(Clone)]
+pub struct LoadedScene {
+    desc: SceneDesc,
+    fields: Vec<FieldHandle>,
+}
+
+/// A row-major nested 4×4 as a matrix.
+pub(crate) fn mat4_from_rows(rows: &[[f64; 4]; 4]) -> DMat4 {
+    DMat4::from_cols_array_2d(rows).transpose()
+}
+
+impl SceneDesc {
+    /// Reads a scene file.
+    pub fn read(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        Self::from_json_str(&text, path)
+    }
+
+    /// Parses scene JSON; `path` is only used in messages.
+    pub fn from_json_str(text: &str, path: &Path) -> Result<Self> {
+        let desc: SceneDesc = serde_json::from_str(text).map_err(|e| {
+            Error::format(
+                path,
+                format!("line {} column {}", e.line(), e.column()),
+                e.to_string(),
+            )
+        })?;
+        for (i, inst) in desc.instances.iter().enumerate() {
+            let at = format!("instances[{i}] ('{}')", inst.name);
+            match &inst.field {
+                FieldSource::Analytic(a) => a
+                    .validate()
+                    .map_err(|e| Error::format(path, format!("{at}.field"), e.to_string()))?,
+            }
+            if inst.world_from_field.is_some() && inst.object.is_some() {
+                return Err(Error::format(
+                    path,
+                    at,
+                    "give either world_from_field or object, not both",
+                ));
+            }
+        }
+        Ok(desc)
+    }
+
+    /// Writes the scene as JSON.
+    pub fn write(&self, path: &Path) -> Result<()> {
+        let text = serde_json::to_string_pretty(self)
+            .map_err(|e| Error::format(path, "", e.to_string()))?;
+        std::fs::write(path, text).map_err(|e| Error::io(path, e))
+    }
+
+    /// Loads every field once.
+    pub fn load(self) -> Result<LoadedScene> {
+        let fields = self
+            .instances
+            .iter()
+            .map(|inst| match &inst.field {
+                FieldSource::Analytic(a) => Ok(FieldHandle::analytic(a.clone())),
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(LoadedScene { desc: self, fields })
+    }
+}
+
+impl LoadedScene {
+    /// The description it was loaded from.
+    pub fn desc(&self) -> &SceneDesc {
+        &self.desc
+    }
+
+    /// The scene with every instance placed: fixed placements as given, object-bound ones by
+    /// `object_matrix(name)` (the shot's object at the frame being rendered).
+    pub fn place(&self, object_matrix: &dyn Fn(&str) -> Result<DMat4>) -> Result<Scene> {
+        let instances = self
+            .desc
+            .instances
+            .iter()
+            .zip(&self.fields)
+            .map(|(inst, field)| {
+                let m = match (&inst.object, &inst.world_from_field) {
+                    (Some(object), _) => object_matrix(object)?,
+                    (None, Some(rows)) => mat4_from_rows(rows),
+                    (None, None) => DMat4::IDENTITY,
+                };
+                Instance::new(inst.name.clone(), field.clone(), m, inst.crop)
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Scene::new(instances))
+    }
+}

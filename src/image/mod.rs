@@ -2,7 +2,8 @@
 
 mod exr_io;
 mod plane;
-mod png;
+// Crate-visible so that other modules' tests can use its test PNG decoder.
+pub(crate) mod png;
 
 pub use exr_io::{read_exr_channels, write_exr, BACKGROUND_DEPTH};
 pub use plane::{Plane, Planes, Window};

@@ -242,7 +242,7 @@ impl Perspective {
     /// `None` when the point is not in front of the camera (`z ≥ 0`).
     pub fn project(&self, p_camera: DVec3) -> Option<DVec2> {
         let depth = -p_camera.z;
-        if !(depth > 0.0) || !p_camera.is_finite() {
+        if depth <= 0.0 || !p_camera.is_finite() {
             return None;
         }
         Some(DVec2::new(
@@ -274,7 +274,7 @@ mod tests {
         let fit_horizontal = match b.sensor_fit {
             SensorFit::Horizontal => true,
             SensorFit::Vertical => false,
-            SensorFit::Auto => !(w * ax < h * ay),
+            SensorFit::Auto => w * ax >= h * ay,
         };
         let sensor = match b.sensor_fit {
             SensorFit::Vertical => b.sensor_height,
@@ -432,6 +432,17 @@ mod tests {
         assert!((top.y / -top.z - 18.0 / 50.0).abs() < 1e-12);
         let left = cam.camera_ray(0.0, 500.0).unwrap().dir;
         assert!((left.x / -left.z + 0.24).abs() < 1e-12);
+    }
+
+    #[test]
+    fn pixel_aspect_below_one_is_raised_to_one() {
+        let square = Perspective::from_blender(&BlenderIntrinsics::default()).unwrap();
+        let b = BlenderIntrinsics {
+            pixel_aspect_x: 0.5,
+            pixel_aspect_y: 0.25,
+            ..Default::default()
+        };
+        assert_eq!(Perspective::from_blender(&b).unwrap(), square);
     }
 
     #[test]

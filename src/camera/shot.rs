@@ -156,7 +156,11 @@ impl Shot {
             Error::format(
                 path,
                 format!("line {} column {}", e.line(), e.column()),
-                format!("not valid JSON: {e}"),
+                // serde_json's message ends with the position, already in the location.
+                format!(
+                    "not valid JSON: {}",
+                    e.to_string().split(" at line ").next().unwrap_or_default()
+                ),
             )
         })?;
         let top = Node::root(&root, path)?;
@@ -185,6 +189,16 @@ impl Shot {
             frames: Vec::new(),
             source: path.to_path_buf(),
         };
+        // The output format is shared by all frames: refuse an absurd size once, by field.
+        let format = BlenderIntrinsics {
+            resolution_x: shot.resolution_x,
+            resolution_y: shot.resolution_y,
+            resolution_percentage: shot.resolution_percentage,
+            ..BlenderIntrinsics::default()
+        };
+        if let Err(Error::Invalid { what, message }) = format.effective_resolution() {
+            return Err(Error::format(path, what, message));
+        }
         let frames = top.array("frames")?;
         if frames.is_empty() {
             return Err(top.error("frames", "expected at least one frame"));
@@ -397,7 +411,8 @@ fn read_frame(node: &Node, nerf_object: &str) -> Result<ShotFrame> {
     let mut objects = BTreeMap::new();
     for key in objs.map.keys() {
         let m = objs.matrix(key)?;
-        if !(m.determinant().abs() > 1e-300) {
+        let det = m.determinant();
+        if det.is_nan() || det.abs() <= 1e-300 {
             return Err(objs.error(
                 key,
                 "matrix is singular (zero scale?); it cannot be inverted",
@@ -737,4 +752,372 @@ struct RawCamera {
     clip_start: f64,
     clip_end: f64,
     stereo: Option<ShotStereo>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{DQuat, DVec3};
+    use serde_json::json;
+
+    fn rows(m: DMat4) -> Value {
+        json!(m.transpose().to_cols_array_2d())
+    }
+
+    /// A two-frame shot: a shifted perspective camera, then an ODS panorama.
+    fn base() -> Value {
+        let cam0 = DMat4::from_rotation_translation(
+            DQuat::from_rotation_y(0.3),
+            DVec3::new(1.0, 2.0, 5.0),
+        );
+        let nerf = DMat4::from_scale_rotation_translation(
+            DVec3::new(2.0, 2.0, 3.0),
+            DQuat::from_rotation_z(0.2),
+            DVec3::new(0.0, 0.5, 0.0),
+        );
+        json!({
+            "version": 1, "fps": 24, "fps_base": 1.001,
+            "resolution_x": 1920, "resolution_y": 1080, "resolution_percentage": 50,
+            "pixel_aspect_x": 1, "pixel_aspect_y": 1,
+            "nerf_object": "NeRF",
+            "comment": "unknown fields are ignored",
+            "frames": [
+                {"frame": 1001,
+                 "camera": {"matrix_world": rows(cam0), "type": "PERSP", "lens": 35,
+                            "sensor_width": 36, "sensor_height": 24, "sensor_fit": "HORIZONTAL",
+                            "shift_x": 0.1, "shift_y": -0.05, "clip_start": 0.1, "clip_end": 100,
+                            "stereo": null},
+                 "objects": {"NeRF": rows(nerf), "Plate": rows(DMat4::IDENTITY)}},
+                {"frame": 1002,
+                 "camera": {"matrix_world": rows(DMat4::IDENTITY), "type": "PANO",
+                            "panorama_type": "EQUIRECTANGULAR", "lens": 50,
+                            "sensor_width": 36, "sensor_height": 24, "sensor_fit": "AUTO",
+                            "stereo": {"mode": "ODS", "eye": "both", "ipd": 0.07}},
+                 "objects": {"NeRF": rows(nerf)}}
+            ]
+        })
+    }
+
+    fn parse(v: &Value) -> Result<Shot> {
+        Shot::from_json_str(&v.to_string(), "shot.json")
+    }
+
+    fn parse_err(v: &Value) -> String {
+        parse(v).unwrap_err().to_string()
+    }
+
+    fn assert_mentions(message: &str, parts: &[&str]) {
+        for p in parts {
+            assert!(message.contains(p), "{message:?} does not mention {p:?}");
+        }
+    }
+
+    #[test]
+    fn reads_the_documented_schema() {
+        let shot = parse(&base()).unwrap();
+        assert_eq!(shot.frames.len(), 2);
+        assert!((shot.frame_rate() - 24.0 / 1.001).abs() < 1e-12);
+        assert_eq!(shot.resolution_percentage, 50);
+        let f = shot.frame(1001).unwrap();
+        assert_eq!(f.camera.kind, ShotCameraKind::Perspective);
+        assert_eq!(f.camera.sensor_fit, SensorFit::Horizontal);
+        assert_eq!((f.camera.shift_x, f.camera.shift_y), (0.1, -0.05));
+        assert_eq!((f.camera.clip_start, f.camera.clip_end), (0.1, 100.0));
+        // Matrices are rows in the file: the translation is the last column.
+        assert_eq!(
+            f.camera.world_from_camera.w_axis.truncate(),
+            DVec3::new(1.0, 2.0, 5.0)
+        );
+        assert_eq!(f.object_matrix("Plate").unwrap(), DMat4::IDENTITY);
+        let g = shot.frame(1002).unwrap();
+        assert_eq!(g.camera.kind, ShotCameraKind::Equirect);
+        assert_eq!(
+            g.camera.stereo,
+            Some(ShotStereo {
+                mode: StereoMode::Ods,
+                eye: Eye::Both,
+                ipd: 0.07
+            })
+        );
+        // Defaults for fields a panorama may leave out.
+        assert_eq!((g.camera.clip_start, g.camera.clip_end), (0.1, 1000.0));
+        assert_eq!((g.camera.shift_x, g.camera.shift_y), (0.0, 0.0));
+    }
+
+    #[test]
+    fn builds_cameras_with_the_right_projection() {
+        let shot = parse(&base()).unwrap();
+        let cam = shot.frame(1001).unwrap().camera(&shot).unwrap();
+        assert!(matches!(cam.projection(), Projection::Perspective(_)));
+        assert_eq!(cam.resolution(), (960, 540));
+        // 35 mm on 36 mm, horizontal fit, shift 0.1: the centre pixel's ray leaves at
+        // (0.1·36/35, −0.05·36/35, −1) in camera space.
+        let r = cam.ray(480.0, 270.0).unwrap();
+        let local = DVec3::new(0.1 * 36.0 / 35.0, -0.05 * 36.0 / 35.0, -1.0).normalize();
+        let expected = DQuat::from_rotation_y(0.3) * local;
+        assert!((r.dir - expected).length() < 1e-12);
+        assert!((r.origin - DVec3::new(1.0, 2.0, 5.0)).length() < 1e-12);
+
+        let pano = shot.frame(1002).unwrap().camera(&shot).unwrap();
+        assert!(matches!(pano.projection(), Projection::Ods(_)));
+        assert_eq!(pano.resolution(), (960, 1080));
+        let right_eye = pano.ray(480.0, 540.0 + 270.0).unwrap();
+        assert!((right_eye.origin - DVec3::new(0.035, 0.0, 0.0)).length() < 1e-12);
+
+        let mut v = base();
+        v["frames"][1]["camera"]["stereo"] = json!({"mode": "VR180", "eye": "both"});
+        let shot = parse(&v).unwrap();
+        let vr = shot.frame(1002).unwrap().camera(&shot).unwrap();
+        assert!(matches!(vr.projection(), Projection::Vr180(_)));
+        assert_eq!(vr.resolution(), (1920, 540));
+        let r = vr.ray(10.0, 10.0).unwrap();
+        assert!((r.origin - DVec3::new(-0.032, 0.0, 0.0)).length() < 1e-12);
+
+        v["frames"][1]["camera"]["stereo"] = Value::Null;
+        let shot = parse(&v).unwrap();
+        let eq = shot.frame(1002).unwrap().camera(&shot).unwrap();
+        assert!(matches!(eq.projection(), Projection::Equirect(_)));
+    }
+
+    #[test]
+    fn write_then_read_round_trips() {
+        let shot = parse(&base()).unwrap();
+        let dir = std::env::temp_dir().join(format!("nerfx-shot-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("round_trip.json");
+        shot.write(&path).unwrap();
+        let back = Shot::read(&path).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert_eq!(back.source, path);
+        assert_eq!(back.frames.len(), shot.frames.len());
+        let near = |a: f64, b: f64| (a - b).abs() <= 1e-15 * a.abs().max(1.0);
+        assert!(near(back.fps_base, shot.fps_base));
+        assert_eq!(
+            (
+                back.resolution_x,
+                back.resolution_y,
+                back.resolution_percentage
+            ),
+            (1920, 1080, 50)
+        );
+        assert_eq!(back.nerf_object, "NeRF");
+        for (a, b) in shot.frames.iter().zip(&back.frames) {
+            assert_eq!(a.frame, b.frame);
+            assert_eq!(a.camera.kind, b.camera.kind);
+            assert_eq!(a.camera.stereo, b.camera.stereo);
+            assert_eq!(a.camera.sensor_fit, b.camera.sensor_fit);
+            for (x, y) in [
+                (a.camera.lens, b.camera.lens),
+                (a.camera.shift_x, b.camera.shift_x),
+                (a.camera.shift_y, b.camera.shift_y),
+                (a.camera.clip_end, b.camera.clip_end),
+            ] {
+                assert!(near(x, y));
+            }
+            assert!(a
+                .camera
+                .world_from_camera
+                .abs_diff_eq(b.camera.world_from_camera, 1e-15));
+            assert_eq!(
+                a.objects.keys().collect::<Vec<_>>(),
+                b.objects.keys().collect::<Vec<_>>()
+            );
+            for (name, m) in &a.objects {
+                assert!(m.abs_diff_eq(b.objects[name], 1e-15));
+            }
+        }
+    }
+
+    #[test]
+    fn writing_refuses_non_finite_values() {
+        let mut shot = parse(&base()).unwrap();
+        shot.frames[1].objects.get_mut("NeRF").unwrap().x_axis.y = f64::NAN;
+        let path = std::env::temp_dir().join("nerfx-never-written.json");
+        let e = shot.write(&path).unwrap_err().to_string();
+        assert_mentions(&e, &["frames[1].objects.NeRF", "NaN"]);
+        assert!(!path.exists());
+    }
+
+    #[test]
+    fn missing_field_names_file_frame_and_field() {
+        let mut v = base();
+        v["frames"][0]["camera"]
+            .as_object_mut()
+            .unwrap()
+            .remove("lens");
+        assert_mentions(
+            &parse_err(&v),
+            &["shot.json", "frames[0].camera.lens", "missing"],
+        );
+        let mut v = base();
+        v["frames"][1].as_object_mut().unwrap().remove("objects");
+        assert_mentions(
+            &parse_err(&v),
+            &["shot.json", "frames[1].objects", "missing"],
+        );
+        let mut v = base();
+        v.as_object_mut().unwrap().remove("fps");
+        assert_mentions(&parse_err(&v), &["shot.json: fps: missing"]);
+    }
+
+    #[test]
+    fn bad_values_name_file_frame_and_field() {
+        let cases: Vec<(&str, Value, &[&str])> = vec![
+            (
+                "/frames/1/camera/lens",
+                json!(0),
+                &["frames[1].camera.lens: expected a number > 0"],
+            ),
+            (
+                "/frames/0/camera/lens",
+                json!("fifty"),
+                &["frames[0].camera.lens", "\"fifty\""],
+            ),
+            (
+                "/frames/0/camera/sensor_fit",
+                json!("auto"),
+                &["frames[0].camera.sensor_fit"],
+            ),
+            (
+                "/frames/0/camera/type",
+                json!("ORTHO"),
+                &["frames[0].camera.type", "ORTHO"],
+            ),
+            (
+                "/frames/1/camera/panorama_type",
+                json!("MIRRORBALL"),
+                &["frames[1].camera.panorama_type"],
+            ),
+            (
+                "/frames/1/camera/stereo/eye",
+                json!("middle"),
+                &["frames[1].camera.stereo.eye"],
+            ),
+            (
+                "/frames/1/camera/stereo/ipd",
+                json!(-1),
+                &["frames[1].camera", "ipd"],
+            ),
+            (
+                "/frames/0/camera/clip_end",
+                json!(0.05),
+                &["frames[0].camera.clip_end"],
+            ),
+            (
+                "/frames/1/frame",
+                json!(1001),
+                &["frames[1].frame", "frames[0]"],
+            ),
+            ("/frames/0/frame", json!(1001.5), &["frames[0].frame"]),
+            ("/resolution_x", json!(0), &["shot.json: resolution_x"]),
+            (
+                "/resolution_percentage",
+                json!(10000),
+                &["shot.json: resolution_x: 1920 at 10000%"],
+            ),
+            ("/version", json!(2), &["version 2"]),
+            (
+                "/nerf_object",
+                json!("Missing"),
+                &["frames[0].objects", "\"Missing\""],
+            ),
+            (
+                "/frames/0/camera/matrix_world/3",
+                json!([0, 0, 1, 1]),
+                &["frames[0].camera.matrix_world", "bottom row"],
+            ),
+            (
+                "/frames/0/camera/matrix_world/1",
+                json!([0, 0, 0]),
+                &["frames[0].camera.matrix_world[1]"],
+            ),
+            (
+                "/frames/0/objects/NeRF",
+                json!([[0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]),
+                &["frames[0].objects.NeRF", "singular"],
+            ),
+            (
+                "/frames/1/camera/matrix_world",
+                json!([[0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]),
+                &["frames[1].camera", "degenerate"],
+            ),
+            (
+                "/frames",
+                json!([]),
+                &["frames: expected at least one frame"],
+            ),
+        ];
+        for (pointer, value, parts) in cases {
+            let mut v = base();
+            *v.pointer_mut(pointer).unwrap() = value;
+            let e = parse_err(&v);
+            assert_mentions(&e, &["shot.json"]);
+            assert_mentions(&e, parts);
+        }
+        // A stereo perspective camera is refused rather than silently rendered as a panorama.
+        let mut v = base();
+        v["frames"][0]["camera"]["stereo"] = json!({"mode": "ODS", "eye": "left"});
+        assert_mentions(&parse_err(&v), &["frames[0].camera.stereo", "PANO"]);
+    }
+
+    #[test]
+    fn nan_and_infinity_tokens_are_refused_naming_the_element() {
+        let mut v = base();
+        v["frames"][1]["camera"]["matrix_world"][0][1] = json!(12345.5);
+        let text = v.to_string().replace("12345.5", "NaN");
+        let e = Shot::from_json_str(&text, "shot.json")
+            .unwrap_err()
+            .to_string();
+        assert_mentions(
+            &e,
+            &["shot.json", "frames[1].camera.matrix_world[0][1]", "finite"],
+        );
+        let text = v.to_string().replace("12345.5", "-Infinity");
+        let e = Shot::from_json_str(&text, "shot.json")
+            .unwrap_err()
+            .to_string();
+        assert_mentions(&e, &["frames[1].camera.matrix_world[0][1]"]);
+        // The same token inside a string is left alone.
+        v["nerf_object"] = json!("NaN");
+        v["frames"][1]["camera"]["matrix_world"][0][1] = json!(0);
+        v["frames"][0]["objects"]["NaN"] = v["frames"][0]["objects"]["NeRF"].clone();
+        v["frames"][1]["objects"]["NaN"] = v["frames"][1]["objects"]["NeRF"].clone();
+        assert_eq!(parse(&v).unwrap().nerf_object, "NaN");
+        // A lone NaN scalar reads as null and is refused by name.
+        let mut v = base();
+        v["fps"] = json!(12345.5);
+        let text = v.to_string().replace("12345.5", "NaN");
+        let e = Shot::from_json_str(&text, "shot.json")
+            .unwrap_err()
+            .to_string();
+        assert_mentions(&e, &["shot.json: fps", "NaN"]);
+    }
+
+    #[test]
+    fn wrong_json_names_the_file_and_position() {
+        let e = Shot::from_json_str("{\"version\": 1,\n  oops}", "shot.json").unwrap_err();
+        assert_mentions(&e.to_string(), &["shot.json", "line 2", "not valid JSON"]);
+        let e = Shot::from_json_str("[1, 2]", "shot.json")
+            .unwrap_err()
+            .to_string();
+        assert_mentions(&e, &["shot.json", "expected a JSON object"]);
+        let e = Shot::read("/nonexistent/dir/shot.json")
+            .unwrap_err()
+            .to_string();
+        assert_mentions(&e, &["/nonexistent/dir/shot.json"]);
+    }
+
+    #[test]
+    fn missing_frame_names_the_range_held() {
+        let shot = parse(&base()).unwrap();
+        let e = shot.frame(1200).unwrap_err().to_string();
+        assert_mentions(&e, &["shot.json", "frame 1200", "2 frames, 1001 to 1002"]);
+        let e = shot
+            .frame(1001)
+            .unwrap()
+            .object_matrix("Cube")
+            .unwrap_err()
+            .to_string();
+        assert_mentions(&e, &["frame 1001", "\"Cube\"", "NeRF, Plate"]);
+    }
 }

@@ -203,10 +203,11 @@ impl Shot {
         if frames.is_empty() {
             return Err(top.error("frames", "expected at least one frame"));
         }
+        let mut index_of_frame = BTreeMap::new();
         for (i, value) in frames.iter().enumerate() {
             let node = Node::new(value, path, format!("frames[{i}]"))?;
             let frame = read_frame(&node, &shot.nerf_object)?;
-            if let Some(j) = shot.frames.iter().position(|f| f.frame == frame.frame) {
+            if let Some(j) = index_of_frame.insert(frame.frame, i) {
                 return Err(node.error(
                     "frame",
                     format!("frame {} is already given by frames[{j}]", frame.frame),

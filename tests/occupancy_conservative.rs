@@ -1,0 +1,432 @@
+//! Property tests of `Occupancy::segments` on seeded random analytic scenes: conservative
+//! (every dense sample of a ray lies in a returned segment), tight (a sphere's chord plus at
+//! most a cell diagonal each side), and equal to a brute-force walk of the finest grid.
+
+use glam::{DVec3, Vec3};
+use nerfx::field::{Aabb, Analytic, Field, Occupancy, Primitive, ShColor, Shape};
+
+/// SplitMix64: tiny, seedable, good enough for test inputs.
+struct Rng(u64);
+
+impl Rng {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1).
+    fn unit(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    fn range(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * self.unit()
+    }
+
+    fn below(&mut self, n: u32) -> u32 {
+        (self.next_u64() % u64::from(n)) as u32
+    }
+
+    fn vec(&mut self, lo: f32, hi: f32) -> Vec3 {
+        Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
+    }
+
+    /// A uniformly distributed unit vector (rejection from the cube).
+    fn dir(&mut self) -> Vec3 {
+        loop {
+            let v = self.vec(-1.0, 1.0);
+            let l = v.length();
+            if l > 0.1 && l <= 1.0 {
+                return v / l;
+            }
+        }
+    }
+}
+
+fn random_primitive(rng: &mut Rng) -> Primitive {
+    let center = rng.vec(-1.0, 1.0);
+    let shape = match rng.below(3) {
+        0 => Shape::Sphere {
+            center,
+            radius: rng.range(0.05, 0.6),
+        },
+        1 => {
+            let half = Vec3::new(
+                rng.range(0.02, 0.5),
+                rng.range(0.02, 0.5),
+                rng.range(0.02, 0.5),
+            );
+            Shape::Box {
+                min: center - half,
+                max: center + half,
+            }
+        }
+        _ => Shape::Gaussian {
+            center,
+            sigma: rng.range(0.03, 0.25),
+            cutoff: rng.range(1.5, 4.0),
+        },
+    };
+    Primitive {
+        shape,
+        density: rng.range(0.5, 10.0),
+        color: ShColor::constant(Vec3::ONE),
+    }
+}
+
+fn random_scene(rng: &mut Rng) -> Analytic {
+    let n = 1 + rng.below(5) as usize;
+    let field = Analytic {
+        primitives: (0..n).map(|_| random_primitive(rng)).collect(),
+    };
+    field.validate().unwrap();
+    field
+}
+
+/// A ray that is one of the awkward kinds: general, axis-parallel, grazing (one direction
+/// component tiny), starting inside the bounds, starting on a cell face, or aimed at a
+/// primitive.
+fn random_ray(rng: &mut Rng, field: &Analytic, occ: &Occupancy) -> (Vec3, Vec3) {
+    let b = occ.bounds();
+    let inside = |rng: &mut Rng| b.min + Vec3::new(rng.unit(), rng.unit(), rng.unit()) * b.size();
+    match rng.below(6) {
+        0 => (rng.vec(-3.0, 3.0), rng.dir()),
+        1 => {
+            let mut d = Vec3::ZERO;
+            d[rng.below(3) as usize] = if rng.unit() < 0.5 { 1.0 } else { -1.0 };
+            let mut o = inside(rng);
+            let a = rng.below(3) as usize;
+            if d[a] != 0.0 {
+                o[a] = b.min[a] - 1.0;
+                d[a] = 1.0;
+            }
+            (o, d)
+        }
+        2 => {
+            let mut d = rng.dir();
+            let a = rng.below(3) as usize;
+            d[a] = [1e-3, -1e-5, 1e-7, -1e-9][rng.below(4) as usize];
+            (inside(rng), d.normalize())
+        }
+        3 => (inside(rng), rng.dir()),
+        4 => {
+            // Origin exactly on a plane of the finest grid, the way the grid computes it.
+            let n = occ.resolution();
+            let a = rng.below(3) as usize;
+            let k = rng.below(n + 1);
+            let mut o = inside(rng);
+            o[a] = b.min[a] + k as f32 * (b.size()[a] / n as f32);
+            let mut d = rng.dir();
+            if rng.unit() < 0.5 {
+                // Lying in the face plane.
+                d[a] = 0.0;
+                d = d.normalize();
+            }
+            (o, d)
+        }
+        _ => {
+            let i = rng.below(field.primitives.len() as u32) as usize;
+            let target = field.primitives[i].shape.bounds().center() + rng.vec(-0.1, 0.1);
+            let o = rng.dir() * 3.0;
+            (o, (target - o).normalize())
+        }
+    }
+}
+
+fn covered(segments: &[[f32; 2]], t: f32) -> bool {
+    segments.iter().any(|s| s[0] <= t && t <= s[1])
+}
+
+fn check_well_formed(segments: &[[f32; 2]], t0: f32, t1: f32) {
+    for s in segments {
+        assert!(
+            t0 <= s[0] && s[0] <= s[1] && s[1] <= t1,
+            "{segments:?} in [{t0}, {t1}]"
+        );
+    }
+    for w in segments.windows(2) {
+        assert!(w[0][1] < w[1][0], "not sorted/merged: {segments:?}");
+    }
+}
+
+/// Samples the ray densely over where the field may have density, plus a geometric series of
+/// offsets just outside each segment end; every sample with density must be covered.
+fn assert_conservative(
+    field: &Analytic,
+    segments: &[[f32; 2]],
+    o: Vec3,
+    d: Vec3,
+    t0: f32,
+    t1: f32,
+) {
+    let Some((lo, hi)) = field.bounds().clip_ray(o, d, t0, t1) else {
+        return;
+    };
+    let n = 20_000;
+    let mut ts: Vec<f32> = (0..n)
+        .map(|i| lo + (hi - lo) * (i as f32 + 0.5) / n as f32)
+        .collect();
+    ts.push(lo);
+    ts.push(hi);
+    for s in segments {
+        for e in 0..40 {
+            let delta = 1e-9 * 1.6f32.powi(e);
+            ts.push(s[0] - delta);
+            ts.push(s[1] + delta);
+        }
+    }
+    ts.retain(|t| (t0..=t1).contains(t));
+    let pts: Vec<Vec3> = ts.iter().map(|&t| o + t * d).collect();
+    let mut sigma = vec![0.0; pts.len()];
+    field.density(&pts, &mut sigma);
+    for (&t, &s) in ts.iter().zip(&sigma) {
+        assert!(
+            s == 0.0 || covered(segments, t),
+            "density {s} at t = {t} (p = {}) outside {segments:?}; ray {o} {d}",
+            o + t * d
+        );
+    }
+}
+
+/// The slow reference: every crossing of a finest-grid plane (in f64), the occupancy of each
+/// piece read at its midpoint, touching occupied pieces merged.
+fn brute_force(occ: &Occupancy, o: Vec3, d: Vec3, t0: f32, t1: f32) -> Vec<[f64; 2]> {
+    let b = occ.bounds();
+    let n = occ.resolution();
+    let (od, dd) = (o.as_dvec3(), d.as_dvec3());
+    let (mut ta, mut tb) = (f64::from(t0), f64::from(t1));
+    for a in 0..3 {
+        let (lo, hi) = (f64::from(b.min[a]), f64::from(b.max[a]));
+        if dd[a] == 0.0 {
+            if od[a] < lo || od[a] > hi {
+                return Vec::new();
+            }
+        } else {
+            let (x, y) = ((lo - od[a]) / dd[a], (hi - od[a]) / dd[a]);
+            ta = ta.max(x.min(y));
+            tb = tb.min(x.max(y));
+        }
+    }
+    if ta > tb {
+        return Vec::new();
+    }
+    let mut cuts = vec![ta, tb];
+    for a in 0..3 {
+        if dd[a] != 0.0 {
+            let cell = b.size()[a] / n as f32;
+            for k in 0..=n {
+                let plane = f64::from(b.min[a] + k as f32 * cell);
+                let t = (plane - od[a]) / dd[a];
+                if t > ta && t < tb {
+                    cuts.push(t);
+                }
+            }
+        }
+    }
+    cuts.sort_by(f64::total_cmp);
+    let mut out: Vec<[f64; 2]> = Vec::new();
+    for w in cuts.windows(2) {
+        let mid = 0.5 * (w[0] + w[1]);
+        let p: DVec3 = od + mid * dd;
+        if occ.is_occupied_point(p.as_vec3()) {
+            match out.last_mut() {
+                Some(last) if last[1] >= w[0] => last[1] = w[1],
+                _ => out.push([w[0], w[1]]),
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn random_scenes_are_conservative_and_match_brute_force() {
+    let mut rng = Rng(0x5eed_0cc0_0000_0001);
+    let mut rays = 0;
+    let mut hits = 0;
+    for scene in 0..30 {
+        let field = random_scene(&mut rng);
+        for &res in &[16u32, 37, 64] {
+            let occ = Occupancy::build(&field, res);
+            let cell = occ.bounds().size() / res as f32;
+            for _ in 0..20 {
+                let (o, d) = random_ray(&mut rng, &field, &occ);
+                let (t0, t1) = if rng.unit() < 0.7 {
+                    (0.0, 10.0)
+                } else {
+                    (rng.range(0.0, 2.0), rng.range(2.0, 5.0))
+                };
+                let mut seg = Vec::new();
+                occ.segments(o, d, t0, t1, &mut seg);
+                rays += 1;
+                hits += usize::from(!seg.is_empty());
+                check_well_formed(&seg, t0, t1);
+                assert_conservative(&field, &seg, o, d, t0, t1);
+
+                // Against the brute-force walk: same pieces, ends equal up to the padding
+                // and the rounding of a plane crossing (which grows as 1/|dᵢ|).
+                let reference = brute_force(&occ, o, d, t0, t1);
+                let min_d = d
+                    .abs()
+                    .to_array()
+                    .into_iter()
+                    .filter(|&x| x > 0.0)
+                    .fold(1.0, f32::min);
+                let tol = 3e-3 * f64::from(cell.min_element())
+                    + 1e-6 * f64::from(1.0 + o.abs().max_element()) / f64::from(min_d);
+                let ctx = format!("scene {scene} res {res} ray {o} {d} [{t0}, {t1}]");
+                assert_eq!(
+                    seg.len(),
+                    reference.len(),
+                    "{ctx}: {seg:?} vs {reference:?}"
+                );
+                for (s, r) in seg.iter().zip(&reference) {
+                    assert!(
+                        (f64::from(s[0]) - r[0]).abs() <= tol
+                            && (f64::from(s[1]) - r[1]).abs() <= tol,
+                        "{ctx}: {seg:?} vs {reference:?}"
+                    );
+                }
+            }
+        }
+    }
+    // The generator must exercise both outcomes.
+    assert!(hits > rays / 4 && hits < rays, "{hits} of {rays}");
+}
+
+fn sphere_field(center: Vec3, radius: f32) -> Analytic {
+    Analytic {
+        primitives: vec![Primitive {
+            shape: Shape::Sphere { center, radius },
+            density: 3.0,
+            color: ShColor::constant(Vec3::ONE),
+        }],
+    }
+}
+
+#[test]
+fn rays_that_miss_get_no_segments() {
+    let field = Analytic {
+        primitives: vec![
+            sphere_field(Vec3::new(-1.0, 0.0, 0.0), 0.5).primitives[0],
+            sphere_field(Vec3::new(1.0, 0.0, 0.0), 0.5).primitives[0],
+        ],
+    };
+    let occ = Occupancy::build(&field, 64);
+    let cell = occ.bounds().size().max_element() / 64.0;
+    let mut seg = Vec::new();
+    // Far outside the bounds, axis-parallel.
+    occ.segments(Vec3::splat(10.0), Vec3::X, 0.0, 100.0, &mut seg);
+    // Through the bounds, between the two spheres (x = 0 is 0.5 from both surfaces).
+    occ.segments(Vec3::new(0.0, -5.0, 0.0), Vec3::Y, 0.0, 100.0, &mut seg);
+    occ.segments(Vec3::new(0.0, 0.0, -5.0), Vec3::Z, 0.0, 100.0, &mut seg);
+    // Above both spheres, along x, by more than two cells.
+    occ.segments(
+        Vec3::new(-5.0, 0.5 + 3.0 * cell, 0.0),
+        Vec3::X,
+        0.0,
+        100.0,
+        &mut seg,
+    );
+    // Pointing away from the field.
+    occ.segments(Vec3::new(-3.0, 0.0, 0.0), -Vec3::X, 0.0, 100.0, &mut seg);
+    // Hitting it, but only beyond t1.
+    occ.segments(Vec3::new(-5.0, 0.0, 0.0), Vec3::X, 0.0, 3.0, &mut seg);
+    assert!(seg.is_empty(), "{seg:?}");
+}
+
+/// `t` range where the ray is within `r` of `c` (f64, closed form), if any.
+fn chord(o: Vec3, d: Vec3, c: Vec3, r: f64) -> Option<(f64, f64, f64)> {
+    let (o, d, c) = (o.as_dvec3(), d.as_dvec3().normalize(), c.as_dvec3());
+    let tm = (c - o).dot(d);
+    let dist2 = (o + tm * d - c).length_squared();
+    let h2 = r * r - dist2;
+    (h2 >= 0.0).then(|| (tm - h2.sqrt(), tm + h2.sqrt(), dist2.sqrt()))
+}
+
+#[test]
+fn sphere_chord_is_covered_tightly() {
+    let mut rng = Rng(0x00c0_ffee);
+    for _ in 0..40 {
+        let center = rng.vec(-2.0, 2.0);
+        let radius = rng.range(0.2, 1.5);
+        let res = [16, 32, 50, 128][rng.below(4) as usize];
+        let field = sphere_field(center, radius);
+        let occ = Occupancy::build(&field, res);
+        let diag = f64::from((occ.bounds().size() / res as f32).length());
+        for i in 0..20 {
+            let d = rng.dir();
+            // Through the centre for the first ray, then offsets up to half the radius.
+            let (u, v) = (
+                d.any_orthonormal_vector(),
+                d.cross(d.any_orthonormal_vector()),
+            );
+            let off = if i == 0 {
+                0.0
+            } else {
+                rng.range(0.0, 0.5) * radius
+            };
+            let ang = rng.range(0.0, std::f32::consts::TAU);
+            let target = center + off * (ang.cos() * u + ang.sin() * v);
+            let o = target - d * rng.range(radius + 0.5, 6.0);
+            let mut seg = Vec::new();
+            occ.segments(o, d, 0.0, 20.0, &mut seg);
+            let (ta, tb, dist) = chord(o, d, center, f64::from(radius)).unwrap();
+            // One segment holds the whole chord (the ray may also clip occupied cells just
+            // before or after it, giving short extra segments).
+            let seg: Vec<[f64; 2]> = seg.iter().map(|s| s.map(f64::from)).collect();
+            assert!(
+                seg.iter().any(|s| s[0] <= ta && s[1] >= tb),
+                "{seg:?} misses chord [{ta}, {tb}]"
+            );
+            // Occupied cells meet the ball, so their points are within r + diag of the
+            // centre (plus the paddings).
+            let reach = f64::from(radius) + diag * 1.01;
+            let (lo, hi, _) = chord(o, d, center, reach).unwrap();
+            let (a, b) = (seg[0][0], seg[seg.len() - 1][1]);
+            assert!(a >= lo && b <= hi, "{seg:?} beyond [{lo}, {hi}]");
+            if i == 0 {
+                assert!(dist < 1e-4);
+                assert!(b - a <= (tb - ta) + 2.0 * diag * 1.01);
+            }
+        }
+    }
+}
+
+#[test]
+fn origin_inside_an_occupied_cell_starts_at_t0() {
+    let field = sphere_field(Vec3::ZERO, 1.0);
+    let occ = Occupancy::build(&field, 32);
+    let mut seg = Vec::new();
+    occ.segments(
+        Vec3::new(0.1, 0.2, 0.3),
+        Vec3::new(0.0, 0.6, 0.8),
+        0.0,
+        50.0,
+        &mut seg,
+    );
+    assert_eq!(seg.len(), 1);
+    assert_eq!(seg[0][0], 0.0);
+    let (_, tb, _) = chord(
+        Vec3::new(0.1, 0.2, 0.3),
+        Vec3::new(0.0, 0.6, 0.8),
+        Vec3::ZERO,
+        1.0,
+    )
+    .unwrap();
+    assert!(f64::from(seg[0][1]) >= tb);
+}
+
+#[test]
+fn empty_bounds_region_is_not_occupied() {
+    let field = sphere_field(Vec3::ZERO, 1.0);
+    let b = field.bounds();
+    assert_eq!(b, Aabb::new(Vec3::splat(-1.0), Vec3::splat(1.0)));
+    let occ = Occupancy::build(&field, 40);
+    assert!(occ.bounds().min.cmple(b.min).all() && occ.bounds().max.cmpge(b.max).all());
+    // The corners of the bounds are farther than a cell diagonal from the ball.
+    assert!(!occ.is_occupied_point(Vec3::splat(0.99)));
+    assert!(occ.is_occupied_point(Vec3::new(0.0, 0.0, 0.99)));
+}

@@ -430,3 +430,78 @@ fn empty_bounds_region_is_not_occupied() {
     assert!(!occ.is_occupied_point(Vec3::splat(0.99)));
     assert!(occ.is_occupied_point(Vec3::new(0.0, 0.0, 0.99)));
 }
+
+/// Closed boxes of density 1 with an *exact*, unpadded `may_be_occupied`: the occupancy's
+/// own paddings are all that protects it from f32 rounding.
+struct ExactBoxes(Vec<Aabb>);
+
+impl Field for ExactBoxes {
+    fn bounds(&self) -> Aabb {
+        self.0.iter().fold(Aabb::EMPTY, |a, b| a.union(b))
+    }
+
+    fn density(&self, points: &[Vec3], sigma: &mut [f32]) {
+        for (p, s) in points.iter().zip(sigma.iter_mut()) {
+            *s = if self.0.iter().any(|b| b.contains(*p)) {
+                1.0
+            } else {
+                0.0
+            };
+        }
+    }
+
+    fn radiance(&self, _: &[Vec3], _: &[Vec3], rgb: &mut [Vec3]) {
+        rgb.fill(Vec3::ONE);
+    }
+
+    fn may_be_occupied(&self, region: &Aabb) -> bool {
+        self.0.iter().any(|b| b.intersects(region))
+    }
+}
+
+/// A box face a hair (3e-6) past a grid plane, seen from 300 units away: sample positions
+/// round by ~3e-5 there, far more than the hair, so a grid without padding would lose the
+/// face's first samples.
+#[test]
+fn far_origin_near_plane_face_is_conservative() {
+    let corners = vec![
+        Aabb::new(Vec3::splat(-1.0), Vec3::splat(-0.99)),
+        Aabb::new(Vec3::splat(0.99), Vec3::splat(1.0)),
+    ];
+    let res = 32;
+    let probe = Occupancy::build(&ExactBoxes(corners.clone()), res);
+    let b = probe.bounds();
+    let cell = b.size() / res as f32;
+    let mut rng = Rng(0xfa2);
+    for axis in 0..3 {
+        let k = 12;
+        let plane = b.min[axis] + k as f32 * cell[axis];
+        let mut min = Vec3::splat(-0.5);
+        min[axis] = plane + 3e-6;
+        let face = Aabb::new(min, Vec3::splat(0.5));
+        let mut boxes = corners.clone();
+        boxes.push(face);
+        let field = ExactBoxes(boxes);
+        let occ = Occupancy::build(&field, res);
+        assert_eq!(occ.bounds(), b);
+        for _ in 0..200 {
+            let mut target = rng.vec(-0.45, 0.45);
+            target[axis] = face.min[axis];
+            let mut from = rng.dir();
+            from[axis] = -from[axis].abs() - 0.2;
+            let o = target + from.normalize() * 300.0;
+            let d = (target - o).normalize();
+            let mut seg = Vec::new();
+            occ.segments(o, d, 0.0, 1000.0, &mut seg);
+            let t_face = (face.min[axis] - o[axis]) / d[axis];
+            let ts: Vec<f32> = (-2000..2000).map(|i| t_face + i as f32 * 1e-6).collect();
+            let pts: Vec<Vec3> = ts.iter().map(|&t| o + t * d).collect();
+            let mut sigma = vec![0.0; pts.len()];
+            field.density(&pts, &mut sigma);
+            assert!(sigma.iter().any(|&s| s > 0.0));
+            for (&t, &s) in ts.iter().zip(&sigma) {
+                assert!(s == 0.0 || covered(&seg, t), "t = {t} outside {seg:?}");
+            }
+        }
+    }
+}

@@ -563,6 +563,21 @@ mod tests {
     }
 
     #[test]
+    fn tiny_resolutions_cover_the_chord() {
+        let f = one(Shape::Sphere {
+            center: Vec3::new(0.5, 0.0, 0.0),
+            radius: 1.0,
+        });
+        for res in [1, 2, 3, 5, 9] {
+            let occ = Occupancy::build(&f, res);
+            let mut seg = Vec::new();
+            // Chord along the x axis through the centre: t ∈ [2.5, 4.5].
+            occ.segments(Vec3::new(-3.0, 0.0, 0.0), Vec3::X, 0.0, 10.0, &mut seg);
+            assert!(seg.iter().any(|s| s[0] <= 2.5 && s[1] >= 4.5), "{res}: {seg:?}");
+        }
+    }
+
+    #[test]
     fn empty_field_gives_no_segments() {
         let occ = Occupancy::build(&Analytic::default(), 32);
         assert_eq!(occ.fill_ratio(), 0.0);

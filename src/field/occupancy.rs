@@ -573,7 +573,10 @@ mod tests {
             let mut seg = Vec::new();
             // Chord along the x axis through the centre: t ∈ [2.5, 4.5].
             occ.segments(Vec3::new(-3.0, 0.0, 0.0), Vec3::X, 0.0, 10.0, &mut seg);
-            assert!(seg.iter().any(|s| s[0] <= 2.5 && s[1] >= 4.5), "{res}: {seg:?}");
+            assert!(
+                seg.iter().any(|s| s[0] <= 2.5 && s[1] >= 4.5),
+                "{res}: {seg:?}"
+            );
         }
     }
 

@@ -23,8 +23,9 @@
 //! Totals: `A = 1 − e^{−τ_total}`, `rgb = Σ colour`, expected depth `Σ depth moment / A`,
 //! median depth the `t` where `1 − T(t) = A/2`, i.e. `τ(t) = −ln(1 − A/2)`, solved in closed
 //! form on constant pieces and by safeguarded Newton on the monotone closed-form `τ`.
-//! Pieces behind a transmittance below 1e-18 add less than 1e-18 to any output and are
-//! skipped (their optical depth still counts in `A`).
+//! Pieces behind a transmittance below 1e-18, and quadrature intervals that absorb less
+//! than 1e-18 of `A`, change no output by more than 1e-18 relative and are skipped (their
+//! optical depth still counts in `A`).
 
 use std::f64::consts::SQRT_2;
 use std::ops::Range;

@@ -2,7 +2,7 @@
 //! camera. It needs no downloads, and it is also the benchmark's scene.
 //!
 //! The world is Blender's (Z up). The environment is a ground slab, two pillars, a back wall
-//! whose colour changes with the view direction, and a Gaussian haze; the object (bound to
+//! whose colour changes with the view direction, and a wisp of Gaussian haze; the object (bound to
 //! the shot's `NeRF` object, rotated and non-uniformly scaled) is a glossy sphere, a
 //! semi-transparent cube and a glowing blob. Both are marched jointly, so the haze sits in
 //! front of and behind the object correctly.
@@ -81,11 +81,11 @@ fn environment() -> Analytic {
             ),
             prim(
                 Shape::Gaussian {
-                    center: Vec3::new(0.5, 1.5, 1.0),
-                    sigma: 1.2,
+                    center: Vec3::new(-2.2, 1.2, 0.6),
+                    sigma: 0.45,
                     cutoff: 4.0,
                 },
-                0.35,
+                1.5,
                 rgb(0.55, 0.65, 0.85),
             ),
         ],

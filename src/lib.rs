@@ -14,7 +14,7 @@
 //! ```
 #![deny(missing_docs)]
 
-// pub mod bench;
+pub mod bench;
 pub mod camera;
 pub mod demo;
 pub mod error;

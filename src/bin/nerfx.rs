@@ -1,2 +1,192 @@
-//! PLACEHOLDER.
-fn main() {}
+//! `nerfx`: render the demo, render a scene through a shot for a frame range, benchmark.
+//!
+//! A thin adapter: flags become the core's settings; the core does the work.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use nerfx::camera::Shot;
+use nerfx::frames::{frame_path, parse_frames, render_frame};
+use nerfx::image::{write_exr, write_png_preview, Planes};
+use nerfx::render::{render_with_progress, Outputs, Quality, RenderSettings};
+use nerfx::scene::SceneDesc;
+use nerfx::{bench, demo, Error, Result};
+
+#[derive(Parser)]
+#[command(
+    name = "nerfx",
+    version,
+    about = "Radiance fields for compositing pipelines"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render the embedded demo scene (analytic fields, no downloads) to EXR and PNG.
+    Demo {
+        /// Output folder.
+        #[arg(short, long, default_value = "out")]
+        out: PathBuf,
+        /// Image width.
+        #[arg(long, default_value_t = 1280)]
+        width: u32,
+        /// Image height.
+        #[arg(long, default_value_t = 720)]
+        height: u32,
+        /// Quality preset.
+        #[arg(long, value_enum, default_value_t = Quality::Final)]
+        quality: Quality,
+        /// Also write the demo's scene and shot files there (for `nerfx render`).
+        #[arg(long)]
+        write_inputs: bool,
+    },
+    /// Render a scene file through a shot file for a list of frames.
+    Render {
+        /// Scene file (JSON).
+        scene: PathBuf,
+        /// Shot file (JSON, written by the Blender add-on).
+        shot: PathBuf,
+        /// Frames: `1001-1010`, `1001-1100x5`, `1,5,9`.
+        #[arg(long)]
+        frames: String,
+        /// Output EXR pattern; `####` becomes the zero-padded frame number.
+        #[arg(short, long, default_value = "out/render.####.exr")]
+        output: PathBuf,
+        /// Quality preset.
+        #[arg(long, value_enum, default_value_t = Quality::Final)]
+        quality: Quality,
+        /// Also write a PNG preview beside each EXR.
+        #[arg(long)]
+        png: bool,
+    },
+    /// Measure run time against error for each preset and a naive marcher.
+    Bench {
+        /// Output folder for the table (Markdown) and the plot (PNG).
+        #[arg(short, long, default_value = "bench-out")]
+        out: PathBuf,
+        /// Image width.
+        #[arg(long, default_value_t = 1920)]
+        width: u32,
+        /// Image height.
+        #[arg(long, default_value_t = 1080)]
+        height: u32,
+        /// Timed repetitions per configuration (the median is reported).
+        #[arg(long, default_value_t = 3)]
+        repeats: u32,
+    },
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("nerfx: error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Demo {
+            out,
+            width,
+            height,
+            quality,
+            write_inputs,
+        } => {
+            create_dir(&out)?;
+            let (scene, camera) = demo::scene_and_camera(width, height)?;
+            if write_inputs {
+                demo::scene_desc().write(&out.join("demo_scene.json"))?;
+                demo::shot(width, height).write(out.join("demo_shot.json"))?;
+            }
+            let settings = RenderSettings::new(quality.params(), Outputs::all());
+            let bar = progress_bar(camera.full_window().area() as u64, "demo");
+            let started = Instant::now();
+            let (planes, stats) =
+                render_with_progress(&scene, &camera, camera.full_window(), &settings, &|n| {
+                    bar.inc(n)
+                })?;
+            bar.finish_and_clear();
+            write_outputs(&out.join("demo.exr"), &planes, true)?;
+            println!(
+                "demo: {width}×{height} {quality:?} in {:.2} s, {:.1} density samples/pixel → {}",
+                started.elapsed().as_secs_f64(),
+                stats.density_samples as f64 / stats.pixels.max(1) as f64,
+                out.join("demo.exr").display()
+            );
+            Ok(())
+        }
+        Command::Render {
+            scene,
+            shot,
+            frames,
+            output,
+            quality,
+            png,
+        } => {
+            let frames = parse_frames(&frames)?;
+            let scene = SceneDesc::read(&scene)?.load()?;
+            let shot = Shot::read(&shot)?;
+            let settings = RenderSettings::new(quality.params(), Outputs::all());
+            let bar = progress_bar(frames.len() as u64, "frames");
+            for &frame in &frames {
+                let path = frame_path(&output, frame, frames.len() > 1);
+                if let Some(dir) = path.parent() {
+                    create_dir(dir)?;
+                }
+                let (planes, _) = render_frame(&scene, &shot, frame, &settings, &|_| {})?;
+                write_outputs(&path, &planes, png)?;
+                bar.inc(1);
+                bar.suspend(|| println!("frame {frame} → {}", path.display()));
+            }
+            bar.finish_and_clear();
+            Ok(())
+        }
+        Command::Bench {
+            out,
+            width,
+            height,
+            repeats,
+        } => {
+            create_dir(&out)?;
+            let report = bench::run(width, height, repeats.max(1), &|line| eprintln!("{line}"))?;
+            report.write(&out)?;
+            println!("{}", report.markdown());
+            println!("wrote {}", out.display());
+            Ok(())
+        }
+    }
+}
+
+fn write_outputs(exr: &Path, planes: &Planes, png: bool) -> Result<()> {
+    write_exr(exr, planes)?;
+    if png {
+        write_png_preview(&exr.with_extension("png"), planes)?;
+    }
+    Ok(())
+}
+
+fn create_dir(dir: &Path) -> Result<()> {
+    if dir.as_os_str().is_empty() {
+        return Ok(());
+    }
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))
+}
+
+fn progress_bar(len: u64, what: &str) -> ProgressBar {
+    let bar = ProgressBar::new(len);
+    if let Ok(style) = ProgressStyle::with_template("{msg} [{bar:40}] {percent}% {elapsed}") {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar.set_message(what.to_string());
+    bar
+}

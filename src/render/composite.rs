@@ -45,7 +45,8 @@ fn first_moment_fraction(x: f64) -> f64 {
 /// use nerfx::render::opacity;
 /// assert_eq!(opacity(0.0), 0.0);
 /// assert_eq!(opacity(f64::INFINITY), 1.0);
-/// assert!((opacity(1e-12) - 1e-12).abs() < 1e-27);
+/// // 1 − e^{−x} ≈ x − x²/2; the naive `1.0 - (-x).exp()` is off by ~1e-4 relative here.
+/// assert!((opacity(1e-12) / 1e-12 - 1.0).abs() < 1e-11);
 /// ```
 #[inline]
 pub fn opacity(optical_thickness: f64) -> f64 {
@@ -79,7 +80,7 @@ impl Pieces {
     #[inline]
     pub fn add(&mut self, t: f64, delta: f64, sigma: f64) -> f64 {
         let x = sigma * delta;
-        if !(x > 0.0) {
+        if x.is_nan() || x <= 0.0 {
             // Empty, zero-length (σ = inf with δ = 0 gives NaN here too) or invalid.
             return 0.0;
         }
@@ -196,7 +197,8 @@ mod tests {
         for &x in &[1e-3f64, 700.0] {
             let below = first_moment_fraction(x * (1.0 - 1e-9));
             let above = first_moment_fraction(x * (1.0 + 1e-9));
-            assert!((below - above).abs() < 1e-9 * below.abs().max(1e-300) + 1e-12);
+            // The function itself changes by ~1e-9 relative over the bracket.
+            assert!((below - above).abs() < 1e-8 * below.abs());
         }
         // Direct integral ∫₀¹ s·x·e^{−xs} ds by a fine midpoint sum at x = 0.37.
         let x = 0.37f64;
@@ -215,7 +217,8 @@ mod tests {
         // σ = 1 from t = 1: accumulation reaches 0.5 at 1 + ln 2.
         let log = [[1.0, 10.0, 1.0, 1.0]];
         assert!((crossing_depth(&log, 0.5) - (1.0 + 2f64.ln())).abs() < 1e-12);
-        assert!(crossing_depth(&log, 0.99999999).is_finite());
+        assert!(crossing_depth(&log, 0.9999).is_finite());
+        assert!(crossing_depth(&log, 0.99999).is_infinite());
         assert!(crossing_depth(&[[1.0, 0.1, 1.0, 1.0]], 0.5).is_infinite());
     }
 }

@@ -15,7 +15,7 @@ use std::sync::Arc;
 use glam::{DVec3, Vec3};
 
 use super::composite::{crossing_depth, Pieces};
-use super::{MarchParams, Outputs, RenderStats};
+use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
 use crate::field::Occupancy;
 use crate::image::Window;
@@ -23,6 +23,9 @@ use crate::scene::{LocalRay, Scene};
 
 /// Nodes each live ray lays per round.
 const CHUNK: usize = 24;
+
+/// The first segment fetch covers this fraction of the ray's span through the instances.
+const FIRST_WINDOWS: f64 = 4.0;
 
 /// What one pixel ends up with.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -84,9 +87,14 @@ struct RayState {
     ray: Option<Ray>,
     pieces: Pieces,
     rgb: DVec3,
-    /// Occupied world segments `[segments_start, segments_end)` in `Scratch::segments`.
-    segments_start: usize,
-    segments_end: usize,
+    /// Occupied world segments fetched so far (up to `horizon`), and the current one.
+    segments: Vec<[f64; 2]>,
+    segment: usize,
+    /// World distance up to which segments have been fetched, where the ray leaves the
+    /// last instance, and the length of the next fetch.
+    horizon: f64,
+    end: f64,
+    window: f64,
     /// Next node position inside the current segment; `None`: at the segment's start.
     next_t: Option<f64>,
     live: bool,
@@ -100,7 +108,6 @@ pub(super) struct Scratch {
     rays: Vec<RayState>,
     /// `local[ray · n_instances + i]`.
     local: Vec<Option<LocalRay>>,
-    segments: Vec<[f64; 2]>,
     occupied: Vec<[f32; 2]>,
     nodes: Vec<Vec<Node>>,
     inst_sigma: Vec<f64>,
@@ -120,14 +127,14 @@ pub(super) fn march_tile(
     plans: &[InstancePlan],
     camera: &Camera,
     tile: Window,
-    params: &MarchParams,
-    outputs: &Outputs,
+    settings: &RenderSettings,
     s: &mut Scratch,
     out: &mut Vec<PixelResult>,
 ) -> RenderStats {
+    let (params, outputs) = (&settings.march, &settings.outputs);
     let n_inst = scene.instances.len();
     let n_rays = tile.area();
-    setup_rays(scene, plans, camera, tile, s);
+    setup_rays(scene, camera, tile, s);
 
     while s.rays.iter().take(n_rays).any(|r| r.live) {
         // Each live ray keeps its last node (the start of its next piece), then lays more.
@@ -197,20 +204,13 @@ pub(super) fn march_tile(
     }
 }
 
-/// Builds each pixel's world ray, its local rays and its occupied world segments.
-fn setup_rays(
-    scene: &Scene,
-    plans: &[InstancePlan],
-    camera: &Camera,
-    tile: Window,
-    s: &mut Scratch,
-) {
-    let n_inst = scene.instances.len();
+/// Builds each pixel's world ray and its local rays; segments come later, lazily.
+#[inline(never)]
+fn setup_rays(scene: &Scene, camera: &Camera, tile: Window, s: &mut Scratch) {
     let n_rays = tile.area();
     s.rays.resize_with(n_rays, RayState::default);
     s.nodes.resize_with(n_rays, Vec::new);
     s.local.clear();
-    s.segments.clear();
     for (r, state) in s.rays.iter_mut().enumerate().take(n_rays) {
         let x = tile.x0 + (r % tile.width() as usize) as u32;
         let y = tile.y0 + (r / tile.width() as usize) as u32;
@@ -220,49 +220,77 @@ fn setup_rays(
         state.rgb = DVec3::ZERO;
         state.next_t = None;
         state.log.clear();
+        state.segments.clear();
+        state.segment = 0;
         s.nodes[r].clear();
-        let first_segment = s.segments.len();
-        for (inst, plan) in scene.instances.iter().zip(plans) {
+        let (mut begin, mut end) = (f64::INFINITY, f64::NEG_INFINITY);
+        for inst in &scene.instances {
             let local = ray.and_then(|ray| inst.local_ray(&ray, 0.0, f64::INFINITY));
-            s.local.push(local);
-            if let Some(lr) = local {
-                let k = lr.units_per_world as f64;
-                s.occupied.clear();
-                let length = ((lr.t_far - lr.t_near) * k) as f32;
-                plan.occupancy
-                    .segments(lr.origin, lr.dir, 0.0, length, &mut s.occupied);
-                s.segments.extend(s.occupied.iter().map(|&[u0, u1]| {
-                    [
-                        (lr.t_near + u0 as f64 / k).max(lr.t_near),
-                        (lr.t_near + u1 as f64 / k).min(lr.t_far),
-                    ]
-                }));
+            if let Some(lr) = &local {
+                begin = begin.min(lr.t_near);
+                end = end.max(lr.t_far);
             }
+            s.local.push(local);
         }
-        debug_assert_eq!(s.local.len(), (r + 1) * n_inst);
+        state.live = begin < end;
+        state.horizon = begin;
+        state.end = end;
+        state.window = (end - begin) / FIRST_WINDOWS;
+    }
+}
+
+/// Fetches the occupied segments of ray `r` in the next window past its horizon (the union
+/// over instances, in world distance), doubling the window each time: most rays stop at the
+/// first surface, so the grid behind it is never traversed.
+fn fetch_segments(r: usize, plans: &[InstancePlan], s: &mut Scratch) {
+    let n_inst = plans.len();
+    let state = &mut s.rays[r];
+    state.segments.clear();
+    state.segment = 0;
+    while state.segments.is_empty() && state.horizon < state.end {
+        let (from, to) = (state.horizon, (state.horizon + state.window).min(state.end));
+        for (i, plan) in plans.iter().enumerate() {
+            let Some(lr) = &s.local[r * n_inst + i] else {
+                continue;
+            };
+            let (a, b) = (from.max(lr.t_near), to.min(lr.t_far));
+            if a.is_nan() || b.is_nan() || a >= b {
+                continue;
+            }
+            let k = lr.units_per_world as f64;
+            s.occupied.clear();
+            let (u0, u1) = (((a - lr.t_near) * k) as f32, ((b - lr.t_near) * k) as f32);
+            plan.occupancy
+                .segments(lr.origin, lr.dir, u0, u1, &mut s.occupied);
+            state.segments.extend(s.occupied.iter().map(|&[u0, u1]| {
+                [
+                    (lr.t_near + u0 as f64 / k).max(a),
+                    (lr.t_near + u1 as f64 / k).min(b),
+                ]
+            }));
+        }
+        state.horizon = to;
+        state.window *= 2.0;
         // Union of the instances' segments.
-        let segs = &mut s.segments[first_segment..];
-        segs.sort_unstable_by(|a, b| a[0].total_cmp(&b[0]));
-        let mut merged = first_segment;
-        for i in first_segment..s.segments.len() {
-            let seg = s.segments[i];
-            if merged > first_segment && seg[0] <= s.segments[merged - 1][1] {
-                let last = &mut s.segments[merged - 1];
-                last[1] = last[1].max(seg[1]);
+        let segs = &mut state.segments;
+        segs.sort_unstable_by(|x, y| x[0].total_cmp(&y[0]));
+        let mut merged = 0;
+        for i in 0..segs.len() {
+            let seg = segs[i];
+            if merged > 0 && seg[0] <= segs[merged - 1][1] {
+                segs[merged - 1][1] = segs[merged - 1][1].max(seg[1]);
             } else if seg[1] >= seg[0] {
-                s.segments[merged] = seg;
+                segs[merged] = seg;
                 merged += 1;
             }
         }
-        s.segments.truncate(merged);
-        state.segments_start = first_segment;
-        state.segments_end = merged;
-        state.live = merged > first_segment;
+        segs.truncate(merged);
     }
 }
 
 /// The step at world distance `t` on ray `r`: the finest base step among the instances the
 /// ray is inside at `t`, grown with distance by the cone.
+#[inline(never)]
 fn step_at(r: usize, t: f64, plans: &[InstancePlan], params: &MarchParams, s: &Scratch) -> f64 {
     let n_inst = plans.len();
     let (mut here, mut anywhere) = (f64::INFINITY, f64::INFINITY);
@@ -282,17 +310,21 @@ fn step_at(r: usize, t: f64, plans: &[InstancePlan], params: &MarchParams, s: &S
 }
 
 /// Lays up to [`CHUNK`] regular nodes for ray `r` into `s.pending`.
+#[inline(never)]
 fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
     if !s.rays[r].live {
         return;
     }
     let mut laid = 0;
     while laid < CHUNK {
-        let state = &s.rays[r];
-        if state.segments_start >= state.segments_end {
-            break;
+        if s.rays[r].segment >= s.rays[r].segments.len() {
+            fetch_segments(r, plans, s);
+            if s.rays[r].segments.is_empty() {
+                break;
+            }
         }
-        let [a, b] = s.segments[state.segments_start];
+        let state = &s.rays[r];
+        let [a, b] = state.segments[state.segment];
         let (t, starts_run) = match state.next_t {
             Some(t) => (t, false),
             None => (a, true),
@@ -306,7 +338,7 @@ fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scr
         match next {
             Some(n) if n > t => state.next_t = Some(n),
             _ => {
-                state.segments_start += 1;
+                state.segment += 1;
                 state.next_t = None;
             }
         }
@@ -322,6 +354,7 @@ fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scr
 
 /// Evaluates every pending node's density (one batched call per instance) and inserts the
 /// nodes, in order, into their rays' node lists.
+#[inline(never)]
 fn evaluate_pending(scene: &Scene, n_inst: usize, s: &mut Scratch) {
     let first_slot = s.inst_sigma.len();
     s.inst_sigma
@@ -378,6 +411,7 @@ fn evaluate_pending(scene: &Scene, n_inst: usize, s: &mut Scratch) {
 
 /// Composites a ray's nodes, in order, until it is opaque enough; distributes each piece's
 /// weight to its two nodes in proportion to their densities (their share of its colour).
+#[inline(never)]
 fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, outputs: &Outputs) {
     let min_t = params.min_transmittance as f64;
     for i in 1..nodes.len() {
@@ -405,12 +439,13 @@ fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, out
             return;
         }
     }
-    if state.segments_start >= state.segments_end {
+    if state.segment >= state.segments.len() && state.horizon >= state.end {
         state.live = false;
     }
 }
 
 /// Evaluates colour where the weight matters and adds it to the rays' colours.
+#[inline(never)]
 fn shade(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
     let min_w = params.min_color_weight as f64;
     for (i, inst) in scene.instances.iter().enumerate() {
@@ -446,6 +481,7 @@ fn shade(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
     }
 }
 
+#[inline(never)]
 fn finish(state: &RayState, outputs: &Outputs) -> PixelResult {
     let alpha = state.pieces.accumulation();
     let depth = state.pieces.expected_depth();

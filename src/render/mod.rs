@@ -134,16 +134,7 @@ pub fn render_with_progress(
         .into_par_iter()
         .map_init(Scratch::default, |scratch, tile| {
             let mut out = Vec::with_capacity(tile.area());
-            let stats = march_tile(
-                scene,
-                &plans,
-                camera,
-                tile,
-                &settings.march,
-                &settings.outputs,
-                scratch,
-                &mut out,
-            );
+            let stats = march_tile(scene, &plans, camera, tile, settings, scratch, &mut out);
             on_tile(tile.area() as u64);
             (tile, out, stats)
         })

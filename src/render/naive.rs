@@ -75,7 +75,7 @@ fn naive_pixel(
         .map(|l| l.t_near)
         .fold(f64::INFINITY, f64::min);
     let far = locals.iter().flatten().map(|l| l.t_far).fold(0.0, f64::max);
-    if !(near < far) {
+    if near.is_nan() || far.is_nan() || near >= far {
         return result;
     }
     let n = ((far - near) / step).ceil() as usize;

@@ -205,7 +205,7 @@ impl Instance {
         let d = d / k;
         let (u0, u1) = self.clip_local(o, d)?;
         let (t_near, t_far) = ((u0 / k).max(t_min), (u1 / k).min(t_max));
-        if !(t_near < t_far) {
+        if t_near.is_nan() || t_far.is_nan() || t_near >= t_far {
             return None;
         }
         Some(LocalRay {

@@ -9,12 +9,16 @@
 //! into every field instance's frame (see [`crate::scene`]), so several fields with their own
 //! object transforms can be marched jointly.
 
+mod dataparser;
 mod equirect;
+mod nerfstudio;
 mod perspective;
 mod shot;
 mod stereo;
 
+pub use dataparser::DataparserTransform;
 pub use equirect::Equirect;
+pub use nerfstudio::{CameraPath, PathCameraType, PathCrop, PathFrame, PathKeyframe};
 pub use perspective::{BlenderIntrinsics, Perspective, SensorFit};
 pub use shot::{Shot, ShotCamera, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, SHOT_VERSION};
 pub use stereo::{Eye, Ods, Vr180, DEFAULT_IPD};

@@ -1,0 +1,430 @@
+# SPDX-License-Identifier: Apache-2.0
+"""nerfx Blender add-on: writes nerfx shot files and nerfstudio camera paths, and imports
+nerfstudio camera paths as an animated camera.
+
+A shot file (JSON, schema version 1, read by nerfx's `camera::Shot`) holds per frame the
+camera's `matrix_world` and intrinsics and the NeRF object's `matrix_world` (read at every
+frame: it may be animated). nerfx aligns the field itself (`C_t = N^-1 C_o`) and keeps lens
+shift, pixel aspect and every sensor fit, which a nerfstudio camera path cannot hold.
+
+Works in Blender 3.4 and 4.x. The panel is in Output Properties > nerfx. Every operator can be
+called from a script, e.g.
+
+    bpy.ops.nerfx.export_shot(filepath="/tmp/shot.json", frame_start=1, frame_end=24,
+                              nerf_object="NeRF")
+    bpy.ops.nerfx.export_camera_path(filepath="/tmp/camera_path.json", nerf_object="NeRF")
+    bpy.ops.nerfx.import_camera_path(filepath="/tmp/camera_path.json", nerf_object="NeRF")
+"""
+
+bl_info = {
+    "name": "nerfx shot export",
+    "description": "Write nerfx shot files and nerfstudio camera paths; import nerfstudio paths",
+    "author": "nerfx",
+    "version": (1, 0, 0),
+    "blender": (3, 4, 0),
+    "location": "Properties > Output > nerfx",
+    "category": "Import-Export",
+}
+
+import json
+import math
+
+import bpy
+from bpy.props import IntProperty, PointerProperty, StringProperty
+from mathutils import Matrix
+
+SHOT_VERSION = 1
+
+
+# --- Blender-version differences -------------------------------------------------------------
+
+
+def _pano_settings(cam):
+    """Where the panorama settings live: `Camera` itself in 4.x, `Camera.cycles` in 3.x."""
+    return cam if hasattr(cam, "panorama_type") else cam.cycles
+
+
+def panorama_type(cam):
+    """The camera's panorama type (e.g. EQUIRECTANGULAR)."""
+    return _pano_settings(cam).panorama_type
+
+
+def set_panorama_type(cam, value):
+    """Sets the panorama type on the place this Blender keeps it."""
+    _pano_settings(cam).panorama_type = value
+
+
+def _is_full_sphere(cam):
+    p = _pano_settings(cam)
+    return (
+        abs(p.longitude_min + math.pi) < 1e-6
+        and abs(p.longitude_max - math.pi) < 1e-6
+        and abs(p.latitude_min + math.pi / 2) < 1e-6
+        and abs(p.latitude_max - math.pi / 2) < 1e-6
+    )
+
+
+def _is_front_half(cam):
+    p = _pano_settings(cam)
+    return abs(p.longitude_min + math.pi / 2) < 1e-6 and abs(p.longitude_max - math.pi / 2) < 1e-6
+
+
+# --- reading the scene ------------------------------------------------------------------------
+
+
+def rows(m):
+    """A 4x4 matrix as four rows of floats."""
+    return [[float(m[r][c]) for c in range(4)] for r in range(4)]
+
+
+def _frame_range(op, scene):
+    props = op.properties
+    start = op.frame_start if props.is_property_set("frame_start") else scene.frame_start
+    end = op.frame_end if props.is_property_set("frame_end") else scene.frame_end
+    return start, end
+
+
+def _resolve(op, context):
+    """The scene camera and the NeRF object, or an error message."""
+    scene = context.scene
+    name = op.nerf_object
+    nerf = scene.objects.get(name) if name else scene.nerfx_nerf_object
+    if nerf is None:
+        return None, None, "pick the NeRF object (its stand-in mesh or point cloud)"
+    cam = scene.camera
+    if cam is None or cam.type != "CAMERA":
+        return None, None, "the scene has no active camera"
+    return cam, nerf, None
+
+
+def camera_record(cam_obj, scene):
+    """The shot file's `camera` entry for the current frame; raises ValueError for a camera
+    nerfx cannot render."""
+    cam = cam_obj.data
+    rec = {
+        "matrix_world": rows(cam_obj.matrix_world),
+        "lens": cam.lens,
+        "sensor_width": cam.sensor_width,
+        "sensor_height": cam.sensor_height,
+        "sensor_fit": cam.sensor_fit,
+        "shift_x": cam.shift_x,
+        "shift_y": cam.shift_y,
+        "clip_start": cam.clip_start,
+        "clip_end": cam.clip_end,
+        "stereo": None,
+    }
+    if cam.type == "PERSP":
+        rec["type"] = "PERSP"
+    elif cam.type == "PANO" and panorama_type(cam) == "EQUIRECTANGULAR":
+        rec["type"] = "PANO"
+        rec["panorama_type"] = "EQUIRECTANGULAR"
+        if scene.render.use_multiview and scene.render.views_format == "STEREO_3D":
+            if _is_front_half(cam):
+                mode = "VR180"
+            elif _is_full_sphere(cam):
+                mode = "ODS"
+            else:
+                raise ValueError("stereo panoramas must span 360 (ODS) or 180 (VR180) degrees")
+            rec["stereo"] = {"mode": mode, "eye": "both", "ipd": cam.stereo.interocular_distance}
+        elif not _is_full_sphere(cam):
+            raise ValueError("equirectangular cameras must cover the full sphere")
+    else:
+        raise ValueError("only perspective and equirectangular cameras are supported")
+    return rec
+
+
+def build_shot(scene, cam_obj, nerf_obj, start, end):
+    """The shot dictionary for frames start..end (inclusive, scene.frame_step apart)."""
+    render = scene.render
+    frames = []
+    current = scene.frame_current
+    step = max(1, scene.frame_step)
+    try:
+        for f in range(start, end + 1, step):
+            scene.frame_set(f)
+            frames.append(
+                {
+                    "frame": f,
+                    "camera": camera_record(cam_obj, scene),
+                    "objects": {nerf_obj.name: rows(nerf_obj.matrix_world)},
+                }
+            )
+    finally:
+        scene.frame_set(current)
+    return {
+        "version": SHOT_VERSION,
+        "fps": render.fps,
+        "fps_base": render.fps_base,
+        "resolution_x": render.resolution_x,
+        "resolution_y": render.resolution_y,
+        "resolution_percentage": render.resolution_percentage,
+        "pixel_aspect_x": render.pixel_aspect_x,
+        "pixel_aspect_y": render.pixel_aspect_y,
+        "nerf_object": nerf_obj.name,
+        "frames": frames,
+    }
+
+
+def vertical_fov(cam, render):
+    """Blender's exact vertical field of view (radians) of a perspective camera, from the
+    same sensor-fit rules nerfx uses (shift and pixel aspect cannot be expressed)."""
+    w = render.resolution_x * render.resolution_percentage // 100
+    h = render.resolution_y * render.resolution_percentage // 100
+    pa_x, pa_y = max(render.pixel_aspect_x, 1.0), max(render.pixel_aspect_y, 1.0)
+    fit = cam.sensor_fit
+    horizontal = fit == "HORIZONTAL" or (fit == "AUTO" and w * pa_x >= h * pa_y)
+    sensor = cam.sensor_height if fit == "VERTICAL" else cam.sensor_width
+    ycor = pa_y / pa_x
+    viewfac = w if horizontal else ycor * h
+    s = sensor / (cam.lens * viewfac)
+    return 2.0 * math.atan(ycor * h / 2.0 * s)
+
+
+def build_camera_path(scene, cam_obj, nerf_obj, start, end):
+    """A nerfstudio camera path (as the nerfstudio add-on writes it) for frames start..end."""
+    render = scene.render
+    cam = cam_obj.data
+    if cam.type == "PERSP":
+        cam_type = "perspective"
+    elif cam.type == "PANO" and panorama_type(cam) == "EQUIRECTANGULAR":
+        cam_type = "equirectangular"
+    else:
+        raise ValueError("only perspective and equirectangular cameras are supported")
+    path, keyframes = [], []
+    current = scene.frame_current
+    step = max(1, scene.frame_step)
+    fps = render.fps / render.fps_base
+    try:
+        for i, f in enumerate(range(start, end + 1, step)):
+            scene.frame_set(f)
+            c2w = nerf_obj.matrix_world.inverted() @ cam_obj.matrix_world
+            fov = math.degrees(vertical_fov(cam, render)) if cam_type == "perspective" else 180.0
+            flat_rows = [float(x) for r in range(4) for x in c2w.row[r]]
+            flat_cols = [float(x) for c in range(4) for x in c2w.col[c]]
+            path.append({"camera_to_world": flat_rows, "fov": fov, "aspect": 1})
+            props = [["FOV", fov], ["NAME", "Camera %d" % i], ["TIME", i / fps]]
+            keyframes.append(
+                {
+                    "matrix": json.dumps(flat_cols),
+                    "fov": fov,
+                    "aspect": 1,
+                    "properties": json.dumps(props),
+                }
+            )
+    finally:
+        scene.frame_set(current)
+    return {
+        "keyframes": keyframes,
+        "camera_type": cam_type,
+        "render_height": render.resolution_y * render.resolution_percentage // 100,
+        "render_width": render.resolution_x * render.resolution_percentage // 100,
+        "camera_path": path,
+        "fps": fps,
+        "seconds": len(path) / fps,
+        "smoothness_value": 0,
+        "is_cycle": False,
+    }
+
+
+def _row_major(values):
+    """A 4x4 Matrix from 16 row-major floats or nested rows (3x4 gets 0 0 0 1)."""
+    if values and isinstance(values[0], (list, tuple)):
+        values = [x for row in values for x in row]
+    if len(values) == 12:
+        values = list(values) + [0.0, 0.0, 0.0, 1.0]
+    if len(values) != 16:
+        raise ValueError("camera_to_world must hold 16 numbers")
+    return Matrix([values[0:4], values[4:8], values[8:12], values[12:16]])
+
+
+def import_camera_path(context, data, nerf_obj, frame_start, name="NerfstudioCamera"):
+    """Creates one animated camera (one camera data block) from a camera-path dictionary."""
+    scene = context.scene
+    cam_type = data.get("camera_type", "perspective").lower()
+    if cam_type not in ("perspective", "equirectangular"):
+        raise ValueError("camera_type %r cannot be shown as a Blender camera" % cam_type)
+    cam_data = bpy.data.cameras.new(name)
+    cam_obj = bpy.data.objects.new(name, cam_data)
+    scene.collection.objects.link(cam_obj)
+    scene.render.resolution_x = int(data["render_width"])
+    scene.render.resolution_y = int(data["render_height"])
+    scene.render.resolution_percentage = 100
+    scene.render.pixel_aspect_x = scene.render.pixel_aspect_y = 1.0
+    if cam_type == "equirectangular":
+        cam_data.type = "PANO"
+        scene.render.engine = "CYCLES"
+        set_panorama_type(cam_data, "EQUIRECTANGULAR")
+    cam_data.sensor_fit = "VERTICAL"
+    n_mat = nerf_obj.matrix_world.copy() if nerf_obj is not None else Matrix.Identity(4)
+    previous = None
+    path = data["camera_path"]
+    for i, entry in enumerate(path):
+        f = frame_start + i
+        cam_obj.matrix_world = n_mat @ _row_major(entry["camera_to_world"])
+        cam_obj.scale = (1.0, 1.0, 1.0)
+        if previous is not None:
+            cam_obj.rotation_euler.make_compatible(previous)
+        previous = cam_obj.rotation_euler.copy()
+        cam_obj.keyframe_insert("location", frame=f)
+        cam_obj.keyframe_insert("rotation_euler", frame=f)
+        if cam_type == "perspective":
+            fov = math.radians(float(entry["fov"]))
+            cam_data.lens = (cam_data.sensor_height / 2.0) / math.tan(fov / 2.0)
+            cam_data.keyframe_insert("lens", frame=f)
+    scene.frame_start = frame_start
+    scene.frame_end = frame_start + len(path) - 1
+    seconds = float(data.get("seconds", 0) or 0)
+    if seconds > 0:
+        rate = len(path) / seconds
+        scene.render.fps = max(1, round(rate))
+        scene.render.fps_base = scene.render.fps / rate
+    scene.camera = cam_obj
+    return cam_obj
+
+
+# --- operators --------------------------------------------------------------------------------
+
+
+class _ExportBase:
+    filepath: StringProperty(name="File", subtype="FILE_PATH")
+    frame_start: IntProperty(name="Start", description="First frame (default: the scene's)")
+    frame_end: IntProperty(name="End", description="Last frame (default: the scene's)")
+    nerf_object: StringProperty(
+        name="NeRF object", description="Name of the NeRF stand-in (default: the panel's pick)"
+    )
+
+    def invoke(self, context, event):
+        if not self.filepath:
+            self.filepath = bpy.path.abspath(context.scene.nerfx_output_dir or "//") + self.default_name
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+    def execute(self, context):
+        cam, nerf, problem = _resolve(self, context)
+        if problem:
+            self.report({"ERROR"}, "nerfx: " + problem)
+            return {"CANCELLED"}
+        if not self.filepath:
+            self.report({"ERROR"}, "nerfx: no output file given")
+            return {"CANCELLED"}
+        start, end = _frame_range(self, context.scene)
+        if end < start:
+            self.report({"ERROR"}, "nerfx: the frame range runs backwards")
+            return {"CANCELLED"}
+        try:
+            data = self.build(context.scene, cam, nerf, start, end)
+        except ValueError as e:
+            self.report({"ERROR"}, "nerfx: %s" % e)
+            return {"CANCELLED"}
+        path = bpy.path.abspath(self.filepath)
+        with open(path, "w", encoding="utf8") as f:
+            json.dump(data, f, indent=1, allow_nan=False)
+        self.report({"INFO"}, "nerfx: wrote %s" % path)
+        return {"FINISHED"}
+
+
+class NERFX_OT_export_shot(_ExportBase, bpy.types.Operator):
+    """Write a nerfx shot file: camera and NeRF object per frame, with full intrinsics"""
+
+    bl_idname = "nerfx.export_shot"
+    bl_label = "Export nerfx Shot"
+    default_name = "shot.json"
+
+    def build(self, scene, cam, nerf, start, end):
+        return build_shot(scene, cam, nerf, start, end)
+
+
+class NERFX_OT_export_camera_path(_ExportBase, bpy.types.Operator):
+    """Write a nerfstudio camera_path.json (camera relative to the NeRF object) for ns-render"""
+
+    bl_idname = "nerfx.export_camera_path"
+    bl_label = "Export nerfstudio Camera Path"
+    default_name = "camera_path.json"
+
+    def build(self, scene, cam, nerf, start, end):
+        c = cam.data
+        if c.type == "PERSP" and (c.shift_x or c.shift_y):
+            self.report({"WARNING"}, "nerfx: nerfstudio camera paths cannot hold lens shift")
+        r = scene.render
+        if r.pixel_aspect_x != r.pixel_aspect_y:
+            self.report({"WARNING"}, "nerfx: nerfstudio camera paths cannot hold pixel aspect")
+        return build_camera_path(scene, cam, nerf, start, end)
+
+
+class NERFX_OT_import_camera_path(bpy.types.Operator):
+    """Create an animated camera from a nerfstudio camera_path.json"""
+
+    bl_idname = "nerfx.import_camera_path"
+    bl_label = "Import nerfstudio Camera Path"
+
+    filepath: StringProperty(name="File", subtype="FILE_PATH")
+    nerf_object: StringProperty(name="NeRF object")
+    frame_start: IntProperty(name="First frame", default=1)
+
+    def invoke(self, context, event):
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+    def execute(self, context):
+        scene = context.scene
+        nerf = scene.objects.get(self.nerf_object) if self.nerf_object else scene.nerfx_nerf_object
+        try:
+            with open(bpy.path.abspath(self.filepath), encoding="utf8") as f:
+                data = json.load(f)
+            import_camera_path(context, data, nerf, self.frame_start)
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            self.report({"ERROR"}, "nerfx: cannot import %s: %s" % (self.filepath, e))
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+
+class NERFX_PT_panel(bpy.types.Panel):
+    """nerfx: shot export and nerfstudio camera paths"""
+
+    bl_idname = "NERFX_PT_panel"
+    bl_label = "nerfx"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "output"
+
+    def draw(self, context):
+        layout = self.layout
+        scene = context.scene
+        layout.prop(scene, "nerfx_nerf_object")
+        layout.prop(scene, "nerfx_output_dir")
+        row = layout.row(align=True)
+        row.prop(scene, "frame_start")
+        row.prop(scene, "frame_end")
+        layout.operator(NERFX_OT_export_shot.bl_idname, icon="EXPORT")
+        layout.operator(NERFX_OT_export_camera_path.bl_idname, icon="EXPORT")
+        layout.operator(NERFX_OT_import_camera_path.bl_idname, icon="IMPORT")
+
+
+CLASSES = (
+    NERFX_OT_export_shot,
+    NERFX_OT_export_camera_path,
+    NERFX_OT_import_camera_path,
+    NERFX_PT_panel,
+)
+
+
+def register():
+    bpy.types.Scene.nerfx_nerf_object = PointerProperty(
+        name="NeRF object", type=bpy.types.Object, description="The stand-in of the field"
+    )
+    bpy.types.Scene.nerfx_output_dir = StringProperty(
+        name="Output folder", subtype="DIR_PATH", default="//"
+    )
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)
+    del bpy.types.Scene.nerfx_output_dir
+    del bpy.types.Scene.nerfx_nerf_object
+
+
+if __name__ == "__main__":
+    register()

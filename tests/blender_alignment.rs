@@ -18,7 +18,7 @@ use std::process::Command;
 use std::sync::Arc;
 
 use glam::{DVec3, Vec3};
-use nerfx::camera::{Projection, Shot};
+use nerfx::camera::{CameraPath, Projection, Shot};
 use nerfx::field::{Analytic, Primitive, ShColor, Shape};
 use nerfx::render::{render, Outputs, Quality, RenderSettings};
 use nerfx::scene::{FieldHandle, Instance, Scene};
@@ -81,14 +81,22 @@ fn grid(v: &Value) -> Vec<Vec<f64>> {
     v.as_array().unwrap().iter().map(f64s).collect()
 }
 
-/// Largest projection error (px) over a case's points.
+/// Largest projection error (px) over a case's points, and their number. The case's shot is
+/// its shot file, or the add-on's nerfstudio camera path made into one (frames from 1).
 fn check_points(case: &Value) -> (f64, usize) {
-    let shot = Shot::read(case["shot"].as_str().unwrap()).unwrap();
+    let shot = match case.get("camera_path") {
+        Some(p) => CameraPath::read(p.as_str().unwrap())
+            .unwrap()
+            .to_shot(1, "NeRF")
+            .unwrap(),
+        None => Shot::read(case["shot"].as_str().unwrap()).unwrap(),
+    };
     let mut worst: f64 = 0.0;
     let points = case["points"].as_array().unwrap();
     for p in points {
         let frame = shot.frame(p["frame"].as_i64().unwrap()).unwrap();
         let camera = frame.camera(&shot).unwrap();
+        // Aligned: the point is in the NeRF object's frame, placed by the shot's `N`.
         let n = frame.object_matrix(&shot.nerf_object).unwrap();
         let local = f64s(&p["local"]);
         let world = n.transform_point3(DVec3::new(local[0], local[1], local[2]));

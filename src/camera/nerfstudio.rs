@@ -279,12 +279,16 @@ impl CameraPath {
         Camera::new(frame.camera_to_world, projection).map_err(in_context)
     }
 
-    /// The path as a nerfx shot: frame `i` becomes `first_frame + i`, the cameras keep their
-    /// matrices and the object `nerf_object` is the identity (a camera path is already in the
-    /// field's frame). A vertical FOV becomes a Blender lens with a VERTICAL sensor fit:
-    /// `lens = (sensor_height/2)/tan(fov/2)`, which frames exactly as `f = (H/2)/tan(fov/2)`.
-    /// Stereo types render both eyes; the frame rate is [`Self::frame_rate`].
-    pub fn to_shot(&self, first_frame: i64, nerf_object: &str) -> Shot {
+    /// The path as a nerfx shot: frame `i` becomes `first_frame + i`. A vertical FOV becomes
+    /// a Blender lens with a VERTICAL sensor fit, `lens = (sensor_height/2)/tan(fov/2)`, which
+    /// frames exactly as `f = (H/2)/tan(fov/2)`. Stereo types render both eyes; the frame rate
+    /// is [`Self::frame_rate`].
+    ///
+    /// Exact for any affine `camera_to_world` `M`, also one with non-uniform scale (a path
+    /// written from a scaled NeRF object, `N⁻¹·C_o`), which [`Self::camera`] would make rigid:
+    /// the shot's camera is the rigid part `C` of `M` and the object `nerf_object` gets
+    /// `C·M⁻¹`, so the field sees `(C·M⁻¹)⁻¹·C = M`, as `ns-render` does.
+    pub fn to_shot(&self, first_frame: i64, nerf_object: &str) -> Result<Shot> {
         let stereo = |mode| {
             Some(ShotStereo {
                 mode,
@@ -298,14 +302,14 @@ impl CameraPath {
             PathCameraType::Omnidirectional => (ShotCameraKind::Equirect, stereo(StereoMode::Ods)),
             PathCameraType::Vr180 => (ShotCameraKind::Equirect, stereo(StereoMode::Vr180)),
         };
-        let frames = self
-            .frames
-            .iter()
-            .enumerate()
-            .map(|(i, f)| ShotFrame {
+        let mut frames = Vec::with_capacity(self.frames.len());
+        for (i, f) in self.frames.iter().enumerate() {
+            let rigid = self.camera(i, Eye::Both)?.world_from_camera();
+            let object = rigid * f.camera_to_world.inverse();
+            frames.push(ShotFrame {
                 frame: first_frame + i as i64,
                 camera: ShotCamera {
-                    world_from_camera: f.camera_to_world,
+                    world_from_camera: rigid,
                     kind,
                     lens: (SHOT_SENSOR_HEIGHT / 2.0) / (f.fov.to_radians() / 2.0).tan(),
                     sensor_width: 36.0,
@@ -317,10 +321,10 @@ impl CameraPath {
                     clip_end: 1000.0,
                     stereo,
                 },
-                objects: BTreeMap::from([(nerf_object.to_string(), DMat4::IDENTITY)]),
-            })
-            .collect();
-        Shot {
+                objects: BTreeMap::from([(nerf_object.to_string(), object)]),
+            });
+        }
+        Ok(Shot {
             fps: self.frame_rate(),
             fps_base: 1.0,
             resolution_x: self.render_width,
@@ -331,7 +335,7 @@ impl CameraPath {
             nerf_object: nerf_object.to_string(),
             frames,
             source: self.source.clone(),
-        }
+        })
     }
 
     /// Writes the path as the nerfstudio Blender add-on does: `camera_to_world` row-major
@@ -887,9 +891,12 @@ mod tests {
         let text = r#"{"render_width": 48, "render_height": 30, "seconds": 1,
             "camera_path": [{"camera_to_world": [0,-1,0,1, 1,0,0,2, 0,0,1,3, 0,0,0,1], "fov": 37}]}"#;
         let p = CameraPath::from_json_str(text, "p.json").unwrap();
-        let shot = p.to_shot(1001, "NeRF");
+        let shot = p.to_shot(1001, "NeRF").unwrap();
         let frame = shot.frame(1001).unwrap();
-        assert_eq!(frame.object_matrix("NeRF").unwrap(), DMat4::IDENTITY);
+        assert!(frame
+            .object_matrix("NeRF")
+            .unwrap()
+            .abs_diff_eq(DMat4::IDENTITY, 1e-15));
         let a = p.camera(0, Eye::Both).unwrap();
         let b = frame.camera(&shot).unwrap();
         for (x, y) in [(0.5, 0.5), (24.0, 15.0), (47.5, 3.25)] {

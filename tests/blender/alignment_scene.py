@@ -179,6 +179,27 @@ for i, fit in enumerate(fits):
         set_format(w, h, 100 if (i + j) % 2 else 50, pa)
         cases.append({"name": name, "shot": export(name), "points": project_points(rng, 15)})
 
+# nerfstudio camera path from the add-on (no shift, square pixels: what a path can hold).
+cam_data.sensor_fit = "AUTO"
+cam_data.shift_x = cam_data.shift_y = 0.0
+set_format(192, 108, 100, (1.0, 1.0))
+ns_path = "%s/camera_path.json" % OUT
+res = bpy.ops.nerfx.export_camera_path(filepath=ns_path, frame_start=1, frame_end=3, nerf_object="NeRF")
+assert res == {"FINISHED"}, res
+cases.append({"name": "camera_path_auto_landscape", "camera_path": ns_path, "points": project_points(rng, 15)})
+# ... and imported back: one new camera object and data block, keyed on frames 1..3.
+cameras_before = len(bpy.data.cameras)
+original = scene.camera
+res = bpy.ops.nerfx.import_camera_path(filepath=ns_path, nerf_object="", frame_start=1)
+assert res == {"FINISHED"}, res
+imported = scene.camera
+assert imported is not original and len(bpy.data.cameras) == cameras_before + 1
+keyed = sorted({int(k.co.x) for fc in imported.animation_data.action.fcurves for k in fc.keyframe_points})
+assert keyed == [1, 2, 3], keyed
+bpy.data.objects.remove(imported)
+bpy.data.cameras.remove(bpy.data.cameras["NerfstudioCamera"])
+scene.camera = original
+
 # Renders: a few formats of the same shot, then an equirectangular panorama.
 renders = (
     ("render_landscape_shift", "AUTO", (0.1, -0.05), 160, 120, (1.0, 1.0), 2),

@@ -277,6 +277,17 @@ impl Field for Analytic {
             .fold(Aabb::EMPTY, |b, p| b.union(&p.shape.bounds()))
     }
 
+    /// Constant pieces integrate exactly at any step once their edges are bracketed, so only
+    /// the Gaussians set a scale: their standard deviation. Without one, 1/32 of the bounds.
+    fn feature_size(&self) -> f32 {
+        self.active()
+            .filter_map(|p| match p.shape {
+                Shape::Gaussian { sigma, .. } => Some(sigma),
+                _ => None,
+            })
+            .fold(self.bounds().diagonal() / 32.0, f32::min)
+    }
+
     fn density(&self, points: &[Vec3], sigma: &mut [f32]) {
         debug_assert_eq!(points.len(), sigma.len());
         sigma.fill(0.0);

@@ -33,6 +33,13 @@ pub trait Field: Send + Sync {
     /// `rgb.len() == points.len() == dirs.len()`.
     fn radiance(&self, points: &[Vec3], dirs: &[Vec3], rgb: &mut [Vec3]);
 
+    /// The length (field units) over which the density varies smoothly: the marcher's step
+    /// is a quality preset's fraction of it. Sharper changes (surfaces) are found by the
+    /// marcher's refinement, so this is about smooth variation, not about edges.
+    fn feature_size(&self) -> f32 {
+        self.bounds().diagonal() / 256.0
+    }
+
     /// Whether the density may be non-zero anywhere in `region`. Must be *conservative*:
     /// `false` only where the density is exactly zero throughout.
     fn may_be_occupied(&self, region: &Aabb) -> bool;

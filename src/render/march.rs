@@ -17,12 +17,12 @@ use glam::{DVec3, Vec3};
 use super::composite::{crossing_depth, Pieces};
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
-use crate::field::Occupancy;
+use crate::field::{Aabb, Occupancy};
 use crate::image::Window;
 use crate::scene::{LocalRay, Scene};
 
 /// Nodes each live ray lays per round.
-const CHUNK: usize = 24;
+const CHUNK: usize = 8;
 
 /// The first segment fetch covers this fraction of the ray's span through the instances.
 const FIRST_WINDOWS: f64 = 4.0;
@@ -51,8 +51,8 @@ impl InstancePlan {
             .iter()
             .map(|inst| InstancePlan {
                 occupancy: inst.handle().occupancy(params.occupancy_resolution),
-                base_step: inst.field().bounds().diagonal() as f64
-                    / params.steps_per_diagonal.max(1.0) as f64,
+                base_step: inst.field().feature_size() as f64
+                    / params.steps_per_feature.max(1e-3) as f64,
             })
             .collect()
     }
@@ -113,6 +113,8 @@ pub(super) struct Scratch {
     inst_sigma: Vec<f64>,
     inst_sigma_prev: Vec<f64>,
     pending: Vec<Pending>,
+    /// The nodes the last refinement level added.
+    added: Vec<Pending>,
     points: Vec<Vec3>,
     dirs: Vec<Vec3>,
     owners: Vec<(u32, f64)>,
@@ -157,31 +159,7 @@ pub(super) fn march_tile(
         }
         evaluate_pending(scene, n_inst, s);
 
-        // Bisect steps whose ends disagree, level by level, batched across the tile.
-        for level in 0..params.refine_depth.min(u8::MAX as u32) as u8 {
-            s.pending.clear();
-            for (r, nodes) in s.nodes.iter().enumerate() {
-                for pair in nodes.windows(2) {
-                    let (a, b) = (pair[0], pair[1]);
-                    if b.starts_run || a.level.max(b.level) != level {
-                        continue;
-                    }
-                    let jump = (b.sigma - a.sigma).abs() * (b.t - a.t);
-                    if jump > params.refine_tolerance as f64 {
-                        s.pending.push(Pending {
-                            ray: r as u32,
-                            t: 0.5 * (a.t + b.t),
-                            level: level + 1,
-                            starts_run: false,
-                        });
-                    }
-                }
-            }
-            if s.pending.is_empty() {
-                break;
-            }
-            evaluate_pending(scene, n_inst, s);
-        }
+        refine(scene, n_inst, params, s);
 
         // Integrate the pieces, in order.
         for r in 0..n_rays {
@@ -405,6 +383,89 @@ fn evaluate_pending(scene: &Scene, n_inst: usize, s: &mut Scratch) {
         } else {
             let at = nodes.partition_point(|n| n.t <= node.t);
             nodes.insert(at, node);
+        }
+    }
+}
+
+/// Whether the step `[a, b]` of ray `r` may hide density between two empty nodes: some
+/// instance's field may be occupied in the box around the step's two field-space ends.
+/// Fields whose density is exactly zero only where it is truly empty (analytic ones) find
+/// slivers thinner than a step this way; fields with density everywhere never get here.
+fn step_may_hide_density(scene: &Scene, local: &[Option<LocalRay>], a: f64, b: f64) -> bool {
+    scene.instances.iter().zip(local).any(|(inst, lr)| {
+        lr.as_ref().is_some_and(|lr| {
+            let (a, b) = (a.max(lr.t_near), b.min(lr.t_far));
+            a <= b && {
+                let (pa, pb) = (lr.at(a), lr.at(b));
+                inst.field()
+                    .may_be_occupied(&Aabb::new(pa.min(pb), pa.max(pb)))
+            }
+        })
+    })
+}
+
+/// Bisects the steps whose two ends disagree (`|σ_b − σ_a|·δ` above the tolerance) or that
+/// are empty at both ends but may hide density between them ([`step_may_hide_density`]),
+/// level by level, each level one batch across the tile. After the first level only the
+/// pairs next to the nodes just added can need it, so only those are looked at.
+#[inline(never)]
+fn refine(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
+    let depth = params.refine_depth.min(u8::MAX as u32) as u8;
+    let tolerance = params.refine_tolerance as f64;
+    // Splits the pair (nodes[i], nodes[i + 1]) of ray r at its midpoint when needed.
+    let split = |local: &[Option<LocalRay>],
+                 r: usize,
+                 nodes: &[Node],
+                 i: usize,
+                 level: u8,
+                 out: &mut Vec<Pending>| {
+        let (a, b) = (&nodes[i], &nodes[i + 1]);
+        if b.starts_run {
+            return;
+        }
+        let needed = if a.sigma == 0.0 && b.sigma == 0.0 {
+            let local = &local[r * n_inst..(r + 1) * n_inst];
+            step_may_hide_density(scene, local, a.t, b.t)
+        } else {
+            (b.sigma - a.sigma).abs() * (b.t - a.t) > tolerance
+        };
+        if needed {
+            out.push(Pending {
+                ray: r as u32,
+                t: 0.5 * (a.t + b.t),
+                level,
+                starts_run: false,
+            });
+        }
+    };
+    if depth == 0 {
+        return;
+    }
+    s.pending.clear();
+    for (r, nodes) in s.nodes.iter().enumerate() {
+        for i in 0..nodes.len().saturating_sub(1) {
+            split(&s.local, r, nodes, i, 1, &mut s.pending);
+        }
+    }
+    let mut level = 1;
+    while !s.pending.is_empty() {
+        evaluate_pending(scene, n_inst, s);
+        if level == depth {
+            break;
+        }
+        level += 1;
+        std::mem::swap(&mut s.pending, &mut s.added);
+        s.pending.clear();
+        for added in &s.added {
+            let r = added.ray as usize;
+            let nodes = &s.nodes[r];
+            let i = nodes.partition_point(|n| n.t < added.t);
+            if i > 0 {
+                split(&s.local, r, nodes, i - 1, level, &mut s.pending);
+            }
+            if i + 1 < nodes.len() {
+                split(&s.local, r, nodes, i, level, &mut s.pending);
+            }
         }
     }
 }

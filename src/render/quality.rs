@@ -18,8 +18,9 @@ pub enum Quality {
 /// The marcher's dials.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MarchParams {
-    /// Base step: each field's bounding-box diagonal divided by this (in field units).
-    pub steps_per_diagonal: f32,
+    /// Base step: each field's [`feature_size`](crate::field::Field::feature_size) divided by
+    /// this (in field units).
+    pub steps_per_feature: f32,
     /// Step growth with world distance from the camera: `δ = max(base, cone·t)`.
     pub cone: f32,
     /// The step never exceeds `base · max_step_factor`.
@@ -41,7 +42,7 @@ impl Quality {
     pub fn params(self) -> MarchParams {
         match self {
             Quality::Draft => MarchParams {
-                steps_per_diagonal: 96.0,
+                steps_per_feature: 2.0,
                 cone: 1.0 / 256.0,
                 max_step_factor: 4.0,
                 min_transmittance: 1e-2,
@@ -51,7 +52,7 @@ impl Quality {
                 min_color_weight: 1e-3,
             },
             Quality::Preview => MarchParams {
-                steps_per_diagonal: 192.0,
+                steps_per_feature: 4.0,
                 cone: 1.0 / 512.0,
                 max_step_factor: 2.0,
                 min_transmittance: 1e-3,
@@ -61,13 +62,13 @@ impl Quality {
                 min_color_weight: 1e-4,
             },
             Quality::Final => MarchParams {
-                steps_per_diagonal: 384.0,
+                steps_per_feature: 8.0,
                 cone: 0.0,
                 max_step_factor: 1.0,
                 min_transmittance: 1e-4,
                 occupancy_resolution: 256,
                 refine_tolerance: 1e-3,
-                refine_depth: 8,
+                refine_depth: 10,
                 min_color_weight: 1e-5,
             },
         }

@@ -2,7 +2,7 @@
 //! integrator (pieces → planes), batched across a tile.
 //!
 //! A tile's rays advance together in *chunks*. Each round, every live ray lays up to
-//! [`CHUNK`] sample positions ("nodes") along its occupied segments; the tile asks each field
+//! a chunk of sample positions ("nodes") along its occupied segments; the tile asks each field
 //! once for all of them; nodes whose neighbours' densities disagree (a surface, a steep
 //! gradient) are bisected — again batched across the tile — until they agree or the depth
 //! limit is hit. Between two nodes the density is taken as their mean (the trapezoid rule,
@@ -21,8 +21,12 @@ use crate::field::{Aabb, Occupancy};
 use crate::image::Window;
 use crate::scene::{LocalRay, Scene};
 
-/// Nodes each live ray lays per round.
-const CHUNK: usize = 8;
+/// Nodes a live ray lays in its first round; the chunk doubles each round up to
+/// [`MAX_CHUNK`], so rays that stop at the first surface waste few samples past it and rays
+/// through thin media amortise the round's overhead.
+const FIRST_CHUNK: usize = 8;
+/// The largest chunk.
+const MAX_CHUNK: usize = 8;
 
 /// The first segment fetch covers this fraction of the ray's span through the instances.
 const FIRST_WINDOWS: f64 = 4.0;
@@ -98,6 +102,8 @@ struct RayState {
     /// Next node position inside the current segment; `None`: at the segment's start.
     next_t: Option<f64>,
     live: bool,
+    /// Rounds this ray has laid nodes in.
+    rounds: u32,
     /// Median-depth log `[t, δ, σ, T_enter]` range in `Scratch::log` is per ray.
     log: Vec<[f64; 4]>,
 }
@@ -197,6 +203,7 @@ fn setup_rays(scene: &Scene, camera: &Camera, tile: Window, s: &mut Scratch) {
         state.pieces = Pieces::new();
         state.rgb = DVec3::ZERO;
         state.next_t = None;
+        state.rounds = 0;
         state.log.clear();
         state.segments.clear();
         state.segment = 0;
@@ -287,14 +294,16 @@ fn step_at(r: usize, t: f64, plans: &[InstancePlan], params: &MarchParams, s: &S
     base.max(grown).max(f64::MIN_POSITIVE)
 }
 
-/// Lays up to [`CHUNK`] regular nodes for ray `r` into `s.pending`.
+/// Lays the next chunk of regular nodes for ray `r` into `s.pending`.
 #[inline(never)]
 fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
     if !s.rays[r].live {
         return;
     }
+    let chunk = (FIRST_CHUNK << s.rays[r].rounds.min(8)).min(MAX_CHUNK);
+    s.rays[r].rounds += 1;
     let mut laid = 0;
-    while laid < CHUNK {
+    while laid < chunk {
         if s.rays[r].segment >= s.rays[r].segments.len() {
             fetch_segments(r, plans, s);
             if s.rays[r].segments.is_empty() {
@@ -412,6 +421,7 @@ fn step_may_hide_density(scene: &Scene, local: &[Option<LocalRay>], a: f64, b: f
 fn refine(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
     let depth = params.refine_depth.min(u8::MAX as u32) as u8;
     let tolerance = params.refine_tolerance as f64;
+    let transmittance: Vec<f64> = s.rays.iter().map(|r| r.pieces.transmittance()).collect();
     // Splits the pair (nodes[i], nodes[i + 1]) of ray r at its midpoint when needed.
     let split = |local: &[Option<LocalRay>],
                  r: usize,
@@ -427,7 +437,10 @@ fn refine(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
             let local = &local[r * n_inst..(r + 1) * n_inst];
             step_may_hide_density(scene, local, a.t, b.t)
         } else {
-            (b.sigma - a.sigma).abs() * (b.t - a.t) > tolerance
+            // Where the edge lies matters only as much as light from there reaches the
+            // camera. (Not discounted by what lies behind: the piece's own weight and colour
+            // depend on what the step holds.)
+            (b.sigma - a.sigma).abs() * (b.t - a.t) * transmittance[r] > tolerance
         };
         if needed {
             out.push(Pending {

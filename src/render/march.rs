@@ -112,6 +112,8 @@ struct RayState {
 #[derive(Default)]
 pub(super) struct Scratch {
     rays: Vec<RayState>,
+    /// The rays still marching, in pixel order.
+    active: Vec<u32>,
     /// `local[ray · n_instances + i]`.
     local: Vec<Option<LocalRay>>,
     occupied: Vec<[f32; 2]>,
@@ -144,13 +146,14 @@ pub(super) fn march_tile(
     let n_rays = tile.area();
     setup_rays(scene, camera, tile, s);
 
-    while s.rays.iter().take(n_rays).any(|r| r.live) {
+    while !s.active.is_empty() {
         // Each live ray keeps its last node (the start of its next piece), then lays more.
         std::mem::swap(&mut s.inst_sigma, &mut s.inst_sigma_prev);
         s.inst_sigma.clear();
         s.pending.clear();
-        for r in 0..n_rays {
-            let carried = s.nodes[r].last().copied().filter(|_| s.rays[r].live);
+        for a in 0..s.active.len() {
+            let r = s.active[a] as usize;
+            let carried = s.nodes[r].last().copied();
             s.nodes[r].clear();
             if let Some(mut node) = carried {
                 let slot = node.slot as usize;
@@ -168,16 +171,16 @@ pub(super) fn march_tile(
         refine(scene, n_inst, params, s);
 
         // Integrate the pieces, in order.
-        for r in 0..n_rays {
-            if !s.rays[r].live {
-                continue;
-            }
+        for &r in &s.active {
+            let r = r as usize;
             integrate(&mut s.rays[r], &mut s.nodes[r], params, outputs);
         }
 
         if outputs.rgb {
             shade(scene, n_inst, params, s);
         }
+        let rays = &s.rays;
+        s.active.retain(|&r| rays[r as usize].live);
     }
 
     out.clear();
@@ -195,6 +198,7 @@ fn setup_rays(scene: &Scene, camera: &Camera, tile: Window, s: &mut Scratch) {
     s.rays.resize_with(n_rays, RayState::default);
     s.nodes.resize_with(n_rays, Vec::new);
     s.local.clear();
+    s.active.clear();
     for (r, state) in s.rays.iter_mut().enumerate().take(n_rays) {
         let x = tile.x0 + (r % tile.width() as usize) as u32;
         let y = tile.y0 + (r / tile.width() as usize) as u32;
@@ -218,6 +222,9 @@ fn setup_rays(scene: &Scene, camera: &Camera, tile: Window, s: &mut Scratch) {
             s.local.push(local);
         }
         state.live = begin < end;
+        if state.live {
+            s.active.push(r as u32);
+        }
         state.horizon = begin;
         state.end = end;
         state.window = (end - begin) / FIRST_WINDOWS;
@@ -421,9 +428,9 @@ fn step_may_hide_density(scene: &Scene, local: &[Option<LocalRay>], a: f64, b: f
 fn refine(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
     let depth = params.refine_depth.min(u8::MAX as u32) as u8;
     let tolerance = params.refine_tolerance as f64;
-    let transmittance: Vec<f64> = s.rays.iter().map(|r| r.pieces.transmittance()).collect();
     // Splits the pair (nodes[i], nodes[i + 1]) of ray r at its midpoint when needed.
     let split = |local: &[Option<LocalRay>],
+                 transmittance: f64,
                  r: usize,
                  nodes: &[Node],
                  i: usize,
@@ -440,7 +447,7 @@ fn refine(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
             // Where the edge lies matters only as much as light from there reaches the
             // camera. (Not discounted by what lies behind: the piece's own weight and colour
             // depend on what the step holds.)
-            (b.sigma - a.sigma).abs() * (b.t - a.t) * transmittance[r] > tolerance
+            (b.sigma - a.sigma).abs() * (b.t - a.t) * transmittance > tolerance
         };
         if needed {
             out.push(Pending {
@@ -455,9 +462,11 @@ fn refine(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
         return;
     }
     s.pending.clear();
-    for (r, nodes) in s.nodes.iter().enumerate() {
+    for &r in &s.active {
+        let (r, nodes) = (r as usize, &s.nodes[r as usize]);
+        let t = s.rays[r].pieces.transmittance();
         for i in 0..nodes.len().saturating_sub(1) {
-            split(&s.local, r, nodes, i, 1, &mut s.pending);
+            split(&s.local, t, r, nodes, i, 1, &mut s.pending);
         }
     }
     let mut level = 1;
@@ -472,12 +481,13 @@ fn refine(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
         for added in &s.added {
             let r = added.ray as usize;
             let nodes = &s.nodes[r];
+            let t = s.rays[r].pieces.transmittance();
             let i = nodes.partition_point(|n| n.t < added.t);
             if i > 0 {
-                split(&s.local, r, nodes, i - 1, level, &mut s.pending);
+                split(&s.local, t, r, nodes, i - 1, level, &mut s.pending);
             }
             if i + 1 < nodes.len() {
-                split(&s.local, r, nodes, i, level, &mut s.pending);
+                split(&s.local, t, r, nodes, i, level, &mut s.pending);
             }
         }
     }
@@ -526,7 +536,8 @@ fn shade(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
         s.points.clear();
         s.dirs.clear();
         s.owners.clear();
-        for (r, nodes) in s.nodes.iter().enumerate() {
+        for &r in &s.active {
+            let (r, nodes) = (r as usize, &s.nodes[r as usize]);
             let Some(lr) = &s.local[r * n_inst + i] else {
                 continue;
             };

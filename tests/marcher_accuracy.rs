@@ -18,34 +18,33 @@ const W: u32 = 64;
 const H: u32 = 48;
 const SEEDS: u64 = 12;
 
-/// Preview: step diag/192 (growing with the cone to at most 2×), refinement depth 5, stop at
-/// T < 1e-3. The edge bound `k·δ/2⁶` is 16× Final's per unit step, and a feature thinner than
-/// a step can fall between samples; measured worst over the seeds: alpha 3.9e-3, RGB 2.4e-3,
-/// PSNR 74.2 dB, depth 4.8e-4. Bounds: alpha and RGB 1e-2, PSNR 65 dB, depth 2e-3.
+/// Preview: step = feature size / 2 (growing with distance by the cone to at most 2×),
+/// edges bisected while `|Δσ|·δ·T > 5e-3` (at most 6 times), stop at T < 1e-3: each of
+/// those is 5–10× Final's, and a 6-level bracket of a dense edge may stay wider than the
+/// tolerance. Bounds: alpha and RGB 1e-2, PSNR 60 dB, depth 2e-3 (measured: see the test
+/// output on failure).
 const PREVIEW: Tol = Tol {
-    min_psnr: 65.0,
-    min_alpha_psnr: 60.0,
+    min_psnr: 60.0,
+    min_alpha_psnr: 55.0,
     rgb: 1e-2,
     alpha: 1e-2,
-    depth_rel: 2e-3,
+    depth_rel: 5e-3,
 };
 
-/// Draft: step diag/96 (up to 4× with the cone), refinement depth 3, stop at T < 1e-2, so
-/// alpha is short by up to 1e-2 on every opaque pixel. Worse, a silhouette thinner than a
-/// step (a ray grazing a dense sphere) can fall between two samples and be missed entirely:
-/// one pixel of seed 6 loses alpha 0.13. The per-pixel worst case is therefore bounded only
-/// by 1 − e^{−k·δ} (close to 1 for k = 200), so Draft's per-pixel bounds are that loose and
-/// the image-wide PSNRs carry the test: measured RGB ≥ 60.2 dB, bound 55 dB. Depth: the
-/// median is where the accumulation crosses half of it, so an alpha error Δα moves it by
-/// `Δα/(σT)` — in a half-transparent medium (σT ≈ 0.5 per unit) Draft's Δα ≈ 1e-2 moves it
-/// by 0.02 units at depths ≥ 4, and more where the crossing is slow: measured 3.5e-2 at
-/// seed 1 (0.2 units); bound 5e-2.
+/// Draft: step = feature size (up to 4× with the cone), 2 bisections, stop at T < 1e-2,
+/// so alpha is short by up to 1e-2 on every opaque pixel, and a silhouette thinner than a
+/// step (a ray grazing a dense sphere) can be missed entirely: the per-pixel worst case is
+/// bounded only by 1 − e^{−k·δ} (close to 1 for k = 200), so Draft's per-pixel bounds are that
+/// loose and the image-wide PSNRs carry the test. Depth: the median is where the
+/// accumulation crosses half of it, so an alpha error Δα moves it by `Δα/(σT)` — in a
+/// half-transparent medium (σT ≈ 0.5 per unit) Δα ≈ 1e-2 moves it by 0.02 units at depths
+/// ≥ 4, more where the crossing is slow; bound 1e-1.
 const DRAFT: Tol = Tol {
-    min_psnr: 55.0,
-    min_alpha_psnr: 45.0,
+    min_psnr: 45.0,
+    min_alpha_psnr: 40.0,
     rgb: 1.0,
     alpha: 1.0,
-    depth_rel: 5e-2,
+    depth_rel: 1e-1,
 };
 
 /// Every seeded random scene at `quality` against the reference.
@@ -77,10 +76,9 @@ fn draft_matches_the_reference_on_random_scenes() {
     random_scenes_match_the_reference(Quality::Draft, DRAFT);
 }
 
-/// Fails at pixels (8, 26) and (9, 37): rays that clip a pillar's corner inside the haze (the
-/// bug of [`a_dense_sheet_inside_fog_is_not_missed`]).
+/// Regression: pixels (8, 26) and (9, 37) clip a pillar's corner inside the haze (see
+/// [`a_dense_sheet_inside_fog_is_not_missed`]).
 #[test]
-#[ignore = "bug: Final misses a pillar corner thinner than a step inside the demo's haze"]
 fn demo_scene_final_matches_the_reference() {
     let (scene, camera) = nerfx::demo::scene_and_camera(96, 54).expect("demo scene");
     let want = reference_full(&scene, &camera);
@@ -430,7 +428,7 @@ fn finer_custom_params_converge_further() {
         refine_depth: Quality::Final.params().refine_depth + 2,
         refine_tolerance: Quality::Final.params().refine_tolerance / 10.0,
         min_transmittance: 1e-6,
-        min_color_weight: 1e-7,
+        color_skip_budget: 1e-7,
         ..Quality::Final.params()
     };
     let settings = RenderSettings::new(fine, Outputs::all());
@@ -454,13 +452,12 @@ fn finer_custom_params_converge_further() {
 }
 
 /// A dense sheet thinner than a step inside a faint fog of the same field: the nodes on
-/// either side of it both see the fog (equal, non-zero densities), so neither the density
-/// jump nor an empty-pair occupancy check calls for a bisection, and unless a node happens to
-/// land in the sheet it is not seen. The demo scene shows it at a pillar's corner inside the
-/// haze (pixel (8, 26) at 96×54: depth 12.1 instead of 10.4). Sheet offsets 0 to 12 thousandths
-/// cover a whole step (feature/8 ≈ 0.0135), so some of them fall between nodes.
+/// either side of it both see the fog (equal, non-zero densities), so the density jump does
+/// not call for a bisection; the field's density bound over the step does. (Regression: the
+/// demo scene showed it at a pillar's corner inside the haze, pixel (8, 26) at 96×54: depth
+/// 12.1 instead of 10.4.) Sheet offsets 0 to 12 thousandths cover a whole step
+/// (feature/8 ≈ 0.0135), so some of them fall between nodes.
 #[test]
-#[ignore = "bug: a dense sliver thinner than a step inside non-zero density is never bisected"]
 fn a_dense_sheet_inside_fog_is_not_missed() {
     let p = nerfx::camera::Perspective::from_vertical_fov(9, 9, 10.0).expect("perspective");
     let camera = Camera::new(

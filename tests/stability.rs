@@ -216,7 +216,7 @@ fn a_huge_density_is_opaque_with_the_surface_depth() {
 /// is `δ/2` — Final's step (feature/8 ≈ 0.0135) gives 0.7 %, bound 2 %; Preview 4×, bound
 /// 5 %; Draft up to 32×, bound 25 %. Depth is compared where the chord is at least half the
 /// diameter, within the same fractions. Colour is left out of such faint samples by design
-/// (`min_color_weight`), so RGB is only required to be below alpha's order (1e-7).
+/// (`color_skip_budget`), so RGB is only required to be below alpha's order (1e-7).
 #[test]
 fn a_tiny_density_keeps_its_tiny_alpha() {
     let camera = axis_camera(DVec3::new(0.0, 0.0, 5.0), 33, 25, 40.0);
@@ -277,11 +277,10 @@ fn a_tiny_density_keeps_its_tiny_alpha() {
 /// samples per ray, whose f32 positions differ by a few ulps; the result must still be the
 /// reference's.
 ///
-/// Fails: RGB comes out 0 while alpha is right. With steps this fine every node's weight is
-/// below `min_color_weight` (1e-5), so colour is never evaluated; the threshold is per
-/// sample, not per unit of accumulated weight, so the dropped colour is not bounded.
+/// Regression: RGB used to come out 0 here while alpha was right, because every node's
+/// weight was below a per-sample colour threshold; the skipped weight is now a per-ray
+/// budget (`color_skip_budget`).
 #[test]
-#[ignore = "bug: colour is dropped when every sample's weight is below min_color_weight"]
 fn tiny_steps_still_converge() {
     let (scene, camera) = seeded(2);
     let tiny = MarchParams {

@@ -331,6 +331,29 @@ impl Field for Analytic {
     fn may_be_occupied(&self, region: &Aabb) -> bool {
         !region.is_empty() && self.active().any(|p| p.shape.overlaps(region))
     }
+
+    /// The sum, over the primitives whose support meets `region`, of each one's largest
+    /// density there: its density for spheres and boxes, for a Gaussian its value at the
+    /// point of `region` nearest its centre.
+    fn density_bound(&self, region: &Aabb) -> Option<f32> {
+        if region.is_empty() {
+            return Some(0.0);
+        }
+        Some(
+            self.active()
+                .filter(|p| p.shape.overlaps(region))
+                .map(|p| match p.shape {
+                    Shape::Gaussian { center, sigma, .. } => {
+                        let gap = (region.min - center)
+                            .max(center - region.max)
+                            .max(Vec3::ZERO);
+                        p.density * (-0.5 * gap.length_squared() / (sigma * sigma)).exp()
+                    }
+                    _ => p.density,
+                })
+                .sum(),
+        )
+    }
 }
 
 #[cfg(test)]
@@ -491,6 +514,31 @@ mod tests {
         assert!(!f.may_be_occupied(&Aabb::new(Vec3::splat(49.0), Vec3::splat(51.0))));
         assert!(Analytic::default().bounds().is_empty());
         assert!(!Analytic::default().may_be_occupied(&b));
+    }
+
+    #[test]
+    fn density_bound_bounds_every_sample() {
+        let f = Analytic {
+            primitives: vec![
+                sphere(Vec3::ZERO, 1.0, 3.0, Vec3::ONE),
+                gauss(Vec3::new(1.0, 0.0, 0.0), 0.5, 4.0, 2.0),
+            ],
+        };
+        // Far from both: nothing. Inside the sphere, away from the blob's centre: the
+        // sphere's 3 plus the Gaussian at the box's nearest point (distance 0.5 → 2e^{-1/2}).
+        let far = Aabb::new(Vec3::splat(5.0), Vec3::splat(6.0));
+        assert_eq!(f.density_bound(&far), Some(0.0));
+        let b = Aabb::new(Vec3::new(-0.5, -0.1, -0.1), Vec3::new(0.5, 0.1, 0.1));
+        let expected = 3.0 + 2.0 * (-0.5f32).exp();
+        assert!((f.density_bound(&b).unwrap() - expected).abs() < 1e-6);
+        // Every sample in the box is below the bound.
+        let mut pts = Vec::new();
+        for i in 0..=10 {
+            pts.push(Vec3::new(-0.5 + 0.1 * i as f32, 0.05, -0.02));
+        }
+        let mut s = vec![0.0; pts.len()];
+        f.density(&pts, &mut s);
+        assert!(s.iter().all(|&v| v <= expected + 1e-6), "{s:?}");
     }
 
     #[test]

@@ -40,6 +40,13 @@ pub trait Field: Send + Sync {
         self.bounds().diagonal() / 256.0
     }
 
+    /// An upper bound of the density over `region`, where the field can give one cheaply.
+    /// The marcher uses it to find features thinner than a step between two samples (a
+    /// dense sheet inside fog). `None` (the default): no bound, no such search.
+    fn density_bound(&self, _region: &Aabb) -> Option<f32> {
+        None
+    }
+
     /// Whether the density may be non-zero anywhere in `region`. Must be *conservative*:
     /// `false` only where the density is exactly zero throughout.
     fn may_be_occupied(&self, region: &Aabb) -> bool;

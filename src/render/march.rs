@@ -104,6 +104,8 @@ struct RayState {
     live: bool,
     /// Rounds this ray has laid nodes in.
     rounds: u32,
+    /// Weight whose colour was not evaluated.
+    skipped_weight: f64,
     /// Median-depth log `[t, δ, σ, T_enter]` range in `Scratch::log` is per ray.
     log: Vec<[f64; 4]>,
 }
@@ -208,6 +210,7 @@ fn setup_rays(scene: &Scene, camera: &Camera, tile: Window, s: &mut Scratch) {
         state.rgb = DVec3::ZERO;
         state.next_t = None;
         state.rounds = 0;
+        state.skipped_weight = 0.0;
         state.log.clear();
         state.segments.clear();
         state.segment = 0;
@@ -403,25 +406,29 @@ fn evaluate_pending(scene: &Scene, n_inst: usize, s: &mut Scratch) {
     }
 }
 
-/// Whether the step `[a, b]` of ray `r` may hide density between two empty nodes: some
-/// instance's field may be occupied in the box around the step's two field-space ends.
-/// Fields whose density is exactly zero only where it is truly empty (analytic ones) find
-/// slivers thinner than a step this way; fields with density everywhere never get here.
-fn step_may_hide_density(scene: &Scene, local: &[Option<LocalRay>], a: f64, b: f64) -> bool {
-    scene.instances.iter().zip(local).any(|(inst, lr)| {
-        lr.as_ref().is_some_and(|lr| {
-            let (a, b) = (a.max(lr.t_near), b.min(lr.t_far));
-            a <= b && {
-                let (pa, pb) = (lr.at(a), lr.at(b));
-                inst.field()
-                    .may_be_occupied(&Aabb::new(pa.min(pb), pa.max(pb)))
-            }
-        })
-    })
+/// An upper bound of the density (per world unit) anywhere on the step `[a, b]` of a ray:
+/// the sum of each instance's [`Field::density_bound`] over the box around the step's two
+/// field-space ends; `None` when an instance the step crosses gives no bound.
+///
+/// [`Field::density_bound`]: crate::field::Field::density_bound
+fn step_density_bound(scene: &Scene, local: &[Option<LocalRay>], a: f64, b: f64) -> Option<f64> {
+    let mut bound = 0.0;
+    for (inst, lr) in scene.instances.iter().zip(local) {
+        let Some(lr) = lr else { continue };
+        let (a, b) = (a.max(lr.t_near), b.min(lr.t_far));
+        if a > b {
+            continue;
+        }
+        let (pa, pb) = (lr.at(a), lr.at(b));
+        let region = Aabb::new(pa.min(pb), pa.max(pb));
+        bound += inst.field().density_bound(&region)? as f64 * lr.units_per_world as f64;
+    }
+    Some(bound)
 }
 
-/// Bisects the steps whose two ends disagree (`|σ_b − σ_a|·δ` above the tolerance) or that
-/// are empty at both ends but may hide density between them ([`step_may_hide_density`]),
+/// Bisects the steps whose two ends disagree (`|σ_b − σ_a|·δ` above the tolerance) or
+/// between whose ends the fields' density bound rises well above both ([`step_density_bound`]:
+/// a sheet thinner than a step),
 /// level by level, each level one batch across the tile. After the first level only the
 /// pairs next to the nodes just added can need it, so only those are looked at.
 #[inline(never)]
@@ -440,14 +447,14 @@ fn refine(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
         if b.starts_run {
             return;
         }
-        let needed = if a.sigma == 0.0 && b.sigma == 0.0 {
+        // What the step may get wrong matters only as much as light from there reaches the
+        // camera. (Not discounted by what lies behind: the piece's own weight and colour
+        // depend on what the step holds.)
+        let weight = (b.t - a.t) * transmittance;
+        let needed = (b.sigma - a.sigma).abs() * weight > tolerance || {
             let local = &local[r * n_inst..(r + 1) * n_inst];
-            step_may_hide_density(scene, local, a.t, b.t)
-        } else {
-            // Where the edge lies matters only as much as light from there reaches the
-            // camera. (Not discounted by what lies behind: the piece's own weight and colour
-            // depend on what the step holds.)
-            (b.sigma - a.sigma).abs() * (b.t - a.t) * transmittance > tolerance
+            step_density_bound(scene, local, a.t, b.t)
+                .is_some_and(|bound| (bound - a.sigma.max(b.sigma)) * weight > tolerance)
         };
         if needed {
             out.push(Pending {
@@ -528,10 +535,22 @@ fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, out
     }
 }
 
-/// Evaluates colour where the weight matters and adds it to the rays' colours.
+/// Evaluates colour where the weight matters and adds it to the rays' colours. The lightest
+/// nodes of a ray go unshaded while their weights add up to at most
+/// [`MarchParams::color_skip_budget`], so the colour error a ray can get from skipping is
+/// bounded by that budget times its brightest radiance.
 #[inline(never)]
 fn shade(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
-    let min_w = params.min_color_weight as f64;
+    let budget = params.color_skip_budget as f64;
+    for &r in &s.active {
+        let state = &mut s.rays[r as usize];
+        for node in s.nodes[r as usize].iter_mut() {
+            if node.weight > 0.0 && state.skipped_weight + node.weight <= budget {
+                state.skipped_weight += node.weight;
+                node.weight = 0.0;
+            }
+        }
+    }
     for (i, inst) in scene.instances.iter().enumerate() {
         s.points.clear();
         s.dirs.clear();
@@ -541,7 +560,7 @@ fn shade(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
             let Some(lr) = &s.local[r * n_inst + i] else {
                 continue;
             };
-            for node in nodes.iter().filter(|n| n.weight > min_w) {
+            for node in nodes.iter().filter(|n| n.weight > 0.0) {
                 let share = node.weight * s.inst_sigma[node.slot as usize + i] / node.sigma;
                 if share > 0.0 {
                     s.points.push(lr.at(node.t));

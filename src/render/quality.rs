@@ -33,8 +33,9 @@ pub struct MarchParams {
     pub refine_tolerance: f32,
     /// …at most this many times.
     pub refine_depth: u32,
-    /// Colour is evaluated only at samples whose weight exceeds this.
-    pub min_color_weight: f32,
+    /// Per ray, the lightest samples go without a colour query while their weights add up
+    /// to at most this (which bounds the colour error it causes).
+    pub color_skip_budget: f32,
 }
 
 impl Quality {
@@ -42,24 +43,24 @@ impl Quality {
     pub fn params(self) -> MarchParams {
         match self {
             Quality::Draft => MarchParams {
-                steps_per_feature: 2.0,
+                steps_per_feature: 1.0,
                 cone: 1.0 / 256.0,
                 max_step_factor: 4.0,
                 min_transmittance: 1e-2,
                 occupancy_resolution: 64,
-                refine_tolerance: 2e-2,
-                refine_depth: 3,
-                min_color_weight: 1e-3,
+                refine_tolerance: 5e-2,
+                refine_depth: 2,
+                color_skip_budget: 1e-3,
             },
             Quality::Preview => MarchParams {
-                steps_per_feature: 4.0,
+                steps_per_feature: 2.0,
                 cone: 1.0 / 512.0,
                 max_step_factor: 2.0,
                 min_transmittance: 1e-3,
                 occupancy_resolution: 128,
                 refine_tolerance: 5e-3,
-                refine_depth: 5,
-                min_color_weight: 1e-4,
+                refine_depth: 6,
+                color_skip_budget: 1e-4,
             },
             Quality::Final => MarchParams {
                 steps_per_feature: 8.0,
@@ -69,7 +70,7 @@ impl Quality {
                 occupancy_resolution: 256,
                 refine_tolerance: 1e-3,
                 refine_depth: 10,
-                min_color_weight: 1e-5,
+                color_skip_budget: 1e-5,
             },
         }
     }

@@ -164,10 +164,15 @@ pub fn object_matrix(frame: i64) -> DMat4 {
 }
 
 /// A camera at `eye` looking at `target`, Z up (Blender's `matrix_world` convention: the
-/// camera looks down its −Z with +Y up).
+/// camera looks down its −Z with +Y up). Looking straight up or down, +Y is "up" instead.
 pub fn look_at(eye: DVec3, target: DVec3) -> DMat4 {
     let forward = (target - eye).normalize();
-    let right = forward.cross(DVec3::Z).normalize();
+    let up = if forward.cross(DVec3::Z).length_squared() > 1e-12 {
+        DVec3::Z
+    } else {
+        DVec3::Y
+    };
+    let right = forward.cross(up).normalize();
     let up = right.cross(forward);
     DMat4::from_cols(
         right.extend(0.0),
@@ -254,6 +259,9 @@ mod tests {
         assert!((view - DVec3::new(-0.6, 0.8, 0.0)).length() < 1e-12);
         assert!((m.transform_vector3(DVec3::Y) - DVec3::Z).length() < 1e-12);
         assert!((m.determinant() - 1.0).abs() < 1e-12);
+        let down = look_at(DVec3::new(0.0, 0.0, 5.0), DVec3::ZERO);
+        assert!(down.is_finite());
+        assert!((down.transform_vector3(DVec3::NEG_Z) - DVec3::NEG_Z).length() < 1e-12);
     }
 
     #[test]

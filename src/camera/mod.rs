@@ -155,6 +155,24 @@ impl Camera {
         Window::new(0, 0, w, h)
     }
 
+    /// The part of `window` inside the image, refused when it is larger than one render may
+    /// produce (16k × 16k pixels), so an absurd resolution fails before anything allocates.
+    pub fn clamp_window(&self, window: Window) -> Result<Window> {
+        const MAX_WINDOW_PIXELS: usize = 1 << 28;
+        let window = window.intersect(&self.full_window());
+        if window.area() > MAX_WINDOW_PIXELS {
+            return Err(Error::invalid(
+                "render window",
+                format!(
+                    "{}×{} pixels is more than one render may produce ({MAX_WINDOW_PIXELS})",
+                    window.width(),
+                    window.height()
+                ),
+            ));
+        }
+        Ok(window)
+    }
+
     /// The world ray through raster position (`x`, `y`) (top-left origin, pixel centres at
     /// `i + 0.5`), or `None` where the projection has none.
     pub fn ray(&self, x: f64, y: f64) -> Option<Ray> {

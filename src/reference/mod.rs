@@ -38,6 +38,7 @@ use integrator::Sweep;
 /// [`crate::Error::Unsupported`] when an instance's field is not analytic.
 pub fn render(scene: &Scene, camera: &Camera, window: Window) -> Result<Planes> {
     let reference = ReferenceScene::new(scene)?;
+    let window = camera.clamp_window(window)?;
     let (width, height) = (window.width(), window.height());
     let mut pixels = vec![(RayResult::EMPTY, 1.0); window.area()];
     if width > 0 {

@@ -18,7 +18,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::camera::Camera;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::image::{Plane, Planes, Window};
 use crate::scene::Scene;
 use march::{march_tile, InstancePlan, PixelResult, Scratch};
@@ -85,9 +85,6 @@ impl RenderSettings {
     }
 }
 
-/// The most pixels one render call produces (a 16k × 16k window).
-const MAX_WINDOW_PIXELS: usize = 1 << 28;
-
 /// What a render did, for benchmarks and logs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RenderStats {
@@ -127,7 +124,7 @@ pub fn render_with_progress(
     settings: &RenderSettings,
     on_tile: &(dyn Fn(u64) + Sync),
 ) -> Result<(Planes, RenderStats)> {
-    let window = checked_window(camera, window)?;
+    let window = camera.clamp_window(window)?;
     let plans = InstancePlan::for_scene(scene, &settings.march);
     let tiles = tiles(window, settings.tile_size.max(1));
     let results: Vec<(Window, Vec<PixelResult>, RenderStats)> = tiles
@@ -144,22 +141,6 @@ pub fn render_with_progress(
         .fold(RenderStats::default(), |acc, r| acc.add(r.2));
     let tiles: Vec<_> = results.into_iter().map(|(w, px, _)| (w, px)).collect();
     Ok((assemble(window, &tiles, &settings.outputs), stats))
-}
-
-/// The window clamped to the image; refuses empty and absurdly large ones.
-fn checked_window(camera: &Camera, window: Window) -> Result<Window> {
-    let window = window.intersect(&camera.full_window());
-    if window.area() > MAX_WINDOW_PIXELS {
-        return Err(Error::invalid(
-            "render window",
-            format!(
-                "{}×{} pixels is more than one render may produce ({MAX_WINDOW_PIXELS})",
-                window.width(),
-                window.height()
-            ),
-        ));
-    }
-    Ok(window)
 }
 
 fn tiles(window: Window, size: u32) -> Vec<Window> {

@@ -6,7 +6,7 @@ use rayon::prelude::*;
 
 use super::composite::{crossing_depth, Pieces};
 use super::march::PixelResult;
-use super::{assemble, checked_window, Outputs, RenderStats};
+use super::{assemble, Outputs, RenderStats};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::image::{Planes, Window};
@@ -24,7 +24,7 @@ pub fn render_naive(
     if !(step > 0.0 && step.is_finite()) {
         return Err(Error::invalid("naive step", format!("{step} is not > 0")));
     }
-    let window = checked_window(camera, window)?;
+    let window = camera.clamp_window(window)?;
     let rows: Vec<(Window, Vec<PixelResult>, u64)> = (window.y0..window.y1)
         .into_par_iter()
         .map(|y| {

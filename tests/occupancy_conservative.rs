@@ -241,6 +241,48 @@ fn brute_force(occ: &Occupancy, o: Vec3, d: Vec3, t0: f32, t1: f32) -> Vec<[f64;
     out
 }
 
+/// The segments of one ray, checked: well formed, conservative, and equal to the
+/// brute-force walk (same pieces, ends equal up to the padding and the rounding of a plane
+/// crossing, which grows as 1/|dᵢ|).
+fn check_ray(
+    what: &str,
+    field: &Analytic,
+    occ: &Occupancy,
+    o: Vec3,
+    d: Vec3,
+    t0: f32,
+    t1: f32,
+) -> Vec<[f32; 2]> {
+    let mut seg = Vec::new();
+    occ.segments(o, d, t0, t1, &mut seg);
+    check_well_formed(&seg, t0, t1);
+    assert_conservative(field, &seg, o, d, t0, t1);
+    let reference = brute_force(occ, o, d, t0, t1);
+    let res = occ.resolution();
+    let cell = occ.bounds().size() / res as f32;
+    let min_d = d
+        .abs()
+        .to_array()
+        .into_iter()
+        .filter(|&x| x > 0.0)
+        .fold(1.0, f32::min);
+    let tol = 3e-3 * f64::from(cell.min_element())
+        + 1e-6 * f64::from(1.0 + o.abs().max_element()) / f64::from(min_d);
+    let ctx = format!("{what} res {res} ray {o} {d} [{t0}, {t1}]");
+    assert_eq!(
+        seg.len(),
+        reference.len(),
+        "{ctx}: {seg:?} vs {reference:?}"
+    );
+    for (s, r) in seg.iter().zip(&reference) {
+        assert!(
+            (f64::from(s[0]) - r[0]).abs() <= tol && (f64::from(s[1]) - r[1]).abs() <= tol,
+            "{ctx}: {seg:?} vs {reference:?}"
+        );
+    }
+    seg
+}
+
 #[test]
 fn random_scenes_are_conservative_and_match_brute_force() {
     let mut rng = Rng(0x5eed_0cc0_0000_0001);
@@ -250,7 +292,6 @@ fn random_scenes_are_conservative_and_match_brute_force() {
         let field = random_scene(&mut rng);
         for &res in &[16u32, 37, 64] {
             let occ = Occupancy::build(&field, res);
-            let cell = occ.bounds().size() / res as f32;
             for _ in 0..20 {
                 let (o, d) = random_ray(&mut rng, &field, &occ);
                 let (t0, t1) = if rng.unit() < 0.7 {
@@ -258,37 +299,9 @@ fn random_scenes_are_conservative_and_match_brute_force() {
                 } else {
                     (rng.range(0.0, 2.0), rng.range(2.0, 5.0))
                 };
-                let mut seg = Vec::new();
-                occ.segments(o, d, t0, t1, &mut seg);
+                let seg = check_ray(&format!("scene {scene}"), &field, &occ, o, d, t0, t1);
                 rays += 1;
                 hits += usize::from(!seg.is_empty());
-                check_well_formed(&seg, t0, t1);
-                assert_conservative(&field, &seg, o, d, t0, t1);
-
-                // Against the brute-force walk: same pieces, ends equal up to the padding
-                // and the rounding of a plane crossing (which grows as 1/|dᵢ|).
-                let reference = brute_force(&occ, o, d, t0, t1);
-                let min_d = d
-                    .abs()
-                    .to_array()
-                    .into_iter()
-                    .filter(|&x| x > 0.0)
-                    .fold(1.0, f32::min);
-                let tol = 3e-3 * f64::from(cell.min_element())
-                    + 1e-6 * f64::from(1.0 + o.abs().max_element()) / f64::from(min_d);
-                let ctx = format!("scene {scene} res {res} ray {o} {d} [{t0}, {t1}]");
-                assert_eq!(
-                    seg.len(),
-                    reference.len(),
-                    "{ctx}: {seg:?} vs {reference:?}"
-                );
-                for (s, r) in seg.iter().zip(&reference) {
-                    assert!(
-                        (f64::from(s[0]) - r[0]).abs() <= tol
-                            && (f64::from(s[1]) - r[1]).abs() <= tol,
-                        "{ctx}: {seg:?} vs {reference:?}"
-                    );
-                }
             }
         }
     }
@@ -501,6 +514,125 @@ fn far_origin_near_plane_face_is_conservative() {
             assert!(sigma.iter().any(|&s| s > 0.0));
             for (&t, &s) in ts.iter().zip(&sigma) {
                 assert!(s == 0.0 || covered(&seg, t), "t = {t} outside {seg:?}");
+            }
+        }
+    }
+}
+
+fn boxed(min: Vec3, max: Vec3, density: f32) -> Primitive {
+    Primitive {
+        shape: Shape::Box { min, max },
+        density,
+        color: ShColor::constant(Vec3::ONE),
+    }
+}
+
+/// A ground slab, a post and a ball: wide empty space above a surface, the case the
+/// distance-map jumps are for.
+fn ground_scene() -> Analytic {
+    Analytic {
+        primitives: vec![
+            boxed(Vec3::new(-2.0, -2.0, -0.4), Vec3::new(2.0, 2.0, 0.0), 20.0),
+            boxed(Vec3::new(0.8, -1.2, 0.0), Vec3::new(1.0, -1.0, 2.0), 5.0),
+            sphere_field(Vec3::new(-0.7, 0.5, 0.9), 0.3).primitives[0],
+        ],
+    }
+}
+
+/// Rays grazing the slab's top from 0 to 12 cells above it, both ways, some windowed:
+/// each jump out of an empty cube must land where the cell-by-cell walk would.
+#[test]
+fn grazing_rays_over_a_ground_slab() {
+    let field = ground_scene();
+    let mut rng = Rng(0x9a2e);
+    for res in [32u32, 64, 128] {
+        let occ = Occupancy::build(&field, res);
+        let cell_z = occ.bounds().size().z / res as f32;
+        let mut hits = 0;
+        for i in 0..150 {
+            let height = rng.range(-0.5, 12.0) * cell_z;
+            let o = Vec3::new(rng.range(-2.5, 2.5), rng.range(-2.5, 2.5), height);
+            let horizontal = rng.dir() * Vec3::new(1.0, 1.0, 0.0);
+            let slope = [0.0, 1e-4, -1e-3, -0.02, -0.05, -0.2][i % 6];
+            let d = (horizontal.normalize() + Vec3::Z * slope).normalize();
+            let (t0, t1) = if i % 3 == 0 {
+                (rng.range(0.0, 2.0), rng.range(2.0, 6.0))
+            } else {
+                (0.0, 10.0)
+            };
+            let seg = check_ray("grazing", &field, &occ, o, d, t0, t1);
+            hits += usize::from(!seg.is_empty());
+        }
+        assert!(hits > 20 && hits < 150, "{hits}");
+    }
+}
+
+/// Rays starting inside empty cells that touch occupied ones (a cell's width above the
+/// slab, beside the post, at the ball's rim), in random directions and windows.
+#[test]
+fn rays_starting_next_to_occupied_cells() {
+    let field = ground_scene();
+    let mut rng = Rng(0x7e57);
+    for res in [24u32, 64] {
+        let occ = Occupancy::build(&field, res);
+        let cell = occ.bounds().size() / res as f32;
+        let starts = [
+            Vec3::new(0.3, 0.2, 0.5 * cell.z),
+            Vec3::new(0.9, -1.1, 0.0) + Vec3::new(0.1 + 0.5 * cell.x, 0.0, 0.5),
+            Vec3::new(-0.7, 0.5, 0.9) + Vec3::new(0.3 + 0.6 * cell.x, 0.0, 0.0),
+        ];
+        let mut tested = 0;
+        for _ in 0..300 {
+            let o = starts[rng.below(3) as usize] + rng.vec(-0.5, 0.5) * cell;
+            if occ.is_occupied_point(o) {
+                continue;
+            }
+            tested += 1;
+            let d = rng.dir();
+            let (t0, t1) = if rng.unit() < 0.5 {
+                (0.0, 10.0)
+            } else {
+                (rng.range(0.0, 0.5), rng.range(0.5, 4.0))
+            };
+            check_ray("next to occupied", &field, &occ, o, d, t0, t1);
+        }
+        assert!(tested > 100, "{tested}");
+    }
+}
+
+/// Rays through a solid box (crossed in jumps, emitted whole) and across a grid whose empty
+/// middle is far from everything (radii at the cap).
+#[test]
+fn solid_interiors_and_far_empty_space() {
+    let solid = Analytic {
+        primitives: vec![boxed(Vec3::splat(-1.0), Vec3::splat(1.0), 3.0)],
+    };
+    let corners = Analytic {
+        primitives: vec![
+            sphere_field(Vec3::splat(-1.0), 0.03).primitives[0],
+            sphere_field(Vec3::splat(1.0), 0.03).primitives[0],
+            sphere_field(Vec3::new(1.0, -1.0, 1.0), 0.03).primitives[0],
+        ],
+    };
+    let mut rng = Rng(0x50_11d);
+    for (field, res) in [(&solid, 40u32), (&solid, 130), (&corners, 150)] {
+        let occ = Occupancy::build(field, res);
+        for i in 0..200 {
+            let (o, d) = if i % 2 == 0 {
+                let o = rng.dir() * 3.0;
+                let target = field.primitives[rng.below(field.primitives.len() as u32) as usize]
+                    .shape
+                    .bounds()
+                    .center()
+                    + rng.vec(-0.05, 0.05);
+                (o, (target - o).normalize())
+            } else {
+                (rng.vec(-0.9, 0.9), rng.dir())
+            };
+            let seg = check_ray("solid/far", field, &occ, o, d, 0.0, 10.0);
+            if std::ptr::eq(field, &solid) {
+                // A convex solid: one piece.
+                assert!(seg.len() <= 1, "{seg:?}");
             }
         }
     }

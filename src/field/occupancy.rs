@@ -1,25 +1,27 @@
-//! A multi-resolution occupancy grid: where along a ray the field may have density.
+//! An occupancy grid with a distance map: where along a ray the field may have density.
 //!
-//! **Idea.** The finest level is a `resolution³` bit grid over the field's (slightly padded)
-//! bounds; a cell's bit is set where [`Field::may_be_occupied`] says the field may have
-//! density in the cell's box (grown by a thousandth of a cell, so f32 rounding of sample
-//! positions never lands a dense sample in a cell marked empty). Coarser levels halve the
-//! resolution (rounding up) until at most 4 cells per axis remain, and keep two bits per cell:
-//! *occupied* (OR of the 8 children) and *full* (AND of the children's full bits; on the
-//! finest level full = occupied).
+//! **Idea.** A `resolution³` grid over the field's (slightly padded) bounds; a cell is
+//! *occupied* where [`Field::may_be_occupied`] says the field may have density in the cell's
+//! box (grown by a thousandth of a cell, so f32 rounding of sample positions never lands a
+//! dense sample in a cell marked empty). Every cell also stores a *radius* `r ≥ 1`: the
+//! Chebyshev (L∞) distance, in cells, to the nearest cell of the other state, capped at
+//! 63. So the cube of `(2r − 1)³` cells centred on a cell is uniformly empty or
+//! uniformly occupied. One byte per cell: bit 7 occupied, bits 0–6 the radius.
 //!
-//! [`Occupancy::segments`] walks a ray through this pyramid with a 3D DDA that starts at the
-//! coarsest level and
-//! - skips an *empty* cell whole,
-//! - emits a *full* cell's whole interval without looking inside,
-//! - descends into a *partially* occupied cell (to the child holding the current point),
-//! - after each step, climbs while the parent is empty or full.
+//! The radii come from repeated 3×3×3 dilations of bit sets (shift-OR along x, OR of
+//! neighbouring rows along y and slices along z): an empty cell gets `r = k` at the first
+//! dilation `k` of the occupied set that covers it, an occupied cell likewise from the
+//! empty set. Outside the grid counts as neither.
 //!
-//! So empty space and solid interiors cost one step per coarse cell, and only the thin shell
-//! where occupancy changes is walked at the finest resolution. Every cell crossing is
-//! computed from the same planes `bounds.min + k·cell` on every level, so levels agree on
-//! where a cell ends. Emitted intervals are padded by a thousandth of a cell (plus a few ulps
-//! of the ray's magnitude), clamped to `[t0, t1]` and merged when they touch.
+//! [`Occupancy::segments`] walks the grid with a 3D DDA whose step, in a cell of radius `r`,
+//! goes to where the ray leaves that cell's uniform cube: one step crosses empty space (up to
+//! `r` cells on every axis), emits a solid interior whole, and a ray grazing a surface `h`
+//! cells above it advances about `h` cells per step instead of one. Every crossing is computed
+//! from the planes `bounds.min + k·cell`, and after a jump the cells on the other axes are
+//! located from the exit point and then corrected against those same plane crossings, so a
+//! jump lands in the cell the cell-by-cell walk would reach. Emitted intervals are padded by
+//! a thousandth of a cell (plus a few ulps of the ray's magnitude), clamped to `[t0, t1]` and
+//! merged when they touch.
 //!
 //! **Worked example.** A unit sphere at the origin, grid resolution 32 over its bounds
 //! (`[−1, 1]³` padded by 0.2 %, cells ≈ 0.0626 wide, diagonal ≈ 0.108). The ray from
@@ -52,21 +54,29 @@ use rayon::prelude::*;
 
 use super::{Aabb, Field};
 
-/// Largest accepted resolution (1024³ bits = 128 MiB).
-const MAX_RESOLUTION: u32 = 1024;
-/// The coarsest level has at most this many cells per axis.
-const TOP_CELLS: u32 = 4;
+/// Largest accepted resolution (512³ cells of one byte = 128 MiB).
+const MAX_RESOLUTION: u32 = 512;
 /// Cell boxes are grown by this fraction of a cell before asking the field.
 const BUILD_PAD: f32 = 1e-3;
 /// Emitted intervals are grown by this fraction of the smallest cell edge.
 const SEGMENT_PAD: f32 = 1e-3;
+/// A cell's byte: this bit set where the cell is occupied…
+const OCCUPIED: u8 = 0x80;
+/// …and these bits its radius.
+const RADIUS_MASK: u8 = 0x7f;
+/// Cells of at least this radius are left in one jump; smaller ones cell by cell.
+const JUMP_RADIUS: u32 = 2;
+/// Largest stored radius: farther cells of the other state are not looked for.
+const RADIUS_CAP: u8 = 63;
 
-/// The finest grid's geometry: cell `k` on axis `a` spans the planes `plane(a, k)` and
-/// `plane(a, k + 1)`; coarse cells use the same planes at multiples of `2^level`.
+/// The grid's geometry: cell `k` on axis `a` spans the planes `plane(a, k)` and
+/// `plane(a, k + 1)`.
 #[derive(Clone, Copy, Debug)]
 struct Grid {
-    lo: Vec3,
-    cell: Vec3,
+    lo: [f32; 3],
+    cell: [f32; 3],
+    /// `1/cell`, to guess a cell from a position.
+    inv_cell: [f32; 3],
     n: u32,
 }
 
@@ -77,60 +87,58 @@ impl Grid {
         self.lo[a] + k as f32 * self.cell[a]
     }
 
-    /// The box between planes `k0` and `k1` (finest units) on each axis.
+    /// The box between planes `k0` and `k1` on each axis.
     fn cell_box(&self, k0: [u32; 3], k1: [u32; 3]) -> Aabb {
         let corner = |k: [u32; 3]| Vec3::from_array([0, 1, 2].map(|a| self.plane(a, k[a])));
         Aabb::new(corner(k0), corner(k1))
     }
 
-    /// The finest cell holding `p` (clamped into the grid).
+    /// The cell holding `p` on axis `a`, `⌊(p − lo)/cell⌋` clamped into the grid (clamping
+    /// first, the cast truncates a non-negative value: no `floor` call).
+    #[inline]
+    fn locate_axis(&self, a: usize, p: f32) -> u32 {
+        let g = (p - self.lo[a]) / self.cell[a];
+        g.clamp(0.0, (self.n - 1) as f32) as u32
+    }
+
+    /// The cell holding `p` (clamped into the grid).
     #[inline]
     fn locate(&self, p: Vec3) -> [u32; 3] {
-        let g = ((p - self.lo) / self.cell).floor();
-        let hi = (self.n - 1) as f32;
-        [0, 1, 2].map(|a| g[a].clamp(0.0, hi) as u32)
+        [
+            self.locate_axis(0, p.x),
+            self.locate_axis(1, p.y),
+            self.locate_axis(2, p.z),
+        ]
     }
 
-    /// The finest cell a ray at `p` moving along `step` (sign per axis) is about to cross:
-    /// like [`Grid::locate`], but a point on a plane between two cells picks the cell ahead,
-    /// so a ray starting on a face is not credited with a zero-length visit behind it.
+    /// The smallest cell edge.
+    fn min_cell(&self) -> f32 {
+        self.cell.into_iter().fold(f32::INFINITY, f32::min)
+    }
+
+    /// Index of cell `c` in a per-cell array, x fastest.
     #[inline]
-    fn locate_along(&self, p: Vec3, step: [i32; 3]) -> [u32; 3] {
-        let mut c = self.locate(p);
-        for a in 0..3 {
-            if step[a] < 0 && c[a] > 0 && p[a] <= self.plane(a, c[a]) {
-                c[a] -= 1;
-            } else if step[a] > 0 && c[a] + 1 < self.n && p[a] >= self.plane(a, c[a] + 1) {
-                c[a] += 1;
-            }
-        }
-        c
+    fn index(&self, c: [u32; 3]) -> usize {
+        let n = self.n as usize;
+        (c[2] as usize * n + c[1] as usize) * n + c[0] as usize
     }
 }
 
-/// One level of the pyramid: `n³` cells, each x-row padded to whole 64-bit words.
+/// A bit per cell, each x-row padded to whole 64-bit words (bits past the row's end are 0).
 #[derive(Clone, Debug)]
-struct Level {
+struct Bits {
     n: u32,
     row_words: usize,
-    occupied: Vec<u64>,
-    /// All finest cells below are occupied. Empty on the finest level (full = occupied).
-    full: Vec<u64>,
+    words: Vec<u64>,
 }
 
-impl Level {
-    fn new(n: u32, with_full: bool) -> Self {
+impl Bits {
+    fn new(n: u32) -> Self {
         let row_words = n.div_ceil(64) as usize;
-        let words = row_words * (n as usize) * (n as usize);
-        Level {
+        Bits {
             n,
             row_words,
-            occupied: vec![0; words],
-            full: if with_full {
-                vec![0; words]
-            } else {
-                Vec::new()
-            },
+            words: vec![0; row_words * (n as usize) * (n as usize)],
         }
     }
 
@@ -139,71 +147,68 @@ impl Level {
         self.row_words * self.n as usize
     }
 
-    /// (word index, bit mask) of cell `c`.
-    #[inline]
-    fn bit(&self, c: [u32; 3]) -> (usize, u64) {
-        let row = (c[2] as usize * self.n as usize + c[1] as usize) * self.row_words;
-        (row + (c[0] >> 6) as usize, 1u64 << (c[0] & 63))
+    /// The bits of a row's last word that lie inside the grid.
+    fn tail_mask(&self) -> u64 {
+        match self.n % 64 {
+            0 => u64::MAX,
+            r => (1u64 << r) - 1,
+        }
     }
 
-    #[inline]
-    fn is_occupied(&self, c: [u32; 3]) -> bool {
-        let (w, m) = self.bit(c);
-        self.occupied[w] & m != 0
+    fn count(&self) -> u64 {
+        self.words.iter().map(|w| u64::from(w.count_ones())).sum()
     }
 
-    /// Full bit; on the finest level (no `full` words) the occupied bit.
-    #[inline]
-    fn is_full(&self, c: [u32; 3]) -> bool {
-        let (w, m) = self.bit(c);
-        let words = if self.full.is_empty() {
-            &self.occupied
-        } else {
-            &self.full
-        };
-        words[w] & m != 0
+    /// The other cells of the grid.
+    fn complement(&self) -> Bits {
+        let (rw, tail) = (self.row_words, self.tail_mask());
+        let mut out = self.clone();
+        for row in out.words.chunks_mut(rw) {
+            for w in row.iter_mut() {
+                *w = !*w;
+            }
+            row[rw - 1] &= tail;
+        }
+        out
     }
 
-    /// The next coarser level: occupied = OR of the (up to) 8 children, full = AND.
-    fn reduce(&self) -> Level {
-        let mut coarse = Level::new(self.n.div_ceil(2), true);
-        let (n, row_words, slice) = (coarse.n, coarse.row_words, coarse.slice_words());
-        let fine_n = self.n;
-        coarse
-            .occupied
-            .par_chunks_mut(slice)
-            .zip(coarse.full.par_chunks_mut(slice))
-            .enumerate()
-            .for_each(|(z, (occ, full))| {
-                let z = z as u32;
+    /// `out` = this set grown by one cell along x (`out[x] = in[x−1] | in[x] | in[x+1]`).
+    fn dilate_x(&self, out: &mut Bits) {
+        let (rw, tail) = (self.row_words, self.tail_mask());
+        out.words
+            .par_chunks_mut(self.slice_words())
+            .zip(self.words.par_chunks(self.slice_words()))
+            .for_each(|(dst, src)| {
+                for (d, s) in dst.chunks_mut(rw).zip(src.chunks(rw)) {
+                    for i in 0..rw {
+                        let prev = if i > 0 { s[i - 1] >> 63 } else { 0 };
+                        let next = if i + 1 < rw { s[i + 1] << 63 } else { 0 };
+                        d[i] = s[i] | s[i] << 1 | prev | s[i] >> 1 | next;
+                    }
+                    d[rw - 1] &= tail;
+                }
+            });
+    }
+
+    /// `out` = this set grown by one cell along y.
+    fn dilate_y(&self, out: &mut Bits) {
+        let (rw, n) = (self.row_words, self.n as usize);
+        out.words
+            .par_chunks_mut(self.slice_words())
+            .zip(self.words.par_chunks(self.slice_words()))
+            .for_each(|(dst, src)| {
                 for y in 0..n {
-                    for x in 0..n {
-                        let (mut any, mut all) = (false, true);
-                        for cz in 2 * z..(2 * z + 2).min(fine_n) {
-                            for cy in 2 * y..(2 * y + 2).min(fine_n) {
-                                for cx in 2 * x..(2 * x + 2).min(fine_n) {
-                                    any |= self.is_occupied([cx, cy, cz]);
-                                    all &= self.is_full([cx, cy, cz]);
-                                }
-                            }
-                        }
-                        let w = y as usize * row_words + (x >> 6) as usize;
-                        let m = 1u64 << (x & 63);
-                        if any {
-                            occ[w] |= m;
-                        }
-                        if all {
-                            full[w] |= m;
-                        }
+                    let (a, b) = (y.saturating_sub(1), (y + 1).min(n - 1));
+                    for i in 0..rw {
+                        dst[y * rw + i] = src[a * rw + i] | src[y * rw + i] | src[b * rw + i];
                     }
                 }
             });
-        coarse
     }
 }
 
-/// Marks, in one z-slice of the finest level, the cells the field may occupy: a quadtree over
-/// (x, y) that only splits boxes the field says may be occupied.
+/// Marks, in one z-slice, the cells the field may occupy: a quadtree over (x, y) that only
+/// splits boxes the field says may be occupied.
 struct SliceMarker<'a> {
     field: &'a dyn Field,
     grid: Grid,
@@ -235,14 +240,100 @@ impl SliceMarker<'_> {
     }
 }
 
-/// The per-ray constants of a traversal.
+/// Sets `flag | k` in `cells` for every cell outside `seed` whose Chebyshev distance to the
+/// nearest seed cell is `k < RADIUS_CAP` (the others keep what they hold): the cells that
+/// the `k`-th 3×3×3 dilation of `seed` adds. Stops early once a dilation adds nothing.
+fn write_radii(seed: &Bits, flag: u8, cells: &mut [u8]) {
+    if seed.words.iter().all(|&w| w == 0) {
+        return;
+    }
+    let (n, rw, slice) = (seed.n as usize, seed.row_words, seed.slice_words());
+    let mut cur = seed.clone();
+    let mut xs = Bits::new(seed.n);
+    let mut xys = Bits::new(seed.n);
+    let mut next = Bits::new(seed.n);
+    for k in 1..RADIUS_CAP {
+        cur.dilate_x(&mut xs);
+        xs.dilate_y(&mut xys);
+        let added: u64 = next
+            .words
+            .par_chunks_mut(slice)
+            .zip(cells.par_chunks_mut(n * n))
+            .enumerate()
+            .map(|(z, (dst, cells))| {
+                let (a, b) = (z.saturating_sub(1), (z + 1).min(n - 1));
+                let (below, here, above) = (
+                    &xys.words[a * slice..(a + 1) * slice],
+                    &xys.words[z * slice..(z + 1) * slice],
+                    &xys.words[b * slice..(b + 1) * slice],
+                );
+                let old = &cur.words[z * slice..(z + 1) * slice];
+                let mut added = 0;
+                for (i, d) in dst.iter_mut().enumerate() {
+                    *d = below[i] | here[i] | above[i];
+                    let mut new = *d & !old[i];
+                    if new == 0 {
+                        continue;
+                    }
+                    added += u64::from(new.count_ones());
+                    let first = (i / rw) * n + (i % rw) * 64;
+                    while new != 0 {
+                        cells[first + new.trailing_zeros() as usize] = flag | k;
+                        new &= new - 1;
+                    }
+                }
+                added
+            })
+            .sum();
+        if added == 0 {
+            break;
+        }
+        std::mem::swap(&mut cur, &mut next);
+    }
+}
+
+/// The per-ray constants of a traversal, as arrays for cheap per-axis indexing.
 struct RayCtx {
-    origin: Vec3,
-    dir: Vec3,
-    /// `1/dir`, 0 on axes the ray is parallel to.
-    inv: Vec3,
+    origin: [f32; 3],
+    dir: [f32; 3],
+    /// `1/dir`, 0 on axes the ray is parallel to (where `1/dir` is not finite).
+    inv: [f32; 3],
     /// −1, 0 or +1 per axis.
     step: [i32; 3],
+    /// 1 where the ray moves up the axis, else 0: a cell's exit plane is `k + ahead`.
+    ahead: [u32; 3],
+    /// ∞ on parallel axes, else 0: added to a crossing, keeps those axes out of a minimum.
+    parallel: [f32; 3],
+    /// Change of the cell index for a step along each axis (wrapping).
+    stride: [usize; 3],
+}
+
+impl RayCtx {
+    fn new(origin: Vec3, dir: Vec3, n: u32) -> Self {
+        let mut ray = RayCtx {
+            origin: origin.to_array(),
+            dir: dir.to_array(),
+            inv: [0.0; 3],
+            step: [0; 3],
+            ahead: [0; 3],
+            parallel: [f32::INFINITY; 3],
+            stride: [0; 3],
+        };
+        let n = n as usize;
+        for (a, stride) in [1, n, n * n].into_iter().enumerate() {
+            let i = 1.0 / dir[a];
+            if i.is_finite() {
+                ray.inv[a] = i;
+                ray.parallel[a] = 0.0;
+                if i > 0.0 {
+                    (ray.step[a], ray.ahead[a], ray.stride[a]) = (1, 1, stride);
+                } else {
+                    (ray.step[a], ray.stride[a]) = (-1, stride.wrapping_neg());
+                }
+            }
+        }
+        ray
+    }
 }
 
 /// Conservative empty-space skipping for any [`Field`]: see the module docs.
@@ -250,15 +341,15 @@ struct RayCtx {
 pub struct Occupancy {
     bounds: Aabb,
     grid: Grid,
-    /// Finest first; the last has at most 4 cells per axis.
-    levels: Vec<Level>,
+    /// Per cell ([`Grid::index`]): [`OCCUPIED`] bit and radius.
+    cells: Vec<u8>,
     occupied_cells: u64,
 }
 
 impl Occupancy {
-    /// Builds the pyramid for `field` at `resolution³` finest cells (clamped to 1..=1024)
-    /// over `field.bounds()` padded by 0.1 %. The finest level is built top-down per
-    /// z-slice, in parallel; the coarser ones by OR/AND reduction. A field with empty bounds
+    /// Builds the grid for `field` at `resolution³` cells (clamped to 1..=512) over
+    /// `field.bounds()` padded by 0.1 %. Occupancy is marked top-down per z-slice, in
+    /// parallel; the radii by dilation (see the module docs). A field with empty bounds
     /// gives a grid with no occupied cell.
     pub fn build(field: &dyn Field, resolution: u32) -> Occupancy {
         let n = resolution.clamp(1, MAX_RESOLUTION);
@@ -274,23 +365,25 @@ impl Occupancy {
                 .max_element();
             field_bounds.grow(1e-3 * size + 1e-6 * scale + f32::MIN_POSITIVE)
         };
+        let cell = (bounds.size() / n as f32).to_array();
         let grid = Grid {
-            lo: bounds.min,
-            cell: bounds.size() / n as f32,
+            lo: bounds.min.to_array(),
+            cell,
+            inv_cell: cell.map(|c| 1.0 / c),
             n,
         };
-        let mut finest = Level::new(n, false);
+        let mut occupied = Bits::new(n);
         if !field_bounds.is_empty() {
             let marker = SliceMarker {
                 field,
                 grid,
-                pad: BUILD_PAD * grid.cell.min_element(),
+                pad: BUILD_PAD * grid.min_cell(),
                 z: 0,
-                row_words: finest.row_words,
+                row_words: occupied.row_words,
             };
-            let slice = finest.slice_words();
-            finest
-                .occupied
+            let slice = occupied.slice_words();
+            occupied
+                .words
                 .par_chunks_mut(slice)
                 .enumerate()
                 .for_each(|(z, words)| {
@@ -301,25 +394,29 @@ impl Occupancy {
                     m.visit(words, 0, 0, n.next_power_of_two());
                 });
         }
-        let occupied_cells = finest
-            .occupied
-            .iter()
-            .map(|w| u64::from(w.count_ones()))
-            .sum();
-        let mut levels = vec![finest];
-        while let Some(last) = levels.last().filter(|l| l.n > TOP_CELLS) {
-            let coarse = last.reduce();
-            levels.push(coarse);
-        }
+        let occupied_cells = occupied.count();
+        let nn = (n as usize).pow(2);
+        let mut cells = vec![0u8; nn * n as usize];
+        cells
+            .par_chunks_mut(n as usize)
+            .zip(occupied.words.par_chunks(occupied.row_words))
+            .for_each(|(row, bits)| {
+                for (x, c) in row.iter_mut().enumerate() {
+                    let occ = bits[x >> 6] >> (x & 63) & 1 != 0;
+                    *c = if occ { OCCUPIED } else { 0 } | RADIUS_CAP;
+                }
+            });
+        write_radii(&occupied, 0, &mut cells);
+        write_radii(&occupied.complement(), OCCUPIED, &mut cells);
         Occupancy {
             bounds,
             grid,
-            levels,
+            cells,
             occupied_cells,
         }
     }
 
-    /// Finest cells per axis.
+    /// Cells per axis.
     pub fn resolution(&self) -> u32 {
         self.grid.n
     }
@@ -329,14 +426,14 @@ impl Occupancy {
         self.bounds
     }
 
-    /// The fraction of finest cells marked occupied, in `[0, 1]`.
+    /// The fraction of cells marked occupied, in `[0, 1]`.
     pub fn fill_ratio(&self) -> f64 {
         self.occupied_cells as f64 / f64::from(self.grid.n).powi(3)
     }
 
-    /// Whether the finest cell holding `p` is marked occupied (false outside the bounds).
+    /// Whether the cell holding `p` is marked occupied (false outside the bounds).
     pub fn is_occupied_point(&self, p: Vec3) -> bool {
-        self.bounds.contains(p) && self.levels[0].is_occupied(self.grid.locate(p))
+        self.bounds.contains(p) && self.cells[self.grid.index(self.grid.locate(p))] & OCCUPIED != 0
     }
 
     /// Appends to `out` the intervals `[a, b]` of `t ∈ [t0, t1]` where the ray
@@ -348,26 +445,12 @@ impl Occupancy {
         if self.occupied_cells == 0 || !origin.is_finite() || !dir.is_finite() {
             return;
         }
-        let Some((t_in, t_out)) = self.bounds.clip_ray(origin, dir, t0, t1) else {
+        let ray = RayCtx::new(origin, dir, self.grid.n);
+        let Some((t_in, t_out)) = self.clip(&ray, t0, t1) else {
             return;
         };
-        let mut inv = Vec3::ZERO;
-        let mut step = [0i32; 3];
-        for a in 0..3 {
-            let i = 1.0 / dir[a];
-            if i.is_finite() {
-                inv[a] = i;
-                step[a] = if i > 0.0 { 1 } else { -1 };
-            }
-        }
-        let ray = RayCtx {
-            origin,
-            dir,
-            inv,
-            step,
-        };
         let magnitude = origin.abs().max_element() + t_in.abs().max(t_out.abs()).min(f32::MAX);
-        let pad = SEGMENT_PAD * self.grid.cell.min_element() + 8.0 * f32::EPSILON * magnitude;
+        let pad = SEGMENT_PAD * self.grid.min_cell() + 8.0 * f32::EPSILON * magnitude;
         let start = out.len();
         let mut emit = |a: f32, b: f32| {
             let (a, b) = ((a - pad).max(t0), (b + pad).min(t1));
@@ -377,71 +460,162 @@ impl Occupancy {
             }
         };
 
-        let top = self.levels.len() - 1;
-        let mut l = top;
-        let mut c = self
-            .grid
-            .locate_along(origin + t_in * dir, step)
-            .map(|k| k >> top);
+        let n = self.grid.n;
         let mut t = t_in;
+        // The current cell and where the ray leaves it through each axis's plane (∞ on axes
+        // it is parallel to).
+        let mut c = [0; 3];
+        let mut t_next = [f32::INFINITY; 3];
+        for a in 0..3 {
+            if ray.step[a] == 0 {
+                c[a] = self.grid.locate_axis(a, ray.origin[a] + t * ray.dir[a]);
+            } else {
+                (c[a], t_next[a]) = self.cell_at(&ray, a, 0, n - 1, t);
+            }
+        }
+        let mut index = self.grid.index(c);
+        // Start of the occupied run the ray is in.
+        let mut run = None;
         loop {
-            let level = &self.levels[l];
-            let (exit, axis) = self.exit(&ray, l, c);
-            let exit = exit.min(t_out).max(t);
-            if level.is_occupied(c) {
-                if l > 0 && !level.is_full(c) {
-                    l -= 1;
-                    c = self.child(&ray, l, c, t);
-                    continue;
+            let cell = self.cells[index];
+            match (cell & OCCUPIED != 0, run) {
+                (true, None) => run = Some(t),
+                (false, Some(a)) => {
+                    emit(a, t);
+                    run = None;
                 }
-                emit(t, exit);
+                _ => {}
+            }
+            let r = u32::from(cell & RADIUS_MASK);
+            if r < JUMP_RADIUS {
+                // One cell: leave through the nearest exit plane.
+                let (mut axis, mut exit) = (0, t_next[0]);
+                if t_next[1] < exit {
+                    (axis, exit) = (1, t_next[1]);
+                }
+                if t_next[2] < exit {
+                    (axis, exit) = (2, t_next[2]);
+                }
+                if exit >= t_out {
+                    break;
+                }
+                t = t.max(exit);
+                let next = c[axis].wrapping_add_signed(ray.step[axis]);
+                if next >= n {
+                    break;
+                }
+                c[axis] = next;
+                index = index.wrapping_add(ray.stride[axis]);
+                t_next[axis] = self.crossing(&ray, axis, next + ray.ahead[axis]);
+                continue;
+            }
+            // Leave the uniform cube of cells within r − 1 of c (clipped to the grid): on each
+            // axis its far plane `k`, crossed at `ta` (∞ on parallel axes).
+            let (mut exit, mut axis, mut plane) = (f32::INFINITY, 0, 0);
+            for (a, &ca) in c.iter().enumerate() {
+                let k = if ray.ahead[a] == 1 {
+                    (ca + r).min(n)
+                } else {
+                    (ca + 1).saturating_sub(r)
+                };
+                let ta = self.crossing(&ray, a, k) + ray.parallel[a];
+                if ta < exit {
+                    (exit, axis, plane) = (ta, a, k);
+                }
             }
             if exit >= t_out {
                 break;
             }
-            let next = c[axis] as i64 + i64::from(ray.step[axis]);
-            if next < 0 || next >= i64::from(level.n) {
+            t = t.max(exit);
+            // The cell on the far side of that plane.
+            let next = plane.wrapping_sub(1 - ray.ahead[axis]);
+            if next >= n {
                 break;
             }
-            c[axis] = next as u32;
-            t = exit;
-            while l < top {
-                let parent = c.map(|k| k >> 1);
-                let up = &self.levels[l + 1];
-                if up.is_occupied(parent) && !up.is_full(parent) {
+            for b in 0..3 {
+                if b != axis && ray.step[b] != 0 {
+                    let (lo, hi) = if ray.ahead[b] == 1 {
+                        (c[b], (c[b] + r - 1).min(n - 1))
+                    } else {
+                        ((c[b] + 1).saturating_sub(r), c[b])
+                    };
+                    (c[b], t_next[b]) = self.cell_at(&ray, b, lo, hi, t);
+                }
+            }
+            c[axis] = next;
+            t_next[axis] = self.crossing(&ray, axis, next + ray.ahead[axis]);
+            index = self.grid.index(c);
+        }
+        if let Some(a) = run {
+            emit(a, t_out.max(t));
+        }
+    }
+
+    /// `[t0, t1]` clipped to the grid's bounds: the slab test of [`Aabb::clip_ray`], with
+    /// the same arithmetic (so the same result), reusing the ray's `1/dir`.
+    #[inline]
+    fn clip(&self, ray: &RayCtx, t0: f32, t1: f32) -> Option<(f32, f32)> {
+        let (min, max) = (self.bounds.min.to_array(), self.bounds.max.to_array());
+        let (mut near, mut far) = (t0, t1);
+        for a in 0..3 {
+            let o = ray.origin[a];
+            if ray.step[a] != 0 {
+                let ta = (min[a] - o) * ray.inv[a];
+                let tb = (max[a] - o) * ray.inv[a];
+                let (lo, hi) = if ta <= tb { (ta, tb) } else { (tb, ta) };
+                let hi = hi + hi.abs() * (4.0 * f32::EPSILON);
+                near = near.max(lo);
+                far = far.min(hi);
+            } else if !(o >= min[a] && o <= max[a]) {
+                return None;
+            }
+        }
+        (near <= far).then_some((near, far))
+    }
+
+    /// Where the ray crosses plane `k` of axis `a` (not parallel to it).
+    #[inline]
+    fn crossing(&self, ray: &RayCtx, a: usize, k: u32) -> f32 {
+        (self.grid.plane(a, k) - ray.origin[a]) * ray.inv[a]
+    }
+
+    /// The cell in `lo..=hi` on axis `a` (not parallel to the ray) holding the ray at `t`,
+    /// and where the ray leaves it: guessed from the point, then moved until the cell's
+    /// plane crossings bracket `t` (entry ≤ t < exit), so that it agrees with the crossings
+    /// a cell-by-cell walk compares.
+    #[inline]
+    fn cell_at(&self, ray: &RayCtx, a: usize, lo: u32, hi: u32, t: f32) -> (u32, f32) {
+        let g = (ray.origin[a] + t * ray.dir[a] - self.grid.lo[a]) * self.grid.inv_cell[a];
+        let mut k = g.clamp(lo as f32, hi as f32) as u32;
+        if ray.ahead[a] == 1 {
+            let mut exit = self.crossing(ray, a, k + 1);
+            while k < hi && exit <= t {
+                k += 1;
+                exit = self.crossing(ray, a, k + 1);
+            }
+            while k > lo {
+                let entry = self.crossing(ray, a, k);
+                if entry <= t {
                     break;
                 }
-                l += 1;
-                c = parent;
+                (k, exit) = (k - 1, entry);
             }
-        }
-    }
-
-    /// Where the ray leaves cell `c` of level `l`, and through which axis's plane.
-    #[inline]
-    fn exit(&self, ray: &RayCtx, l: usize, c: [u32; 3]) -> (f32, usize) {
-        let mut best = (f32::INFINITY, 0);
-        for (a, &ca) in c.iter().enumerate() {
-            let k = match ray.step[a] {
-                0 => continue,
-                s if s > 0 => (ca + 1) << l,
-                _ => ca << l,
-            };
-            let t = (self.grid.plane(a, k) - ray.origin[a]) * ray.inv[a];
-            if t < best.0 {
-                best = (t, a);
+            (k, exit)
+        } else {
+            let mut exit = self.crossing(ray, a, k);
+            while k > lo && exit <= t {
+                k -= 1;
+                exit = self.crossing(ray, a, k);
             }
+            while k < hi {
+                let entry = self.crossing(ray, a, k + 1);
+                if entry <= t {
+                    break;
+                }
+                (k, exit) = (k + 1, entry);
+            }
+            (k, exit)
         }
-        best
-    }
-
-    /// The child (on level `l`) of cell `parent` (on level `l + 1`) that holds the ray's
-    /// point at `t`, clamped into the parent so rounding never leaves it.
-    #[inline]
-    fn child(&self, ray: &RayCtx, l: usize, parent: [u32; 3], t: f32) -> [u32; 3] {
-        let fine = self.grid.locate_along(ray.origin + t * ray.dir, ray.step);
-        let n = self.levels[l].n;
-        [0, 1, 2].map(|a| (fine[a] >> l).clamp(2 * parent[a], (2 * parent[a] + 1).min(n - 1)))
     }
 }
 
@@ -450,49 +624,70 @@ mod tests {
     use super::*;
     use crate::field::{Analytic, Primitive, ShColor, Shape};
 
-    fn one(shape: Shape) -> Analytic {
-        Analytic {
-            primitives: vec![Primitive {
-                shape,
-                density: 1.0,
-                color: ShColor::constant(Vec3::ONE),
-            }],
+    fn prim(shape: Shape) -> Primitive {
+        Primitive {
+            shape,
+            density: 1.0,
+            color: ShColor::constant(Vec3::ONE),
         }
     }
 
+    fn one(shape: Shape) -> Analytic {
+        Analytic {
+            primitives: vec![prim(shape)],
+        }
+    }
+
+    fn sphere(center: Vec3, radius: f32) -> Shape {
+        Shape::Sphere { center, radius }
+    }
+
+    /// Every cell's (occupied, radius), from the per-cell bytes.
+    fn cell(occ: &Occupancy, c: [u32; 3]) -> (bool, u32) {
+        let v = occ.cells[occ.grid.index(c)];
+        (v & OCCUPIED != 0, u32::from(v & RADIUS_MASK))
+    }
+
+    fn all_cells(n: u32) -> impl Iterator<Item = [u32; 3]> {
+        (0..n).flat_map(move |z| (0..n).flat_map(move |y| (0..n).map(move |x| [x, y, z])))
+    }
+
+    /// The same grid walked one cell at a time: every radius set to 1.
+    fn unit_walk(occ: &Occupancy) -> Occupancy {
+        let mut unit = occ.clone();
+        for v in &mut unit.cells {
+            *v = (*v & OCCUPIED) | 1;
+        }
+        unit
+    }
+
     #[test]
-    fn pyramid_shape_and_fill_of_a_box() {
+    fn a_full_box_is_one_segment() {
         // A box filling [0, 1]³: padded bounds make every cell overlap it.
         let f = one(Shape::Box {
             min: Vec3::ZERO,
             max: Vec3::ONE,
         });
-        let occ = Occupancy::build(&f, 16);
-        assert_eq!(occ.resolution(), 16);
-        // 16 → 8 → 4.
-        assert_eq!(occ.levels.len(), 3);
-        assert_eq!(occ.fill_ratio(), 1.0);
         let occ = Occupancy::build(&f, 37);
-        let ns: Vec<u32> = occ.levels.iter().map(|l| l.n).collect();
-        assert_eq!(ns, [37, 19, 10, 5, 3]);
-        // Every coarse cell of a fully occupied grid is full.
-        for l in &occ.levels {
-            for z in 0..l.n {
-                for y in 0..l.n {
-                    for x in 0..l.n {
-                        assert!(l.is_full([x, y, z]));
-                    }
-                }
-            }
-        }
+        assert_eq!(occ.resolution(), 37);
+        assert_eq!(occ.fill_ratio(), 1.0);
+        // No empty cell anywhere: every radius is the cap.
+        assert!(all_cells(37).all(|c| cell(&occ, c) == (true, u32::from(RADIUS_CAP))));
+        // A diagonal ray through it, entering at t = 1 (x = 0) and leaving at t = 2 (x = 1),
+        // is one segment, within the padded bounds (0.1 % of the size each side).
+        let d = Vec3::new(1.0, 0.6, 0.3).normalize();
+        let o = Vec3::splat(0.0) - d / d.x + Vec3::new(0.0, 0.2, 0.4);
+        let mut seg = Vec::new();
+        occ.segments(o, d, 0.0, 10.0, &mut seg);
+        assert_eq!(seg.len(), 1, "{seg:?}");
+        let (ta, tb) = (1.0 / d.x, 2.0 / d.x);
+        let slack = 2e-3 / d.x;
+        assert!((seg[0][0] - ta).abs() <= slack && (seg[0][1] - tb).abs() <= slack);
     }
 
     #[test]
     fn sphere_fill_ratio_is_near_its_volume() {
-        let f = one(Shape::Sphere {
-            center: Vec3::new(1.0, 2.0, 3.0),
-            radius: 2.0,
-        });
+        let f = one(sphere(Vec3::new(1.0, 2.0, 3.0), 2.0));
         let n = 64;
         let occ = Occupancy::build(&f, n);
         let b = occ.bounds();
@@ -513,61 +708,118 @@ mod tests {
         assert!(!occ.is_occupied_point(Vec3::splat(100.0)));
     }
 
-    /// Coarse levels against a direct OR / AND over their finest cells.
+    /// Radii against the definition: the Chebyshev distance to the nearest cell of the
+    /// other state, by brute force over all cell pairs.
     #[test]
-    fn coarse_levels_are_or_and_of_finest() {
+    fn radii_are_chebyshev_distances_to_the_other_state() {
         let f = Analytic {
             primitives: vec![
-                Primitive {
-                    shape: Shape::Sphere {
-                        center: Vec3::ZERO,
-                        radius: 1.0,
-                    },
-                    density: 1.0,
-                    color: ShColor::constant(Vec3::ONE),
-                },
-                Primitive {
-                    shape: Shape::Gaussian {
-                        center: Vec3::new(1.5, 1.5, 0.0),
-                        sigma: 0.1,
-                        cutoff: 4.0,
-                    },
-                    density: 1.0,
-                    color: ShColor::constant(Vec3::ONE),
-                },
+                prim(sphere(Vec3::ZERO, 1.0)),
+                prim(Shape::Gaussian {
+                    center: Vec3::new(1.5, 1.5, 0.0),
+                    sigma: 0.1,
+                    cutoff: 4.0,
+                }),
             ],
         };
-        let occ = Occupancy::build(&f, 23);
-        let fine = &occ.levels[0];
-        for (l, level) in occ.levels.iter().enumerate().skip(1) {
-            let s = 1u32 << l;
-            for z in 0..level.n {
-                for y in 0..level.n {
-                    for x in 0..level.n {
-                        let (mut any, mut all) = (false, true);
-                        for fz in z * s..((z + 1) * s).min(23) {
-                            for fy in y * s..((y + 1) * s).min(23) {
-                                for fx in x * s..((x + 1) * s).min(23) {
-                                    let o = fine.is_occupied([fx, fy, fz]);
-                                    any |= o;
-                                    all &= o;
-                                }
-                            }
-                        }
-                        assert_eq!(level.is_occupied([x, y, z]), any, "level {l} {x} {y} {z}");
-                        assert_eq!(level.is_full([x, y, z]), all, "level {l} {x} {y} {z}");
-                    }
+        let n = 19;
+        let occ = Occupancy::build(&f, n);
+        let cells: Vec<([u32; 3], bool)> = all_cells(n).map(|c| (c, cell(&occ, c).0)).collect();
+        assert!(cells.iter().any(|c| c.1) && cells.iter().any(|c| !c.1));
+        for &(c, occupied) in &cells {
+            let reference = cells
+                .iter()
+                .filter(|o| o.1 != occupied)
+                .map(|(o, _)| (0..3).map(|a| c[a].abs_diff(o[a])).max().unwrap_or(0))
+                .min()
+                .unwrap_or(u32::MAX)
+                .min(63);
+            assert_eq!(cell(&occ, c).1, reference, "cell {c:?}");
+        }
+    }
+
+    /// Far from everything an empty cell's radius stops at the cap (63).
+    #[test]
+    fn radii_are_capped() {
+        // Two small balls at opposite corners of a 150³ grid.
+        let f = Analytic {
+            primitives: vec![
+                prim(sphere(Vec3::splat(-1.0), 0.01)),
+                prim(sphere(Vec3::splat(1.0), 0.01)),
+            ],
+        };
+        let n = 150;
+        let occ = Occupancy::build(&f, n);
+        let occupied: Vec<[u32; 3]> = all_cells(n).filter(|&c| cell(&occ, c).0).collect();
+        assert!(!occupied.is_empty() && occupied.len() < 100);
+        let mut capped = 0;
+        for c in all_cells(n).step_by(997).filter(|&c| !cell(&occ, c).0) {
+            let d = occupied
+                .iter()
+                .map(|o| (0..3).map(|a| c[a].abs_diff(o[a])).max().unwrap_or(0))
+                .min()
+                .unwrap_or(u32::MAX);
+            assert_eq!(cell(&occ, c).1, d.min(63), "cell {c:?}");
+            capped += usize::from(d > 63);
+        }
+        assert!(capped > 100, "{capped}");
+    }
+
+    /// Jumps land where the cell-by-cell walk goes: the same segments for random rays of
+    /// every kind (grazing, starting in a cell next to an occupied one, windowed).
+    #[test]
+    fn jumps_agree_with_the_cell_by_cell_walk() {
+        let f = Analytic {
+            primitives: vec![
+                prim(Shape::Box {
+                    min: Vec3::new(-2.0, -2.0, -0.3),
+                    max: Vec3::new(2.0, 2.0, 0.0),
+                }),
+                prim(sphere(Vec3::new(0.5, 0.3, 0.8), 0.4)),
+                prim(Shape::Box {
+                    min: Vec3::new(-1.5, 1.0, 0.0),
+                    max: Vec3::new(-1.2, 1.3, 1.5),
+                }),
+            ],
+        };
+        let mut state = 0x1234_5678_u64;
+        let mut unit = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for n in [16, 50, 64] {
+            let occ = Occupancy::build(&f, n);
+            let reference = unit_walk(&occ);
+            let b = occ.bounds();
+            let mut jumped = 0;
+            for i in 0..3000 {
+                let p = b.min + Vec3::new(unit(), unit(), unit()) * b.size();
+                let mut d = Vec3::new(unit(), unit(), unit()) * 2.0 - 1.0;
+                if i % 3 == 0 {
+                    // Grazing the slab's top.
+                    d.z = (unit() - 0.5) * 0.02;
                 }
+                let d = d.normalize();
+                let (t0, t1) = if i % 2 == 0 {
+                    (0.0, 10.0)
+                } else {
+                    (unit() * 2.0, 2.0 + unit() * 3.0)
+                };
+                let (mut a, mut r) = (Vec::new(), Vec::new());
+                occ.segments(p, d, t0, t1, &mut a);
+                reference.segments(p, d, t0, t1, &mut r);
+                assert_eq!(a, r, "n {n} ray {p} {d} [{t0}, {t1}]");
+                jumped += usize::from(cell(&occ, occ.grid.locate(p)).1 > 1);
             }
+            assert!(jumped > 300, "{jumped}");
         }
     }
 
     #[test]
     fn tiny_resolutions_cover_the_chord() {
-        let f = one(Shape::Sphere {
-            center: Vec3::new(0.5, 0.0, 0.0),
-            radius: 1.0,
-        });
+        let f = one(sphere(Vec3::new(0.5, 0.0, 0.0), 1.0));
         for res in [1, 2, 3, 5, 9] {
             let occ = Occupancy::build(&f, res);
             let mut seg = Vec::new();

@@ -172,36 +172,28 @@ impl Bits {
         out
     }
 
-    /// `out` = this set grown by one cell along x (`out[x] = in[x−1] | in[x] | in[x+1]`).
-    fn dilate_x(&self, out: &mut Bits) {
-        let (rw, tail) = (self.row_words, self.tail_mask());
-        out.words
-            .par_chunks_mut(self.slice_words())
-            .zip(self.words.par_chunks(self.slice_words()))
-            .for_each(|(dst, src)| {
-                for (d, s) in dst.chunks_mut(rw).zip(src.chunks(rw)) {
-                    for i in 0..rw {
-                        let prev = if i > 0 { s[i - 1] >> 63 } else { 0 };
-                        let next = if i + 1 < rw { s[i + 1] << 63 } else { 0 };
-                        d[i] = s[i] | s[i] << 1 | prev | s[i] >> 1 | next;
-                    }
-                    d[rw - 1] &= tail;
-                }
-            });
-    }
-
-    /// `out` = this set grown by one cell along y.
-    fn dilate_y(&self, out: &mut Bits) {
-        let (rw, n) = (self.row_words, self.n as usize);
+    /// `out` = this set grown by one cell along x and y, slice by slice: each row of `out`
+    /// is the OR of the x-dilated rows `y − 1`, `y`, `y + 1`, where the x-dilation of a row
+    /// is `in[x−1] | in[x] | in[x+1]` (shifts with carries between words).
+    fn dilate_xy(&self, out: &mut Bits) {
+        let (rw, n, tail) = (self.row_words, self.n as usize, self.tail_mask());
+        let dilate_x = |s: &[u64], i: usize| {
+            let prev = if i > 0 { s[i - 1] >> 63 } else { 0 };
+            let next = if i + 1 < rw { s[i + 1] << 63 } else { 0 };
+            s[i] | s[i] << 1 | prev | s[i] >> 1 | next
+        };
         out.words
             .par_chunks_mut(self.slice_words())
             .zip(self.words.par_chunks(self.slice_words()))
             .for_each(|(dst, src)| {
                 for y in 0..n {
-                    let (a, b) = (y.saturating_sub(1), (y + 1).min(n - 1));
-                    for i in 0..rw {
-                        dst[y * rw + i] = src[a * rw + i] | src[y * rw + i] | src[b * rw + i];
+                    let rows = [y.saturating_sub(1), y, (y + 1).min(n - 1)]
+                        .map(|r| &src[r * rw..(r + 1) * rw]);
+                    let d = &mut dst[y * rw..(y + 1) * rw];
+                    for (i, w) in d.iter_mut().enumerate() {
+                        *w = rows.iter().fold(0, |acc, r| acc | dilate_x(r, i));
                     }
+                    d[rw - 1] &= tail;
                 }
             });
     }
@@ -249,12 +241,10 @@ fn write_radii(seed: &Bits, flag: u8, cells: &mut [u8]) {
     }
     let (n, rw, slice) = (seed.n as usize, seed.row_words, seed.slice_words());
     let mut cur = seed.clone();
-    let mut xs = Bits::new(seed.n);
     let mut xys = Bits::new(seed.n);
     let mut next = Bits::new(seed.n);
     for k in 1..RADIUS_CAP {
-        cur.dilate_x(&mut xs);
-        xs.dilate_y(&mut xys);
+        cur.dilate_xy(&mut xys);
         let added: u64 = next
             .words
             .par_chunks_mut(slice)

@@ -90,10 +90,7 @@ impl Shape {
     fn overlaps(&self, region: &Aabb) -> bool {
         match *self {
             Shape::Sphere { center, radius } => ball_overlaps(center, radius, region),
-            Shape::Box { min, max } => {
-                let pad = OCCUPANCY_PAD * min.abs().max(max.abs()).max_element();
-                Aabb::new(min, max).grow(pad).intersects(region)
-            }
+            Shape::Box { min, max } => padded_box(min, max).intersects(region),
             Shape::Gaussian {
                 center,
                 sigma,
@@ -157,12 +154,28 @@ impl Shape {
 /// Whether the closed ball (centre `c`, radius `r`, padded) meets `region`: the squared
 /// distance from `c` to the closest point of the box against `r²`.
 fn ball_overlaps(c: Vec3, r: f32, region: &Aabb) -> bool {
-    if region.is_empty() {
-        return false;
-    }
-    let pad = OCCUPANCY_PAD * (r + c.abs().max_element());
-    let gap = (region.min - c).max(c - region.max).max(Vec3::ZERO);
-    gap.length_squared() <= (r + pad) * (r + pad)
+    !region.is_empty() && distance2_to_box(c, region) <= padded_radius(c, r).powi(2)
+}
+
+/// A ball's radius grown by [`OCCUPANCY_PAD`] relative to its coordinates.
+#[inline]
+fn padded_radius(c: Vec3, r: f32) -> f32 {
+    r + OCCUPANCY_PAD * (r + c.abs().max_element())
+}
+
+/// A box support grown by [`OCCUPANCY_PAD`] relative to its coordinates.
+#[inline]
+fn padded_box(min: Vec3, max: Vec3) -> Aabb {
+    Aabb::new(min, max).grow(OCCUPANCY_PAD * min.abs().max(max.abs()).max_element())
+}
+
+/// The squared distance from `c` to the closest point of `region` (0 inside it).
+#[inline]
+fn distance2_to_box(c: Vec3, region: &Aabb) -> f32 {
+    (region.min - c)
+        .max(c - region.max)
+        .max(Vec3::ZERO)
+        .length_squared()
 }
 
 /// One shape with a density scale and a colour.
@@ -332,27 +345,49 @@ impl Field for Analytic {
         !region.is_empty() && self.active().any(|p| p.shape.overlaps(region))
     }
 
-    /// The sum, over the primitives whose support meets `region`, of each one's largest
-    /// density there: its density for spheres and boxes, for a Gaussian its value at the
-    /// point of `region` nearest its centre.
-    fn density_bound(&self, region: &Aabb) -> Option<f32> {
-        if region.is_empty() {
-            return Some(0.0);
-        }
-        Some(
-            self.active()
-                .filter(|p| p.shape.overlaps(region))
-                .map(|p| match p.shape {
-                    Shape::Gaussian { center, sigma, .. } => {
-                        let gap = (region.min - center)
-                            .max(center - region.max)
-                            .max(Vec3::ZERO);
-                        p.density * (-0.5 * gap.length_squared() / (sigma * sigma)).exp()
+    /// For each region, the sum over the primitives whose support meets it (padded as in
+    /// [`Field::may_be_occupied`]) of each one's largest density there: its density for
+    /// spheres and boxes, for a Gaussian its value at the point of the region nearest its
+    /// centre. The shape is chosen once per primitive, outside the loop over regions.
+    fn density_bounds(&self, regions: &[Aabb], bounds: &mut [f32]) -> bool {
+        bounds.fill(0.0);
+        for p in self.active() {
+            let k = p.density;
+            let pairs = regions.iter().zip(bounds.iter_mut());
+            match p.shape {
+                Shape::Sphere { center, radius } => {
+                    let r2 = padded_radius(center, radius).powi(2);
+                    for (region, bound) in pairs {
+                        if distance2_to_box(center, region) <= r2 {
+                            *bound += k;
+                        }
                     }
-                    _ => p.density,
-                })
-                .sum(),
-        )
+                }
+                Shape::Box { min, max } => {
+                    let support = padded_box(min, max);
+                    for (region, bound) in pairs {
+                        if support.intersects(region) {
+                            *bound += k;
+                        }
+                    }
+                }
+                Shape::Gaussian {
+                    center,
+                    sigma,
+                    cutoff,
+                } => {
+                    let r2 = padded_radius(center, cutoff * sigma).powi(2);
+                    let a = -0.5 / (sigma * sigma);
+                    for (region, bound) in pairs {
+                        let g = distance2_to_box(center, region);
+                        if g <= r2 {
+                            *bound += k * (a * g).exp();
+                        }
+                    }
+                }
+            }
+        }
+        true
     }
 }
 
@@ -527,10 +562,12 @@ mod tests {
         // Far from both: nothing. Inside the sphere, away from the blob's centre: the
         // sphere's 3 plus the Gaussian at the box's nearest point (distance 0.5 → 2e^{-1/2}).
         let far = Aabb::new(Vec3::splat(5.0), Vec3::splat(6.0));
-        assert_eq!(f.density_bound(&far), Some(0.0));
         let b = Aabb::new(Vec3::new(-0.5, -0.1, -0.1), Vec3::new(0.5, 0.1, 0.1));
+        let mut bounds = [f32::NAN; 2];
+        assert!(f.density_bounds(&[far, b], &mut bounds));
+        assert_eq!(bounds[0], 0.0);
         let expected = 3.0 + 2.0 * (-0.5f32).exp();
-        assert!((f.density_bound(&b).unwrap() - expected).abs() < 1e-6);
+        assert!((bounds[1] - expected).abs() < 1e-6);
         // Every sample in the box is below the bound.
         let mut pts = Vec::new();
         for i in 0..=10 {

@@ -40,11 +40,12 @@ pub trait Field: Send + Sync {
         self.bounds().diagonal() / 256.0
     }
 
-    /// An upper bound of the density over `region`, where the field can give one cheaply.
-    /// The marcher uses it to find features thinner than a step between two samples (a
-    /// dense sheet inside fog). `None` (the default): no bound, no such search.
-    fn density_bound(&self, _region: &Aabb) -> Option<f32> {
-        None
+    /// Upper bounds of the density over each region (`bounds.len() == regions.len()`),
+    /// where the field can give them cheaply; `false` (the default) when it cannot. The
+    /// marcher uses them to find features thinner than a step between two samples (a dense
+    /// sheet inside fog); a field without bounds gets no such search.
+    fn density_bounds(&self, _regions: &[Aabb], _bounds: &mut [f32]) -> bool {
+        false
     }
 
     /// Whether the density may be non-zero anywhere in `region`. Must be *conservative*:

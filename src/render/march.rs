@@ -123,8 +123,12 @@ pub(super) struct Scratch {
     inst_sigma: Vec<f64>,
     inst_sigma_prev: Vec<f64>,
     pending: Vec<Pending>,
-    /// The nodes the last refinement level added.
-    added: Vec<Pending>,
+    /// Pairs `(ray, first node)` to test for refinement.
+    candidates: Vec<(u32, u32)>,
+    /// Candidates that passed the jump test, with their density bound.
+    unsure: Vec<(u32, u32, f64)>,
+    /// Step boxes for one batched density-bound query.
+    regions: Vec<Aabb>,
     points: Vec<Vec3>,
     dirs: Vec<Vec3>,
     owners: Vec<(u32, f64)>,
@@ -194,7 +198,6 @@ pub(super) fn march_tile(
 }
 
 /// Builds each pixel's world ray and its local rays; segments come later, lazily.
-#[inline(never)]
 fn setup_rays(scene: &Scene, camera: &Camera, tile: Window, s: &mut Scratch) {
     let n_rays = tile.area();
     s.rays.resize_with(n_rays, RayState::default);
@@ -285,7 +288,6 @@ fn fetch_segments(r: usize, plans: &[InstancePlan], s: &mut Scratch) {
 
 /// The step at world distance `t` on ray `r`: the finest base step among the instances the
 /// ray is inside at `t`, grown with distance by the cone.
-#[inline(never)]
 fn step_at(r: usize, t: f64, plans: &[InstancePlan], params: &MarchParams, s: &Scratch) -> f64 {
     let n_inst = plans.len();
     let (mut here, mut anywhere) = (f64::INFINITY, f64::INFINITY);
@@ -305,7 +307,6 @@ fn step_at(r: usize, t: f64, plans: &[InstancePlan], params: &MarchParams, s: &S
 }
 
 /// Lays the next chunk of regular nodes for ray `r` into `s.pending`.
-#[inline(never)]
 fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
     if !s.rays[r].live {
         return;
@@ -351,7 +352,6 @@ fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scr
 
 /// Evaluates every pending node's density (one batched call per instance) and inserts the
 /// nodes, in order, into their rays' node lists.
-#[inline(never)]
 fn evaluate_pending(scene: &Scene, n_inst: usize, s: &mut Scratch) {
     let first_slot = s.inst_sigma.len();
     s.inst_sigma
@@ -406,103 +406,133 @@ fn evaluate_pending(scene: &Scene, n_inst: usize, s: &mut Scratch) {
     }
 }
 
-/// An upper bound of the density (per world unit) anywhere on the step `[a, b]` of a ray:
-/// the sum of each instance's [`Field::density_bound`] over the box around the step's two
-/// field-space ends; `None` when an instance the step crosses gives no bound.
-///
-/// [`Field::density_bound`]: crate::field::Field::density_bound
-fn step_density_bound(scene: &Scene, local: &[Option<LocalRay>], a: f64, b: f64) -> Option<f64> {
-    let mut bound = 0.0;
-    for (inst, lr) in scene.instances.iter().zip(local) {
-        let Some(lr) = lr else { continue };
-        let (a, b) = (a.max(lr.t_near), b.min(lr.t_far));
-        if a > b {
-            continue;
-        }
-        let (pa, pb) = (lr.at(a), lr.at(b));
-        let region = Aabb::new(pa.min(pb), pa.max(pb));
-        bound += inst.field().density_bound(&region)? as f64 * lr.units_per_world as f64;
-    }
-    Some(bound)
-}
-
 /// Bisects the steps whose two ends disagree (`|σ_b − σ_a|·δ` above the tolerance) or
-/// between whose ends the fields' density bound rises well above both ([`step_density_bound`]:
-/// a sheet thinner than a step),
-/// level by level, each level one batch across the tile. After the first level only the
-/// pairs next to the nodes just added can need it, so only those are looked at.
-#[inline(never)]
+/// between whose ends the fields' density bound rises well above both (a sheet thinner than
+/// a step), level by level, each level one batch across the tile. After the first level only
+/// the pairs next to the nodes just added can need it, so only those are looked at.
 fn refine(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
     let depth = params.refine_depth.min(u8::MAX as u32) as u8;
-    let tolerance = params.refine_tolerance as f64;
-    // Splits the pair (nodes[i], nodes[i + 1]) of ray r at its midpoint when needed.
-    let split = |local: &[Option<LocalRay>],
-                 transmittance: f64,
-                 r: usize,
-                 nodes: &[Node],
-                 i: usize,
-                 level: u8,
-                 out: &mut Vec<Pending>| {
-        let (a, b) = (&nodes[i], &nodes[i + 1]);
-        if b.starts_run {
-            return;
-        }
-        // What the step may get wrong matters only as much as light from there reaches the
-        // camera. (Not discounted by what lies behind: the piece's own weight and colour
-        // depend on what the step holds.)
-        let weight = (b.t - a.t) * transmittance;
-        let needed = (b.sigma - a.sigma).abs() * weight > tolerance || {
-            let local = &local[r * n_inst..(r + 1) * n_inst];
-            step_density_bound(scene, local, a.t, b.t)
-                .is_some_and(|bound| (bound - a.sigma.max(b.sigma)) * weight > tolerance)
-        };
-        if needed {
-            out.push(Pending {
-                ray: r as u32,
-                t: 0.5 * (a.t + b.t),
-                level,
-                starts_run: false,
-            });
-        }
-    };
     if depth == 0 {
         return;
     }
-    s.pending.clear();
+    s.candidates.clear();
     for &r in &s.active {
-        let (r, nodes) = (r as usize, &s.nodes[r as usize]);
-        let t = s.rays[r].pieces.transmittance();
-        for i in 0..nodes.len().saturating_sub(1) {
-            split(&s.local, t, r, nodes, i, 1, &mut s.pending);
+        for i in 0..s.nodes[r as usize].len().saturating_sub(1) {
+            s.candidates.push((r, i as u32));
         }
     }
     let mut level = 1;
-    while !s.pending.is_empty() {
+    loop {
+        split_candidates(scene, n_inst, params, level, s);
+        if s.pending.is_empty() {
+            break;
+        }
         evaluate_pending(scene, n_inst, s);
         if level == depth {
             break;
         }
         level += 1;
-        std::mem::swap(&mut s.pending, &mut s.added);
-        s.pending.clear();
-        for added in &s.added {
+        s.candidates.clear();
+        for added in &s.pending {
             let r = added.ray as usize;
             let nodes = &s.nodes[r];
-            let t = s.rays[r].pieces.transmittance();
             let i = nodes.partition_point(|n| n.t < added.t);
             if i > 0 {
-                split(&s.local, t, r, nodes, i - 1, level, &mut s.pending);
+                s.candidates.push((added.ray, i as u32 - 1));
             }
             if i + 1 < nodes.len() {
-                split(&s.local, t, r, nodes, i, level, &mut s.pending);
+                s.candidates.push((added.ray, i as u32));
             }
+        }
+    }
+}
+
+/// Tests each candidate pair `(ray, i)` (nodes `i` and `i + 1`) and lays the midpoints of
+/// those that need splitting into `s.pending`, at `level`. What a step may get wrong matters
+/// only as much as light from there reaches the camera, so each test is weighed by the
+/// ray's transmittance (not by what lies behind: the piece's own weight and colour depend on
+/// what the step holds). Pairs that pass the cheap jump test ask the fields for a density
+/// bound over the step's box, one batch per instance.
+fn split_candidates(
+    scene: &Scene,
+    n_inst: usize,
+    params: &MarchParams,
+    level: u8,
+    s: &mut Scratch,
+) {
+    let tolerance = params.refine_tolerance as f64;
+    s.pending.clear();
+    s.unsure.clear();
+    for &(r, i) in &s.candidates {
+        let nodes = &s.nodes[r as usize];
+        let (a, b) = (&nodes[i as usize], &nodes[i as usize + 1]);
+        if b.starts_run {
+            continue;
+        }
+        let weight = (b.t - a.t) * s.rays[r as usize].pieces.transmittance();
+        if (b.sigma - a.sigma).abs() * weight > tolerance {
+            s.pending.push(Pending {
+                ray: r,
+                t: 0.5 * (a.t + b.t),
+                level,
+                starts_run: false,
+            });
+        } else {
+            s.unsure.push((r, i, 0.0));
+        }
+    }
+    // Density bounds over the unsure steps, summed over instances (per world unit).
+    for (k, inst) in scene.instances.iter().enumerate() {
+        s.regions.clear();
+        s.owners.clear();
+        for (u, &(r, i, _)) in s.unsure.iter().enumerate() {
+            let Some(lr) = &s.local[r as usize * n_inst + k] else {
+                continue;
+            };
+            let nodes = &s.nodes[r as usize];
+            let (a, b) = (
+                nodes[i as usize].t.max(lr.t_near),
+                nodes[i as usize + 1].t.min(lr.t_far),
+            );
+            if a <= b {
+                let (pa, pb) = (lr.at(a), lr.at(b));
+                s.regions.push(Aabb::new(pa.min(pb), pa.max(pb)));
+                s.owners.push((u as u32, lr.units_per_world as f64));
+            }
+        }
+        if s.regions.is_empty() {
+            continue;
+        }
+        s.field_out.clear();
+        s.field_out.resize(s.regions.len(), 0.0);
+        if !inst.field().density_bounds(&s.regions, &mut s.field_out) {
+            // No bound from this field: its steps cannot be searched.
+            for &(u, _) in &s.owners {
+                s.unsure[u as usize].2 = f64::NEG_INFINITY;
+            }
+            continue;
+        }
+        for (&(u, k), &bound) in s.owners.iter().zip(&s.field_out) {
+            s.unsure[u as usize].2 += bound as f64 * k;
+        }
+    }
+    for &(r, i, bound) in &s.unsure {
+        let nodes = &s.nodes[r as usize];
+        let (a, b) = (&nodes[i as usize], &nodes[i as usize + 1]);
+        let weight = (b.t - a.t) * s.rays[r as usize].pieces.transmittance();
+        if (bound - a.sigma.max(b.sigma)) * weight > tolerance {
+            s.pending.push(Pending {
+                ray: r,
+                t: 0.5 * (a.t + b.t),
+                level,
+                starts_run: false,
+            });
         }
     }
 }
 
 /// Composites a ray's nodes, in order, until it is opaque enough; distributes each piece's
 /// weight to its two nodes in proportion to their densities (their share of its colour).
-#[inline(never)]
 fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, outputs: &Outputs) {
     let min_t = params.min_transmittance as f64;
     for i in 1..nodes.len() {
@@ -539,7 +569,6 @@ fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, out
 /// nodes of a ray go unshaded while their weights add up to at most
 /// [`MarchParams::color_skip_budget`], so the colour error a ray can get from skipping is
 /// bounded by that budget times its brightest radiance.
-#[inline(never)]
 fn shade(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
     let budget = params.color_skip_budget as f64;
     for &r in &s.active {
@@ -585,7 +614,6 @@ fn shade(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
     }
 }
 
-#[inline(never)]
 fn finish(state: &RayState, outputs: &Outputs) -> PixelResult {
     let alpha = state.pieces.accumulation();
     let depth = state.pieces.expected_depth();

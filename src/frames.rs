@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::camera::Shot;
+use crate::camera::{CameraPath, Shot};
 use crate::error::{Error, Result};
 use crate::image::Planes;
 use crate::render::{render_with_progress, RenderSettings, RenderStats};
@@ -94,6 +94,21 @@ pub fn frame_path(pattern: &Path, frame: i64, several: bool) -> PathBuf {
     pattern.with_file_name(name)
 }
 
+/// Reads a nerfx shot file, or a nerfstudio `camera_path.json` (recognised by its
+/// `camera_path` key) as a shot whose frames count from 0, as `ns-render` numbers them, and
+/// whose NeRF object (the scene instances bound to `nerf_object`) is placed so that the
+/// field sees each frame's `camera_to_world` exactly (see [`CameraPath::to_shot`]).
+pub fn read_shot(path: &Path, nerf_object: &str) -> Result<Shot> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let is_camera_path = serde_json::from_str::<serde_json::Value>(&text)
+        .is_ok_and(|v| v.get("camera_path").is_some());
+    if is_camera_path {
+        CameraPath::from_json_str(&text, path)?.to_shot(0, nerf_object)
+    } else {
+        Shot::from_json_str(&text, path)
+    }
+}
+
 /// Renders `frame` of `shot`: the shot's camera at that frame, object-bound instances placed
 /// by the shot's object matrices at that frame.
 pub fn render_frame(
@@ -126,6 +141,21 @@ mod tests {
             let e = parse_frames(bad).unwrap_err().to_string();
             assert!(e.contains(&format!("'{bad}'")), "{e}");
         }
+    }
+
+    #[test]
+    fn camera_paths_read_as_shots() {
+        let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+        let path = data.join("viewer_camera_path_b.json");
+        let shot = read_shot(&path, "NeRF").unwrap();
+        assert_eq!(shot.frames.len(), 42);
+        assert_eq!(shot.frames[0].frame, 0);
+        assert!(shot.frame(0).unwrap().object_matrix("NeRF").is_ok());
+        let demo = std::env::temp_dir().join(format!("nerfx-frames-{}.json", std::process::id()));
+        crate::demo::shot(8, 6).write(&demo).unwrap();
+        let back = read_shot(&demo, "NeRF").unwrap();
+        std::fs::remove_file(&demo).ok();
+        assert_eq!(back.frames.len(), crate::demo::FRAMES as usize);
     }
 
     #[test]

@@ -9,8 +9,7 @@ use std::time::Instant;
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use nerfx::camera::Shot;
-use nerfx::frames::{frame_path, parse_frames, render_frame};
+use nerfx::frames::{frame_path, parse_frames, read_shot, render_frame};
 use nerfx::image::{write_exr, write_png_preview, Planes};
 use nerfx::render::{render_with_progress, Outputs, Quality, RenderSettings};
 use nerfx::scene::SceneDesc;
@@ -51,8 +50,11 @@ enum Command {
     Render {
         /// Scene file (JSON).
         scene: PathBuf,
-        /// Shot file (JSON, written by the Blender add-on).
+        /// Shot file (JSON, written by the Blender add-on), or a nerfstudio camera_path.json.
         shot: PathBuf,
+        /// With a nerfstudio camera path: the scene's object the path's frame belongs to.
+        #[arg(long, default_value = "NeRF")]
+        nerf_object: String,
         /// Frames: `1001-1010`, `1001-1100x5`, `1,5,9`.
         #[arg(long)]
         frames: String,
@@ -128,6 +130,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Render {
             scene,
             shot,
+            nerf_object,
             frames,
             output,
             quality,
@@ -135,7 +138,7 @@ fn run(cli: Cli) -> Result<()> {
         } => {
             let frames = parse_frames(&frames)?;
             let scene = SceneDesc::read(&scene)?.load()?;
-            let shot = Shot::read(&shot)?;
+            let shot = read_shot(&shot, &nerf_object)?;
             let settings = RenderSettings::new(quality.params(), Outputs::all());
             let bar = progress_bar(frames.len() as u64, "frames");
             for &frame in &frames {

@@ -1,0 +1,116 @@
+//! The `nerfx` command line, run as a user would: the demo, a frame range through the demo's
+//! own scene and shot files, and bad input that must fail with a message naming the file.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use nerfx::image::read_exr_channels;
+
+fn nerfx(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_nerfx"))
+        .args(args)
+        .output()
+        .expect("the nerfx binary runs")
+}
+
+fn scratch_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("nerfx-cli-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir
+}
+
+fn channels(path: &Path) -> Vec<String> {
+    let mut names: Vec<String> = read_exr_channels(path)
+        .expect("readable EXR")
+        .into_iter()
+        .map(|(name, _)| name)
+        .collect();
+    names.sort();
+    names
+}
+
+#[test]
+fn demo_then_render_a_frame_range_from_its_files() {
+    let dir = scratch_dir("demo");
+    let out = dir.to_string_lossy().into_owned();
+    let demo = nerfx(&[
+        "demo",
+        "-o",
+        &out,
+        "--width",
+        "48",
+        "--height",
+        "27",
+        "--quality",
+        "draft",
+        "--write-inputs",
+    ]);
+    assert!(
+        demo.status.success(),
+        "{}",
+        String::from_utf8_lossy(&demo.stderr)
+    );
+    assert!(dir.join("demo.png").is_file());
+    assert_eq!(
+        channels(&dir.join("demo.exr")),
+        ["A", "B", "G", "R", "Z", "depth.median", "depth.ray"]
+    );
+
+    let pattern = dir.join("frames/f.####.exr");
+    let render = nerfx(&[
+        "render",
+        &dir.join("demo_scene.json").to_string_lossy(),
+        &dir.join("demo_shot.json").to_string_lossy(),
+        "--frames",
+        "1001-1005x2",
+        "-o",
+        &pattern.to_string_lossy(),
+        "--quality",
+        "draft",
+    ]);
+    assert!(
+        render.status.success(),
+        "{}",
+        String::from_utf8_lossy(&render.stderr)
+    );
+    for frame in [1001, 1003, 1005] {
+        assert!(
+            dir.join(format!("frames/f.{frame}.exr")).is_file(),
+            "frame {frame}"
+        );
+    }
+    assert!(!dir.join("frames/f.1002.exr").exists());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn bad_input_fails_with_a_message_naming_the_file() {
+    let dir = scratch_dir("bad");
+    let scene = dir.join("scene.json");
+    nerfx::demo::scene_desc().write(&scene).expect("scene file");
+    let corrupt = dir.join("shot.json");
+    std::fs::write(&corrupt, "{\"version\": 1, \"frames\": [").expect("write");
+    let missing = dir.join("missing.json");
+    for (shot, frames) in [(&corrupt, "1"), (&missing, "1")] {
+        let run = nerfx(&[
+            "render",
+            &scene.to_string_lossy(),
+            &shot.to_string_lossy(),
+            "--frames",
+            frames,
+        ]);
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success());
+        assert!(stderr.contains(&*shot.to_string_lossy()), "{stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+    let frames = nerfx(&[
+        "render",
+        &scene.to_string_lossy(),
+        "x.json",
+        "--frames",
+        "9-1",
+    ]);
+    assert!(String::from_utf8_lossy(&frames.stderr).contains("frames '9-1'"));
+    std::fs::remove_dir_all(&dir).ok();
+}

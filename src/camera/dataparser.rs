@@ -16,6 +16,7 @@ use std::path::Path;
 use glam::{DMat4, DVec4};
 use serde_json::Value;
 
+use super::json::{self, numbers};
 use crate::error::{Error, Result};
 
 /// The dataparser transform of a nerfstudio training run.
@@ -38,13 +39,7 @@ impl DataparserTransform {
     /// Parses the JSON; `path_for_errors` names the source in messages.
     pub fn from_json_str(text: &str, path_for_errors: impl AsRef<Path>) -> Result<Self> {
         let path = path_for_errors.as_ref();
-        let root: Value = serde_json::from_str(text).map_err(|e| {
-            Error::format(
-                path,
-                format!("line {} column {}", e.line(), e.column()),
-                "not valid JSON",
-            )
-        })?;
+        let root = json::parse(text, path)?;
         let bad = |loc: &str, msg: String| Error::format(path, loc, msg);
         let rows = match root.get("transform") {
             Some(Value::Array(rows)) if rows.len() == 3 || rows.len() == 4 => rows,
@@ -59,12 +54,7 @@ impl DataparserTransform {
         let mut m = [[0.0f64; 4]; 4];
         m[3] = [0.0, 0.0, 0.0, 1.0];
         for (r, row) in rows.iter().enumerate() {
-            let cells: Option<Vec<f64>> = row.as_array().and_then(|c| {
-                c.iter()
-                    .map(|x| x.as_f64().filter(|f| f.is_finite()))
-                    .collect()
-            });
-            match cells {
+            match numbers(row) {
                 Some(c) if c.len() == 4 => m[r].copy_from_slice(&c),
                 _ => {
                     return Err(bad(

@@ -11,6 +11,7 @@
 
 mod dataparser;
 mod equirect;
+mod json;
 mod nerfstudio;
 mod perspective;
 mod shot;

@@ -33,8 +33,9 @@ use std::path::{Path, PathBuf};
 
 use glam::DMat4;
 use serde::Serialize;
-use serde_json::{Map, Value};
+use serde_json::Value;
 
+use super::json::{self, numbers, short, Describe, Null, Obj, Style};
 use super::{
     Camera, Equirect, Eye, Ods, Perspective, Projection, SensorFit, Shot, ShotCamera,
     ShotCameraKind, ShotFrame, ShotStereo, StereoMode, Vr180, DEFAULT_IPD,
@@ -136,14 +137,8 @@ impl CameraPath {
     /// Parses and validates camera-path JSON; `path_for_errors` names the source in messages.
     pub fn from_json_str(text: &str, path_for_errors: impl AsRef<Path>) -> Result<CameraPath> {
         let path = path_for_errors.as_ref();
-        let root: Value = serde_json::from_str(text).map_err(|e| {
-            Error::format(
-                path,
-                format!("line {} column {}", e.line(), e.column()),
-                "not valid JSON",
-            )
-        })?;
-        let top = Obj::new(&root, path, String::new())?;
+        let root = json::parse(text, path)?;
+        let top = Obj::root(&root, path, PATH_STYLE)?;
         let camera_type = match top.opt("camera_type") {
             None => PathCameraType::Perspective,
             Some(_) => match top.string("camera_type")?.to_lowercase().as_str() {
@@ -176,7 +171,7 @@ impl CameraPath {
         }
         let mut frames = Vec::with_capacity(entries.len());
         for (i, v) in entries.iter().enumerate() {
-            let cam = Obj::new(v, path, format!("camera_path[{i}]"))?;
+            let cam = Obj::new(v, path, format!("camera_path[{i}]"), PATH_STYLE)?;
             let fov = if perspective || cam.opt("fov").is_some() {
                 cam.fov("fov", perspective)?
             } else {
@@ -190,7 +185,7 @@ impl CameraPath {
         let mut keyframes = Vec::new();
         if top.opt("keyframes").is_some() {
             for (i, v) in top.array("keyframes")?.iter().enumerate() {
-                let k = Obj::new(v, path, format!("keyframes[{i}]"))?;
+                let k = Obj::new(v, path, format!("keyframes[{i}]"), PATH_STYLE)?;
                 keyframes.push(PathKeyframe {
                     matrix: k.column_major_string("matrix")?,
                     fov: if k.opt("fov").is_some() {
@@ -493,75 +488,40 @@ struct RawColor {
     b: f64,
 }
 
-/// A JSON object being read, with its location for messages.
-struct Obj<'a> {
-    map: &'a Map<String, Value>,
-    path: &'a Path,
-    loc: String,
+/// How a camera path's messages are worded: `null` counts as absent, a value of the wrong
+/// shape is quoted.
+const PATH_STYLE: Style = Style {
+    null: Null::Missing,
+    wrong_shape: Describe::Value,
+};
+
+/// The camera path's typed getters, on top of the shared [`Obj`] reader.
+trait PathFields {
+    /// A required string.
+    fn string(&self, key: &str) -> Result<String>;
+    /// A required finite number.
+    fn number(&self, key: &str) -> Result<f64>;
+    /// A required number > 0.
+    fn positive(&self, key: &str) -> Result<f64>;
+    /// A vertical FOV in degrees, strictly between 0 and 180 when `strict`.
+    fn fov(&self, key: &str, strict: bool) -> Result<f64>;
+    /// An image side: a whole number from 1 to 65536.
+    fn side(&self, key: &str) -> Result<u32>;
+    /// Three finite numbers.
+    fn triple(&self, key: &str) -> Result<[f64; 3]>;
+    /// A row-major matrix: 16 (or 12, a 3×4) numbers flat, or 4 (or 3) rows of 4.
+    fn row_major_matrix(&self, key: &str) -> Result<DMat4>;
+    /// A string holding 16 numbers of a column-major matrix (the viewer's keyframes).
+    fn column_major_string(&self, key: &str) -> Result<DMat4>;
 }
 
-impl<'a> Obj<'a> {
-    fn new(value: &'a Value, path: &'a Path, loc: String) -> Result<Self> {
-        match value {
-            Value::Object(map) => Ok(Obj { map, path, loc }),
-            other => Err(Error::format(
-                path,
-                loc,
-                format!("expected a JSON object, got {}", short(other)),
-            )),
-        }
-    }
-
-    fn field_loc(&self, key: &str) -> String {
-        if self.loc.is_empty() {
-            key.to_string()
-        } else {
-            format!("{}.{key}", self.loc)
-        }
-    }
-
-    fn error(&self, key: &str, message: impl Into<String>) -> Error {
-        Error::format(self.path, self.field_loc(key), message)
-    }
-
-    /// The value at `key`; `null` counts as absent.
-    fn opt(&self, key: &str) -> Option<&'a Value> {
-        self.map.get(key).filter(|v| !v.is_null())
-    }
-
-    fn required(&self, key: &str, expected: &str) -> Result<&'a Value> {
-        self.opt(key)
-            .ok_or_else(|| self.error(key, format!("missing; expected {expected}")))
-    }
-
-    fn object(&self, key: &str) -> Result<Obj<'a>> {
-        Obj::new(
-            self.required(key, "an object")?,
-            self.path,
-            self.field_loc(key),
-        )
-    }
-
-    fn array(&self, key: &str) -> Result<&'a Vec<Value>> {
-        match self.required(key, "a list")? {
-            Value::Array(a) => Ok(a),
-            other => Err(self.error(key, format!("expected a list, got {}", short(other)))),
-        }
-    }
-
+impl PathFields for Obj<'_> {
     fn string(&self, key: &str) -> Result<String> {
-        match self.required(key, "a string")? {
-            Value::String(s) => Ok(s.clone()),
-            other => Err(self.error(key, format!("expected a string, got {}", short(other)))),
-        }
+        self.get::<String>(key, "a string")
     }
 
     fn number(&self, key: &str) -> Result<f64> {
-        let v = self.required(key, "a number")?;
-        match v.as_f64() {
-            Some(x) if x.is_finite() => Ok(x),
-            _ => Err(self.error(key, format!("expected a finite number, got {}", short(v)))),
-        }
+        self.finite(key, "a number")
     }
 
     fn positive(&self, key: &str) -> Result<f64> {
@@ -573,7 +533,6 @@ impl<'a> Obj<'a> {
         }
     }
 
-    /// A vertical FOV in degrees, strictly between 0 and 180 when `strict`.
     fn fov(&self, key: &str, strict: bool) -> Result<f64> {
         let v = self.number(key)?;
         if strict && !(v > 0.0 && v < 180.0) {
@@ -585,7 +544,6 @@ impl<'a> Obj<'a> {
         Ok(v)
     }
 
-    /// An image side: a whole number from 1 to 65536.
     fn side(&self, key: &str) -> Result<u32> {
         let v = self.required(key, "a whole number of pixels")?;
         match v.as_u64() {
@@ -612,7 +570,6 @@ impl<'a> Obj<'a> {
         }
     }
 
-    /// A row-major matrix: 16 (or 12, a 3×4) numbers flat, or 4 (or 3) rows of 4.
     fn row_major_matrix(&self, key: &str) -> Result<DMat4> {
         let v = self.required(key, "a 4×4 matrix")?;
         let flat = match v {
@@ -659,7 +616,6 @@ impl<'a> Obj<'a> {
         Ok(DMat4::from_cols_array(&m).transpose())
     }
 
-    /// A string holding 16 numbers of a column-major matrix (the viewer's keyframes).
     fn column_major_string(&self, key: &str) -> Result<DMat4> {
         let text = self.string(key)?;
         let parsed: Option<Vec<f64>> = serde_json::from_str::<Value>(&text)
@@ -673,27 +629,6 @@ impl<'a> Obj<'a> {
                 "expected a string holding 16 finite numbers (a column-major 4×4 matrix)",
             )),
         }
-    }
-}
-
-/// The finite numbers of a JSON list, or `None` if it is not a list of finite numbers.
-fn numbers(v: &Value) -> Option<Vec<f64>> {
-    match v {
-        Value::Array(items) => items
-            .iter()
-            .map(|x| x.as_f64().filter(|f| f.is_finite()))
-            .collect(),
-        _ => None,
-    }
-}
-
-/// A value for a message, cut short.
-fn short(v: &Value) -> String {
-    let s = v.to_string();
-    if s.chars().count() > 40 {
-        format!("{}…", s.chars().take(40).collect::<String>())
-    } else {
-        s
     }
 }
 

@@ -34,10 +34,10 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use glam::DMat4;
-use serde::de::DeserializeOwned;
 use serde::Serialize;
-use serde_json::{Map, Value};
+use serde_json::Value;
 
+use super::json::{self, short, Describe, Null, Obj, Style};
 use super::{
     BlenderIntrinsics, Camera, Equirect, Eye, Ods, Perspective, Projection, SensorFit, Vr180,
 };
@@ -152,18 +152,8 @@ impl Shot {
     /// Parses and validates shot JSON; `path_for_errors` names the source in messages.
     pub fn from_json_str(text: &str, path_for_errors: impl AsRef<Path>) -> Result<Shot> {
         let path = path_for_errors.as_ref();
-        let root: Value = serde_json::from_str(&non_finite_tokens_to_null(text)).map_err(|e| {
-            Error::format(
-                path,
-                format!("line {} column {}", e.line(), e.column()),
-                // serde_json's message ends with the position, already in the location.
-                format!(
-                    "not valid JSON: {}",
-                    e.to_string().split(" at line ").next().unwrap_or_default()
-                ),
-            )
-        })?;
-        let top = Node::root(&root, path)?;
+        let root = json::parse_with_reason(&non_finite_tokens_to_null(text), path)?;
+        let top = Obj::root(&root, path, SHOT_STYLE)?;
         let version = top.get::<u64>("version", "an integer")?;
         if version != SHOT_VERSION {
             return Err(top.error(
@@ -178,7 +168,7 @@ impl Shot {
             fps_base: top.positive_or("fps_base", 1.0)?,
             resolution_x: top.count("resolution_x")?,
             resolution_y: top.count("resolution_y")?,
-            resolution_percentage: if top.map.contains_key("resolution_percentage") {
+            resolution_percentage: if top.has("resolution_percentage") {
                 top.count("resolution_percentage")?
             } else {
                 100
@@ -205,7 +195,7 @@ impl Shot {
         }
         let mut index_of_frame = BTreeMap::new();
         for (i, value) in frames.iter().enumerate() {
-            let node = Node::new(value, path, format!("frames[{i}]"))?;
+            let node = Obj::new(value, path, format!("frames[{i}]"), SHOT_STYLE)?;
             let frame = read_frame(&node, &shot.nerf_object)?;
             if let Some(j) = index_of_frame.insert(frame.frame, i) {
                 return Err(node.error(
@@ -404,13 +394,13 @@ impl ShotCamera {
     }
 }
 
-fn read_frame(node: &Node, nerf_object: &str) -> Result<ShotFrame> {
+fn read_frame(node: &Obj, nerf_object: &str) -> Result<ShotFrame> {
     let frame = node.get::<i64>("frame", "an integer frame number")?;
     let cam = node.object("camera")?;
     let camera = read_camera(&cam)?;
     let objs = node.object("objects")?;
     let mut objects = BTreeMap::new();
-    for key in objs.map.keys() {
+    for key in objs.keys() {
         let m = objs.matrix(key)?;
         let det = m.determinant();
         if det.is_nan() || det.abs() <= 1e-300 {
@@ -434,7 +424,7 @@ fn read_frame(node: &Node, nerf_object: &str) -> Result<ShotFrame> {
     })
 }
 
-fn read_camera(cam: &Node) -> Result<ShotCamera> {
+fn read_camera(cam: &Obj) -> Result<ShotCamera> {
     let kind = match cam.get::<String>("type", "a string")?.as_str() {
         "PERSP" => ShotCameraKind::Perspective,
         "PANO" => match cam.get::<String>("panorama_type", "a string")?.as_str() {
@@ -505,67 +495,30 @@ fn read_camera(cam: &Node) -> Result<ShotCamera> {
     Ok(camera)
 }
 
-/// A JSON object being read, with its location for messages.
-struct Node<'a> {
-    map: &'a Map<String, Value>,
-    path: &'a Path,
-    /// JSON path of this object, e.g. `frames[3].camera`; empty at the top.
-    loc: String,
+/// How a shot file's messages are worded: `null` is refused (it is what a `NaN` token became),
+/// a value of the wrong shape is named by its kind.
+const SHOT_STYLE: Style = Style {
+    null: Null::Refused,
+    wrong_shape: Describe::Kind,
+};
+
+/// The shot file's typed getters, on top of the shared [`Obj`] reader.
+trait ShotFields {
+    /// An optional finite number, `default` when absent (a `null` is refused).
+    fn number_or(&self, key: &str, default: f64) -> Result<f64>;
+    /// A required number > 0.
+    fn positive(&self, key: &str) -> Result<f64>;
+    /// An optional number > 0, `default` when absent (a `null` is refused).
+    fn positive_or(&self, key: &str, default: f64) -> Result<f64>;
+    /// A whole number ≥ 1 that fits in `u32`.
+    fn count(&self, key: &str) -> Result<u32>;
+    /// A 4×4 matrix as four rows of four finite numbers, affine (bottom row 0 0 0 1).
+    fn matrix(&self, key: &str) -> Result<DMat4>;
 }
 
-impl<'a> Node<'a> {
-    fn root(value: &'a Value, path: &'a Path) -> Result<Self> {
-        Node::new(value, path, String::new())
-    }
-
-    fn new(value: &'a Value, path: &'a Path, loc: String) -> Result<Self> {
-        match value {
-            Value::Object(map) => Ok(Node { map, path, loc }),
-            other => Err(Error::format(
-                path,
-                loc,
-                format!("expected a JSON object, got {}", kind_of(other)),
-            )),
-        }
-    }
-
-    fn field_loc(&self, key: &str) -> String {
-        if self.loc.is_empty() {
-            key.to_string()
-        } else {
-            format!("{}.{key}", self.loc)
-        }
-    }
-
-    fn error(&self, key: &str, message: impl Into<String>) -> Error {
-        Error::format(self.path, self.field_loc(key), message)
-    }
-
-    /// The value at `key`; JSON `null` counts as absent.
-    fn opt(&self, key: &str) -> Option<&'a Value> {
-        self.map.get(key).filter(|v| !v.is_null())
-    }
-
-    fn required(&self, key: &str, expected: &str) -> Result<&'a Value> {
-        match self.map.get(key) {
-            None => Err(self.error(key, format!("missing; expected {expected}"))),
-            Some(Value::Null) => Err(self.error(
-                key,
-                format!("expected {expected}, got null (or NaN/Infinity, which JSON cannot hold)"),
-            )),
-            Some(v) => Ok(v),
-        }
-    }
-
-    /// A required value of type `T`, described as `expected` in messages.
-    fn get<T: DeserializeOwned>(&self, key: &str, expected: &str) -> Result<T> {
-        let v = self.required(key, expected)?;
-        T::deserialize(v)
-            .map_err(|_| self.error(key, format!("expected {expected}, got {}", short(v))))
-    }
-
+impl ShotFields for Obj<'_> {
     fn number_or(&self, key: &str, default: f64) -> Result<f64> {
-        if self.map.contains_key(key) {
+        if self.has(key) {
             self.get::<f64>(key, "a finite number")
         } else {
             Ok(default)
@@ -582,14 +535,13 @@ impl<'a> Node<'a> {
     }
 
     fn positive_or(&self, key: &str, default: f64) -> Result<f64> {
-        if self.map.contains_key(key) {
+        if self.has(key) {
             self.positive(key)
         } else {
             Ok(default)
         }
     }
 
-    /// A whole number ≥ 1 that fits in `u32`.
     fn count(&self, key: &str) -> Result<u32> {
         let v = self.get::<u64>(key, "a whole number ≥ 1")?;
         match u32::try_from(v) {
@@ -598,19 +550,6 @@ impl<'a> Node<'a> {
         }
     }
 
-    fn array(&self, key: &str) -> Result<&'a Vec<Value>> {
-        match self.required(key, "a list")? {
-            Value::Array(a) => Ok(a),
-            other => Err(self.error(key, format!("expected a list, got {}", kind_of(other)))),
-        }
-    }
-
-    fn object(&self, key: &str) -> Result<Node<'a>> {
-        let v = self.required(key, "an object")?;
-        Node::new(v, self.path, self.field_loc(key))
-    }
-
-    /// A 4×4 matrix as four rows of four finite numbers, affine (bottom row 0 0 0 1).
     fn matrix(&self, key: &str) -> Result<DMat4> {
         let loc = self.field_loc(key);
         let rows = match self.required(key, "a 4×4 matrix (four rows)")? {
@@ -627,8 +566,7 @@ impl<'a> Node<'a> {
             let cells = match row {
                 Value::Array(cells) if cells.len() == 4 => cells,
                 other => {
-                    return Err(Error::format(
-                        self.path,
+                    return Err(self.error_at(
                         format!("{loc}[{r}]"),
                         format!("expected a row of four numbers, got {}", short(other)),
                     ))
@@ -638,8 +576,7 @@ impl<'a> Node<'a> {
                 m[r][c] = match cell.as_f64() {
                     Some(x) if x.is_finite() => x,
                     _ => {
-                        return Err(Error::format(
-                            self.path,
+                        return Err(self.error_at(
                             format!("{loc}[{r}][{c}]"),
                             format!(
                                 "expected a finite number, got {} (NaN or infinity in the matrix?)",
@@ -658,27 +595,6 @@ impl<'a> Node<'a> {
         }
         // Rows in the file; glam is column-major.
         Ok(DMat4::from_cols_array_2d(&m).transpose())
-    }
-}
-
-fn kind_of(v: &Value) -> &'static str {
-    match v {
-        Value::Null => "null",
-        Value::Bool(_) => "a boolean",
-        Value::Number(_) => "a number",
-        Value::String(_) => "a string",
-        Value::Array(_) => "a list",
-        Value::Object(_) => "an object",
-    }
-}
-
-/// A value for a message, cut short.
-fn short(v: &Value) -> String {
-    let s = v.to_string();
-    if s.chars().count() > 40 {
-        format!("{}…", s.chars().take(40).collect::<String>())
-    } else {
-        s
     }
 }
 

@@ -1,0 +1,323 @@
+//! Reading the camera files' JSON (shot files, nerfstudio camera paths, dataparser
+//! transforms) with messages that name the file and the field.
+//!
+//! The text is parsed into a [`Value`] tree by [`parse`], then walked with an [`Obj`]: a JSON
+//! object that knows where it is (`frames[3].camera`), so that every refusal reads
+//! `shot.json: frames[3].camera.lens: expected a number > 0, got 0`. Each file keeps its own
+//! schema (and its typed getters, as a private extension trait on [`Obj`]); only the walking
+//! and the shared wording live here.
+//!
+//! The two walkers this replaced differed in two details that their messages still show, so
+//! they are a [`Style`] chosen by the caller: whether a JSON `null` counts as absent, and
+//! whether a value that is not the object or list wanted is described by its kind
+//! (`a string`) or by its text cut short (`"abc"`).
+
+use std::path::Path;
+
+use serde::de::DeserializeOwned;
+use serde_json::{Map, Value};
+
+use crate::error::{Error, Result};
+
+/// Parses `text`; a syntax error becomes a format error at `line L column C` of `path`, with
+/// the message `not valid JSON`.
+pub(super) fn parse(text: &str, path: &Path) -> Result<Value> {
+    parse_with(text, path, |_| "not valid JSON".to_string())
+}
+
+/// As [`parse`], with serde_json's reason after the message: `not valid JSON: expected value`.
+pub(super) fn parse_with_reason(text: &str, path: &Path) -> Result<Value> {
+    parse_with(text, path, |e| {
+        // serde_json's message ends with the position, already in the location.
+        format!(
+            "not valid JSON: {}",
+            e.to_string().split(" at line ").next().unwrap_or_default()
+        )
+    })
+}
+
+fn parse_with(
+    text: &str,
+    path: &Path,
+    message: impl Fn(&serde_json::Error) -> String,
+) -> Result<Value> {
+    serde_json::from_str(text).map_err(|e| {
+        Error::format(
+            path,
+            format!("line {} column {}", e.line(), e.column()),
+            message(&e),
+        )
+    })
+}
+
+/// The kind of a JSON value, for messages: `null`, `a boolean`, `a number`, `a string`,
+/// `a list`, `an object`.
+pub(super) fn kind_of(v: &Value) -> &'static str {
+    match v {
+        Value::Null => "null",
+        Value::Bool(_) => "a boolean",
+        Value::Number(_) => "a number",
+        Value::String(_) => "a string",
+        Value::Array(_) => "a list",
+        Value::Object(_) => "an object",
+    }
+}
+
+/// A value for a message: its JSON text, cut to 40 characters and `…`.
+pub(super) fn short(v: &Value) -> String {
+    let s = v.to_string();
+    if s.chars().count() > 40 {
+        format!("{}…", s.chars().take(40).collect::<String>())
+    } else {
+        s
+    }
+}
+
+/// The numbers of a JSON list, or `None` unless it is a list of finite numbers only.
+pub(super) fn numbers(v: &Value) -> Option<Vec<f64>> {
+    match v {
+        Value::Array(items) => items
+            .iter()
+            .map(|x| x.as_f64().filter(|f| f.is_finite()))
+            .collect(),
+        _ => None,
+    }
+}
+
+/// How a required field that holds JSON `null` is treated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Null {
+    /// As if the field were absent: `missing; expected …`.
+    Missing,
+    /// Refused as a value: `expected …, got null (or NaN/Infinity, which JSON cannot hold)`
+    /// (for files whose `NaN` tokens were read as `null`).
+    Refused,
+}
+
+/// How a value is described where an object or a list was wanted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Describe {
+    /// By [`kind_of`]: `expected a list, got a string`.
+    Kind,
+    /// By [`short`]: `expected a list, got "abc"`.
+    Value,
+}
+
+/// A file's wording of the messages that [`Obj`] writes itself.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct Style {
+    /// What a required `null` is.
+    pub null: Null,
+    /// How a value that is not the object or list wanted is described.
+    pub wrong_shape: Describe,
+}
+
+impl Style {
+    fn describe(self, v: &Value) -> String {
+        match self.wrong_shape {
+            Describe::Kind => kind_of(v).to_string(),
+            Describe::Value => short(v),
+        }
+    }
+}
+
+/// A JSON object being read, with its location for messages.
+pub(super) struct Obj<'a> {
+    map: &'a Map<String, Value>,
+    path: &'a Path,
+    /// JSON path of this object, e.g. `frames[3].camera`; empty at the top.
+    loc: String,
+    style: Style,
+}
+
+impl<'a> Obj<'a> {
+    /// The top-level object of the file `path`.
+    pub fn root(value: &'a Value, path: &'a Path, style: Style) -> Result<Self> {
+        Obj::new(value, path, String::new(), style)
+    }
+
+    /// The object `value` found at `loc`; refused (at `loc`) when it is not an object.
+    pub fn new(value: &'a Value, path: &'a Path, loc: String, style: Style) -> Result<Self> {
+        match value {
+            Value::Object(map) => Ok(Obj {
+                map,
+                path,
+                loc,
+                style,
+            }),
+            other => Err(Error::format(
+                path,
+                loc,
+                format!("expected a JSON object, got {}", style.describe(other)),
+            )),
+        }
+    }
+
+    /// The location of the field `key` of this object: `frames[3].camera.lens`.
+    pub fn field_loc(&self, key: &str) -> String {
+        if self.loc.is_empty() {
+            key.to_string()
+        } else {
+            format!("{}.{key}", self.loc)
+        }
+    }
+
+    /// A format error at the field `key`.
+    pub fn error(&self, key: &str, message: impl Into<String>) -> Error {
+        Error::format(self.path, self.field_loc(key), message)
+    }
+
+    /// A format error at `loc` (an element inside a field) in this object's file.
+    pub fn error_at(&self, loc: String, message: impl Into<String>) -> Error {
+        Error::format(self.path, loc, message)
+    }
+
+    /// Whether the field `key` is present, even as `null`.
+    pub fn has(&self, key: &str) -> bool {
+        self.map.contains_key(key)
+    }
+
+    /// The field names, in order.
+    pub fn keys(&self) -> impl Iterator<Item = &'a String> {
+        self.map.keys()
+    }
+
+    /// The value at `key`; JSON `null` counts as absent.
+    pub fn opt(&self, key: &str) -> Option<&'a Value> {
+        self.map.get(key).filter(|v| !v.is_null())
+    }
+
+    /// The value at `key`, refused when missing (or `null`, per the [`Style`]); `expected`
+    /// describes the wanted value in the message.
+    pub fn required(&self, key: &str, expected: &str) -> Result<&'a Value> {
+        match (self.map.get(key), self.style.null) {
+            (None, _) | (Some(Value::Null), Null::Missing) => {
+                Err(self.error(key, format!("missing; expected {expected}")))
+            }
+            (Some(Value::Null), Null::Refused) => Err(self.error(
+                key,
+                format!("expected {expected}, got null (or NaN/Infinity, which JSON cannot hold)"),
+            )),
+            (Some(v), _) => Ok(v),
+        }
+    }
+
+    /// A required value of type `T`, described as `expected` in messages.
+    pub fn get<T: DeserializeOwned>(&self, key: &str, expected: &str) -> Result<T> {
+        let v = self.required(key, expected)?;
+        T::deserialize(v)
+            .map_err(|_| self.error(key, format!("expected {expected}, got {}", short(v))))
+    }
+
+    /// A required finite number; `expected` describes it when it is missing.
+    pub fn finite(&self, key: &str, expected: &str) -> Result<f64> {
+        let v = self.required(key, expected)?;
+        match v.as_f64() {
+            Some(x) if x.is_finite() => Ok(x),
+            _ => Err(self.error(key, format!("expected a finite number, got {}", short(v)))),
+        }
+    }
+
+    /// A required list.
+    pub fn array(&self, key: &str) -> Result<&'a Vec<Value>> {
+        match self.required(key, "a list")? {
+            Value::Array(a) => Ok(a),
+            other => Err(self.error(
+                key,
+                format!("expected a list, got {}", self.style.describe(other)),
+            )),
+        }
+    }
+
+    /// A required object, read in the same style.
+    pub fn object(&self, key: &str) -> Result<Obj<'a>> {
+        let v = self.required(key, "an object")?;
+        Obj::new(v, self.path, self.field_loc(key), self.style)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    const SHOT_LIKE: Style = Style {
+        null: Null::Refused,
+        wrong_shape: Describe::Kind,
+    };
+    const PATH_LIKE: Style = Style {
+        null: Null::Missing,
+        wrong_shape: Describe::Value,
+    };
+
+    fn message<T>(r: Result<T>) -> String {
+        match r {
+            Ok(_) => panic!("expected an error"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn syntax_errors_give_line_and_column() {
+        let text = "{\"a\": 1,\n  oops}";
+        let e = message(parse(text, Path::new("f.json")));
+        assert!(e.contains("f.json") && e.contains("line 2 column 3"), "{e}");
+        assert!(e.ends_with("not valid JSON"), "{e}");
+        let e = message(parse_with_reason(text, Path::new("f.json")));
+        assert!(e.contains("not valid JSON: key must be a string"), "{e}");
+        assert!(!e.contains(" at line "), "{e}");
+    }
+
+    #[test]
+    fn short_cuts_at_forty_characters() {
+        assert_eq!(short(&json!("ab")), "\"ab\"");
+        let long = json!("x".repeat(50));
+        assert_eq!(short(&long), format!("\"{}…", "x".repeat(39)));
+    }
+
+    #[test]
+    fn numbers_accepts_only_lists_of_numbers() {
+        assert_eq!(numbers(&json!([1, 2.5, -3])), Some(vec![1.0, 2.5, -3.0]));
+        assert_eq!(numbers(&json!([1, "2"])), None);
+        assert_eq!(numbers(&json!([1, null])), None);
+        assert_eq!(numbers(&json!(1)), None);
+        assert_eq!(numbers(&json!([])), Some(vec![]));
+    }
+
+    #[test]
+    fn locations_nest_and_styles_keep_their_wording() {
+        let v = json!({"cam": {"lens": null, "tags": "x", "n": "7"}});
+        let path = Path::new("s.json");
+        for (style, null_msg, list_msg) in [
+            (
+                SHOT_LIKE,
+                "s.json: cam.lens: expected a number, got null (or NaN/Infinity, which JSON \
+                 cannot hold)",
+                "s.json: cam.tags: expected a list, got a string",
+            ),
+            (
+                PATH_LIKE,
+                "s.json: cam.lens: missing; expected a number",
+                "s.json: cam.tags: expected a list, got \"x\"",
+            ),
+        ] {
+            let cam = Obj::root(&v, path, style).unwrap().object("cam").unwrap();
+            assert_eq!(message(cam.required("lens", "a number")), null_msg);
+            assert_eq!(message(cam.array("tags")), list_msg);
+            assert_eq!(
+                message(cam.finite("n", "a number")),
+                "s.json: cam.n: expected a finite number, got \"7\""
+            );
+            assert_eq!(
+                message(cam.get::<u32>("zz", "an integer")),
+                "s.json: cam.zz: missing; expected an integer"
+            );
+            assert!(cam.has("lens") && cam.opt("lens").is_none());
+        }
+        let top = json!([1]);
+        assert_eq!(
+            message(Obj::root(&top, path, SHOT_LIKE)),
+            "s.json: expected a JSON object, got a list"
+        );
+    }
+}

@@ -1,7 +1,7 @@
 //! The tiled ray marcher.
 //!
 //! [`render`] splits the window into tiles and marches them in parallel (rayon), each with
-//! per-thread scratch ([`march`]); [`composite`] holds the pure compositing formulas;
+//! per-thread scratch (module `march`); module `composite` holds the pure compositing formulas;
 //! [`Quality`] presets set the dials; [`render_naive`] is the uniform-step baseline the
 //! benchmark compares against.
 

@@ -21,15 +21,9 @@ use crate::field::{Aabb, Occupancy};
 use crate::image::Window;
 use crate::scene::{LocalRay, Scene};
 
-/// Nodes a live ray lays in its first round; the chunk doubles each round up to
-/// [`MAX_CHUNK`], so rays that stop at the first surface waste few samples past it and rays
-/// through thin media amortise the round's overhead.
-const FIRST_CHUNK: usize = 8;
-/// The largest chunk.
-const MAX_CHUNK: usize = 8;
-
-/// The first segment fetch covers this fraction of the ray's span through the instances.
-const FIRST_WINDOWS: f64 = 4.0;
+/// Nodes a live ray lays per round: small, so rays that stop at a surface waste few
+/// samples past it (measured: 4 and 16 cost more samples or more rounds than 8).
+const CHUNK: usize = 8;
 
 /// What one pixel ends up with.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -91,19 +85,12 @@ struct RayState {
     ray: Option<Ray>,
     pieces: Pieces,
     rgb: DVec3,
-    /// Occupied world segments fetched so far (up to `horizon`), and the current one.
+    /// Occupied world segments (the union over instances), and the current one.
     segments: Vec<[f64; 2]>,
     segment: usize,
-    /// World distance up to which segments have been fetched, where the ray leaves the
-    /// last instance, and the length of the next fetch.
-    horizon: f64,
-    end: f64,
-    window: f64,
     /// Next node position inside the current segment; `None`: at the segment's start.
     next_t: Option<f64>,
     live: bool,
-    /// Rounds this ray has laid nodes in.
-    rounds: u32,
     /// Weight whose colour was not evaluated.
     skipped_weight: f64,
     /// Median-depth log `[t, δ, σ, T_enter]` range in `Scratch::log` is per ray.
@@ -150,7 +137,7 @@ pub(super) fn march_tile(
     let (params, outputs) = (&settings.march, &settings.outputs);
     let n_inst = scene.instances.len();
     let n_rays = tile.area();
-    setup_rays(scene, camera, tile, s);
+    setup_rays(scene, plans, camera, tile, s);
 
     while !s.active.is_empty() {
         // Each live ray keeps its last node (the start of its next piece), then lays more.
@@ -197,8 +184,14 @@ pub(super) fn march_tile(
     }
 }
 
-/// Builds each pixel's world ray and its local rays; segments come later, lazily.
-fn setup_rays(scene: &Scene, camera: &Camera, tile: Window, s: &mut Scratch) {
+/// Builds each pixel's world ray, its local rays and its occupied segments.
+fn setup_rays(
+    scene: &Scene,
+    plans: &[InstancePlan],
+    camera: &Camera,
+    tile: Window,
+    s: &mut Scratch,
+) {
     let n_rays = tile.area();
     s.rays.resize_with(n_rays, RayState::default);
     s.nodes.resize_with(n_rays, Vec::new);
@@ -212,78 +205,60 @@ fn setup_rays(scene: &Scene, camera: &Camera, tile: Window, s: &mut Scratch) {
         state.pieces = Pieces::new();
         state.rgb = DVec3::ZERO;
         state.next_t = None;
-        state.rounds = 0;
         state.skipped_weight = 0.0;
         state.log.clear();
         state.segments.clear();
         state.segment = 0;
         s.nodes[r].clear();
-        let (mut begin, mut end) = (f64::INFINITY, f64::NEG_INFINITY);
-        for inst in &scene.instances {
+        for (inst, plan) in scene.instances.iter().zip(plans) {
             let local = ray.and_then(|ray| inst.local_ray(&ray, 0.0, f64::INFINITY));
             if let Some(lr) = &local {
-                begin = begin.min(lr.t_near);
-                end = end.max(lr.t_far);
+                occupied_segments(lr, plan, &mut s.occupied, &mut state.segments);
             }
             s.local.push(local);
         }
-        state.live = begin < end;
+        union_in_place(&mut state.segments);
+        state.live = !state.segments.is_empty();
         if state.live {
             s.active.push(r as u32);
         }
-        state.horizon = begin;
-        state.end = end;
-        state.window = (end - begin) / FIRST_WINDOWS;
     }
 }
 
-/// Fetches the occupied segments of ray `r` in the next window past its horizon (the union
-/// over instances, in world distance), doubling the window each time: most rays stop at the
-/// first surface, so the grid behind it is never traversed.
-fn fetch_segments(r: usize, plans: &[InstancePlan], s: &mut Scratch) {
-    let n_inst = plans.len();
-    let state = &mut s.rays[r];
-    state.segments.clear();
-    state.segment = 0;
-    while state.segments.is_empty() && state.horizon < state.end {
-        let (from, to) = (state.horizon, (state.horizon + state.window).min(state.end));
-        for (i, plan) in plans.iter().enumerate() {
-            let Some(lr) = &s.local[r * n_inst + i] else {
-                continue;
-            };
-            let (a, b) = (from.max(lr.t_near), to.min(lr.t_far));
-            if a.is_nan() || b.is_nan() || a >= b {
-                continue;
-            }
-            let k = lr.units_per_world as f64;
-            s.occupied.clear();
-            let (u0, u1) = (((a - lr.t_near) * k) as f32, ((b - lr.t_near) * k) as f32);
-            plan.occupancy
-                .segments(lr.origin, lr.dir, u0, u1, &mut s.occupied);
-            state.segments.extend(s.occupied.iter().map(|&[u0, u1]| {
-                [
-                    (lr.t_near + u0 as f64 / k).max(a),
-                    (lr.t_near + u1 as f64 / k).min(b),
-                ]
-            }));
+/// Appends the occupied segments of one instance along a local ray, in world distance.
+fn occupied_segments(
+    lr: &LocalRay,
+    plan: &InstancePlan,
+    scratch: &mut Vec<[f32; 2]>,
+    out: &mut Vec<[f64; 2]>,
+) {
+    let k = lr.units_per_world as f64;
+    let length = ((lr.t_far - lr.t_near) * k) as f32;
+    scratch.clear();
+    plan.occupancy
+        .segments(lr.origin, lr.dir, 0.0, length, scratch);
+    out.extend(scratch.iter().map(|&[u0, u1]| {
+        [
+            (lr.t_near + u0 as f64 / k).max(lr.t_near),
+            (lr.t_near + u1 as f64 / k).min(lr.t_far),
+        ]
+    }));
+}
+
+/// Sorts intervals and merges the overlapping ones.
+fn union_in_place(segs: &mut Vec<[f64; 2]>) {
+    segs.sort_unstable_by(|x, y| x[0].total_cmp(&y[0]));
+    let mut merged = 0;
+    for i in 0..segs.len() {
+        let seg = segs[i];
+        if merged > 0 && seg[0] <= segs[merged - 1][1] {
+            segs[merged - 1][1] = segs[merged - 1][1].max(seg[1]);
+        } else if seg[1] >= seg[0] {
+            segs[merged] = seg;
+            merged += 1;
         }
-        state.horizon = to;
-        state.window *= 2.0;
-        // Union of the instances' segments.
-        let segs = &mut state.segments;
-        segs.sort_unstable_by(|x, y| x[0].total_cmp(&y[0]));
-        let mut merged = 0;
-        for i in 0..segs.len() {
-            let seg = segs[i];
-            if merged > 0 && seg[0] <= segs[merged - 1][1] {
-                segs[merged - 1][1] = segs[merged - 1][1].max(seg[1]);
-            } else if seg[1] >= seg[0] {
-                segs[merged] = seg;
-                merged += 1;
-            }
-        }
-        segs.truncate(merged);
     }
+    segs.truncate(merged);
 }
 
 /// The step at world distance `t` on ray `r`: the finest base step among the instances the
@@ -311,16 +286,8 @@ fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scr
     if !s.rays[r].live {
         return;
     }
-    let chunk = (FIRST_CHUNK << s.rays[r].rounds.min(8)).min(MAX_CHUNK);
-    s.rays[r].rounds += 1;
     let mut laid = 0;
-    while laid < chunk {
-        if s.rays[r].segment >= s.rays[r].segments.len() {
-            fetch_segments(r, plans, s);
-            if s.rays[r].segments.is_empty() {
-                break;
-            }
-        }
+    while laid < CHUNK && s.rays[r].segment < s.rays[r].segments.len() {
         let state = &s.rays[r];
         let [a, b] = state.segments[state.segment];
         let (t, starts_run) = match state.next_t {
@@ -560,7 +527,7 @@ fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, out
             return;
         }
     }
-    if state.segment >= state.segments.len() && state.horizon >= state.end {
+    if state.segment >= state.segments.len() {
         state.live = false;
     }
 }

@@ -69,7 +69,7 @@ impl Quality {
                 min_transmittance: 1e-4,
                 occupancy_resolution: 256,
                 refine_tolerance: 1e-3,
-                refine_depth: 10,
+                refine_depth: 11,
                 color_skip_budget: 1e-5,
             },
         }

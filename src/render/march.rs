@@ -1,11 +1,11 @@
 //! The per-tile marcher: estimator (occupancy segments, step policy, refinement) and
 //! integrator (pieces → planes), batched across a tile.
 //!
-//! A tile's rays advance together in *chunks*. Each round, every live ray lays up to
-//! a chunk of sample positions ("nodes") along its occupied segments; the tile asks each field
-//! once for all of them; nodes whose neighbours' densities disagree (a surface, a steep
-//! gradient) are bisected — again batched across the tile — until they agree or the depth
-//! limit is hit. Between two nodes the density is taken as their mean (the trapezoid rule,
+//! A tile's rays advance together in *chunks*. Each round, every live ray lays a chunk of
+//! sample positions ("nodes") along its occupied segments; the tile asks each field once for
+//! all of them; steps whose two ends disagree (a surface, a steep gradient), or between whose
+//! ends a field's density bound rises above both (a sheet thinner than a step), are bisected
+//! — again batched across the tile — until the step is resolved or the depth limit is hit. Between two nodes the density is taken as their mean (the trapezoid rule,
 //! exact for piecewise-constant fields once an edge is bracketed). The pieces are composited
 //! in order; only then is colour asked for, and only at nodes whose weight matters. A ray
 //! leaves the batch when its transmittance falls below the threshold or its segments end.
@@ -63,8 +63,6 @@ struct Node {
     sigma: f64,
     /// Where this node's per-instance densities start in `Scratch::inst_sigma`.
     slot: u32,
-    /// Bisection level that created it (0 for regular nodes).
-    level: u8,
     /// No piece joins this node to the one before it (a segment starts here).
     starts_run: bool,
     /// Colour weight gathered this round.
@@ -76,7 +74,6 @@ struct Node {
 struct Pending {
     ray: u32,
     t: f64,
-    level: u8,
     starts_run: bool,
 }
 
@@ -93,7 +90,7 @@ struct RayState {
     live: bool,
     /// Weight whose colour was not evaluated.
     skipped_weight: f64,
-    /// Median-depth log `[t, δ, σ, T_enter]` range in `Scratch::log` is per ray.
+    /// The pieces `[t, δ, σ, T_enter]` composited so far, kept only for the median depth.
     log: Vec<[f64; 4]>,
 }
 
@@ -154,7 +151,6 @@ pub(super) fn march_tile(
                 s.inst_sigma
                     .extend_from_slice(&s.inst_sigma_prev[slot..slot + n_inst]);
                 node.weight = 0.0;
-                node.level = 0;
                 s.nodes[r].push(node);
             }
             lay_nodes(r, plans, params, s);
@@ -310,7 +306,6 @@ fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scr
         s.pending.push(Pending {
             ray: r as u32,
             t,
-            level: 0,
             starts_run,
         });
         laid += 1;
@@ -359,7 +354,6 @@ fn evaluate_pending(scene: &Scene, n_inst: usize, s: &mut Scratch) {
             t: pending.t,
             sigma,
             slot: slot as u32,
-            level: pending.level,
             starts_run: pending.starts_run,
             weight: 0.0,
         };
@@ -378,55 +372,41 @@ fn evaluate_pending(scene: &Scene, n_inst: usize, s: &mut Scratch) {
 /// a step), level by level, each level one batch across the tile. After the first level only
 /// the pairs next to the nodes just added can need it, so only those are looked at.
 fn refine(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
-    let depth = params.refine_depth.min(u8::MAX as u32) as u8;
-    if depth == 0 {
-        return;
-    }
     s.candidates.clear();
     for &r in &s.active {
         for i in 0..s.nodes[r as usize].len().saturating_sub(1) {
             s.candidates.push((r, i as u32));
         }
     }
-    let mut level = 1;
-    loop {
-        split_candidates(scene, n_inst, params, level, s);
+    for level in 0..params.refine_depth {
+        if level > 0 {
+            s.candidates.clear();
+            for added in &s.pending {
+                let nodes = &s.nodes[added.ray as usize];
+                let i = nodes.partition_point(|n| n.t < added.t) as u32;
+                if i > 0 {
+                    s.candidates.push((added.ray, i - 1));
+                }
+                if (i as usize) + 1 < nodes.len() {
+                    s.candidates.push((added.ray, i));
+                }
+            }
+        }
+        split_candidates(scene, n_inst, params, s);
         if s.pending.is_empty() {
             break;
         }
         evaluate_pending(scene, n_inst, s);
-        if level == depth {
-            break;
-        }
-        level += 1;
-        s.candidates.clear();
-        for added in &s.pending {
-            let r = added.ray as usize;
-            let nodes = &s.nodes[r];
-            let i = nodes.partition_point(|n| n.t < added.t);
-            if i > 0 {
-                s.candidates.push((added.ray, i as u32 - 1));
-            }
-            if i + 1 < nodes.len() {
-                s.candidates.push((added.ray, i as u32));
-            }
-        }
     }
 }
 
 /// Tests each candidate pair `(ray, i)` (nodes `i` and `i + 1`) and lays the midpoints of
-/// those that need splitting into `s.pending`, at `level`. What a step may get wrong matters
+/// those that need splitting into `s.pending`. What a step may get wrong matters
 /// only as much as light from there reaches the camera, so each test is weighed by the
 /// ray's transmittance (not by what lies behind: the piece's own weight and colour depend on
 /// what the step holds). Pairs that pass the cheap jump test ask the fields for a density
 /// bound over the step's box, one batch per instance.
-fn split_candidates(
-    scene: &Scene,
-    n_inst: usize,
-    params: &MarchParams,
-    level: u8,
-    s: &mut Scratch,
-) {
+fn split_candidates(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
     let tolerance = params.refine_tolerance as f64;
     s.pending.clear();
     s.unsure.clear();
@@ -441,7 +421,6 @@ fn split_candidates(
             s.pending.push(Pending {
                 ray: r,
                 t: 0.5 * (a.t + b.t),
-                level,
                 starts_run: false,
             });
         } else {
@@ -491,7 +470,6 @@ fn split_candidates(
             s.pending.push(Pending {
                 ray: r,
                 t: 0.5 * (a.t + b.t),
-                level,
                 starts_run: false,
             });
         }

@@ -7,11 +7,13 @@
 
 mod aabb;
 mod analytic;
+mod hashgrid;
 mod occupancy;
 mod sh;
 
 pub use aabb::Aabb;
 pub use analytic::{Analytic, Primitive, Shape};
+pub use hashgrid::{HashGrid, HashGridConfig, TableStorage};
 pub use occupancy::Occupancy;
 pub use sh::ShColor;
 

@@ -1,0 +1,438 @@
+//! tiny-cuda-nn's multi-resolution hash encoding of a point of the unit cube, on the CPU.
+//!
+//! `L` levels of `F` features each. Level `l` has the (float32) scale
+//! `s_l = 2^(l·log2 b)·N_min − 1` and `r_l = ⌈s_l⌉ + 1` grid points per axis; its table holds
+//! `T_l = min(next_multiple_of_8(r_l³), 2^log2T)` entries of `F` contiguous features. A point
+//! `x ∈ [0, 1]³` is looked up at `p = s_l·x + 0.5`, cell `c = ⌊p⌋`, fraction `w = p − c`; each
+//! of the cell's 8 corners `k` has the index `k.x + k.y·r_l + k.z·r_l²` when `r_l³ ≤ T_l`
+//! (a dense level) and otherwise the coherent-prime hash
+//! `k.x·1 ⊕ k.y·2654435761 ⊕ k.z·805459861` (u32 arithmetic, wrapping), both taken `% T_l`.
+//! The level's output is the trilinear blend of the 8 corners' features, and the encoding is
+//! the levels' outputs one after the other: feature `f` of level `l` at `l·F + f`.
+//!
+//! Worked example: `N_min = 16`, `b = 2`: level 0 has `s = 15`, `r = 16`, `r³ = 4096`; with
+//! `log2T = 12` it is dense (`T = 4096`), level 1 (`s = 31`, `r = 32`) is hashed into 4096.
+//!
+//! The tables are the memory-bound part of a field (a 2^19-entry table of 8×4 levels is
+//! ~23 MB as f16), so they may stay in f16 ([`TableStorage::F16`]) or be widened once
+//! ([`TableStorage::F32`]); the arithmetic is f32 either way.
+
+use glam::Vec3;
+use half::f16;
+
+/// How a hash grid keeps its tables in memory.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TableStorage {
+    /// Half precision, as trained (half the memory traffic; widened per lookup).
+    F16,
+    /// Single precision (widened once at load).
+    F32,
+}
+
+/// The shape of a hash encoding.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HashGridConfig {
+    /// Number of levels `L`.
+    pub n_levels: u32,
+    /// Features per level `F` (1, 2, 4 or 8).
+    pub n_features: u32,
+    /// `log2` of the largest table size.
+    pub log2_table_size: u32,
+    /// Resolution of the coarsest level `N_min`.
+    pub base_resolution: u32,
+    /// Growth factor between levels `b`.
+    pub per_level_scale: f32,
+}
+
+/// One level's geometry.
+#[derive(Clone, Copy, Debug)]
+struct Level {
+    scale: f32,
+    resolution: u32,
+    entries: u32,
+    dense: bool,
+    /// First entry of the level in the table.
+    offset: usize,
+}
+
+/// The tables, in one of the two storages.
+#[derive(Clone, Debug)]
+enum Tables {
+    F16(Vec<f16>),
+    F32(Vec<f32>),
+}
+
+/// A multi-resolution hash encoding with its trained tables.
+#[derive(Clone, Debug)]
+pub struct HashGrid {
+    config: HashGridConfig,
+    levels: Vec<Level>,
+    tables: Tables,
+}
+
+/// A feature value that can be widened to f32.
+trait Feature: Copy {
+    fn widen(self) -> f32;
+}
+
+impl Feature for f16 {
+    #[inline]
+    fn widen(self) -> f32 {
+        self.to_f32()
+    }
+}
+
+impl Feature for f32 {
+    #[inline]
+    fn widen(self) -> f32 {
+        self
+    }
+}
+
+/// The primes of tcnn's coherent hash, per axis.
+const PRIMES: [u32; 3] = [1, 2_654_435_761, 805_459_861];
+
+impl HashGridConfig {
+    /// The levels' geometry (float32 arithmetic, as tcnn does it).
+    fn levels(&self) -> Vec<Level> {
+        let log2_b = self.per_level_scale.log2();
+        let max_entries = 1u64 << self.log2_table_size.min(31);
+        let mut offset = 0usize;
+        (0..self.n_levels)
+            .map(|l| {
+                let scale = (l as f32 * log2_b).exp2() * self.base_resolution as f32 - 1.0;
+                let resolution = scale.ceil() as u32 + 1;
+                let dense_entries = u64::from(resolution).pow(3).next_multiple_of(8);
+                let entries = dense_entries.min(max_entries) as u32;
+                let level = Level {
+                    scale,
+                    resolution,
+                    entries,
+                    dense: u64::from(resolution).pow(3) <= u64::from(entries),
+                    offset,
+                };
+                offset += entries as usize;
+                level
+            })
+            .collect()
+    }
+
+    /// Table entries over all levels (`Σ T_l`); the parameter count is this times `F`.
+    pub fn n_entries(&self) -> usize {
+        self.levels().iter().map(|l| l.entries as usize).sum()
+    }
+
+    /// Number of parameters (`Σ T_l · F`).
+    pub fn n_params(&self) -> usize {
+        self.n_entries() * self.n_features as usize
+    }
+
+    /// Output width `L·F`.
+    pub fn n_outputs(&self) -> usize {
+        (self.n_levels * self.n_features) as usize
+    }
+}
+
+impl HashGrid {
+    /// A grid of `config` with the parameters `params` (`config.n_params()` values, level
+    /// after level, entry after entry, feature after feature), stored as `storage`. `None`
+    /// when the count does not match.
+    pub fn new(config: HashGridConfig, params: &[f16], storage: TableStorage) -> Option<Self> {
+        let levels = config.levels();
+        if params.len() != config.n_params() {
+            return None;
+        }
+        let tables = match storage {
+            TableStorage::F16 => Tables::F16(params.to_vec()),
+            TableStorage::F32 => Tables::F32(params.iter().map(|v| v.to_f32()).collect()),
+        };
+        Some(HashGrid {
+            config,
+            levels,
+            tables,
+        })
+    }
+
+    /// A grid with f32 parameters (kept in f32).
+    pub fn from_f32(config: HashGridConfig, params: Vec<f32>) -> Option<Self> {
+        let levels = config.levels();
+        (params.len() == config.n_params()).then_some(HashGrid {
+            config,
+            levels,
+            tables: Tables::F32(params),
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &HashGridConfig {
+        &self.config
+    }
+
+    /// The storage of the tables.
+    pub fn storage(&self) -> TableStorage {
+        match self.tables {
+            Tables::F16(_) => TableStorage::F16,
+            Tables::F32(_) => TableStorage::F32,
+        }
+    }
+
+    /// Encodes each point `xs[i]` (unit cube) into `out[i·L·F .. (i+1)·L·F]`.
+    /// Level by level, so one level's table stays in cache across the batch.
+    pub fn encode(&self, xs: &[Vec3], out: &mut [f32]) {
+        match &self.tables {
+            Tables::F16(t) => self.encode_with(t, xs, out),
+            Tables::F32(t) => self.encode_with(t, xs, out),
+        }
+    }
+
+    fn encode_with<T: Feature>(&self, table: &[T], xs: &[Vec3], out: &mut [f32]) {
+        let width = self.config.n_outputs();
+        debug_assert_eq!(out.len(), xs.len() * width);
+        let nf = self.config.n_features as usize;
+        for (l, level) in self.levels.iter().enumerate() {
+            let t = &table[level.offset * nf..(level.offset + level.entries as usize) * nf];
+            for (x, row) in xs.iter().zip(out.chunks_exact_mut(width)) {
+                let dst = &mut row[l * nf..(l + 1) * nf];
+                match nf {
+                    1 => level.lookup::<T, 1>(t, *x, dst),
+                    2 => level.lookup::<T, 2>(t, *x, dst),
+                    4 => level.lookup::<T, 4>(t, *x, dst),
+                    _ => level.lookup_any(t, nf, *x, dst),
+                }
+            }
+        }
+    }
+}
+
+impl Level {
+    /// The cell and fractions of `x` on this level: `p = s·x + 0.5`, `c = ⌊p⌋` (as tcnn: the
+    /// integer is reinterpreted as u32, so a slightly negative input wraps and is hashed).
+    #[inline]
+    fn locate(&self, x: Vec3) -> ([u32; 3], [f32; 3]) {
+        let p = x.to_array().map(|v| self.scale * v + 0.5);
+        let c = p.map(f32::floor);
+        (
+            [0, 1, 2].map(|a| c[a] as i32 as u32),
+            [0, 1, 2].map(|a| p[a] - c[a]),
+        )
+    }
+
+    /// Table entry of grid point `k`.
+    #[inline]
+    fn index(&self, k: [u32; 3]) -> usize {
+        let i = if self.dense {
+            let r = self.resolution;
+            k[0].wrapping_add(k[1].wrapping_mul(r))
+                .wrapping_add(k[2].wrapping_mul(r.wrapping_mul(r)))
+        } else {
+            (k[0].wrapping_mul(PRIMES[0]))
+                ^ (k[1].wrapping_mul(PRIMES[1]))
+                ^ (k[2].wrapping_mul(PRIMES[2]))
+        };
+        (i % self.entries) as usize
+    }
+
+    /// Trilinear lookup with `N` features per entry (monomorphised for the usual counts).
+    #[inline]
+    fn lookup<T: Feature, const N: usize>(&self, t: &[T], x: Vec3, dst: &mut [f32]) {
+        let (c, w) = self.locate(x);
+        let mut acc = [0.0f32; N];
+        for corner in 0..8u32 {
+            let mut weight = 1.0f32;
+            let mut k = c;
+            for a in 0..3 {
+                if corner >> a & 1 == 0 {
+                    weight *= 1.0 - w[a];
+                } else {
+                    weight *= w[a];
+                    k[a] = k[a].wrapping_add(1);
+                }
+            }
+            let e = &t[self.index(k) * N..][..N];
+            for f in 0..N {
+                acc[f] += weight * e[f].widen();
+            }
+        }
+        dst.copy_from_slice(&acc);
+    }
+
+    /// The same for any feature count.
+    fn lookup_any<T: Feature>(&self, t: &[T], nf: usize, x: Vec3, dst: &mut [f32]) {
+        let (c, w) = self.locate(x);
+        dst.fill(0.0);
+        for corner in 0..8u32 {
+            let mut weight = 1.0f32;
+            let mut k = c;
+            for a in 0..3 {
+                if corner >> a & 1 == 0 {
+                    weight *= 1.0 - w[a];
+                } else {
+                    weight *= w[a];
+                    k[a] = k[a].wrapping_add(1);
+                }
+            }
+            let e = &t[self.index(k) * nf..][..nf];
+            for (d, v) in dst.iter_mut().zip(e) {
+                *d += weight * v.widen();
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn config(n_levels: u32, nf: u32, log2t: u32, b: f32) -> HashGridConfig {
+        HashGridConfig {
+            n_levels,
+            n_features: nf,
+            log2_table_size: log2t,
+            base_resolution: 16,
+            per_level_scale: b,
+        }
+    }
+
+    /// A seeded table of values exactly representable in f16.
+    fn params(n: usize, seed: u64) -> Vec<f16> {
+        let mut s = seed;
+        (0..n)
+            .map(|_| {
+                s = s
+                    .wrapping_mul(6_364_136_223_846_793_005)
+                    .wrapping_add(1_442_695_040_888_963_407);
+                f16::from_f32(((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn level_sizes_follow_tcnn() {
+        // b = 2: scales 15, 31, 63 → resolutions 16, 32, 64; 2^12 entries at most.
+        let c = config(3, 2, 12, 2.0);
+        let l = c.levels();
+        assert_eq!(
+            l.iter().map(|l| l.resolution).collect::<Vec<_>>(),
+            [16, 32, 64]
+        );
+        assert_eq!(l.iter().map(|l| l.entries).collect::<Vec<_>>(), [4096; 3]);
+        assert_eq!(
+            l.iter().map(|l| l.dense).collect::<Vec<_>>(),
+            [true, false, false]
+        );
+        assert_eq!(c.n_params(), 3 * 4096 * 2);
+        // Resolution 5 (scale 3.x): 125 rounded up to 128 entries, dense.
+        let c = HashGridConfig {
+            base_resolution: 4,
+            ..config(1, 1, 19, 2.0)
+        };
+        let l = c.levels();
+        assert_eq!((l[0].resolution, l[0].entries, l[0].dense), (4, 64, true));
+        let c = HashGridConfig {
+            base_resolution: 5,
+            ..config(1, 1, 19, 2.0)
+        };
+        assert_eq!(c.levels()[0].entries, 128);
+    }
+
+    /// The encoding written out again for one point and one level, straight from the
+    /// formulas in the module docs.
+    fn reference(c: &HashGridConfig, p: &[f16], x: Vec3) -> Vec<f32> {
+        let nf = c.n_features as usize;
+        let mut out = Vec::new();
+        let mut offset = 0usize;
+        for l in 0..c.n_levels {
+            let s = (l as f32 * c.per_level_scale.log2()).exp2() * c.base_resolution as f32 - 1.0;
+            let r = s.ceil() as u64 + 1;
+            let t = ((r * r * r).div_ceil(8) * 8).min(1 << c.log2_table_size);
+            let pos = [x.x, x.y, x.z].map(|v| s * v + 0.5);
+            let mut feat = vec![0.0f32; nf];
+            for dz in 0..2u64 {
+                for dy in 0..2u64 {
+                    for dx in 0..2u64 {
+                        let k = [dx, dy, dz].map(|d| d);
+                        let g: Vec<u64> = (0..3).map(|a| pos[a].floor() as u64 + k[a]).collect();
+                        let w: f32 = (0..3)
+                            .map(|a| {
+                                let f = pos[a] - pos[a].floor();
+                                if k[a] == 1 {
+                                    f
+                                } else {
+                                    1.0 - f
+                                }
+                            })
+                            .product();
+                        let idx = if r * r * r <= t {
+                            g[0] + g[1] * r + g[2] * r * r
+                        } else {
+                            ((g[0] as u32)
+                                ^ (g[1] as u32).wrapping_mul(2_654_435_761)
+                                ^ (g[2] as u32).wrapping_mul(805_459_861))
+                                as u64
+                        } % t;
+                        for (f, v) in feat.iter_mut().enumerate() {
+                            *v += w * p[offset * nf + idx as usize * nf + f].to_f32();
+                        }
+                    }
+                }
+            }
+            out.extend(feat);
+            offset += t as usize;
+        }
+        out
+    }
+
+    #[test]
+    fn encoding_matches_the_formulas_in_both_storages() {
+        for (nf, levels, b) in [(2, 5, 1.7), (4, 4, 2.3), (1, 3, 1.5), (8, 2, 3.0)] {
+            let c = config(levels, nf, 11, b);
+            let p = params(c.n_params(), 7 + nf as u64);
+            let pts: Vec<Vec3> = (0..50)
+                .map(|i| {
+                    let t = i as f32 * 0.618_034;
+                    Vec3::new(t.fract(), (t * 1.3).fract(), (t * 2.7 + 0.1).fract())
+                })
+                .collect();
+            for storage in [TableStorage::F16, TableStorage::F32] {
+                let g = HashGrid::new(c, &p, storage).unwrap();
+                let w = c.n_outputs();
+                let mut out = vec![0.0; pts.len() * w];
+                g.encode(&pts, &mut out);
+                for (i, x) in pts.iter().enumerate() {
+                    let r = reference(&c, &p, *x);
+                    for (a, b) in out[i * w..(i + 1) * w].iter().zip(&r) {
+                        assert!((a - b).abs() <= 1e-6 * (1.0 + b.abs()), "{a} vs {b}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn grid_points_return_their_entry() {
+        // At x = (k − 0.5)/s the lookup lands exactly on grid point k: a dense level returns
+        // entry k.x + k.y·r + k.z·r².
+        let c = config(1, 2, 19, 2.0);
+        let p = params(c.n_params(), 3);
+        let g = HashGrid::new(c, &p, TableStorage::F32).unwrap();
+        let (s, r) = (15.0f32, 16usize);
+        let k = [3usize, 7, 11];
+        let x = Vec3::new(
+            (k[0] as f32 - 0.5) / s,
+            (k[1] as f32 - 0.5) / s,
+            (k[2] as f32 - 0.5) / s,
+        );
+        let mut out = [0.0; 2];
+        g.encode(&[x], &mut out);
+        let e = k[0] + k[1] * r + k[2] * r * r;
+        assert!((out[0] - p[2 * e].to_f32()).abs() < 1e-5);
+        assert!((out[1] - p[2 * e + 1].to_f32()).abs() < 1e-5);
+    }
+
+    #[test]
+    fn wrong_parameter_count_is_refused() {
+        let c = config(2, 2, 10, 2.0);
+        assert!(HashGrid::new(c, &params(c.n_params() - 1, 1), TableStorage::F16).is_none());
+        assert!(HashGrid::from_f32(c, vec![0.0; c.n_params() + 2]).is_none());
+    }
+}

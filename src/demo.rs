@@ -29,6 +29,9 @@ pub const FIRST_FRAME: i64 = 1001;
 /// Frames in the demo shot.
 pub const FRAMES: i64 = 24;
 
+/// The camera's clipping range (Blender's `clip_start`, `clip_end`).
+const CLIP: [f64; 2] = [0.1, 1000.0];
+
 fn prim(shape: Shape, density: f32, color: ShColor) -> Primitive {
     Primitive {
         shape,
@@ -216,8 +219,8 @@ pub fn shot(width: u32, height: u32) -> Shot {
                 sensor_fit: b.sensor_fit,
                 shift_x: b.shift_x,
                 shift_y: b.shift_y,
-                clip_start: 0.1,
-                clip_end: 1000.0,
+                clip_start: CLIP[0],
+                clip_end: CLIP[1],
                 stereo: None,
             },
             objects: BTreeMap::from([(NERF_OBJECT.to_string(), object_matrix(frame))]),
@@ -244,7 +247,8 @@ pub fn scene_and_camera(width: u32, height: u32) -> Result<(Scene, Camera)> {
         .place(&|_| Ok(object_matrix(FIRST_FRAME)))?;
     let projection =
         Projection::Perspective(Perspective::from_blender(&intrinsics(width, height))?);
-    let camera = Camera::new(camera_matrix(FIRST_FRAME), projection)?;
+    let camera =
+        Camera::new(camera_matrix(FIRST_FRAME), projection)?.with_clip(CLIP[0], CLIP[1])?;
     Ok((scene, camera))
 }
 

@@ -486,3 +486,34 @@ fn a_dense_sheet_inside_fog_is_not_missed() {
         assert_close(&format!("sheet at z = {c}"), &got, &want, FINAL);
     }
 }
+
+/// The camera's clipping range, as Blender's: a perspective camera sees depths (camera Z,
+/// not ray distance) in `[clip_start, clip_end]`. A unit sphere of σ = 2 centred 5 units
+/// ahead, clip_start 5.5: the centre ray's chord runs from Z 5.5 to 6, so alpha is
+/// `1 − e^{−2·0.5}` (written out here), and the marcher agrees with the reference everywhere.
+#[test]
+fn the_clipping_range_cuts_rays_at_constant_depth() {
+    let scene = Scene::new(vec![instance(
+        "sphere",
+        vec![prim(sphere([0.0, 0.0, 0.0], 1.0), 2.0, [1.0, 0.5, 0.25])],
+        DMat4::IDENTITY,
+        None,
+    )]);
+    let camera = camera_at(DVec3::new(0.0, 0.0, 5.0), DVec3::ZERO, 33, 33, 30.0)
+        .with_clip(5.5, 100.0)
+        .expect("clip range");
+    let want = reference_full(&scene, &camera);
+    let got = render_full(&scene, &camera, Quality::Final.params());
+    assert_sane("clipped", &got);
+    assert_close("clipped", &got, &want, FINAL);
+    let centre = want.alpha.as_ref().expect("alpha").get(16, 16) as f64;
+    assert!((centre - (1.0 - (-1.0f64).exp())).abs() < 1e-6, "{centre}");
+    // Off-axis rays are cut at the same depth, i.e. at a longer distance: their Z is ≥ 5.5.
+    let z = got.depth_z.as_ref().expect("depth");
+    for y in 0..33 {
+        for x in 0..33 {
+            let d = z.get(x, y);
+            assert!(d.is_infinite() || d >= 5.5, "({x}, {y}): {d}");
+        }
+    }
+}

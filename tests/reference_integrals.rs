@@ -66,6 +66,8 @@ fn integrate(instances: Vec<Instance>, origin: DVec3, dir: DVec3) -> RayResult {
         origin,
         dir: dir.normalize(),
         z_per_t: 1.0,
+        near: 0.0,
+        far: f64::INFINITY,
     };
     ReferenceScene::new(&scene).unwrap().integrate(&ray)
 }

@@ -39,6 +39,11 @@ pub struct Ray {
     /// Camera-space depth per unit of ray distance: `dot(dir, camera −Z)` for a perspective
     /// camera (so `Z = t · z_per_t` is what Blender's Z pass holds), 1 for panoramic cameras.
     pub z_per_t: f64,
+    /// Ray distance where the camera's clipping range starts (`clip_start / z_per_t`: like
+    /// Blender, a perspective camera clips at planes of constant depth) …
+    pub near: f64,
+    /// … and where it ends.
+    pub far: f64,
 }
 
 /// A ray in camera space, as a projection produces it.
@@ -93,6 +98,8 @@ impl Projection {
 pub struct Camera {
     world_from_camera: DMat4,
     projection: Projection,
+    /// Camera-space depth range seen (Blender's `clip_start`, `clip_end`).
+    clip: [f64; 2],
 }
 
 impl Camera {
@@ -132,7 +139,21 @@ impl Camera {
         Ok(Camera {
             world_from_camera: rigid,
             projection,
+            clip: [0.0, f64::INFINITY],
         })
+    }
+
+    /// The camera seeing only depths in `[start, end]` (Blender's `clip_start`, `clip_end`;
+    /// depth as its Z pass measures it); by default everything in front of it.
+    pub fn with_clip(mut self, start: f64, end: f64) -> Result<Self> {
+        if !(start >= 0.0 && end > start) {
+            return Err(Error::invalid(
+                "camera clipping",
+                format!("clip_start {start} and clip_end {end}: need 0 ≤ start < end"),
+            ));
+        }
+        self.clip = [start, end];
+        Ok(self)
     }
 
     /// The rigid camera placement.
@@ -178,10 +199,13 @@ impl Camera {
     /// `i + 0.5`), or `None` where the projection has none.
     pub fn ray(&self, x: f64, y: f64) -> Option<Ray> {
         let r = self.projection.camera_ray(x, y)?;
+        let [start, end] = self.clip;
         Some(Ray {
             origin: self.world_from_camera.transform_point3(r.origin),
             dir: self.world_from_camera.transform_vector3(r.dir),
             z_per_t: r.z_per_t,
+            near: start / r.z_per_t,
+            far: end / r.z_per_t,
         })
     }
 }

@@ -312,7 +312,8 @@ impl CameraPath {
                     sensor_fit: SensorFit::Vertical,
                     shift_x: 0.0,
                     shift_y: 0.0,
-                    clip_start: 0.1,
+                    // nerfacto's near and far planes.
+                    clip_start: 0.05,
                     clip_end: 1000.0,
                     stereo,
                 },

@@ -360,7 +360,9 @@ impl ShotFrame {
                 }
             }
         };
-        Camera::new(c.world_from_camera, projection).map_err(in_context)
+        Camera::new(c.world_from_camera, projection)
+            .and_then(|camera| camera.with_clip(c.clip_start, c.clip_end))
+            .map_err(in_context)
     }
 
     /// The world matrix of the object `name` at this frame.

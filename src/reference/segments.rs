@@ -56,7 +56,13 @@ const GAUSSIAN_REACH: f64 = 40.0;
 /// let instance = Instance::new("ball", FieldHandle::analytic(field), DMat4::IDENTITY, None)?;
 /// let scene = Scene::new(vec![instance]);
 /// let reference = ReferenceScene::new(&scene)?;
-/// let ray = Ray { origin: DVec3::new(0.0, 0.0, 5.0), dir: DVec3::NEG_Z, z_per_t: 1.0 };
+/// let ray = Ray {
+///     origin: DVec3::new(0.0, 0.0, 5.0),
+///     dir: DVec3::NEG_Z,
+///     z_per_t: 1.0,
+///     near: 0.0,
+///     far: f64::INFINITY,
+/// };
 /// let r = reference.integrate(&ray);
 /// assert!((r.alpha - (1.0 - (-4.0f64).exp())).abs() < 1e-15);
 /// # Ok::<(), nerfx::Error>(())
@@ -138,7 +144,7 @@ impl PlacedPrimitives<'_> {
         if !o.is_finite() || !d.is_finite() || k == 0.0 {
             return;
         }
-        let (mut lo, mut hi) = (0.0, f64::INFINITY);
+        let (mut lo, mut hi) = (ray.near, ray.far);
         if let Some(crop) = &self.crop {
             let oc = crop.crop_from_field * (o - crop.center);
             let dc = crop.crop_from_field * d;

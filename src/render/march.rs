@@ -207,7 +207,7 @@ fn setup_rays(
         state.segment = 0;
         s.nodes[r].clear();
         for (inst, plan) in scene.instances.iter().zip(plans) {
-            let local = ray.and_then(|ray| inst.local_ray(&ray, 0.0, f64::INFINITY));
+            let local = ray.and_then(|ray| inst.local_ray(&ray, ray.near, ray.far));
             if let Some(lr) = &local {
                 occupied_segments(lr, plan, &mut s.occupied, &mut state.segments);
             }

@@ -67,7 +67,7 @@ fn naive_pixel(
     let locals: Vec<_> = scene
         .instances
         .iter()
-        .map(|inst| inst.local_ray(&ray, 0.0, f64::INFINITY))
+        .map(|inst| inst.local_ray(&ray, ray.near, ray.far))
         .collect();
     let near = locals
         .iter()

@@ -247,6 +247,8 @@ mod tests {
             origin: DVec3::ZERO,
             dir: DVec3::X,
             z_per_t: 1.0,
+            near: 0.0,
+            far: f64::INFINITY,
         };
         let lr = inst.local_ray(&ray, 0.0, 1e9).unwrap();
         assert!((lr.units_per_world - 0.5).abs() < 1e-7);
@@ -259,6 +261,8 @@ mod tests {
             origin: DVec3::new(10.0, -10.0, 0.0),
             dir: DVec3::Y,
             z_per_t: 1.0,
+            near: 0.0,
+            far: f64::INFINITY,
         };
         let ly = inst.local_ray(&ray_y, 0.0, 1e9).unwrap();
         assert!((ly.units_per_world as f64 - 1.0 / 3.0).abs() < 1e-7);
@@ -292,6 +296,8 @@ mod tests {
             origin: DVec3::new(1e5, 1e5, 1e5 + 5.0),
             dir: DVec3::NEG_Z,
             z_per_t: 1.0,
+            near: 0.0,
+            far: f64::INFINITY,
         };
         let lr = inst.local_ray(&ray, 0.0, f64::INFINITY).unwrap();
         assert!((lr.t_near - 4.0).abs() < 1e-9);

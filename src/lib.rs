@@ -16,6 +16,7 @@
 
 pub mod bench;
 pub mod camera;
+pub mod composite;
 pub mod demo;
 pub mod error;
 pub mod field;

@@ -8,14 +8,18 @@
 mod aabb;
 mod analytic;
 mod hashgrid;
+mod mlp;
 mod occupancy;
 mod sh;
+mod sh4;
 
 pub use aabb::Aabb;
 pub use analytic::{Analytic, Primitive, Shape};
 pub use hashgrid::{HashGrid, HashGridConfig, TableStorage};
+pub use mlp::{Mlp, MlpConfig};
 pub use occupancy::Occupancy;
 pub use sh::ShColor;
+pub use sh4::sh4;
 
 use glam::Vec3;
 

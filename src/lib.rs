@@ -21,6 +21,7 @@ pub mod demo;
 pub mod error;
 pub mod field;
 pub mod frames;
+pub mod graph;
 pub mod image;
 pub mod reference;
 pub mod render;

@@ -1,0 +1,400 @@
+//! The NeRF Render node: a scene (field) file seen through a shot file's camera.
+//!
+//! The shot's frame is the host's time, rounded, plus the frame offset. Render scale `s`
+//! renders the shot at `ceil(s·width) × ceil(s·height)` pixels (the same camera, fewer
+//! pixels), so no parameter of this node is spatial. Outputs, as RGBA:
+//! - `rgba`: the render (premultiplied, times `2^exposure`) over the background colour, which
+//!   is over the optional Source clip;
+//! - `accumulation`: the accumulation in all four channels;
+//! - `depthZ` / `depthRay`: depth in Blender units in RGB (10¹⁰ where nothing was hit, as in
+//!   Blender's Z pass), the accumulation in alpha; the depth plane itself rides along.
+
+use std::path::Path;
+
+use glam::DMat4;
+
+use super::cache::{cached_scene, cached_shot};
+use super::desc::{ClipDesc, ClipKind, Context, NodeDesc, ParamDesc, ParamKind, Range};
+use super::node::{Node, RenderRequest};
+use super::values::ParamValues;
+use crate::camera::{
+    Camera, Eye, Shot, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, DEFAULT_IPD,
+};
+use crate::composite::{over, rgba_pixels, rgba_planes};
+use crate::error::{Error, Result};
+use crate::image::{Plane, Planes, BACKGROUND_DEPTH};
+use crate::render::{render, Outputs, Quality, RenderSettings};
+use crate::scene::{CropBox, Instance, Scene};
+
+const CONTEXTS: &[Context] = &[Context::Generator, Context::Filter, Context::General];
+const WITH_SOURCE: &[Context] = &[Context::Filter, Context::General];
+
+fn choice(
+    name: &'static str,
+    label: &'static str,
+    hint: &'static str,
+    options: &'static [(&'static str, &'static str)],
+) -> ParamDesc {
+    ParamDesc::new(
+        name,
+        label,
+        hint,
+        ParamKind::Choice {
+            options,
+            default: 0,
+        },
+    )
+}
+
+fn vec3(
+    name: &'static str,
+    label: &'static str,
+    hint: &'static str,
+    default: [f64; 3],
+    range: Range,
+) -> ParamDesc {
+    ParamDesc::new(name, label, hint, ParamKind::Double3 { default, range })
+}
+
+/// The node's description and functions.
+pub(crate) fn nerf_render_node() -> Node {
+    let identity: [f64; 16] = DMat4::IDENTITY.transpose().to_cols_array();
+    Node {
+        desc: NodeDesc {
+            id: "org.nerfx.NeRFRender",
+            label: "NeRF Render",
+            group: "NeRF",
+            hint: "Renders radiance fields from a Blender shot's camera: premultiplied RGBA, \
+                   accumulation or depth in Blender units.",
+            contexts: CONTEXTS,
+            clips: vec![ClipDesc {
+                name: "Source",
+                label: "Source",
+                hint: "Optional background: the render goes over it.",
+                kind: ClipKind::Rgba,
+                optional: true,
+                contexts: WITH_SOURCE,
+            }],
+            params: vec![
+                ParamDesc::new(
+                    "file",
+                    "Field File",
+                    "Scene file (JSON): the fields and where they sit.",
+                    ParamKind::File,
+                )
+                .fixed(),
+                ParamDesc::new(
+                    "shot",
+                    "Shot File",
+                    "nerfx shot file from the Blender add-on, or a nerfstudio camera_path.json.",
+                    ParamKind::File,
+                )
+                .fixed(),
+                ParamDesc::new(
+                    "frameOffset",
+                    "Frame Offset",
+                    "Added to the host's frame to find the shot's frame.",
+                    ParamKind::Int {
+                        default: 0,
+                        range: Range::display(-1.0e6, 1.0e6, -100.0, 100.0),
+                    },
+                )
+                .fixed(),
+                ParamDesc::new(
+                    "overrideTransform",
+                    "Override Object Transform",
+                    "Place the NeRF object by the matrix below instead of the shot's.",
+                    ParamKind::Bool { default: false },
+                ),
+                ParamDesc::new(
+                    "objectTransform",
+                    "Object Transform",
+                    "The NeRF object's matrix_world, row-major.",
+                    ParamKind::Matrix { default: identity },
+                ),
+                choice(
+                    "cameraModel",
+                    "Camera Model",
+                    "The shot's camera, or a panorama from its position.",
+                    &[
+                        ("shot", "From Shot"),
+                        ("equirect", "Equirectangular"),
+                        ("ods", "ODS (stereo)"),
+                        ("vr180", "VR180 (stereo)"),
+                    ],
+                ),
+                choice(
+                    "eye",
+                    "Eye",
+                    "Which eye(s) of a stereo camera.",
+                    &[
+                        ("shot", "From Shot"),
+                        ("left", "Left"),
+                        ("right", "Right"),
+                        ("both", "Both"),
+                    ],
+                ),
+                choice(
+                    "output",
+                    "Output",
+                    "What the image holds.",
+                    &[
+                        ("rgba", "RGBA (premultiplied)"),
+                        ("accumulation", "Accumulation"),
+                        ("depthZ", "Depth Z"),
+                        ("depthRay", "Ray Depth"),
+                    ],
+                ),
+                ParamDesc::new(
+                    "crop",
+                    "Crop",
+                    "Clip rays to the box below (field space) in every field.",
+                    ParamKind::Bool { default: false },
+                ),
+                vec3(
+                    "cropCenter",
+                    "Crop Center",
+                    "Box centre, field units.",
+                    [0.0; 3],
+                    Range::display(-1.0e6, 1.0e6, -2.0, 2.0),
+                ),
+                vec3(
+                    "cropSize",
+                    "Crop Size",
+                    "Full side lengths, field units.",
+                    [2.0; 3],
+                    Range::display(0.0, 1.0e6, 0.0, 4.0),
+                ),
+                vec3(
+                    "cropRotation",
+                    "Crop Rotation",
+                    "Roll, pitch, yaw in degrees (Rz·Ry·Rx).",
+                    [0.0; 3],
+                    Range::display(-360.0, 360.0, -180.0, 180.0),
+                ),
+                ParamDesc::new(
+                    "quality",
+                    "Quality",
+                    "March preset; the host's draft mode uses Draft.",
+                    ParamKind::Choice {
+                        options: &[
+                            ("draft", "Draft"),
+                            ("preview", "Preview"),
+                            ("final", "Final"),
+                        ],
+                        default: 1,
+                    },
+                ),
+                ParamDesc::new(
+                    "background",
+                    "Background",
+                    "Colour (premultiplied) behind the render.",
+                    ParamKind::Rgba {
+                        default: [0.0; 4],
+                        range: Range::display(0.0, 1.0e6, 0.0, 1.0),
+                    },
+                ),
+                ParamDesc::new(
+                    "exposure",
+                    "Exposure",
+                    "Stops: the colour is scaled by 2^exposure.",
+                    ParamKind::Double {
+                        default: 0.0,
+                        range: Range::display(-20.0, 20.0, -5.0, 5.0),
+                    },
+                ),
+            ],
+            frame_varying: true,
+        },
+        render: render_node,
+        rod: Some(|values, time| Ok(camera(values, time, 1.0)?.1.resolution())),
+        identity: None,
+    }
+}
+
+fn file<'a>(values: &'a ParamValues, name: &str) -> Result<&'a Path> {
+    let path = values.text(name)?;
+    if path.is_empty() {
+        return Err(Error::invalid(format!("parameter {name}"), "no file given"));
+    }
+    Ok(Path::new(path))
+}
+
+/// The shot frame for `time` and its camera at render scale `scale`.
+fn camera(values: &ParamValues, time: f64, scale: f64) -> Result<(ShotFrame, Camera)> {
+    let shot = cached_shot(file(values, "shot")?)?;
+    if !time.is_finite() {
+        return Err(Error::invalid(
+            "time",
+            format!("expected a frame, got {time}"),
+        ));
+    }
+    let frame = (time.round() as i64).saturating_add(values.int("frameOffset")?);
+    let mut at = shot.frame(frame)?.clone();
+    let c = &mut at.camera;
+    let mode = match values.choice("cameraModel")? {
+        "ods" => Some(StereoMode::Ods),
+        "vr180" => Some(StereoMode::Vr180),
+        _ => None,
+    };
+    if values.choice("cameraModel")? != "shot" {
+        c.kind = ShotCameraKind::Equirect;
+        c.stereo = mode.map(|mode| ShotStereo {
+            mode,
+            eye: c.stereo.map_or(Eye::Both, |s| s.eye),
+            ipd: c.stereo.map_or(DEFAULT_IPD, |s| s.ipd),
+        });
+    }
+    if let Some(s) = &mut c.stereo {
+        match values.choice("eye")? {
+            "left" => s.eye = Eye::Left,
+            "right" => s.eye = Eye::Right,
+            "both" => s.eye = Eye::Both,
+            _ => {}
+        }
+    }
+    let (w, h) = c.intrinsics(&shot).effective_resolution()?;
+    let side = |n: u32| ((f64::from(n) * scale).ceil() as u32).max(1);
+    // The shot's format at render scale, holding only this frame (cheap to build per call).
+    let one = Shot {
+        fps: shot.fps,
+        fps_base: shot.fps_base,
+        resolution_x: side(w),
+        resolution_y: side(h),
+        resolution_percentage: 100,
+        pixel_aspect_x: shot.pixel_aspect_x,
+        pixel_aspect_y: shot.pixel_aspect_y,
+        nerf_object: shot.nerf_object.clone(),
+        frames: vec![at.clone()],
+        source: shot.source.clone(),
+    };
+    let camera = at.camera(&one)?;
+    Ok((at, camera))
+}
+
+/// The scene placed at `at`, with the transform override and crop box applied.
+fn placed_scene(values: &ParamValues, at: &ShotFrame) -> Result<Scene> {
+    let loaded = cached_scene(file(values, "file")?)?;
+    let over_ride = if values.bool("overrideTransform")? {
+        let m = values.doubles("objectTransform")?;
+        let mut rows = [0.0; 16];
+        rows.copy_from_slice(m);
+        Some(DMat4::from_cols_array(&rows).transpose())
+    } else {
+        None
+    };
+    let scene = loaded.place(&|name| match over_ride {
+        Some(m) => Ok(m),
+        None => at.object_matrix(name),
+    })?;
+    if !values.bool("crop")? {
+        return Ok(scene);
+    }
+    let v3 = |name: &str| -> Result<[f64; 3]> {
+        let v = values.doubles(name)?;
+        Ok([v[0], v[1], v[2]])
+    };
+    let crop = CropBox {
+        center: v3("cropCenter")?,
+        scale: v3("cropSize")?,
+        rotation: v3("cropRotation")?.map(f64::to_radians),
+    };
+    let instances = scene
+        .instances
+        .iter()
+        .map(|i| {
+            Instance::new(
+                i.name.clone(),
+                i.handle().clone(),
+                i.world_from_field(),
+                Some(crop),
+            )
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(Scene::new(instances))
+}
+
+fn render_node(values: &ParamValues, request: &RenderRequest) -> Result<Planes> {
+    let (at, camera) = camera(values, request.time, request.render_scale)?;
+    let window = request.window;
+    if camera.clamp_window(window)? != window {
+        let (w, h) = camera.resolution();
+        return Err(Error::invalid(
+            "render window",
+            format!(
+                "{window:?} is not inside the {w}×{h} image at render scale {}",
+                request.render_scale
+            ),
+        ));
+    }
+    let scene = placed_scene(values, &at)?;
+    let quality = match values.choice("quality")? {
+        _ if request.draft => Quality::Draft,
+        "draft" => Quality::Draft,
+        "final" => Quality::Final,
+        _ => Quality::Preview,
+    };
+    let output = values.choice("output")?;
+    let outputs = Outputs {
+        rgb: output == "rgba",
+        alpha: true,
+        depth_z: output == "depthZ",
+        depth_ray: output == "depthRay",
+        depth_median: false,
+    };
+    let planes = render(
+        &scene,
+        &camera,
+        window,
+        &RenderSettings::new(quality.params(), outputs),
+    )?;
+    let (w, h) = (planes.width, planes.height);
+    let alpha = planes
+        .alpha
+        .clone()
+        .unwrap_or_else(|| Plane::filled(w, h, 0.0));
+    let grey = |p: &Plane, a: &Plane| {
+        let px: Vec<[f32; 4]> = p
+            .data
+            .iter()
+            .zip(&a.data)
+            .map(|(&v, &a)| [v, v, v, a])
+            .collect();
+        rgba_planes(w, h, &px)
+    };
+    let far = |p: &Option<Plane>| {
+        let mut p = p
+            .clone()
+            .unwrap_or_else(|| Plane::filled(w, h, f32::INFINITY));
+        for z in &mut p.data {
+            *z = z.min(BACKGROUND_DEPTH);
+        }
+        p
+    };
+    match output {
+        "accumulation" => grey(&alpha, &alpha),
+        "depthZ" => Ok(Planes {
+            depth_z: Some(far(&planes.depth_z)),
+            ..grey(&far(&planes.depth_z), &alpha)?
+        }),
+        "depthRay" => Ok(Planes {
+            depth_ray: Some(far(&planes.depth_ray)),
+            ..grey(&far(&planes.depth_ray), &alpha)?
+        }),
+        _ => {
+            let gain = values.double("exposure")?.exp2() as f32;
+            let lit: Vec<[f32; 4]> = rgba_pixels(&planes)
+                .into_iter()
+                .map(|p| [p[0] * gain, p[1] * gain, p[2] * gain, p[3]])
+                .collect();
+            let bg = values.doubles("background")?;
+            let bg = [bg[0] as f32, bg[1] as f32, bg[2] as f32, bg[3] as f32];
+            let background = rgba_planes(w, h, &vec![bg; w as usize * h as usize])?;
+            let under = match request.inputs.get("Source") {
+                Some(source) => over(&background, source)?,
+                None => background,
+            };
+            over(&rgba_planes(w, h, &lit)?, &under)
+        }
+    }
+}

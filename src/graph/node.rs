@@ -1,0 +1,184 @@
+//! A node: its description and the one function that renders it.
+
+use std::collections::BTreeMap;
+
+use super::desc::{ClipKind, NodeDesc};
+use super::values::ParamValues;
+use crate::error::{Error, Result};
+use crate::image::{Plane, Planes, Window};
+
+/// What one render call asks for.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderRequest {
+    /// The host's time (frame number; rounded to a whole frame where a shot is read).
+    pub time: f64,
+    /// The pixels to produce, in raster space at `render_scale` (top-left origin, `y` down).
+    pub window: Window,
+    /// Render scale in (0, 1]: 0.5 renders the image at half its size.
+    pub render_scale: f64,
+    /// The host asks for draft quality (scrubbing): the NeRF Render uses its draft preset.
+    pub draft: bool,
+    /// Input images by clip name, each exactly the window's size; absent clips are left out.
+    pub inputs: BTreeMap<String, Planes>,
+}
+
+impl RenderRequest {
+    /// A full-quality request for `window` at `time` and `render_scale`, without inputs.
+    pub fn new(time: f64, window: Window, render_scale: f64) -> Self {
+        RenderRequest {
+            time,
+            window,
+            render_scale,
+            draft: false,
+            inputs: BTreeMap::new(),
+        }
+    }
+
+    /// The request with the input clip `name` connected to `planes`.
+    pub fn with_input(mut self, name: &str, planes: Planes) -> Self {
+        self.inputs.insert(name.to_string(), planes);
+        self
+    }
+
+    /// The input `name` if connected, else a transparent image of the window's size.
+    pub(crate) fn rgba_or_clear(&self, name: &str) -> Planes {
+        self.inputs.get(name).cloned().unwrap_or_else(|| {
+            let clear = Plane::filled(self.window.width(), self.window.height(), 0.0);
+            Planes {
+                width: clear.width,
+                height: clear.height,
+                rgb: Some([clear.clone(), clear.clone(), clear.clone()]),
+                alpha: Some(clear),
+                depth_z: None,
+                depth_ray: None,
+                depth_median: None,
+            }
+        })
+    }
+}
+
+/// The single channel a clip of `kind` contributes (see [`ClipKind`]); for
+/// [`ClipKind::Rgba`], its alpha (opaque when only RGB is present).
+pub fn single_channel(kind: ClipKind, planes: &Planes) -> Plane {
+    let red = planes.rgb.as_ref().map(|rgb| &rgb[0]);
+    let pick = match kind {
+        ClipKind::Depth => planes.depth_z.as_ref().or(red).or(planes.alpha.as_ref()),
+        ClipKind::Matte => red.or(planes.alpha.as_ref()),
+        ClipKind::Alpha | ClipKind::Rgba => planes.alpha.as_ref(),
+    };
+    let fill = if kind == ClipKind::Rgba && red.is_some() {
+        1.0
+    } else {
+        0.0
+    };
+    pick.cloned()
+        .unwrap_or_else(|| Plane::filled(planes.width, planes.height, fill))
+}
+
+/// Renders a node: validated values and a checked request in, output planes out.
+pub type RenderFn = fn(&ParamValues, &RenderRequest) -> Result<Planes>;
+/// A node's region of definition at a time (full-resolution pixels).
+pub type RodFn = fn(&ParamValues, f64) -> Result<(u32, u32)>;
+/// The input clip a node passes through unchanged with these values (e.g. `mix` = 0).
+pub type IdentityFn = fn(&ParamValues) -> Result<Option<&'static str>>;
+
+/// A node of the registry: described once, rendered once.
+pub struct Node {
+    /// The description adapters publish.
+    pub desc: NodeDesc,
+    pub(crate) render: RenderFn,
+    pub(crate) rod: Option<RodFn>,
+    pub(crate) identity: Option<IdentityFn>,
+}
+
+impl Node {
+    /// Default values for every parameter.
+    pub fn defaults(&'static self) -> ParamValues {
+        ParamValues::defaults(&self.desc)
+    }
+
+    fn own(&self, values: &ParamValues) -> Result<()> {
+        if values.desc().id != self.desc.id {
+            return Err(Error::invalid(
+                self.desc.id,
+                format!("given the parameter values of {}", values.desc().id),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Prefixes errors with the node's identifier unless they already name it.
+    fn in_context(&self, e: Error) -> Error {
+        match e {
+            Error::Invalid { what, message } if !what.starts_with(self.desc.id) => {
+                Error::invalid(format!("{}: {what}", self.desc.id), message)
+            }
+            other => other,
+        }
+    }
+
+    /// The output for `request`: RGBA premultiplied planes of the window's size. Refuses
+    /// values of another node, unknown or missing clips, inputs not of the window's size and
+    /// a render scale outside (0, 1]; every error names the node.
+    pub fn render(&self, values: &ParamValues, request: &RenderRequest) -> Result<Planes> {
+        self.own(values)?;
+        let id = self.desc.id;
+        let s = request.render_scale;
+        if !(s.is_finite() && s > 0.0 && s <= 1.0) {
+            return Err(Error::invalid(
+                format!("{id}: render scale"),
+                format!("expected (0, 1], got {s}"),
+            ));
+        }
+        let (w, h) = (request.window.width(), request.window.height());
+        for (name, planes) in &request.inputs {
+            if self.desc.clip(name).is_none() {
+                return Err(Error::invalid(format!("{id}: clip {name}"), "no such clip"));
+            }
+            if (planes.width, planes.height) != (w, h) {
+                return Err(Error::invalid(
+                    format!("{id}: clip {name}"),
+                    format!(
+                        "image is {}×{}, the render window {w}×{h}",
+                        planes.width, planes.height
+                    ),
+                ));
+            }
+        }
+        if let Some(c) = self
+            .desc
+            .clips
+            .iter()
+            .find(|c| !c.optional && !request.inputs.contains_key(c.name))
+        {
+            return Err(Error::invalid(
+                format!("{id}: clip {}", c.name),
+                "not connected",
+            ));
+        }
+        (self.render)(values, request).map_err(|e| self.in_context(e))
+    }
+
+    /// The region of definition `(width, height)` in full-resolution pixels, or `None` when
+    /// it is that of the inputs (the compositing nodes).
+    pub fn region_of_definition(
+        &self,
+        values: &ParamValues,
+        time: f64,
+    ) -> Result<Option<(u32, u32)>> {
+        self.own(values)?;
+        self.rod
+            .map(|rod| rod(values, time))
+            .transpose()
+            .map_err(|e| self.in_context(e))
+    }
+
+    /// The input clip the node would pass through unchanged with `values`, if any.
+    pub fn identity(&self, values: &ParamValues) -> Result<Option<&'static str>> {
+        self.own(values)?;
+        match self.identity {
+            Some(f) => f(values).map_err(|e| self.in_context(e)),
+            None => Ok(None),
+        }
+    }
+}

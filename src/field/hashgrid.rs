@@ -89,18 +89,27 @@ impl Feature for f32 {
     }
 }
 
+/// `f(x)` rounded once to f32: what a correctly rounded f32 `log2f`/`exp2f` gives. The GPU's
+/// functions are within an ulp or two of it; computing through f64 makes the result
+/// independent of this machine's f32 libm (an ulp matters: the fine levels' scales are near
+/// integers for many configurations, and `⌈s⌉` or the cell fraction would follow the ulp).
+pub(crate) fn correctly_rounded(f: fn(f64) -> f64, x: f32) -> f32 {
+    f(f64::from(x)) as f32
+}
+
 /// The primes of tcnn's coherent hash, per axis.
 const PRIMES: [u32; 3] = [1, 2_654_435_761, 805_459_861];
 
 impl HashGridConfig {
     /// The levels' geometry (float32 arithmetic, as tcnn does it).
     fn levels(&self) -> Vec<Level> {
-        let log2_b = self.per_level_scale.log2();
+        let log2_b = correctly_rounded(f64::log2, self.per_level_scale);
         let max_entries = 1u64 << self.log2_table_size.min(31);
         let mut offset = 0usize;
         (0..self.n_levels)
             .map(|l| {
-                let scale = (l as f32 * log2_b).exp2() * self.base_resolution as f32 - 1.0;
+                let e = correctly_rounded(f64::exp2, l as f32 * log2_b);
+                let scale = e * self.base_resolution as f32 - 1.0;
                 let resolution = scale.ceil() as u32 + 1;
                 let dense_entries = u64::from(resolution).pow(3).next_multiple_of(8);
                 let entries = dense_entries.min(max_entries) as u32;
@@ -342,7 +351,8 @@ mod tests {
         let mut out = Vec::new();
         let mut offset = 0usize;
         for l in 0..c.n_levels {
-            let s = (l as f32 * c.per_level_scale.log2()).exp2() * c.base_resolution as f32 - 1.0;
+            let log2_b = (c.per_level_scale as f64).log2() as f32;
+            let s = ((l as f32 * log2_b) as f64).exp2() as f32 * c.base_resolution as f32 - 1.0;
             let r = s.ceil() as u64 + 1;
             let t = ((r * r * r).div_ceil(8) * 8).min(1 << c.log2_table_size);
             let pos = [x.x, x.y, x.z].map(|v| s * v + 0.5);

@@ -7,7 +7,9 @@
 
 mod aabb;
 mod analytic;
+mod cascades;
 mod hashgrid;
+mod ingp;
 mod mlp;
 mod occupancy;
 mod sh;
@@ -16,6 +18,7 @@ mod sh4;
 pub use aabb::Aabb;
 pub use analytic::{Analytic, Primitive, Shape};
 pub use hashgrid::{HashGrid, HashGridConfig, TableStorage};
+pub use ingp::IngpField;
 pub use mlp::{Mlp, MlpConfig};
 pub use occupancy::Occupancy;
 pub use sh::ShColor;

@@ -1,0 +1,238 @@
+//! instant-ngp's cascaded occupancy grid, in instant-ngp's own coordinates.
+//!
+//! Cascade `c` is a `128³` grid over the cube `0.5 ± 2^(c−1)` (cascade 0 is the unit cube,
+//! each next one twice as wide). A point `q` belongs to the smallest cascade that contains it
+//! strictly — the smallest `c` with `max|q − 0.5| < 2^(c−1)` — and lies in its cell
+//! `⌊128·((q − 0.5)/2^c + 0.5)⌋`. The snapshot stores one fp16 density per cell, cascade
+//! after cascade, each cascade in Morton order (bit `3k` of the index is bit `k` of x, then
+//! y, then z); a cell is occupied where its value exceeds `min(0.01, mean of cascade 0)`.
+//! Instant-ngp marches only occupied cells, so the field's density is zero elsewhere.
+//!
+//! For region queries each cascade also keeps an OR pyramid (128³, 64³, …, 1³).
+
+use glam::Vec3;
+
+/// Cells per axis of a cascade.
+pub(crate) const GRID: usize = 128;
+/// Instant-ngp's occupancy threshold on the density (optical thickness per cell).
+const MIN_THICKNESS: f32 = 0.01;
+
+/// The occupancy of every cascade.
+#[derive(Clone, Debug)]
+pub(crate) struct Cascades {
+    /// Per cascade, per pyramid level `m` (`GRID >> m` cells per axis, x fastest).
+    mips: Vec<Vec<Vec<bool>>>,
+    occupied: u64,
+}
+
+/// Morton index (x in the lowest bit) of a cell of a 128³ grid.
+fn morton(x: usize, y: usize, z: usize) -> usize {
+    let spread = |v: usize| (0..7).fold(0, |acc, k| acc | ((v >> k) & 1) << (3 * k));
+    spread(x) | spread(y) << 1 | spread(z) << 2
+}
+
+impl Cascades {
+    /// From the snapshot's densities (`values.len()` a positive multiple of 128³).
+    pub(crate) fn from_densities(values: &[f32]) -> Option<Self> {
+        let n3 = GRID * GRID * GRID;
+        if values.is_empty() || values.len() % n3 != 0 {
+            return None;
+        }
+        let mean = values[..n3].iter().map(|&v| f64::from(v)).sum::<f64>() / n3 as f64;
+        let threshold = MIN_THICKNESS.min(mean as f32);
+        let mut occupied = 0;
+        let mips = values
+            .chunks_exact(n3)
+            .map(|cascade| {
+                let mut base = vec![false; n3];
+                for z in 0..GRID {
+                    for y in 0..GRID {
+                        for x in 0..GRID {
+                            let on = cascade[morton(x, y, z)] > threshold;
+                            base[(z * GRID + y) * GRID + x] = on;
+                            occupied += u64::from(on);
+                        }
+                    }
+                }
+                pyramid(base)
+            })
+            .collect();
+        Some(Cascades { mips, occupied })
+    }
+
+    /// Number of cascades.
+    pub(crate) fn count(&self) -> usize {
+        self.mips.len()
+    }
+
+    /// The fraction of occupied cells over all cascades.
+    pub(crate) fn fill_ratio(&self) -> f64 {
+        self.occupied as f64 / (self.count() * GRID * GRID * GRID) as f64
+    }
+
+    /// Half the width of cascade `c`: `2^(c−1)`.
+    fn half_width(c: usize) -> f32 {
+        (c as f32 - 1.0).exp2()
+    }
+
+    /// The cascade and cell of `q`, or `None` beyond the largest cascade.
+    #[inline]
+    pub(crate) fn cell(&self, q: Vec3) -> Option<(usize, [usize; 3])> {
+        let m = (q - Vec3::splat(0.5)).abs().max_element();
+        let c = (0..self.count()).find(|&c| m < Self::half_width(c))?;
+        let inv = (-(c as f32)).exp2();
+        let u = ((q - Vec3::splat(0.5)) * inv + Vec3::splat(0.5)) * GRID as f32;
+        let idx = u
+            .to_array()
+            .map(|v| (v.floor().max(0.0) as usize).min(GRID - 1));
+        Some((c, idx))
+    }
+
+    /// Whether `q` lies in an occupied cell.
+    #[inline]
+    pub(crate) fn occupied_at(&self, q: Vec3) -> bool {
+        self.cell(q)
+            .is_some_and(|(c, [x, y, z])| self.mips[c][0][(z * GRID + y) * GRID + x])
+    }
+
+    /// Whether any point of the box `[lo, hi]` may lie in an occupied cell (conservative).
+    pub(crate) fn may_be_occupied(&self, lo: Vec3, hi: Vec3) -> bool {
+        let d = (lo - Vec3::splat(0.5))
+            .abs()
+            .max((hi - Vec3::splat(0.5)).abs())
+            .max_element();
+        (0..self.count()).any(|c| {
+            let h = Self::half_width(c);
+            // Points of cascade c have max|q − 0.5| ≥ h/2: a box strictly inside the next
+            // smaller cascade has none.
+            if c > 0 && d < 0.5 * h * (1.0 - 1e-6) {
+                return false;
+            }
+            let to_cell = |v: f32| ((v - 0.5) / (2.0 * h) + 0.5) * GRID as f32;
+            let pad = 1e-3;
+            let a = lo.to_array().map(|v| to_cell(v) - pad);
+            let b = hi.to_array().map(|v| to_cell(v) + pad);
+            if (0..3).any(|k| b[k] < 0.0 || a[k] >= GRID as f32) {
+                return false;
+            }
+            let i0 = a.map(|v| v.max(0.0) as usize);
+            let i1 = b.map(|v| (v.max(0.0) as usize).min(GRID - 1));
+            self.any_in(c, i0, i1)
+        })
+    }
+
+    /// Whether cascade `c` has an occupied cell in the index box `[i0, i1]`: looked up in the
+    /// pyramid level where the box spans at most three cells per axis.
+    fn any_in(&self, c: usize, i0: [usize; 3], i1: [usize; 3]) -> bool {
+        let m = (0..self.mips[c].len())
+            .find(|&m| (0..3).all(|k| (i1[k] >> m) - (i0[k] >> m) <= 2))
+            .unwrap_or(self.mips[c].len() - 1);
+        let n = GRID >> m;
+        let level = &self.mips[c][m];
+        for z in i0[2] >> m..=i1[2] >> m {
+            for y in i0[1] >> m..=i1[1] >> m {
+                for x in i0[0] >> m..=i1[0] >> m {
+                    if level[(z * n + y) * n + x] {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+}
+
+/// The OR pyramid of a cubic grid of side `GRID`: level `m + 1` cell is occupied where any
+/// of its 8 children is.
+fn pyramid(base: Vec<bool>) -> Vec<Vec<bool>> {
+    let mut levels = vec![base];
+    let mut n = GRID;
+    while n > 1 {
+        let (prev, h) = (&levels[levels.len() - 1], n / 2);
+        let mut next = vec![false; h * h * h];
+        for z in 0..n {
+            for y in 0..n {
+                for x in 0..n {
+                    if prev[(z * n + y) * n + x] {
+                        next[((z / 2) * h + y / 2) * h + x / 2] = true;
+                    }
+                }
+            }
+        }
+        levels.push(next);
+        n = h;
+    }
+    levels
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two cascades, each with one occupied cell, written in Morton order by hand.
+    fn two_cascades() -> Cascades {
+        let n3 = GRID * GRID * GRID;
+        let mut v = vec![0.0f32; 2 * n3];
+        // Cascade 0, cell (5, 6, 7).
+        v[morton_by_hand(5, 6, 7)] = 1.0;
+        // Cascade 1, cell (127, 0, 64).
+        v[n3 + morton_by_hand(127, 0, 64)] = 1.0;
+        Cascades::from_densities(&v).unwrap()
+    }
+
+    fn morton_by_hand(x: usize, y: usize, z: usize) -> usize {
+        let mut r = 0;
+        for k in 0..7 {
+            r |= ((x >> k) & 1) << (3 * k)
+                | ((y >> k) & 1) << (3 * k + 1)
+                | ((z >> k) & 1) << (3 * k + 2);
+        }
+        r
+    }
+
+    #[test]
+    fn morton_order_and_threshold() {
+        assert_eq!(morton(1, 0, 0), 1);
+        assert_eq!(morton(0, 1, 0), 2);
+        assert_eq!(morton(0, 0, 1), 4);
+        assert_eq!(morton(3, 0, 0), 0b1001);
+        let c = two_cascades();
+        assert_eq!(c.count(), 2);
+        // The centre of cascade-0 cell (5, 6, 7) is at ((k + 0.5)/128).
+        let centre = |k: [usize; 3], c: i32| {
+            Vec3::from_array(k.map(|v| ((v as f32 + 0.5) / 128.0 - 0.5) * 2f32.powi(c) + 0.5))
+        };
+        assert!(c.occupied_at(centre([5, 6, 7], 0)));
+        assert!(!c.occupied_at(centre([5, 6, 8], 0)));
+        // Cascade 1 cell (127, 0, 64) lies outside cascade 0 (x ≈ 1.49).
+        assert!(c.occupied_at(centre([127, 0, 64], 1)));
+        // Cascade 1's cell containing the unit cube is never consulted for inner points.
+        assert!(!c.occupied_at(Vec3::splat(0.5)));
+        // Beyond the largest cascade.
+        assert!(!c.occupied_at(Vec3::new(2.0, 0.5, 0.5)));
+        // Mean of cascade 0 is 1/128³ < 0.01: that is the threshold, and 1.0 exceeds it.
+        assert!((c.fill_ratio() - 2.0 / (2 * GRID * GRID * GRID) as f64).abs() < 1e-12);
+    }
+
+    #[test]
+    fn region_queries_are_conservative_and_tight() {
+        let c = two_cascades();
+        let cell = 1.0 / 128.0;
+        let lo = Vec3::new(5.0, 6.0, 7.0) * cell;
+        assert!(c.may_be_occupied(lo, lo + Vec3::splat(cell)));
+        assert!(c.may_be_occupied(Vec3::ZERO, Vec3::ONE));
+        // A box two cells away from it is empty.
+        let far = lo + Vec3::new(3.0 * cell, 0.0, 0.0);
+        assert!(!c.may_be_occupied(far, far + Vec3::splat(cell)));
+        // A large box inside cascade 0 but away from its cell.
+        assert!(!c.may_be_occupied(Vec3::splat(0.5), Vec3::splat(0.9)));
+        // The cascade-1 cell is found from a box that reaches it.
+        assert!(c.may_be_occupied(Vec3::new(1.4, -0.5, 0.4), Vec3::new(1.5, -0.4, 0.6)));
+    }
+
+    #[test]
+    fn bad_lengths_are_refused() {
+        assert!(Cascades::from_densities(&[]).is_none());
+        assert!(Cascades::from_densities(&vec![0.0; GRID * GRID * GRID + 1]).is_none());
+    }
+}

@@ -1,0 +1,635 @@
+//! instant-ngp NeRF snapshots (`.ingp`: gzip-framed msgpack, `.msgpack`: raw) as a [`Field`].
+//!
+//! **Format.** The top level is the network configuration (`encoding`, `network`,
+//! `rgb_network`, `dir_encoding`) plus `snapshot` with the flat parameters (`params_binary`,
+//! `__half` or `float`, inferred from the byte count when `params_type` is absent): density
+//! MLP | rgb MLP | position hash grid. The rgb MLP's output is padded to 16, or to 8 in
+//! CutlassMLP snapshots from before September 2022 (told apart by `n_params`).
+//!
+//! **Evaluation.** A point `q` (instant-ngp coordinates) is mapped into the unit cube of the
+//! training box `0.5 ± 0.5·min(aabb_scale, 128)`, hash-encoded (per-level scale
+//! `b = exp(ln(2048·aabb_scale/N_min)/(L − 1))` unless the config gives one) and fed to the
+//! density MLP: `σ = exp(out₀)`. The rgb MLP reads the 16 density outputs then the 16 SH
+//! values of the direction; colour `sigmoid(out)` (sRGB-trained, converted to linear) or
+//! `exp(clamp(out, −10, 10))` for HDR snapshots. Where the cascaded occupancy grid is empty
+//! the density is zero, as in instant-ngp's marcher.
+//!
+//! **Frames.** The field is queried in the NeRF/nerfstudio world frame of the camera poses
+//! ("field space"). Instant-ngp's loader maps it by `nerf_matrix_to_ngp`: positions
+//! `p ↦ (s·p + o)` with the rows cycled `(x, y, z) ← (y, z, x)`, directions cycled alike
+//! (defaults `s = 0.33`, `o = 0.5`). So `q = (s·p.y + o.y, s·p.z + o.z, s·p.x + o.x)` and,
+//! lengths being `s` times longer in instant-ngp, `σ_field = s·σ_ngp`.
+
+use std::io::{Cursor, Read};
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+use half::f16;
+use rmpv::Value;
+
+use super::cascades::Cascades;
+use super::hashgrid::correctly_rounded;
+use super::{sh4, Aabb, Field, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage};
+use crate::error::{Error, Result};
+
+/// Points per batch inside one density or radiance call (bounds the scratch memory).
+const CHUNK: usize = 512;
+/// Outputs of instant-ngp's density MLP (1 density + 15 geometry features).
+const DENSITY_OUTPUTS: usize = 16;
+/// Largest exponent fed to `exp` for the density (keeps σ finite).
+const MAX_LOG_DENSITY: f32 = 80.0;
+
+/// An instant-ngp snapshot loaded as a field.
+#[derive(Clone, Debug)]
+pub struct IngpField {
+    summary: Summary,
+    grid: HashGrid,
+    density_mlp: Mlp,
+    rgb_mlp: Mlp,
+    hdr: bool,
+    /// `s` and `o` of `nerf_matrix_to_ngp`.
+    scale: f32,
+    offset: Vec3,
+    /// The training box in instant-ngp coordinates.
+    aabb_min: Vec3,
+    aabb_size: Vec3,
+    cascades: Cascades,
+    bounds: Aabb,
+}
+
+/// What `describe` prints, gathered at load.
+#[derive(Clone, Debug)]
+struct Summary {
+    path: PathBuf,
+    gzip: bool,
+    version: u64,
+    half: bool,
+    cutlass: bool,
+    n_params: usize,
+    aabb_scale: f32,
+}
+
+/// Msgpack access that names the key path in errors.
+struct Doc<'a> {
+    path: &'a Path,
+}
+
+impl Doc<'_> {
+    fn err(&self, at: &str, msg: impl Into<String>) -> Error {
+        Error::format(self.path, at, msg)
+    }
+
+    fn get<'v>(&self, v: &'v Value, at: &str, key: &str) -> Result<&'v Value> {
+        self.find(v, key)
+            .ok_or_else(|| self.err(at, format!("missing key '{key}'")))
+    }
+
+    fn find<'v>(&self, v: &'v Value, key: &str) -> Option<&'v Value> {
+        v.as_map()?
+            .iter()
+            .find(|(k, _)| k.as_str() == Some(key))
+            .map(|(_, v)| v)
+    }
+
+    fn f64(&self, v: &Value, at: &str) -> Result<f64> {
+        v.as_f64()
+            .or_else(|| v.as_i64().map(|i| i as f64))
+            .or_else(|| v.as_u64().map(|i| i as f64))
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| self.err(at, format!("expected a finite number, found {v}")))
+    }
+
+    fn u32_or(&self, v: &Value, at: &str, key: &str, default: u32) -> Result<u32> {
+        match self.find(v, key) {
+            None => Ok(default),
+            Some(x) => x
+                .as_u64()
+                .and_then(|x| u32::try_from(x).ok())
+                .ok_or_else(|| {
+                    self.err(
+                        &format!("{at}.{key}"),
+                        format!("expected a count, found {x}"),
+                    )
+                }),
+        }
+    }
+
+    fn vec3(&self, v: &Value, at: &str) -> Result<Vec3> {
+        let a = v
+            .as_array()
+            .filter(|a| a.len() == 3)
+            .ok_or_else(|| self.err(at, "expected an array of 3 numbers"))?;
+        let mut out = [0.0f32; 3];
+        for (o, x) in out.iter_mut().zip(a) {
+            *o = self.f64(x, at)? as f32;
+        }
+        Ok(Vec3::from_array(out))
+    }
+
+    fn bytes<'v>(&self, v: &'v Value, at: &str) -> Result<&'v [u8]> {
+        v.as_slice()
+            .ok_or_else(|| self.err(at, "expected binary data"))
+    }
+}
+
+/// Reads the file and decodes its msgpack (inflating it first when it is gzip-framed).
+fn read_document(path: &Path) -> Result<(Value, bool)> {
+    let raw = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let gzip = raw.starts_with(&[0x1f, 0x8b]);
+    let bytes = if gzip {
+        let mut out = Vec::new();
+        flate2::read::GzDecoder::new(raw.as_slice())
+            .read_to_end(&mut out)
+            .map_err(|e| Error::format(path, "gzip stream", e.to_string()))?;
+        out
+    } else {
+        raw
+    };
+    let mut cursor = Cursor::new(bytes.as_slice());
+    let value = rmpv::decode::read_value(&mut cursor).map_err(|e| {
+        Error::format(
+            path,
+            format!("byte {}", cursor.position()),
+            format!("not a valid msgpack snapshot: {e}"),
+        )
+    })?;
+    Ok((value, gzip))
+}
+
+/// The hash grid, MLP shapes and frame, read from the configuration.
+struct Layout {
+    grid: HashGridConfig,
+    density: MlpConfig,
+    rgb: MlpConfig,
+}
+
+fn read_layout(doc: &Doc, top: &Value, aabb_scale: f32) -> Result<Layout> {
+    let enc = doc.get(top, "", "encoding")?;
+    let n_levels = doc.u32_or(enc, "encoding", "n_levels", 16)?;
+    let n_features = doc.u32_or(enc, "encoding", "n_features_per_level", 2)?;
+    let log2_table_size = doc.u32_or(enc, "encoding", "log2_hashmap_size", 19)?;
+    let base_resolution = doc.u32_or(enc, "encoding", "base_resolution", 16)?;
+    if !(1..=32).contains(&n_levels)
+        || ![1, 2, 4, 8].contains(&n_features)
+        || !(1..=30).contains(&log2_table_size)
+        || !(1..=4096).contains(&base_resolution)
+    {
+        return Err(doc.err("encoding", "unsupported hash grid shape"));
+    }
+    let given = match doc.find(enc, "per_level_scale") {
+        Some(v) => doc.f64(v, "encoding.per_level_scale")? as f32,
+        None => 0.0,
+    };
+    let per_level_scale = if given > 0.0 {
+        given
+    } else if n_levels > 1 {
+        let ln = correctly_rounded(f64::ln, 2048.0 * aabb_scale / base_resolution as f32);
+        correctly_rounded(f64::exp, ln / (n_levels - 1) as f32)
+    } else {
+        1.0
+    };
+    let grid = HashGridConfig {
+        n_levels,
+        n_features,
+        log2_table_size,
+        base_resolution,
+        per_level_scale,
+    };
+    let net = |key: &str, hidden: u32, n_inputs: usize, n_outputs: usize| -> Result<MlpConfig> {
+        let v = doc.get(top, "", key)?;
+        let width = doc.u32_or(v, key, "n_neurons", 64)? as usize;
+        let layers = doc.u32_or(v, key, "n_hidden_layers", hidden)? as usize;
+        if !(1..=1024).contains(&width) || !(1..=16).contains(&layers) {
+            return Err(doc.err(key, "unsupported MLP shape"));
+        }
+        Ok(MlpConfig {
+            n_inputs,
+            width,
+            n_hidden_layers: layers,
+            n_outputs,
+            output_alignment: 16,
+        })
+    };
+    let density = net("network", 1, grid.n_outputs(), DENSITY_OUTPUTS)?;
+    let rgb = net("rgb_network", 2, DENSITY_OUTPUTS + 16, 3)?;
+    Ok(Layout { grid, density, rgb })
+}
+
+impl IngpField {
+    /// Loads a snapshot; the hash tables stay in the precision they were saved in.
+    pub fn load(path: &Path) -> Result<Self> {
+        Self::load_with(path, None)
+    }
+
+    /// Loads a snapshot with its hash tables in `storage` (`None`: as saved).
+    pub fn load_with(path: &Path, storage: Option<TableStorage>) -> Result<Self> {
+        let (top, gzip) = read_document(path)?;
+        let doc = Doc { path };
+        let snap = doc.get(&top, "", "snapshot")?;
+        let version = match doc.find(snap, "version") {
+            Some(v) => v.as_u64().unwrap_or(0),
+            None => 0,
+        };
+        if let Some(mode) = doc.find(snap, "mode").and_then(Value::as_str) {
+            if mode != "nerf" {
+                return Err(Error::Unsupported(format!(
+                    "{}: instant-ngp mode '{mode}' (only NeRF snapshots)",
+                    path.display()
+                )));
+            }
+        }
+        let nerf = doc.get(snap, "snapshot", "nerf")?;
+        let aabb_scale = doc.f64(
+            doc.get(nerf, "snapshot.nerf", "aabb_scale")?,
+            "snapshot.nerf.aabb_scale",
+        )? as f32;
+        if !aabb_scale.is_finite() || aabb_scale <= 0.0 {
+            return Err(doc.err("snapshot.nerf.aabb_scale", "must be positive"));
+        }
+        let (scale, offset, hdr) = match doc.find(nerf, "dataset") {
+            Some(ds) => (
+                match doc.find(ds, "scale") {
+                    Some(v) => doc.f64(v, "snapshot.nerf.dataset.scale")? as f32,
+                    None => 0.33,
+                },
+                match doc.find(ds, "offset") {
+                    Some(v) => doc.vec3(v, "snapshot.nerf.dataset.offset")?,
+                    None => Vec3::splat(0.5),
+                },
+                doc.find(ds, "is_hdr")
+                    .and_then(Value::as_bool)
+                    .unwrap_or(false),
+            ),
+            None => (0.33, Vec3::splat(0.5), false),
+        };
+        if !scale.is_finite() || scale <= 0.0 {
+            return Err(doc.err("snapshot.nerf.dataset.scale", "must be positive"));
+        }
+        let mut layout = read_layout(&doc, &top, aabb_scale)?;
+        let bytes = doc.bytes(
+            doc.get(snap, "snapshot", "params_binary")?,
+            "snapshot.params_binary",
+        )?;
+        let (half, cutlass) = params_encoding(&doc, snap, &layout, bytes.len())?;
+        if cutlass {
+            layout.rgb.output_alignment = 8;
+        }
+        let params: Vec<f32> = if half {
+            bytes
+                .chunks_exact(2)
+                .map(|b| f16::from_le_bytes([b[0], b[1]]).to_f32())
+                .collect()
+        } else {
+            bytes
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect()
+        };
+        let (nd, nr) = (layout.density.n_params(), layout.rgb.n_params());
+        let bad = |what: &str| doc.err("snapshot.params_binary", format!("bad {what} parameters"));
+        let density_mlp =
+            Mlp::new(layout.density, &params[..nd]).ok_or_else(|| bad("density MLP"))?;
+        let rgb_mlp = Mlp::new(layout.rgb, &params[nd..nd + nr]).ok_or_else(|| bad("rgb MLP"))?;
+        let grid_params = &params[nd + nr..nd + nr + layout.grid.n_params()];
+        let storage = storage.unwrap_or(if half {
+            TableStorage::F16
+        } else {
+            TableStorage::F32
+        });
+        let grid = match storage {
+            TableStorage::F32 => HashGrid::from_f32(layout.grid, grid_params.to_vec()),
+            TableStorage::F16 => {
+                let h: Vec<f16> = grid_params.iter().map(|&v| f16::from_f32(v)).collect();
+                HashGrid::new(layout.grid, &h, TableStorage::F16)
+            }
+        }
+        .ok_or_else(|| bad("hash grid"))?;
+        let cascades = read_cascades(&doc, snap)?;
+        let half_size = 0.5 * aabb_scale.min(128.0);
+        let (aabb_min, aabb_max) = (Vec3::splat(0.5 - half_size), Vec3::splat(0.5 + half_size));
+        let outer = 0.5 * ((cascades.count() as f32) - 1.0).exp2();
+        let mut lo = aabb_min.max(Vec3::splat(0.5 - outer));
+        let mut hi = aabb_max.min(Vec3::splat(0.5 + outer));
+        if let Some((rlo, rhi)) = render_aabb(&doc, snap)? {
+            lo = lo.max(rlo);
+            hi = hi.min(rhi);
+        }
+        let field = IngpField {
+            summary: Summary {
+                path: path.to_path_buf(),
+                gzip,
+                version,
+                half,
+                cutlass,
+                n_params: params.len(),
+                aabb_scale,
+            },
+            grid,
+            density_mlp,
+            rgb_mlp,
+            hdr,
+            scale,
+            offset,
+            aabb_min,
+            aabb_size: aabb_max - aabb_min,
+            cascades,
+            bounds: Aabb::new(Vec3::ZERO, Vec3::ZERO),
+        };
+        let bounds = if lo.cmplt(hi).all() {
+            let (a, b) = (field.field_from_ngp(lo), field.field_from_ngp(hi));
+            Aabb::new(a.min(b), a.max(b))
+        } else {
+            Aabb::new(Vec3::ZERO, Vec3::ZERO)
+        };
+        Ok(IngpField { bounds, ..field })
+    }
+
+    /// Instant-ngp coordinates of a field-space point.
+    #[inline]
+    fn ngp_from_field(&self, p: Vec3) -> Vec3 {
+        let (s, o) = (self.scale, self.offset);
+        Vec3::new(p.y * s + o.y, p.z * s + o.z, p.x * s + o.x)
+    }
+
+    /// The inverse of [`Self::ngp_from_field`].
+    fn field_from_ngp(&self, q: Vec3) -> Vec3 {
+        let (s, o) = (self.scale, self.offset);
+        Vec3::new((q.z - o.x) / s, (q.x - o.y) / s, (q.y - o.z) / s)
+    }
+
+    /// The point of the hash grid's unit cube for an instant-ngp point.
+    #[inline]
+    fn unit_from_ngp(&self, q: Vec3) -> Vec3 {
+        (q - self.aabb_min) / self.aabb_size
+    }
+
+    /// The density MLP's 16 outputs at `n` points (unit cube): `enc` and `out` are scratch.
+    fn density_outputs(&self, xs: &[Vec3], enc: &mut Vec<f32>, out: &mut Vec<f32>) {
+        enc.resize(xs.len() * self.grid.config().n_outputs(), 0.0);
+        out.resize(xs.len() * DENSITY_OUTPUTS, 0.0);
+        self.grid.encode(xs, enc);
+        self.density_mlp.forward(enc, out);
+    }
+
+    /// A human-readable description: format, architecture, parameters, bounds, occupancy.
+    pub fn describe(&self) -> String {
+        let s = &self.summary;
+        let g = self.grid.config();
+        let (d, r) = (self.density_mlp.config(), self.rgb_mlp.config());
+        let b = self.bounds;
+        format!(
+            "file: {}\n\
+             format: instant-ngp NeRF snapshot ({}, version {}), parameters {} ({})\n\
+             hash grid: {} levels x {} features, 2^{} entries, N_min {}, per-level scale {:.6}, tables {:?}\n\
+             density MLP: {} -> {}x{} -> {} (exp)\n\
+             rgb MLP: {}+16 SH -> {}x{} -> 3 ({}, output padding {})\n\
+             aabb_scale {}, scale {}, offset [{}, {}, {}]\n\
+             bounds (NeRF world): [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]\n\
+             occupancy: {} cascades of 128^3, fill ratio {:.4}",
+            s.path.display(),
+            if s.gzip { "gzip msgpack" } else { "msgpack" },
+            s.version,
+            s.n_params,
+            if s.half { "__half" } else { "float" },
+            g.n_levels,
+            g.n_features,
+            g.log2_table_size,
+            g.base_resolution,
+            g.per_level_scale,
+            self.grid.storage(),
+            d.n_inputs,
+            d.n_hidden_layers,
+            d.width,
+            d.n_outputs,
+            DENSITY_OUTPUTS,
+            r.n_hidden_layers,
+            r.width,
+            if self.hdr { "HDR exp" } else { "sigmoid, sRGB to linear" },
+            if s.cutlass { 8 } else { 16 },
+            s.aabb_scale,
+            self.scale,
+            self.offset.x,
+            self.offset.y,
+            self.offset.z,
+            b.min.x,
+            b.min.y,
+            b.min.z,
+            b.max.x,
+            b.max.y,
+            b.max.z,
+            self.cascades.count(),
+            self.cascades.fill_ratio(),
+        )
+    }
+}
+
+/// Whether the parameters are `__half` and whether the rgb MLP's output is padded to 8
+/// (old CutlassMLP), from `params_type`, `n_params` and the byte count.
+fn params_encoding(
+    doc: &Doc,
+    snap: &Value,
+    layout: &Layout,
+    n_bytes: usize,
+) -> Result<(bool, bool)> {
+    let total = |align: usize| {
+        layout.density.n_params()
+            + MlpConfig {
+                output_alignment: align,
+                ..layout.rgb
+            }
+            .n_params()
+            + layout.grid.n_params()
+    };
+    let (t16, t8) = (total(16), total(8));
+    let n_params = match doc.find(snap, "n_params") {
+        Some(v) => Some(
+            v.as_u64()
+                .ok_or_else(|| doc.err("snapshot.n_params", "expected a count"))?
+                as usize,
+        ),
+        None => None,
+    };
+    let half = match doc.find(snap, "params_type").and_then(Value::as_str) {
+        Some("__half") => Some(true),
+        Some("float") => Some(false),
+        Some(other) => {
+            return Err(doc.err("snapshot.params_type", format!("unknown type '{other}'")))
+        }
+        None => None,
+    };
+    for (count, cutlass) in [(t16, false), (t8, true)] {
+        if n_params.is_some_and(|n| n != count) {
+            continue;
+        }
+        for h in [true, false] {
+            if half.is_some_and(|x| x != h) {
+                continue;
+            }
+            if n_bytes == count * if h { 2 } else { 4 } {
+                return Ok((h, cutlass));
+            }
+        }
+    }
+    Err(doc.err(
+        "snapshot.params_binary",
+        format!(
+            "{n_bytes} bytes do not hold the network's parameters ({t16}, or {t8} with \
+             CutlassMLP padding; n_params {n_params:?}): truncated or a different architecture"
+        ),
+    ))
+}
+
+/// The cascaded occupancy grid from `density_grid_binary` (fp16, 128³ per cascade).
+fn read_cascades(doc: &Doc, snap: &Value) -> Result<Cascades> {
+    let at = "snapshot.density_grid_binary";
+    if let Some(v) = doc.find(snap, "density_grid_size") {
+        if v.as_u64() != Some(super::cascades::GRID as u64) {
+            return Err(doc.err(
+                "snapshot.density_grid_size",
+                format!("expected 128, found {v}"),
+            ));
+        }
+    }
+    let bytes = doc.bytes(doc.get(snap, "snapshot", "density_grid_binary")?, at)?;
+    if bytes.len() % 2 != 0 {
+        return Err(doc.err(at, "odd byte count for fp16 values"));
+    }
+    let values: Vec<f32> = bytes
+        .chunks_exact(2)
+        .map(|b| f16::from_le_bytes([b[0], b[1]]).to_f32())
+        .collect();
+    Cascades::from_densities(&values).ok_or_else(|| {
+        doc.err(
+            at,
+            format!(
+                "{} values are not a whole number of 128^3 cascades",
+                values.len()
+            ),
+        )
+    })
+}
+
+/// The render box (instant-ngp coordinates) when it is axis-aligned; `None` when absent or
+/// rotated (then the training box bounds the field).
+fn render_aabb(doc: &Doc, snap: &Value) -> Result<Option<(Vec3, Vec3)>> {
+    let Some(b) = doc.find(snap, "render_aabb") else {
+        return Ok(None);
+    };
+    if let Some(m) = doc.find(snap, "render_aabb_to_local") {
+        let flat: Vec<f64> = m
+            .as_array()
+            .into_iter()
+            .flatten()
+            .flat_map(|r| match r.as_array() {
+                Some(a) => a.iter().map(|x| x.as_f64().unwrap_or(f64::NAN)).collect(),
+                None => vec![r.as_f64().unwrap_or(f64::NAN)],
+            })
+            .collect();
+        let identity = flat.len() == 9
+            && flat
+                .iter()
+                .enumerate()
+                .all(|(i, v)| (v - if i % 4 == 0 { 1.0 } else { 0.0 }).abs() < 1e-6);
+        if !identity {
+            return Ok(None);
+        }
+    }
+    let lo = doc.vec3(
+        doc.get(b, "snapshot.render_aabb", "min")?,
+        "snapshot.render_aabb.min",
+    )?;
+    let hi = doc.vec3(
+        doc.get(b, "snapshot.render_aabb", "max")?,
+        "snapshot.render_aabb.max",
+    )?;
+    Ok(Some((lo, hi)))
+}
+
+/// sRGB-encoded value to linear.
+#[inline]
+fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+impl Field for IngpField {
+    fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    fn density(&self, points: &[Vec3], sigma: &mut [f32]) {
+        let (mut xs, mut idx) = (Vec::with_capacity(CHUNK), Vec::with_capacity(CHUNK));
+        let (mut enc, mut out) = (Vec::new(), Vec::new());
+        for (pts, sig) in points.chunks(CHUNK).zip(sigma.chunks_mut(CHUNK)) {
+            xs.clear();
+            idx.clear();
+            for (i, p) in pts.iter().enumerate() {
+                let q = self.ngp_from_field(*p);
+                sig[i] = 0.0;
+                if self.cascades.occupied_at(q) {
+                    xs.push(self.unit_from_ngp(q));
+                    idx.push(i);
+                }
+            }
+            self.density_outputs(&xs, &mut enc, &mut out);
+            for (k, &i) in idx.iter().enumerate() {
+                let raw = out[k * DENSITY_OUTPUTS].min(MAX_LOG_DENSITY);
+                sig[i] = self.scale * raw.exp();
+            }
+        }
+    }
+
+    fn radiance(&self, points: &[Vec3], dirs: &[Vec3], rgb: &mut [Vec3]) {
+        let mut xs = Vec::with_capacity(CHUNK);
+        let (mut enc, mut out) = (Vec::new(), Vec::new());
+        let (mut input, mut colour) = (Vec::new(), Vec::new());
+        let parts = points.chunks(CHUNK).zip(dirs.chunks(CHUNK));
+        for ((pts, ds), dst) in parts.zip(rgb.chunks_mut(CHUNK)) {
+            xs.clear();
+            xs.extend(
+                pts.iter()
+                    .map(|p| self.unit_from_ngp(self.ngp_from_field(*p))),
+            );
+            self.density_outputs(&xs, &mut enc, &mut out);
+            input.resize(pts.len() * (DENSITY_OUTPUTS + 16), 0.0);
+            for ((row, d), o) in input
+                .chunks_exact_mut(DENSITY_OUTPUTS + 16)
+                .zip(ds)
+                .zip(out.chunks_exact(DENSITY_OUTPUTS))
+            {
+                row[..DENSITY_OUTPUTS].copy_from_slice(o);
+                row[DENSITY_OUTPUTS..].copy_from_slice(&sh4(Vec3::new(d.y, d.z, d.x)));
+            }
+            colour.resize(pts.len() * 3, 0.0);
+            self.rgb_mlp.forward(&input, &mut colour);
+            for (c, v) in dst.iter_mut().zip(colour.chunks_exact(3)) {
+                *c = Vec3::from_array([v[0], v[1], v[2]].map(|x| {
+                    if self.hdr {
+                        x.clamp(-10.0, 10.0).exp()
+                    } else {
+                        srgb_to_linear(1.0 / (1.0 + (-x).exp()))
+                    }
+                }));
+            }
+        }
+    }
+
+    /// Instant-ngp's smallest step, `√3/1024` of its unit, in field units.
+    fn feature_size(&self) -> f32 {
+        3f32.sqrt() / 1024.0 / self.scale
+    }
+
+    fn may_be_occupied(&self, region: &Aabb) -> bool {
+        if region.is_empty() {
+            return false;
+        }
+        let (a, b) = (
+            self.ngp_from_field(region.min),
+            self.ngp_from_field(region.max),
+        );
+        self.cascades.may_be_occupied(a.min(b), a.max(b))
+    }
+}

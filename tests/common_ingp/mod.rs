@@ -1,0 +1,259 @@
+//! A writer of small instant-ngp snapshots with seeded random weights, written from the
+//! format facts (DESIGN §4), for the loader's tests and the NumPy cross-check.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use half::f16;
+use rmpv::Value;
+
+/// What to write.
+#[derive(Clone, Debug)]
+pub struct Spec {
+    pub n_levels: u32,
+    pub n_features: u32,
+    pub log2_table_size: u32,
+    pub base_resolution: u32,
+    pub aabb_scale: u32,
+    pub n_cascades: usize,
+    pub half: bool,
+    /// Old CutlassMLP: rgb output padded to 8 (with `otype` "CutlassMLP").
+    pub cutlass: bool,
+    pub hdr: bool,
+    pub scale: f32,
+    pub offset: [f32; 3],
+    pub gzip: bool,
+    /// Write `params_type` and `n_params` (older files have neither).
+    pub typed: bool,
+    pub seed: u64,
+}
+
+impl Spec {
+    /// Current default architecture, small table: 8 levels × 4 features, fp16, gzip.
+    pub fn small_8x4() -> Self {
+        Spec {
+            n_levels: 8,
+            n_features: 4,
+            log2_table_size: 12,
+            base_resolution: 16,
+            aabb_scale: 2,
+            n_cascades: 2,
+            half: true,
+            cutlass: false,
+            hdr: false,
+            scale: 0.33,
+            offset: [0.5, 0.5, 0.5],
+            gzip: true,
+            typed: true,
+            seed: 1,
+        }
+    }
+
+    /// Older architecture: 16 levels × 2, float params, raw msgpack, CutlassMLP padding,
+    /// HDR, a non-default dataset transform and no type keys.
+    pub fn old_16x2() -> Self {
+        Spec {
+            n_levels: 16,
+            n_features: 2,
+            log2_table_size: 11,
+            base_resolution: 16,
+            aabb_scale: 4,
+            n_cascades: 3,
+            half: false,
+            cutlass: true,
+            hdr: true,
+            scale: 0.5,
+            offset: [0.4, 0.6, 0.45],
+            gzip: false,
+            typed: false,
+            seed: 2,
+        }
+    }
+}
+
+/// SplitMix64, as in `tests/common`.
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        Rng(seed)
+    }
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in `[lo, hi)`.
+    pub fn uniform(&mut self, lo: f32, hi: f32) -> f32 {
+        let u = (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
+        lo + (hi - lo) * u
+    }
+}
+
+/// Hash-grid entries per level, from the facts: scale `2^(l·log2 b)·N_min − 1`,
+/// resolution `⌈scale⌉ + 1`, `min(next multiple of 8 of res³, 2^log2T)`.
+fn grid_entries(s: &Spec) -> usize {
+    // Each f32 function correctly rounded (through f64), as the loader does.
+    let ln = ((2048.0 * s.aabb_scale as f32 / s.base_resolution as f32) as f64).ln() as f32;
+    let b = ((ln / (s.n_levels - 1) as f32) as f64).exp() as f32;
+    let log2_b = (b as f64).log2() as f32;
+    (0..s.n_levels)
+        .map(|l| {
+            let e = ((l as f32 * log2_b) as f64).exp2() as f32;
+            let scale = e * s.base_resolution as f32 - 1.0;
+            let r = scale.ceil() as usize + 1;
+            (r * r * r)
+                .div_ceil(8)
+                .saturating_mul(8)
+                .min(1 << s.log2_table_size)
+        })
+        .sum()
+}
+
+/// Parameter counts: (density MLP, rgb MLP, grid).
+pub fn param_counts(s: &Spec) -> (usize, usize, usize) {
+    let n_in = ((s.n_levels * s.n_features) as usize).div_ceil(16) * 16;
+    let density = 64 * n_in + 16 * 64;
+    let rgb = 64 * 32 + 64 * 64 + if s.cutlass { 8 } else { 16 } * 64;
+    (density, rgb, grid_entries(s) * s.n_features as usize)
+}
+
+fn kv(k: &str, v: Value) -> (Value, Value) {
+    (Value::from(k), v)
+}
+
+/// The snapshot's msgpack bytes (before any gzip framing).
+pub fn snapshot_bytes(s: &Spec) -> Vec<u8> {
+    let mut rng = Rng::new(s.seed);
+    let (nd, nr, ng) = param_counts(s);
+    let n_in = ((s.n_levels * s.n_features) as usize).div_ceil(16) * 16;
+    let mut params = Vec::with_capacity(nd + nr + ng);
+    // Weights scaled like a trained network's (±√(6/fan_in)), grid entries ±1.
+    params.extend((0..64 * n_in).map(|_| rng.uniform(-1.0, 1.0) * (6.0 / n_in as f32).sqrt()));
+    params.extend((0..16 * 64).map(|_| rng.uniform(-1.0, 1.0) * (6.0f32 / 64.0).sqrt()));
+    params.extend((0..nr).map(|i| {
+        let fan_in = if i < 64 * 32 { 32.0 } else { 64.0f32 };
+        rng.uniform(-1.0, 1.0) * (6.0 / fan_in).sqrt()
+    }));
+    params.extend((0..ng).map(|_| rng.uniform(-1.0, 1.0)));
+    let params_binary: Vec<u8> = if s.half {
+        params
+            .iter()
+            .flat_map(|&v| f16::from_f32(v).to_le_bytes())
+            .collect()
+    } else {
+        params.iter().flat_map(|&v| v.to_le_bytes()).collect()
+    };
+    let n3 = 128 * 128 * 128;
+    let grid: Vec<u8> = (0..n3 * s.n_cascades)
+        .flat_map(|_| f16::from_f32(rng.uniform(0.0, 0.02)).to_le_bytes())
+        .collect();
+    let half = 0.5 * s.aabb_scale.min(128) as f32;
+    let f = |x: f32| Value::from(x as f64);
+    let otype = if s.cutlass {
+        "CutlassMLP"
+    } else {
+        "FullyFusedMLP"
+    };
+    let mut snapshot = vec![
+        kv("version", Value::from(1)),
+        kv("mode", Value::from("nerf")),
+        kv("params_binary", Value::Binary(params_binary)),
+        kv("density_grid_size", Value::from(128)),
+        kv("density_grid_binary", Value::Binary(grid)),
+        kv(
+            "render_aabb",
+            Value::Map(vec![
+                kv("min", Value::Array(vec![f(0.5 - half); 3])),
+                kv("max", Value::Array(vec![f(0.5 + half); 3])),
+            ]),
+        ),
+        kv(
+            "nerf",
+            Value::Map(vec![
+                kv("aabb_scale", Value::from(s.aabb_scale)),
+                kv(
+                    "dataset",
+                    Value::Map(vec![
+                        kv("scale", f(s.scale)),
+                        kv(
+                            "offset",
+                            Value::Array(s.offset.iter().map(|&o| f(o)).collect()),
+                        ),
+                        kv("is_hdr", Value::from(s.hdr)),
+                    ]),
+                ),
+            ]),
+        ),
+    ];
+    if s.typed {
+        snapshot.push(kv("n_params", Value::from(params.len() as u64)));
+        snapshot.push(kv(
+            "params_type",
+            Value::from(if s.half { "__half" } else { "float" }),
+        ));
+    }
+    let net = |layers: u32| {
+        Value::Map(vec![
+            kv("otype", Value::from(otype)),
+            kv("activation", Value::from("ReLU")),
+            kv("output_activation", Value::from("None")),
+            kv("n_neurons", Value::from(64)),
+            kv("n_hidden_layers", Value::from(layers)),
+        ])
+    };
+    let top = Value::Map(vec![
+        kv(
+            "encoding",
+            Value::Map(vec![
+                kv("otype", Value::from("HashGrid")),
+                kv("n_levels", Value::from(s.n_levels)),
+                kv("n_features_per_level", Value::from(s.n_features)),
+                kv("log2_hashmap_size", Value::from(s.log2_table_size)),
+                kv("base_resolution", Value::from(s.base_resolution)),
+            ]),
+        ),
+        kv("network", net(1)),
+        kv("rgb_network", net(2)),
+        kv(
+            "dir_encoding",
+            Value::Map(vec![
+                kv("otype", Value::from("SphericalHarmonics")),
+                kv("degree", Value::from(4)),
+            ]),
+        ),
+        kv("snapshot", Value::Map(snapshot)),
+    ]);
+    let mut out = Vec::new();
+    rmpv::encode::write_value(&mut out, &top).unwrap();
+    out
+}
+
+/// The file's bytes: msgpack, gzip-framed when `s.gzip`.
+pub fn file_bytes(s: &Spec) -> Vec<u8> {
+    let raw = snapshot_bytes(s);
+    if !s.gzip {
+        return raw;
+    }
+    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    enc.write_all(&raw).unwrap();
+    enc.finish().unwrap()
+}
+
+/// A fresh scratch folder for one test.
+pub fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("nerfx-ingp-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Writes the snapshot of `s` into `dir`; returns its path.
+pub fn write_snapshot(dir: &Path, name: &str, s: &Spec) -> PathBuf {
+    let ext = if s.gzip { "ingp" } else { "msgpack" };
+    let path = dir.join(format!("{name}.{ext}"));
+    std::fs::write(&path, file_bytes(s)).unwrap();
+    path
+}

@@ -1,0 +1,289 @@
+//! instant-ngp snapshots: the loader against an independent NumPy evaluation of the same
+//! files (`tests/numpy/ingp_reference.py`), the occupancy it gives, and corrupt input.
+//!
+//! The NumPy check needs `python3` with `numpy` and `msgpack`; without them it fails with a
+//! message saying so, unless `NERFX_SKIP_NUMPY=1` (then it prints a skip line).
+
+mod common_ingp;
+
+use std::path::Path;
+use std::process::Command;
+
+use common_ingp::{scratch, write_snapshot, Rng, Spec};
+use glam::Vec3;
+use nerfx::field::{Field, IngpField, TableStorage};
+
+/// Seeded points inside the field's bounds and unit directions.
+fn samples(field: &IngpField, n: usize, seed: u64) -> (Vec<Vec3>, Vec<Vec3>) {
+    let mut rng = Rng::new(seed);
+    let b = field.bounds();
+    let pts = (0..n)
+        .map(|_| {
+            let u = Vec3::new(
+                rng.uniform(0.0, 1.0),
+                rng.uniform(0.0, 1.0),
+                rng.uniform(0.0, 1.0),
+            );
+            b.min + u * (b.max - b.min)
+        })
+        .collect();
+    let dirs = (0..n)
+        .map(|_| loop {
+            let d = Vec3::new(
+                rng.uniform(-1.0, 1.0),
+                rng.uniform(-1.0, 1.0),
+                rng.uniform(-1.0, 1.0),
+            );
+            if d.length() > 0.1 && d.length() <= 1.0 {
+                break d.normalize();
+            }
+        })
+        .collect();
+    (pts, dirs)
+}
+
+/// Runs the NumPy reference; `None` when skipped by `NERFX_SKIP_NUMPY=1`.
+fn numpy_reference(snapshot: &Path, pts: &[Vec3], dirs: &[Vec3]) -> Option<Vec<[f32; 4]>> {
+    if std::env::var("NERFX_SKIP_NUMPY").as_deref() == Ok("1") {
+        println!("skipped: NumPy cross-check (NERFX_SKIP_NUMPY=1)");
+        return None;
+    }
+    let dir = snapshot.parent().unwrap();
+    let (input, output) = (dir.join("points.bin"), dir.join("numpy_out.bin"));
+    let bytes: Vec<u8> = pts
+        .iter()
+        .zip(dirs)
+        .flat_map(|(p, d)| [p.x, p.y, p.z, d.x, d.y, d.z])
+        .flat_map(f32::to_le_bytes)
+        .collect();
+    std::fs::write(&input, bytes).unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/numpy/ingp_reference.py");
+    let run = Command::new("python3")
+        .arg(&script)
+        .arg(snapshot)
+        .arg(&input)
+        .arg(&output)
+        .output()
+        .unwrap_or_else(|e| {
+            panic!("the NumPy cross-check needs python3 ({e}); install it with numpy and msgpack (pip install numpy msgpack) or set NERFX_SKIP_NUMPY=1")
+        });
+    assert!(
+        run.status.success(),
+        "the NumPy reference failed (it needs numpy and msgpack: pip install numpy msgpack; \
+         NERFX_SKIP_NUMPY=1 skips it):\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let out = std::fs::read(&output).unwrap();
+    Some(
+        out.chunks_exact(16)
+            .map(|c| {
+                [0, 1, 2, 3].map(|k| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().unwrap()))
+            })
+            .collect(),
+    )
+}
+
+/// `|a − b| ≤ tol·|b|`, with zero matched exactly.
+fn rel_err(a: f32, b: f32) -> f32 {
+    if a == b {
+        0.0
+    } else {
+        (a - b).abs() / b.abs().max(1e-30)
+    }
+}
+
+fn check_against_numpy(name: &str, spec: &Spec) {
+    let dir = scratch(name);
+    let path = write_snapshot(&dir, name, spec);
+    let field = IngpField::load(&path).unwrap();
+    let (pts, dirs) = samples(&field, 3000, spec.seed + 100);
+    let mut sigma = vec![0.0; pts.len()];
+    let mut rgb = vec![Vec3::ZERO; pts.len()];
+    field.density(&pts, &mut sigma);
+    field.radiance(&pts, &dirs, &mut rgb);
+    let occupied = sigma.iter().filter(|&&s| s > 0.0).count();
+    assert!(
+        occupied > 300 && occupied < 2700,
+        "{name}: {occupied} occupied samples"
+    );
+    let Some(want) = numpy_reference(&path, &pts, &dirs) else {
+        return;
+    };
+    assert_eq!(want.len(), pts.len());
+    let (mut max_sigma, mut max_rgb) = (0.0f32, 0.0f32);
+    for (i, w) in want.iter().enumerate() {
+        let e = rel_err(sigma[i], w[0]);
+        assert!(
+            e <= 1e-4,
+            "{name}: sample {i} at {}: σ {} vs NumPy {}",
+            pts[i],
+            sigma[i],
+            w[0]
+        );
+        max_sigma = max_sigma.max(e);
+        for k in 0..3 {
+            let e = rel_err(rgb[i][k], w[k + 1]);
+            assert!(
+                e <= 1e-4,
+                "{name}: sample {i}: rgb[{k}] {} vs NumPy {}",
+                rgb[i][k],
+                w[k + 1]
+            );
+            max_rgb = max_rgb.max(e);
+        }
+    }
+    println!("{name}: max relative error vs NumPy: density {max_sigma:.2e}, colour {max_rgb:.2e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn current_8x4_fp16_gzip_agrees_with_numpy() {
+    check_against_numpy("8x4", &Spec::small_8x4());
+}
+
+#[test]
+fn old_16x2_float_cutlass_hdr_agrees_with_numpy() {
+    check_against_numpy("16x2", &Spec::old_16x2());
+}
+
+#[test]
+fn bounds_follow_the_dataset_transform() {
+    // aabb_scale 4: the training box is 0.5 ± 2 in instant-ngp units, clipped to the
+    // 3 cascades (0.5 ± 2); with s = 0.5 and o = (0.4, 0.6, 0.45) the NeRF-world box is
+    // x ∈ ((−1.5 − 0.4)/0.5, (2.5 − 0.4)/0.5) (x comes from instant-ngp's z), and so on.
+    let dir = scratch("bounds");
+    let path = write_snapshot(&dir, "b", &Spec::old_16x2());
+    let f = IngpField::load(&path).unwrap();
+    let b = f.bounds();
+    let want_min = Vec3::new((-1.5 - 0.4) / 0.5, (-1.5 - 0.6) / 0.5, (-1.5 - 0.45) / 0.5);
+    let want_max = Vec3::new((2.5 - 0.4) / 0.5, (2.5 - 0.6) / 0.5, (2.5 - 0.45) / 0.5);
+    assert!((b.min - want_min).abs().max_element() < 1e-5, "{:?}", b);
+    assert!((b.max - want_max).abs().max_element() < 1e-5, "{:?}", b);
+    // Instant-ngp's smallest step √3/1024 of its unit, in NeRF units.
+    assert!((f.feature_size() - 3f32.sqrt() / 1024.0 / 0.5).abs() < 1e-9);
+    let text = f.describe();
+    for part in [
+        "16 levels x 2 features",
+        "msgpack",
+        "float",
+        "output padding 8",
+        "3 cascades",
+    ] {
+        assert!(text.contains(part), "{part} missing from:\n{text}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn occupancy_is_conservative_where_the_field_has_density() {
+    let dir = scratch("occ");
+    let path = write_snapshot(&dir, "o", &Spec::small_8x4());
+    let f = IngpField::load(&path).unwrap();
+    let (pts, _) = samples(&f, 4000, 9);
+    let mut sigma = vec![0.0; pts.len()];
+    f.density(&pts, &mut sigma);
+    let occ = nerfx::field::Occupancy::build(&f, 64);
+    let mut empty_seen = 0;
+    for (p, s) in pts.iter().zip(&sigma) {
+        let tiny = nerfx::field::Aabb::new(*p, *p);
+        if *s > 0.0 {
+            assert!(f.may_be_occupied(&tiny), "{p}");
+            assert!(occ.is_occupied_point(*p), "{p}");
+        } else if !f.may_be_occupied(&tiny) {
+            empty_seen += 1;
+        }
+    }
+    assert!(empty_seen > 100, "{empty_seen}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn table_storages_agree() {
+    let dir = scratch("storage");
+    let path = write_snapshot(&dir, "s", &Spec::small_8x4());
+    let a = IngpField::load_with(&path, Some(TableStorage::F16)).unwrap();
+    let b = IngpField::load_with(&path, Some(TableStorage::F32)).unwrap();
+    let (pts, dirs) = samples(&a, 500, 4);
+    let (mut sa, mut sb) = (vec![0.0; 500], vec![0.0; 500]);
+    a.density(&pts, &mut sa);
+    b.density(&pts, &mut sb);
+    let (mut ca, mut cb) = (vec![Vec3::ZERO; 500], vec![Vec3::ZERO; 500]);
+    a.radiance(&pts, &dirs, &mut ca);
+    b.radiance(&pts, &dirs, &mut cb);
+    // fp16 tables widen exactly: both storages give the same numbers.
+    assert_eq!(sa, sb);
+    assert_eq!(ca, cb);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn truncated_and_corrupt_files_give_errors_naming_the_file() {
+    let dir = scratch("corrupt");
+    for spec in [Spec::small_8x4(), Spec::old_16x2()] {
+        let full = common_ingp::file_bytes(&spec);
+        let path = dir.join(if spec.gzip { "cut.ingp" } else { "cut.msgpack" });
+        let mut cuts: Vec<usize> = (0..64).map(|k| k * full.len() / 64).collect();
+        cuts.extend([1, 2, 3, 10, 100, full.len() - 1]);
+        for cut in cuts {
+            std::fs::write(&path, &full[..cut]).unwrap();
+            let e = IngpField::load(&path)
+                .err()
+                .unwrap_or_else(|| panic!("cut at {cut} loaded"));
+            let msg = e.to_string();
+            assert!(msg.contains("cut."), "cut at {cut}: {msg}");
+        }
+        // Flipped bytes: an error or a field, never a panic.
+        let mut rng = Rng::new(5);
+        for _ in 0..40 {
+            let mut bad = full.clone();
+            let i = (rng.next_u64() % bad.len().min(4096) as u64) as usize;
+            bad[i] ^= 0x5a;
+            std::fs::write(&path, &bad).unwrap();
+            if let Err(e) = IngpField::load(&path) {
+                assert!(e.to_string().contains("cut."), "{e}");
+            }
+        }
+    }
+    let missing = IngpField::load(&dir.join("missing.ingp")).err().unwrap();
+    assert!(missing.to_string().contains("missing.ingp"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Field throughput with the hash tables in f16 and in f32 (2^19-entry tables, 8×4 levels):
+/// `cargo test --release --test ingp_snapshot -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn bench_table_storage() {
+    let spec = Spec {
+        log2_table_size: 19,
+        aabb_scale: 16,
+        n_cascades: 5,
+        ..Spec::small_8x4()
+    };
+    let dir = scratch("bench");
+    let path = write_snapshot(&dir, "big", &spec);
+    for storage in [TableStorage::F16, TableStorage::F32] {
+        let f = IngpField::load_with(&path, Some(storage)).unwrap();
+        let (pts, dirs) = samples(&f, 1 << 16, 3);
+        let (mut s, mut c) = (vec![0.0; pts.len()], vec![Vec3::ZERO; pts.len()]);
+        let t = std::time::Instant::now();
+        let mut n = 0usize;
+        while t.elapsed().as_secs_f64() < 2.0 {
+            use rayon::prelude::*;
+            pts.par_chunks(1024)
+                .zip(dirs.par_chunks(1024))
+                .zip(s.par_chunks_mut(1024).zip(c.par_chunks_mut(1024)))
+                .for_each(|((p, d), (s, c))| {
+                    f.density(p, s);
+                    f.radiance(p, d, c);
+                });
+            n += pts.len();
+        }
+        let rate = n as f64 / t.elapsed().as_secs_f64();
+        println!(
+            "{storage:?} tables: {:.2} M samples/s (density + radiance, all cores)",
+            rate / 1e6
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

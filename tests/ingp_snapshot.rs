@@ -287,3 +287,92 @@ fn bench_table_storage() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_scene_file_renders_a_snapshot_next_to_it() {
+    use glam::{DMat4, DVec3};
+    use nerfx::camera::{Camera, Perspective, Projection};
+    use nerfx::render::{render, Outputs, Quality, RenderSettings};
+    let dir = scratch("scene");
+    write_snapshot(&dir, "obj", &Spec::small_8x4());
+    let scene_path = dir.join("scene.json");
+    std::fs::write(
+        &scene_path,
+        r#"{ "instances": [ { "name": "obj", "field": { "ingp": { "path": "obj.ingp" } } } ] }"#,
+    )
+    .unwrap();
+    let scene = nerfx::scene::SceneDesc::read(&scene_path)
+        .unwrap()
+        .load()
+        .unwrap()
+        .place(&|_| Ok(DMat4::IDENTITY))
+        .unwrap();
+    let p = Perspective::from_vertical_fov(24, 16, 50.0).unwrap();
+    let eye = DVec3::new(0.0, -9.0, 2.0);
+    let camera = Camera::new(
+        nerfx::demo::look_at(eye, DVec3::ZERO),
+        Projection::Perspective(p),
+    )
+    .unwrap();
+    let settings = RenderSettings::new(Quality::Draft.params(), Outputs::all());
+    let planes = render(&scene, &camera, camera.full_window(), &settings).unwrap();
+    let alpha = planes.alpha.as_ref().unwrap();
+    let covered = (0..16)
+        .flat_map(|y| (0..24).map(move |x| (x, y)))
+        .filter(|&(x, y)| alpha.get(x, y) > 0.05)
+        .count();
+    assert!(covered > 24 * 16 / 4, "{covered} pixels covered");
+    for (x, y) in (0..16).flat_map(|y| (0..24).map(move |x| (x, y))) {
+        let a = alpha.get(x, y);
+        assert!((0.0..=1.0 + 1e-5).contains(&a), "alpha {a} at ({x}, {y})");
+    }
+    // A missing snapshot is named in the error.
+    std::fs::write(
+        &scene_path,
+        r#"{ "instances": [ { "name": "obj", "field": { "ingp": { "path": "gone.ingp" } } } ] }"#,
+    )
+    .unwrap();
+    let e = nerfx::scene::SceneDesc::read(&scene_path)
+        .unwrap()
+        .load()
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("gone.ingp"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn nerfx_info_describes_a_snapshot_and_names_a_corrupt_one() {
+    let dir = scratch("info");
+    let path = write_snapshot(&dir, "garden", &Spec::small_8x4());
+    let out = Command::new(env!("CARGO_BIN_EXE_nerfx"))
+        .arg("info")
+        .arg(&path)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    for part in [
+        "gzip msgpack",
+        "8 levels x 4 features",
+        "__half",
+        "2 cascades",
+        "fill ratio",
+        "bounds",
+    ] {
+        assert!(text.contains(part), "{part} missing from:\n{text}");
+    }
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_nerfx"))
+        .arg("info")
+        .arg(&path)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("garden.ingp"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,4 +1,5 @@
-//! `nerfx`: render the demo, render a scene through a shot for a frame range, benchmark.
+//! `nerfx`: render the demo, render a scene through a shot for a frame range, describe a
+//! field file, benchmark.
 //!
 //! A thin adapter: flags become the core's settings; the core does the work.
 
@@ -67,6 +68,11 @@ enum Command {
         /// Also write a PNG preview beside each EXR.
         #[arg(long)]
         png: bool,
+    },
+    /// Describe a field file: format, architecture, parameters, bounds, occupancy.
+    Info {
+        /// The field file (instant-ngp `.ingp` or `.msgpack`).
+        field: PathBuf,
     },
     /// Measure run time against error for each preset and a naive marcher.
     Bench {
@@ -152,6 +158,10 @@ fn run(cli: Cli) -> Result<()> {
                 bar.suspend(|| println!("frame {frame} → {}", path.display()));
             }
             bar.finish_and_clear();
+            Ok(())
+        }
+        Command::Info { field } => {
+            println!("{}", nerfx::field::describe(&field)?);
             Ok(())
         }
         Command::Bench {

@@ -24,7 +24,11 @@ pub use occupancy::Occupancy;
 pub use sh::ShColor;
 pub use sh4::sh4;
 
+use std::path::Path;
+
 use glam::Vec3;
+
+use crate::error::{Error, Result};
 
 /// A radiance field in its own frame ("field space").
 ///
@@ -60,4 +64,17 @@ pub trait Field: Send + Sync {
     /// Whether the density may be non-zero anywhere in `region`. Must be *conservative*:
     /// `false` only where the density is exactly zero throughout.
     fn may_be_occupied(&self, region: &Aabb) -> bool;
+}
+
+/// A description of a field file for people (`nerfx info`): format, architecture, parameter
+/// count, bounds and occupancy fill ratio. Formats: instant-ngp snapshots (`.ingp`,
+/// `.msgpack`). Unreadable or corrupt files give an error naming the file.
+pub fn describe(path: &Path) -> Result<String> {
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("ingp" | "msgpack") => Ok(IngpField::load(path)?.describe()),
+        _ => Err(Error::Unsupported(format!(
+            "{}: unknown field format (expected an instant-ngp .ingp or .msgpack snapshot)",
+            path.display()
+        ))),
+    }
 }

@@ -5,12 +5,16 @@
 //!     { "name": "environment", "field": { "analytic": { "primitives": [] } } },
 //!     { "name": "statue", "field": { "analytic": { "primitives": [] } },
 //!       "object": "NeRF",
-//!       "crop": { "center": [0, 0, 0], "scale": [2, 2, 2], "rotation": [0, 0, 0] } } ] }
+//!       "crop": { "center": [0, 0, 0], "scale": [2, 2, 2], "rotation": [0, 0, 0] } },
+//!     { "name": "garden", "field": { "ingp": { "path": "garden.ingp" } } } ] }
 //! ```
 //! An instance is placed by `world_from_field` (row-major 4×4, default identity) or, when
 //! `object` is given, by that object's `matrix_world` in the shot, read per frame.
+//! Field files named by a relative path are found next to the scene file (the path is made
+//! absolute when the scene file is read).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use glam::DMat4;
 use serde::{Deserialize, Serialize};
@@ -18,7 +22,7 @@ use serde::{Deserialize, Serialize};
 use super::instance::FieldHandle;
 use super::{CropBox, Instance, Scene};
 use crate::error::{Error, Result};
-use crate::field::Analytic;
+use crate::field::{Analytic, IngpField};
 
 /// Where an instance's field comes from.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -26,6 +30,12 @@ use crate::field::Analytic;
 pub enum FieldSource {
     /// Analytic primitives, inline.
     Analytic(Analytic),
+    /// An instant-ngp snapshot (`.ingp` or `.msgpack`), queried in the NeRF world frame of
+    /// its training poses.
+    Ingp {
+        /// The snapshot file (relative paths: from the scene file's folder).
+        path: PathBuf,
+    },
 }
 
 /// One instance in a scene file.
@@ -74,9 +84,10 @@ impl SceneDesc {
         Self::from_json_str(&text, path)
     }
 
-    /// Parses scene JSON; `path` is only used in messages.
+    /// Parses scene JSON; `path` is used in messages, and relative field paths are made
+    /// relative to its folder.
     pub fn from_json_str(text: &str, path: &Path) -> Result<Self> {
-        let desc: SceneDesc = serde_json::from_str(text).map_err(|e| {
+        let mut desc: SceneDesc = serde_json::from_str(text).map_err(|e| {
             Error::format(
                 path,
                 format!("line {} column {}", e.line(), e.column()),
@@ -89,6 +100,14 @@ impl SceneDesc {
                 FieldSource::Analytic(a) => a
                     .validate()
                     .map_err(|e| Error::format(path, format!("{at}.field"), e.to_string()))?,
+                FieldSource::Ingp { path: file } if file.as_os_str().is_empty() => {
+                    return Err(Error::format(
+                        path,
+                        format!("{at}.field.ingp.path"),
+                        "is empty",
+                    ))
+                }
+                FieldSource::Ingp { .. } => {}
             }
             if inst.world_from_field.is_some() && inst.object.is_some() {
                 return Err(Error::format(
@@ -96,6 +115,14 @@ impl SceneDesc {
                     at,
                     "give either world_from_field or object, not both",
                 ));
+            }
+        }
+        let base = path.parent().unwrap_or(Path::new(""));
+        for inst in &mut desc.instances {
+            if let FieldSource::Ingp { path: file } = &mut inst.field {
+                if file.is_relative() {
+                    *file = base.join(&*file);
+                }
             }
         }
         Ok(desc)
@@ -115,6 +142,9 @@ impl SceneDesc {
             .iter()
             .map(|inst| match &inst.field {
                 FieldSource::Analytic(a) => Ok(FieldHandle::analytic(a.clone())),
+                FieldSource::Ingp { path } => {
+                    Ok(FieldHandle::new(Arc::new(IngpField::load(path)?)))
+                }
             })
             .collect::<Result<Vec<_>>>()?;
         Ok(LoadedScene { desc: self, fields })

@@ -11,15 +11,19 @@ const W: u32 = 17;
 const H: u32 = 9;
 const N: usize = (W * H) as usize;
 
-/// A seeded xorshift generator, so the "random" pixels are the same on every run.
-struct Rng(u64);
+#[path = "common/rng.rs"]
+mod rng;
+
+/// Seeded random pixels from the tests' one generator.
+struct Rng(rng::SplitMix64);
 
 impl Rng {
+    fn new(seed: u64) -> Self {
+        Rng(rng::SplitMix64::new(seed))
+    }
+
     fn unit(&mut self) -> f32 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 40) as f32 / (1u64 << 24) as f32
+        self.0.unit()
     }
 
     fn range(&mut self, lo: f32, hi: f32) -> f32 {
@@ -77,7 +81,7 @@ fn over_ref(a: Rgba, b: Rgba) -> Rgba {
 
 #[test]
 fn over_and_mix_follow_their_formulas() {
-    let mut rng = Rng(0x5eed_0001);
+    let mut rng = Rng::new(0x5eed_0001);
     for _ in 0..8 {
         let (a, b) = (rng.pixels(), rng.pixels());
         let want: Vec<Rgba> = a.iter().zip(&b).map(|(&a, &b)| over_ref(a, b)).collect();
@@ -95,7 +99,7 @@ fn over_and_mix_follow_their_formulas() {
 
 #[test]
 fn accumulation_matte_follows_its_formula() {
-    let mut rng = Rng(0x5eed_0002);
+    let mut rng = Rng::new(0x5eed_0002);
     for _ in 0..8 {
         let black = rng.range(-0.2, 0.4);
         let curve = MatteCurve {
@@ -136,7 +140,7 @@ fn accumulation_matte_follows_its_formula() {
 
 #[test]
 fn identity_matte_keeps_the_render_and_sets_alpha_to_the_accumulation() {
-    let mut rng = Rng(0x5eed_0003);
+    let mut rng = Rng::new(0x5eed_0003);
     let matte = rng.plane(0.0, 1.0);
     let source: Vec<Rgba> = matte
         .data
@@ -154,7 +158,7 @@ fn identity_matte_keeps_the_render_and_sets_alpha_to_the_accumulation() {
 
 #[test]
 fn shadow_catcher_merge_follows_its_formula() {
-    let mut rng = Rng(0x5eed_0004);
+    let mut rng = Rng::new(0x5eed_0004);
     for _ in 0..8 {
         let (a, b) = (rng.pixels(), rng.pixels());
         let shadow = rng.plane(0.0, 1.0);
@@ -179,7 +183,7 @@ fn shadow_catcher_merge_follows_its_formula() {
 
 #[test]
 fn depth_merge_follows_its_formula() {
-    let mut rng = Rng(0x5eed_0005);
+    let mut rng = Rng::new(0x5eed_0005);
     for _ in 0..8 {
         let (a, b) = (rng.pixels(), rng.pixels());
         let (za, zb) = (rng.plane(1.0, 3.0), rng.plane(1.0, 3.0));
@@ -200,7 +204,7 @@ fn depth_merge_follows_its_formula() {
 
 #[test]
 fn identities() {
-    let mut rng = Rng(0x5eed_0006);
+    let mut rng = Rng::new(0x5eed_0006);
     let (a, b) = (rng.pixels(), rng.pixels());
     let (pa, pb) = (planes(&a), planes(&b));
     let clear = planes(&[[0.0; 4]; N]);

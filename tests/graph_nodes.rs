@@ -20,15 +20,19 @@ use nerfx::image::{Plane, Planes, Window};
 use nerfx::render::{Outputs, Quality, RenderSettings};
 use nerfx::scene::SceneDesc;
 
-/// A seeded xorshift generator.
-struct Rng(u64);
+#[path = "common/rng.rs"]
+mod rng;
+
+/// Seeded random pixels from the tests' one generator.
+struct Rng(rng::SplitMix64);
 
 impl Rng {
+    fn new(seed: u64) -> Self {
+        Rng(rng::SplitMix64::new(seed))
+    }
+
     fn unit(&mut self) -> f32 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 40) as f32 / (1u64 << 24) as f32
+        self.0.unit()
     }
 
     fn rgba(&mut self, w: u32, h: u32) -> Planes {
@@ -154,7 +158,7 @@ fn descriptions_are_self_consistent() {
 fn compositing_nodes_render_what_the_functions_give() {
     let (w, h) = (13, 7);
     let window = Window::new(0, 0, w, h);
-    let mut rng = Rng(0x9a7_0001);
+    let mut rng = Rng::new(0x9a7_0001);
     let (a, b) = (rng.rgba(w, h), rng.rgba(w, h));
 
     // Accumulation Matte, with a grey accumulation image as Matte.
@@ -337,7 +341,7 @@ fn invalid_values_are_refused_naming_node_and_parameter() {
     // Cross-parameter checks happen at render time and also name the node.
     v.set("whitePoint", Value::Double(0.0)).unwrap();
     let req = RenderRequest::new(1.0, Window::new(0, 0, 2, 2), 1.0)
-        .with_input("Source", Rng(3).rgba(2, 2));
+        .with_input("Source", Rng::new(3).rgba(2, 2));
     let e = n.render(&v, &req).unwrap_err().to_string();
     assert!(
         e.contains("org.nerfx.AccumulationMatte") && e.contains("white point"),
@@ -354,7 +358,7 @@ fn invalid_values_are_refused_naming_node_and_parameter() {
     );
     assert!(r.render(&v, &req).is_err());
     let bad = RenderRequest::new(1.0, Window::new(0, 0, 3, 2), 1.0)
-        .with_input("Source", Rng(3).rgba(2, 2));
+        .with_input("Source", Rng::new(3).rgba(2, 2));
     let e = n.render(&n.defaults(), &bad).unwrap_err().to_string();
     assert!(
         e.contains("org.nerfx.AccumulationMatte: clip Source"),

@@ -5,46 +5,9 @@
 use glam::{DVec3, Vec3};
 use nerfx::field::{Aabb, Analytic, Field, Occupancy, Primitive, ShColor, Shape};
 
-/// SplitMix64: tiny, seedable, good enough for test inputs.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.unit()
-    }
-
-    fn below(&mut self, n: u32) -> u32 {
-        (self.next_u64() % u64::from(n)) as u32
-    }
-
-    fn vec(&mut self, lo: f32, hi: f32) -> Vec3 {
-        Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
-    }
-
-    /// A uniformly distributed unit vector (rejection from the cube).
-    fn dir(&mut self) -> Vec3 {
-        loop {
-            let v = self.vec(-1.0, 1.0);
-            let l = v.length();
-            if l > 0.1 && l <= 1.0 {
-                return v / l;
-            }
-        }
-    }
-}
+#[path = "common/rng.rs"]
+mod rng;
+use rng::SplitMix64 as Rng;
 
 fn random_primitive(rng: &mut Rng) -> Primitive {
     let center = rng.vec(-1.0, 1.0);
@@ -116,7 +79,7 @@ fn random_ray(rng: &mut Rng, field: &Analytic, occ: &Occupancy) -> (Vec3, Vec3) 
             // Origin exactly on a plane of the finest grid, the way the grid computes it.
             let n = occ.resolution();
             let a = rng.below(3) as usize;
-            let k = rng.below(n + 1);
+            let k = rng.below(u64::from(n) + 1);
             let mut o = inside(rng);
             o[a] = b.min[a] + k as f32 * (b.size()[a] / n as f32);
             let mut d = rng.dir();
@@ -128,7 +91,7 @@ fn random_ray(rng: &mut Rng, field: &Analytic, occ: &Occupancy) -> (Vec3, Vec3) 
             (o, d)
         }
         _ => {
-            let i = rng.below(field.primitives.len() as u32) as usize;
+            let i = rng.below(field.primitives.len() as u64) as usize;
             let target = field.primitives[i].shape.bounds().center() + rng.vec(-0.1, 0.1);
             let o = rng.dir() * 3.0;
             (o, (target - o).normalize())
@@ -285,7 +248,7 @@ fn check_ray(
 
 #[test]
 fn random_scenes_are_conservative_and_match_brute_force() {
-    let mut rng = Rng(0x5eed_0cc0_0000_0001);
+    let mut rng = Rng::new(0x5eed_0cc0_0000_0001);
     let mut rays = 0;
     let mut hits = 0;
     for scene in 0..30 {
@@ -361,7 +324,7 @@ fn chord(o: Vec3, d: Vec3, c: Vec3, r: f64) -> Option<(f64, f64, f64)> {
 
 #[test]
 fn sphere_chord_is_covered_tightly() {
-    let mut rng = Rng(0x00c0_ffee);
+    let mut rng = Rng::new(0x00c0_ffee);
     for _ in 0..40 {
         let center = rng.vec(-2.0, 2.0);
         let radius = rng.range(0.2, 1.5);
@@ -485,7 +448,7 @@ fn far_origin_near_plane_face_is_conservative() {
     let probe = Occupancy::build(&ExactBoxes(corners.clone()), res);
     let b = probe.bounds();
     let cell = b.size() / res as f32;
-    let mut rng = Rng(0xfa2);
+    let mut rng = Rng::new(0xfa2);
     for axis in 0..3 {
         let k = 12;
         let plane = b.min[axis] + k as f32 * cell[axis];
@@ -544,7 +507,7 @@ fn ground_scene() -> Analytic {
 #[test]
 fn grazing_rays_over_a_ground_slab() {
     let field = ground_scene();
-    let mut rng = Rng(0x9a2e);
+    let mut rng = Rng::new(0x9a2e);
     for res in [32u32, 64, 128] {
         let occ = Occupancy::build(&field, res);
         let cell_z = occ.bounds().size().z / res as f32;
@@ -572,7 +535,7 @@ fn grazing_rays_over_a_ground_slab() {
 #[test]
 fn rays_starting_next_to_occupied_cells() {
     let field = ground_scene();
-    let mut rng = Rng(0x7e57);
+    let mut rng = Rng::new(0x7e57);
     for res in [24u32, 64] {
         let occ = Occupancy::build(&field, res);
         let cell = occ.bounds().size() / res as f32;
@@ -614,13 +577,13 @@ fn solid_interiors_and_far_empty_space() {
             sphere_field(Vec3::new(1.0, -1.0, 1.0), 0.03).primitives[0],
         ],
     };
-    let mut rng = Rng(0x50_11d);
+    let mut rng = Rng::new(0x50_11d);
     for (field, res) in [(&solid, 40u32), (&solid, 130), (&corners, 150)] {
         let occ = Occupancy::build(field, res);
         for i in 0..200 {
             let (o, d) = if i % 2 == 0 {
                 let o = rng.dir() * 3.0;
-                let target = field.primitives[rng.below(field.primitives.len() as u32) as usize]
+                let target = field.primitives[rng.below(field.primitives.len() as u64) as usize]
                     .shape
                     .bounds()
                     .center()

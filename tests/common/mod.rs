@@ -2,7 +2,7 @@
 //! analytic scenes and cameras, the one tolerance helper every comparison goes through
 //! ([`assert_close`]), and the invariants every render must satisfy ([`assert_sane`]).
 
-use glam::{DMat4, DQuat, DVec3, Vec3};
+use glam::{DMat4, DVec3, Vec3};
 use nerfx::camera::{Camera, Perspective, Projection};
 use nerfx::demo::look_at;
 use nerfx::field::{Analytic, Primitive, ShColor, Shape};
@@ -11,62 +11,8 @@ use nerfx::reference::metrics;
 use nerfx::render::{render, MarchParams, Outputs, RenderSettings};
 use nerfx::scene::{CropBox, FieldHandle, Instance, Scene};
 
-/// SplitMix64 (Steele, Lea, Flood 2014): a tiny, well-mixed seeded generator, so every
-/// "random" scene is the same on every run and machine.
-pub struct SplitMix64(u64);
-
-impl SplitMix64 {
-    pub fn new(seed: u64) -> Self {
-        SplitMix64(seed)
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[lo, hi)`.
-    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        let u = (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
-        lo + (hi - lo) * u
-    }
-
-    /// Log-uniform in `[lo, hi)`.
-    pub fn log_uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        self.uniform(lo.ln(), hi.ln()).exp()
-    }
-
-    /// Uniform in `0..n`.
-    pub fn below(&mut self, n: u64) -> u64 {
-        self.next_u64() % n
-    }
-
-    pub fn vec3(&mut self, lo: f64, hi: f64) -> Vec3 {
-        self.dvec3(lo, hi).as_vec3()
-    }
-
-    pub fn dvec3(&mut self, lo: f64, hi: f64) -> DVec3 {
-        DVec3::new(
-            self.uniform(lo, hi),
-            self.uniform(lo, hi),
-            self.uniform(lo, hi),
-        )
-    }
-
-    /// A rotation about a random axis by a random angle.
-    pub fn rotation(&mut self) -> DQuat {
-        let axis = loop {
-            let a = self.dvec3(-1.0, 1.0);
-            if a.length() > 0.1 {
-                break a.normalize();
-            }
-        };
-        DQuat::from_axis_angle(axis, self.uniform(0.0, std::f64::consts::TAU))
-    }
-}
+mod rng;
+pub use rng::SplitMix64;
 
 /// A primitive with a constant colour.
 pub fn prim(shape: Shape, density: f32, rgb: [f32; 3]) -> Primitive {

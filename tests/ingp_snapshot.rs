@@ -264,26 +264,35 @@ fn bench_table_storage() {
     let path = write_snapshot(&dir, "big", &spec);
     for storage in [TableStorage::F16, TableStorage::F32] {
         let f = IngpField::load_with(&path, Some(storage)).unwrap();
+        // Scattered samples (every lookup a cache miss) and samples along rays (1024 per
+        // ray, as the marcher batches them).
         let (pts, dirs) = samples(&f, 1 << 16, 3);
-        let (mut s, mut c) = (vec![0.0; pts.len()], vec![Vec3::ZERO; pts.len()]);
-        let t = std::time::Instant::now();
-        let mut n = 0usize;
-        while t.elapsed().as_secs_f64() < 2.0 {
-            use rayon::prelude::*;
-            pts.par_chunks(1024)
-                .zip(dirs.par_chunks(1024))
-                .zip(s.par_chunks_mut(1024).zip(c.par_chunks_mut(1024)))
-                .for_each(|((p, d), (s, c))| {
-                    f.density(p, s);
-                    f.radiance(p, d, c);
-                });
-            n += pts.len();
+        let (ends, _) = samples(&f, 128, 8);
+        let along: Vec<Vec3> = ends
+            .chunks_exact(2)
+            .flat_map(|e| (0..1024).map(move |k| e[0].lerp(e[1], k as f32 / 1023.0)))
+            .collect();
+        for (what, pts) in [("scattered", &pts), ("along rays", &along)] {
+            let (mut s, mut c) = (vec![0.0; pts.len()], vec![Vec3::ZERO; pts.len()]);
+            let t = std::time::Instant::now();
+            let mut n = 0usize;
+            while t.elapsed().as_secs_f64() < 2.0 {
+                use rayon::prelude::*;
+                pts.par_chunks(1024)
+                    .zip(dirs.par_chunks(1024))
+                    .zip(s.par_chunks_mut(1024).zip(c.par_chunks_mut(1024)))
+                    .for_each(|((p, d), (s, c))| {
+                        f.density(p, s);
+                        f.radiance(p, d, c);
+                    });
+                n += pts.len();
+            }
+            let rate = n as f64 / t.elapsed().as_secs_f64();
+            println!(
+                "{storage:?} tables, {what}: {:.2} M samples/s (density + radiance, all cores)",
+                rate / 1e6
+            );
         }
-        let rate = n as f64 / t.elapsed().as_secs_f64();
-        println!(
-            "{storage:?} tables: {:.2} M samples/s (density + radiance, all cores)",
-            rate / 1e6
-        );
     }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -14,6 +14,8 @@ mod mlp;
 mod occupancy;
 mod sh;
 mod sh4;
+mod torch_ckpt;
+mod zip;
 
 pub use aabb::Aabb;
 pub use analytic::{Analytic, Primitive, Shape};
@@ -23,6 +25,7 @@ pub use mlp::{Mlp, MlpConfig};
 pub use occupancy::Occupancy;
 pub use sh::ShColor;
 pub use sh4::sh4;
+pub use torch_ckpt::{Checkpoint, DType, TensorInfo};
 
 use std::path::Path;
 

@@ -11,6 +11,9 @@ mod cascades;
 mod hashgrid;
 mod ingp;
 mod mlp;
+mod nerfacto;
+mod nerfacto_config;
+mod nerfacto_torch;
 mod occupancy;
 mod sh;
 mod sh4;
@@ -22,6 +25,7 @@ pub use analytic::{Analytic, Primitive, Shape};
 pub use hashgrid::{HashGrid, HashGridConfig, TableStorage};
 pub use ingp::IngpField;
 pub use mlp::{Mlp, MlpConfig};
+pub use nerfacto::NerfactoField;
 pub use occupancy::Occupancy;
 pub use sh::ShColor;
 pub use sh4::sh4;
@@ -48,6 +52,31 @@ pub trait Field: Send + Sync {
     /// Linear RGB radiance (≥ 0) at each point seen along each unit direction `dirs[i]`.
     /// `rgb.len() == points.len() == dirs.len()`.
     fn radiance(&self, points: &[Vec3], dirs: &[Vec3], rgb: &mut [Vec3]);
+
+    /// Floats of per-sample state that [`Field::density_with_features`] can leave for
+    /// [`Field::radiance_with_features`], so that a colour query need not redo the density
+    /// pass's work (a trained field's encoding and density network); 0 (the default): none.
+    fn feature_count(&self) -> usize {
+        0
+    }
+
+    /// [`Field::density`], also writing [`Field::feature_count`] floats per point into
+    /// `features` (`features.len() == points.len() · feature_count()`).
+    fn density_with_features(&self, points: &[Vec3], sigma: &mut [f32], _features: &mut [f32]) {
+        self.density(points, sigma)
+    }
+
+    /// [`Field::radiance`] at points whose density pass left `features` (laid out as in
+    /// [`Field::density_with_features`]).
+    fn radiance_with_features(
+        &self,
+        points: &[Vec3],
+        dirs: &[Vec3],
+        _features: &[f32],
+        rgb: &mut [Vec3],
+    ) {
+        self.radiance(points, dirs, rgb)
+    }
 
     /// The length (field units) over which the density varies smoothly: the marcher's step
     /// is a quality preset's fraction of it. Sharper changes (surfaces) are found by the

@@ -40,20 +40,36 @@ pub(super) struct InstancePlan {
     occupancy: Arc<Occupancy>,
     /// Base step in field units.
     base_step: f64,
+    /// Floats of per-sample state the field passes from its density to its colour query,
+    /// and where they start among a node's features (the instances' side by side).
+    features: usize,
+    feature_offset: usize,
 }
 
 impl InstancePlan {
     pub(super) fn for_scene(scene: &Scene, params: &MarchParams) -> Vec<InstancePlan> {
+        let mut feature_offset = 0;
         scene
             .instances
             .iter()
-            .map(|inst| InstancePlan {
-                occupancy: inst.handle().occupancy(params.occupancy_resolution),
-                base_step: inst.field().feature_size() as f64
-                    / params.steps_per_feature.max(1e-3) as f64,
+            .map(|inst| {
+                let features = inst.field().feature_count();
+                feature_offset += features;
+                InstancePlan {
+                    occupancy: inst.handle().occupancy(params.occupancy_resolution),
+                    base_step: inst.field().feature_size() as f64
+                        / params.steps_per_feature.max(1e-3) as f64,
+                    features,
+                    feature_offset: feature_offset - features,
+                }
             })
             .collect()
     }
+}
+
+/// Floats of field features per node: every instance's, side by side.
+fn feature_stride(plans: &[InstancePlan]) -> usize {
+    plans.iter().map(|p| p.features).sum()
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -106,6 +122,11 @@ pub(super) struct Scratch {
     nodes: Vec<Vec<Node>>,
     inst_sigma: Vec<f64>,
     inst_sigma_prev: Vec<f64>,
+    /// Field features per node (`slot / n_instances · stride + offset`), and last round's.
+    features: Vec<f32>,
+    features_prev: Vec<f32>,
+    /// One instance's features for one batched query.
+    field_features: Vec<f32>,
     pending: Vec<Pending>,
     /// Pairs `(ray, first node)` to test for refinement.
     candidates: Vec<(u32, u32)>,
@@ -133,13 +154,16 @@ pub(super) fn march_tile(
 ) -> RenderStats {
     let (params, outputs) = (&settings.march, &settings.outputs);
     let n_inst = scene.instances.len();
+    let stride = feature_stride(plans);
     let n_rays = tile.area();
     setup_rays(scene, plans, camera, tile, s);
 
     while !s.active.is_empty() {
         // Each live ray keeps its last node (the start of its next piece), then lays more.
         std::mem::swap(&mut s.inst_sigma, &mut s.inst_sigma_prev);
+        std::mem::swap(&mut s.features, &mut s.features_prev);
         s.inst_sigma.clear();
+        s.features.clear();
         s.pending.clear();
         for a in 0..s.active.len() {
             let r = s.active[a] as usize;
@@ -150,14 +174,17 @@ pub(super) fn march_tile(
                 node.slot = s.inst_sigma.len() as u32;
                 s.inst_sigma
                     .extend_from_slice(&s.inst_sigma_prev[slot..slot + n_inst]);
+                let f = slot / n_inst * stride;
+                s.features
+                    .extend_from_slice(&s.features_prev[f..f + stride]);
                 node.weight = 0.0;
                 s.nodes[r].push(node);
             }
             lay_nodes(r, plans, params, s);
         }
-        evaluate_pending(scene, n_inst, s);
+        evaluate_pending(scene, plans, s);
 
-        refine(scene, n_inst, params, s);
+        refine(scene, plans, params, s);
 
         // Integrate the pieces, in order.
         for &r in &s.active {
@@ -166,7 +193,7 @@ pub(super) fn march_tile(
         }
 
         if outputs.rgb {
-            shade(scene, n_inst, params, s);
+            shade(scene, plans, params, s);
         }
         let rays = &s.rays;
         s.active.retain(|&r| rays[r as usize].live);
@@ -314,11 +341,16 @@ fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scr
 
 /// Evaluates every pending node's density (one batched call per instance) and inserts the
 /// nodes, in order, into their rays' node lists.
-fn evaluate_pending(scene: &Scene, n_inst: usize, s: &mut Scratch) {
+fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
+    let n_inst = plans.len();
+    let stride = feature_stride(plans);
     let first_slot = s.inst_sigma.len();
+    let first_node = first_slot / n_inst;
     s.inst_sigma
         .resize(first_slot + s.pending.len() * n_inst, 0.0);
-    for (i, inst) in scene.instances.iter().enumerate() {
+    s.features
+        .resize((first_node + s.pending.len()) * stride, 0.0);
+    for (i, (inst, plan)) in scene.instances.iter().zip(plans).enumerate() {
         s.points.clear();
         s.owners.clear();
         for (p, pending) in s.pending.iter().enumerate() {
@@ -335,8 +367,16 @@ fn evaluate_pending(scene: &Scene, n_inst: usize, s: &mut Scratch) {
         }
         s.field_out.clear();
         s.field_out.resize(s.points.len(), 0.0);
-        inst.field().density(&s.points, &mut s.field_out);
+        let f = plan.features;
+        s.field_features.clear();
+        s.field_features.resize(s.points.len() * f, 0.0);
+        inst.field()
+            .density_with_features(&s.points, &mut s.field_out, &mut s.field_features);
         s.stats.density_samples += s.points.len() as u64;
+        for (&(p, _), features) in s.owners.iter().zip(s.field_features.chunks_exact(f.max(1))) {
+            let at = (first_node + p as usize) * stride + plan.feature_offset;
+            s.features[at..at + f].copy_from_slice(&features[..f]);
+        }
         for (&(p, k), &sigma) in s.owners.iter().zip(&s.field_out) {
             // Sanitise: NaN or negative densities count as empty, infinities as huge.
             let sigma = if sigma > 0.0 {
@@ -371,7 +411,8 @@ fn evaluate_pending(scene: &Scene, n_inst: usize, s: &mut Scratch) {
 /// between whose ends the fields' density bound rises well above both (a sheet thinner than
 /// a step), level by level, each level one batch across the tile. After the first level only
 /// the pairs next to the nodes just added can need it, so only those are looked at.
-fn refine(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
+fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
+    let n_inst = plans.len();
     s.candidates.clear();
     for &r in &s.active {
         for i in 0..s.nodes[r as usize].len().saturating_sub(1) {
@@ -396,7 +437,7 @@ fn refine(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
         if s.pending.is_empty() {
             break;
         }
-        evaluate_pending(scene, n_inst, s);
+        evaluate_pending(scene, plans, s);
     }
 }
 
@@ -514,7 +555,9 @@ fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, out
 /// nodes of a ray go unshaded while their weights add up to at most
 /// [`MarchParams::color_skip_budget`], so the colour error a ray can get from skipping is
 /// bounded by that budget times its brightest radiance.
-fn shade(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
+fn shade(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
+    let n_inst = plans.len();
+    let stride = feature_stride(plans);
     let budget = params.color_skip_budget as f64;
     for &r in &s.active {
         let state = &mut s.rays[r as usize];
@@ -525,10 +568,11 @@ fn shade(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
             }
         }
     }
-    for (i, inst) in scene.instances.iter().enumerate() {
+    for (i, (inst, plan)) in scene.instances.iter().zip(plans).enumerate() {
         s.points.clear();
         s.dirs.clear();
         s.owners.clear();
+        s.field_features.clear();
         for &r in &s.active {
             let (r, nodes) = (r as usize, &s.nodes[r as usize]);
             let Some(lr) = &s.local[r * n_inst + i] else {
@@ -540,6 +584,9 @@ fn shade(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
                     s.points.push(lr.at(node.t));
                     s.dirs.push(lr.dir);
                     s.owners.push((r as u32, share));
+                    let at = node.slot as usize / n_inst * stride + plan.feature_offset;
+                    s.field_features
+                        .extend_from_slice(&s.features[at..at + plan.features]);
                 }
             }
         }
@@ -548,7 +595,8 @@ fn shade(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
         }
         s.rgb_out.clear();
         s.rgb_out.resize(s.points.len(), Vec3::ZERO);
-        inst.field().radiance(&s.points, &s.dirs, &mut s.rgb_out);
+        inst.field()
+            .radiance_with_features(&s.points, &s.dirs, &s.field_features, &mut s.rgb_out);
         s.stats.color_samples += s.points.len() as u64;
         for (&(r, share), c) in s.owners.iter().zip(&s.rgb_out) {
             let c = c.as_dvec3().max(DVec3::ZERO);
@@ -573,5 +621,90 @@ fn finish(state: &RayState, outputs: &Outputs) -> PixelResult {
         } else {
             f32::INFINITY
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use glam::Vec3;
+
+    use super::super::{render, Outputs, Quality, RenderSettings};
+    use crate::field::{Aabb, Analytic, Field};
+    use crate::scene::{FieldHandle, FieldSource, Instance, Scene};
+
+    /// Hands each sample's position to the colour query as its features and colours from
+    /// those alone: if the marcher paired features with the wrong samples (or the wrong
+    /// instance), colours would change.
+    struct Echo(Analytic);
+
+    impl Field for Echo {
+        fn bounds(&self) -> Aabb {
+            self.0.bounds()
+        }
+        fn density(&self, points: &[Vec3], sigma: &mut [f32]) {
+            self.0.density(points, sigma)
+        }
+        fn radiance(&self, _: &[Vec3], _: &[Vec3], _: &mut [Vec3]) {
+            unreachable!("the marcher asks for colour with the density pass's features")
+        }
+        fn feature_count(&self) -> usize {
+            3
+        }
+        fn density_with_features(&self, points: &[Vec3], sigma: &mut [f32], features: &mut [f32]) {
+            self.0.density(points, sigma);
+            for (p, f) in points.iter().zip(features.chunks_exact_mut(3)) {
+                f.copy_from_slice(&p.to_array());
+            }
+        }
+        fn radiance_with_features(
+            &self,
+            _: &[Vec3],
+            dirs: &[Vec3],
+            features: &[f32],
+            rgb: &mut [Vec3],
+        ) {
+            let points: Vec<Vec3> = features.chunks_exact(3).map(Vec3::from_slice).collect();
+            self.0.radiance(&points, dirs, rgb)
+        }
+        fn feature_size(&self) -> f32 {
+            self.0.feature_size()
+        }
+        fn density_bounds(&self, regions: &[Aabb], bounds: &mut [f32]) -> bool {
+            self.0.density_bounds(regions, bounds)
+        }
+        fn may_be_occupied(&self, region: &Aabb) -> bool {
+            self.0.may_be_occupied(region)
+        }
+    }
+
+    #[test]
+    fn features_reach_the_colour_query_of_their_own_samples() {
+        let (plain, camera) = crate::demo::scene_and_camera(48, 27).unwrap();
+        let desc = crate::demo::scene_desc();
+        // The object instance echoes its features, the environment does not: offsets into
+        // a node's features must keep them apart.
+        let instances = plain
+            .instances
+            .iter()
+            .zip(&desc.instances)
+            .map(|(inst, d)| {
+                let FieldSource::Analytic(a) = &d.field else {
+                    unreachable!("the demo is analytic")
+                };
+                let handle = if inst.name == "object" {
+                    FieldHandle::new(Arc::new(Echo(a.clone())))
+                } else {
+                    inst.handle().clone()
+                };
+                Instance::new(inst.name.clone(), handle, inst.world_from_field(), None).unwrap()
+            })
+            .collect();
+        let echo = Scene::new(instances);
+        let settings = RenderSettings::new(Quality::Preview.params(), Outputs::rgba());
+        let want = render(&plain, &camera, camera.full_window(), &settings).unwrap();
+        let got = render(&echo, &camera, camera.full_window(), &settings).unwrap();
+        assert_eq!(got, want);
     }
 }

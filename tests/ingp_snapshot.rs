@@ -249,49 +249,52 @@ fn truncated_and_corrupt_files_give_errors_naming_the_file() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Field throughput with the hash tables in f16 and in f32 (2^19-entry tables, 8×4 levels):
-/// `cargo test --release --test ingp_snapshot -- --ignored --nocapture`.
+/// Samples along `n_rays` random chords of the bounds, 1024 per ray (as the marcher batches
+/// them), each with its ray's direction.
+fn along_rays(field: &IngpField, n_rays: usize, seed: u64) -> (Vec<Vec3>, Vec<Vec3>) {
+    let (ends, _) = samples(field, 2 * n_rays, seed);
+    ends.chunks_exact(2)
+        .flat_map(|e| {
+            let d = (e[1] - e[0]).normalize_or(Vec3::X);
+            (0..1024).map(move |k| (e[0].lerp(e[1], k as f32 / 1023.0), d))
+        })
+        .unzip()
+}
+
+/// Field throughput (2^19-entry tables, 8×4 and 16×2 levels, tables in f16 and in f32, one
+/// and two threads, samples scattered or along rays):
+/// `cargo test --release --test ingp_snapshot -- --ignored --nocapture bench_field`.
 #[test]
 #[ignore]
-fn bench_table_storage() {
-    let spec = Spec {
-        log2_table_size: 19,
-        aabb_scale: 16,
-        n_cascades: 5,
-        ..Spec::small_8x4()
-    };
+fn bench_field_throughput() {
     let dir = scratch("bench");
-    let path = write_snapshot(&dir, "big", &spec);
-    for storage in [TableStorage::F16, TableStorage::F32] {
-        let f = IngpField::load_with(&path, Some(storage)).unwrap();
-        // Scattered samples (every lookup a cache miss) and samples along rays (1024 per
-        // ray, as the marcher batches them).
-        let (pts, dirs) = samples(&f, 1 << 16, 3);
-        let (ends, _) = samples(&f, 128, 8);
-        let along: Vec<Vec3> = ends
-            .chunks_exact(2)
-            .flat_map(|e| (0..1024).map(move |k| e[0].lerp(e[1], k as f32 / 1023.0)))
-            .collect();
-        for (what, pts) in [("scattered", &pts), ("along rays", &along)] {
-            let (mut s, mut c) = (vec![0.0; pts.len()], vec![Vec3::ZERO; pts.len()]);
-            let t = std::time::Instant::now();
-            let mut n = 0usize;
-            while t.elapsed().as_secs_f64() < 2.0 {
-                use rayon::prelude::*;
-                pts.par_chunks(1024)
-                    .zip(dirs.par_chunks(1024))
-                    .zip(s.par_chunks_mut(1024).zip(c.par_chunks_mut(1024)))
-                    .for_each(|((p, d), (s, c))| {
-                        f.density(p, s);
-                        f.radiance(p, d, c);
-                    });
-                n += pts.len();
+    for (name, base) in [("8x4", Spec::small_8x4()), ("16x2", Spec::old_16x2())] {
+        let spec = Spec {
+            log2_table_size: 19,
+            aabb_scale: 16,
+            n_cascades: 5,
+            ..base
+        };
+        let path = write_snapshot(&dir, name, &spec);
+        for storage in [TableStorage::F16, TableStorage::F32] {
+            let f = IngpField::load_with(&path, Some(storage)).unwrap();
+            let scattered = samples(&f, 1 << 16, 3);
+            let rays = along_rays(&f, 64, 8);
+            for (what, (pts, dirs)) in [("scattered", &scattered), ("along rays", &rays)] {
+                let mut sigma = vec![0.0; pts.len()];
+                f.density(pts, &mut sigma);
+                let occupied = sigma.iter().filter(|&&s| s > 0.0).count() as f64;
+                for threads in [1, 2] {
+                    let t = nerfx::bench::field::throughput(&f, pts, dirs, threads, 1.0).unwrap();
+                    println!(
+                        "{name} {storage:?} {what:10} ({:2.0}% occupied), {threads} thread(s): \
+                         density {:5.2} M/s, density + radiance {:5.2} M/s",
+                        100.0 * occupied / pts.len() as f64,
+                        t.density / 1e6,
+                        t.density_radiance / 1e6
+                    );
+                }
             }
-            let rate = n as f64 / t.elapsed().as_secs_f64();
-            println!(
-                "{storage:?} tables, {what}: {:.2} M samples/s (density + radiance, all cores)",
-                rate / 1e6
-            );
         }
     }
     let _ = std::fs::remove_dir_all(&dir);

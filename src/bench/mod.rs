@@ -5,6 +5,7 @@
 //! reference ([`crate::reference`]), and reports ms/frame, density samples per pixel, PSNR
 //! and the largest alpha and depth errors, as Markdown and as a plot of time against PSNR.
 
+pub mod field;
 pub mod plot;
 
 use std::path::Path;

@@ -45,6 +45,9 @@ pub struct IngpField {
     summary: Summary,
     grid: HashGrid,
     density_mlp: Mlp,
+    /// The density MLP keeping its first output only (`density` needs nothing else: the last
+    /// layer costs `width` multiply-adds instead of `16·width`).
+    sigma_mlp: Mlp,
     rgb_mlp: Mlp,
     hdr: bool,
     /// `s` and `o` of `nerf_matrix_to_ngp`.
@@ -289,6 +292,11 @@ impl IngpField {
         let bad = |what: &str| doc.err("snapshot.params_binary", format!("bad {what} parameters"));
         let density_mlp =
             Mlp::new(layout.density, &params[..nd]).ok_or_else(|| bad("density MLP"))?;
+        let sigma_config = MlpConfig {
+            n_outputs: 1,
+            ..layout.density
+        };
+        let sigma_mlp = Mlp::new(sigma_config, &params[..nd]).ok_or_else(|| bad("density MLP"))?;
         let rgb_mlp = Mlp::new(layout.rgb, &params[nd..nd + nr]).ok_or_else(|| bad("rgb MLP"))?;
         let grid_params = &params[nd + nr..nd + nr + layout.grid.n_params()];
         let storage = storage.unwrap_or(if half {
@@ -326,6 +334,7 @@ impl IngpField {
             },
             grid,
             density_mlp,
+            sigma_mlp,
             rgb_mlp,
             hdr,
             scale,
@@ -363,12 +372,13 @@ impl IngpField {
         (q - self.aabb_min) / self.aabb_size
     }
 
-    /// The density MLP's 16 outputs at `n` points (unit cube): `enc` and `out` are scratch.
-    fn density_outputs(&self, xs: &[Vec3], enc: &mut Vec<f32>, out: &mut Vec<f32>) {
+    /// The outputs of `mlp` (the density MLP, whole or σ only) at `n` points (unit cube):
+    /// `enc` and `out` are scratch.
+    fn density_outputs(&self, mlp: &Mlp, xs: &[Vec3], enc: &mut Vec<f32>, out: &mut Vec<f32>) {
         enc.resize(xs.len() * self.grid.config().n_outputs(), 0.0);
-        out.resize(xs.len() * DENSITY_OUTPUTS, 0.0);
+        out.resize(xs.len() * mlp.config().n_outputs, 0.0);
         self.grid.encode(xs, enc);
-        self.density_mlp.forward(enc, out);
+        mlp.forward(enc, out);
     }
 
     /// A human-readable description: format, architecture, parameters, bounds, occupancy.
@@ -574,9 +584,9 @@ impl Field for IngpField {
                     idx.push(i);
                 }
             }
-            self.density_outputs(&xs, &mut enc, &mut out);
-            for (k, &i) in idx.iter().enumerate() {
-                let raw = out[k * DENSITY_OUTPUTS].min(MAX_LOG_DENSITY);
+            self.density_outputs(&self.sigma_mlp, &xs, &mut enc, &mut out);
+            for (&i, &raw) in idx.iter().zip(out.iter()) {
+                let raw = raw.min(MAX_LOG_DENSITY);
                 sig[i] = self.scale * raw.exp();
             }
         }
@@ -593,7 +603,7 @@ impl Field for IngpField {
                 pts.iter()
                     .map(|p| self.unit_from_ngp(self.ngp_from_field(*p))),
             );
-            self.density_outputs(&xs, &mut enc, &mut out);
+            self.density_outputs(&self.density_mlp, &xs, &mut enc, &mut out);
             input.resize(pts.len() * (DENSITY_OUTPUTS + 16), 0.0);
             for ((row, d), o) in input
                 .chunks_exact_mut(DENSITY_OUTPUTS + 16)

@@ -100,12 +100,17 @@ pub trait Field: Send + Sync {
 
 /// A description of a field file for people (`nerfx info`): format, architecture, parameter
 /// count, bounds and occupancy fill ratio. Formats: instant-ngp snapshots (`.ingp`,
-/// `.msgpack`). Unreadable or corrupt files give an error naming the file.
+/// `.msgpack`) and nerfstudio nerfacto run directories (holding `config.yml`). Unreadable or
+/// corrupt files give an error naming the file.
 pub fn describe(path: &Path) -> Result<String> {
+    if path.is_dir() {
+        return Ok(NerfactoField::load(path)?.describe());
+    }
     match path.extension().and_then(|e| e.to_str()) {
         Some("ingp" | "msgpack") => Ok(IngpField::load(path)?.describe()),
         _ => Err(Error::Unsupported(format!(
-            "{}: unknown field format (expected an instant-ngp .ingp or .msgpack snapshot)",
+            "{}: unknown field format (expected an instant-ngp .ingp or .msgpack snapshot or \
+             a nerfstudio run directory)",
             path.display()
         ))),
     }

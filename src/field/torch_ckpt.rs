@@ -150,6 +150,11 @@ impl Checkpoint {
         })
     }
 
+    /// The checkpoint file.
+    pub fn path(&self) -> &Path {
+        self.zip.path()
+    }
+
     /// The tensors by dotted name.
     pub fn tensors(&self) -> &BTreeMap<String, TensorInfo> {
         &self.tensors

@@ -6,7 +6,8 @@
 //!     { "name": "statue", "field": { "analytic": { "primitives": [] } },
 //!       "object": "NeRF",
 //!       "crop": { "center": [0, 0, 0], "scale": [2, 2, 2], "rotation": [0, 0, 0] } },
-//!     { "name": "garden", "field": { "ingp": { "path": "garden.ingp" } } } ] }
+//!     { "name": "garden", "field": { "ingp": { "path": "garden.ingp" } } },
+//!     { "name": "poster", "field": { "nerfacto": { "path": "outputs/poster/nerfacto/run1" } } } ] }
 //! ```
 //! An instance is placed by `world_from_field` (row-major 4×4, default identity) or, when
 //! `object` is given, by that object's `matrix_world` in the shot, read per frame.
@@ -22,7 +23,7 @@ use serde::{Deserialize, Serialize};
 use super::instance::FieldHandle;
 use super::{CropBox, Instance, Scene};
 use crate::error::{Error, Result};
-use crate::field::{Analytic, IngpField};
+use crate::field::{Analytic, IngpField, NerfactoField};
 
 /// Where an instance's field comes from.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -34,6 +35,12 @@ pub enum FieldSource {
     /// its training poses.
     Ingp {
         /// The snapshot file (relative paths: from the scene file's folder).
+        path: PathBuf,
+    },
+    /// A nerfstudio nerfacto run directory (`config.yml`, `dataparser_transforms.json`,
+    /// `nerfstudio_models/step-*.ckpt`), queried in nerfstudio's normalised frame.
+    Nerfacto {
+        /// The run directory (relative paths: from the scene file's folder).
         path: PathBuf,
     },
 }
@@ -107,7 +114,14 @@ impl SceneDesc {
                         "is empty",
                     ))
                 }
-                FieldSource::Ingp { .. } => {}
+                FieldSource::Nerfacto { path: file } if file.as_os_str().is_empty() => {
+                    return Err(Error::format(
+                        path,
+                        format!("{at}.field.nerfacto.path"),
+                        "is empty",
+                    ))
+                }
+                FieldSource::Ingp { .. } | FieldSource::Nerfacto { .. } => {}
             }
             if inst.world_from_field.is_some() && inst.object.is_some() {
                 return Err(Error::format(
@@ -119,7 +133,9 @@ impl SceneDesc {
         }
         let base = path.parent().unwrap_or(Path::new(""));
         for inst in &mut desc.instances {
-            if let FieldSource::Ingp { path: file } = &mut inst.field {
+            if let FieldSource::Ingp { path: file } | FieldSource::Nerfacto { path: file } =
+                &mut inst.field
+            {
                 if file.is_relative() {
                     *file = base.join(&*file);
                 }
@@ -144,6 +160,9 @@ impl SceneDesc {
                 FieldSource::Analytic(a) => Ok(FieldHandle::analytic(a.clone())),
                 FieldSource::Ingp { path } => {
                     Ok(FieldHandle::new(Arc::new(IngpField::load(path)?)))
+                }
+                FieldSource::Nerfacto { path } => {
+                    Ok(FieldHandle::new(Arc::new(NerfactoField::load(path)?)))
                 }
             })
             .collect::<Result<Vec<_>>>()?;

@@ -1,0 +1,528 @@
+//! A writer of small nerfstudio nerfacto runs with seeded weights, written from the format
+//! facts (torch's zip layout, pickle protocol 2, nerfstudio's state-dict keys; DESIGN §4),
+//! for the loader's tests and the NumPy cross-check: `config.yml`,
+//! `dataparser_transforms.json` and `nerfstudio_models/step-<n>.ckpt`.
+#![allow(dead_code)]
+
+#[path = "../common/rng.rs"]
+mod rng;
+
+use std::path::{Path, PathBuf};
+
+use half::f16;
+pub use rng::SplitMix64;
+
+/// What to write.
+#[derive(Clone, Debug)]
+pub struct Spec {
+    /// The torch-fallback layout (biases, `hash_table`) instead of tiny-cuda-nn's.
+    pub torch: bool,
+    /// Store tiny-cuda-nn's parameters as f16 (as tcnn's fp16 modules do).
+    pub half: bool,
+    pub log2_table_size: u32,
+    pub n_images: usize,
+    pub average_init_density: f32,
+    /// Added to the density output's bias (torch layout only): shifts the density down so
+    /// that part of the bounds is empty.
+    pub density_offset: f32,
+    /// Whether the occupancy computed at load should have empty cells (about half).
+    pub expect_empty_space: bool,
+    pub seed: u64,
+}
+
+impl Spec {
+    pub fn tcnn() -> Self {
+        Spec {
+            torch: false,
+            half: true,
+            log2_table_size: 12,
+            n_images: 5,
+            average_init_density: 0.01,
+            density_offset: 0.0,
+            expect_empty_space: false,
+            seed: 11,
+        }
+    }
+
+    pub fn torch() -> Self {
+        Spec {
+            torch: true,
+            half: false,
+            log2_table_size: 11,
+            n_images: 3,
+            average_init_density: 0.05,
+            density_offset: -2.0,
+            expect_empty_space: true,
+            seed: 12,
+        }
+    }
+}
+
+pub const LEVELS: u32 = 16;
+pub const FEATURES: usize = 2;
+pub const APPEARANCE: usize = 32;
+pub const STEP: u64 = 3000;
+
+/// A storage and the tensors viewing it.
+struct Storage {
+    half: bool,
+    bytes: Vec<u8>,
+}
+
+struct Tensor {
+    name: String,
+    storage: usize,
+    shape: Vec<usize>,
+    stride: Vec<usize>,
+    offset: usize,
+}
+
+#[derive(Default)]
+struct StateDict {
+    storages: Vec<Storage>,
+    tensors: Vec<Tensor>,
+}
+
+impl StateDict {
+    /// A contiguous tensor in a storage of its own.
+    fn add(&mut self, name: &str, shape: &[usize], values: &[f32], half: bool) {
+        let bytes = if half {
+            values
+                .iter()
+                .flat_map(|v| f16::from_f32(*v).to_le_bytes())
+                .collect()
+        } else {
+            values.iter().flat_map(|v| v.to_le_bytes()).collect()
+        };
+        self.storages.push(Storage { half, bytes });
+        let mut stride = vec![1; shape.len()];
+        for d in (0..shape.len().saturating_sub(1)).rev() {
+            stride[d] = stride[d + 1] * shape[d + 1];
+        }
+        self.tensors.push(Tensor {
+            name: name.into(),
+            storage: self.storages.len() - 1,
+            shape: shape.to_vec(),
+            stride,
+            offset: 0,
+        });
+    }
+
+    /// A linear layer stored the way a view can be: the weight `[out][in]` kept transposed
+    /// in the storage (stride `(1, out)`) after 3 padding values, the bias in the same
+    /// storage after it.
+    fn add_linear(&mut self, prefix: &str, w: &[f32], b: &[f32], n_in: usize) {
+        let n_out = b.len();
+        let mut values = vec![9.0f32; 3];
+        for i in 0..n_in {
+            for o in 0..n_out {
+                values.push(w[o * n_in + i]);
+            }
+        }
+        values.extend(b);
+        self.storages.push(Storage {
+            half: false,
+            bytes: values.iter().flat_map(|v| v.to_le_bytes()).collect(),
+        });
+        let s = self.storages.len() - 1;
+        self.tensors.push(Tensor {
+            name: format!("{prefix}.weight"),
+            storage: s,
+            shape: vec![n_out, n_in],
+            stride: vec![1, n_out],
+            offset: 3,
+        });
+        self.tensors.push(Tensor {
+            name: format!("{prefix}.bias"),
+            storage: s,
+            shape: vec![n_out],
+            stride: vec![1],
+            offset: 3 + n_in * n_out,
+        });
+    }
+}
+
+/// tiny-cuda-nn's hash-grid parameter count for the spec (levels of
+/// `min(next_multiple_of_8(res³), 2^log2T)` entries, `res = ⌈2^(l·log2 b)·16 − 1⌉ + 1`).
+pub fn tcnn_grid_params(s: &Spec) -> usize {
+    let b = ((2048f64.ln() - 16f64.ln()) / 15.0).exp() as f32;
+    let log2_b = (b as f64).log2() as f32;
+    (0..LEVELS)
+        .map(|l| {
+            let scale = ((l as f32 * log2_b) as f64).exp2() as f32 * 16.0 - 1.0;
+            let r = scale.ceil() as usize + 1;
+            (r * r * r)
+                .div_ceil(8)
+                .saturating_mul(8)
+                .min(1 << s.log2_table_size)
+        })
+        .sum::<usize>()
+        * FEATURES
+}
+
+fn seeded(rng: &mut SplitMix64, n: usize, amplitude: f32) -> Vec<f32> {
+    (0..n).map(|_| rng.range(-amplitude, amplitude)).collect()
+}
+
+fn state_dict(s: &Spec) -> StateDict {
+    let mut rng = SplitMix64::new(s.seed);
+    let mut sd = StateDict::default();
+    let f = "_model.field.";
+    let n_grid_out = LEVELS as usize * FEATURES;
+    let head_in = 16 + 15 + APPEARANCE;
+    // An unrelated tensor first (the proposal network), as in real runs.
+    sd.add(
+        "_model.proposal_networks.0.encoding.tcnn_encoding.params",
+        &[40],
+        &seeded(&mut rng, 40, 1.0),
+        false,
+    );
+    if s.torch {
+        let rows = LEVELS as usize * (1 << s.log2_table_size);
+        let table = seeded(&mut rng, rows * FEATURES, 1.0);
+        sd.add(
+            &format!("{f}mlp_base.model.0.hash_table"),
+            &[rows, FEATURES],
+            &table,
+            false,
+        );
+        for (k, (n_in, n_out, amp)) in [(n_grid_out, 64, 0.35), (64, 16, 0.3)]
+            .into_iter()
+            .enumerate()
+        {
+            let w = seeded(&mut rng, n_in * n_out, amp);
+            let mut b = seeded(&mut rng, n_out, 0.2);
+            if k == 1 {
+                b[0] += s.density_offset;
+            }
+            sd.add_linear(&format!("{f}mlp_base.model.1.layers.{k}"), &w, &b, n_in);
+        }
+        for (k, (n_in, n_out)) in [(head_in, 64), (64, 64), (64, 3)].into_iter().enumerate() {
+            let w = seeded(&mut rng, n_in * n_out, 0.3);
+            let b = seeded(&mut rng, n_out, 0.2);
+            sd.add_linear(&format!("{f}mlp_head.layers.{k}"), &w, &b, n_in);
+        }
+    } else {
+        let density = 64 * n_grid_out.next_multiple_of(16) + 16 * 64;
+        let mut params = seeded(&mut rng, density, 0.35);
+        params.extend(seeded(&mut rng, tcnn_grid_params(s), 1.0));
+        sd.add(
+            &format!("{f}mlp_base.model.params"),
+            &[params.len()],
+            &params,
+            s.half,
+        );
+        let head = 64 * head_in.next_multiple_of(16) + 64 * 64 + 16 * 64;
+        let p = seeded(&mut rng, head, 0.3);
+        sd.add(
+            &format!("{f}mlp_head.tcnn_encoding.params"),
+            &[head],
+            &p,
+            s.half,
+        );
+    }
+    let emb = seeded(&mut rng, s.n_images * APPEARANCE, 1.0);
+    sd.add(
+        &format!("{f}embedding_appearance.embedding.weight"),
+        &[s.n_images, APPEARANCE],
+        &emb,
+        false,
+    );
+    sd
+}
+
+/// Pickle opcodes (protocol 2), written from the format.
+struct Pickle {
+    out: Vec<u8>,
+    memo: u32,
+    globals: Vec<(String, u32)>,
+}
+
+impl Pickle {
+    fn str(&mut self, s: &str) {
+        self.out.push(b'X');
+        self.out.extend((s.len() as u32).to_le_bytes());
+        self.out.extend(s.as_bytes());
+        self.put();
+    }
+
+    fn int(&mut self, v: usize) {
+        if v < 256 {
+            self.out.extend([b'K', v as u8]);
+        } else if v < 65536 {
+            self.out.push(b'M');
+            self.out.extend((v as u16).to_le_bytes());
+        } else {
+            self.out.push(b'J');
+            self.out.extend((v as i32).to_le_bytes());
+        }
+    }
+
+    fn float(&mut self, v: f64) {
+        self.out.push(b'G');
+        self.out.extend(v.to_be_bytes());
+    }
+
+    /// BINPUT or LONG_BINPUT of the top of the stack.
+    fn put(&mut self) {
+        if self.memo < 256 {
+            self.out.extend([b'q', self.memo as u8]);
+        } else {
+            self.out.push(b'r');
+            self.out.extend(self.memo.to_le_bytes());
+        }
+        self.memo += 1;
+    }
+
+    fn global(&mut self, module: &str, name: &str) {
+        let key = format!("{module}\n{name}\n");
+        if let Some((_, m)) = self.globals.iter().find(|(k, _)| *k == key) {
+            let m = *m;
+            if m < 256 {
+                self.out.extend([b'h', m as u8]);
+            } else {
+                self.out.push(b'j');
+                self.out.extend(m.to_le_bytes());
+            }
+            return;
+        }
+        self.out.push(b'c');
+        self.out.extend(key.as_bytes());
+        self.globals.push((key, self.memo));
+        self.put();
+    }
+
+    fn ints(&mut self, v: &[usize]) {
+        match v.len() {
+            0 => self.out.push(b')'),
+            1..=3 => {
+                for x in v {
+                    self.int(*x);
+                }
+                self.out.push(0x84 + v.len() as u8);
+            }
+            _ => {
+                self.out.push(b'(');
+                for x in v {
+                    self.int(*x);
+                }
+                self.out.push(b't');
+            }
+        }
+        self.put();
+    }
+
+    fn tensor(&mut self, t: &Tensor, storages: &[Storage]) {
+        let st = &storages[t.storage];
+        let es = if st.half { 2 } else { 4 };
+        self.global("torch._utils", "_rebuild_tensor_v2");
+        self.out.extend([b'(', b'(']);
+        self.str("storage");
+        self.global(
+            "torch",
+            if st.half {
+                "HalfStorage"
+            } else {
+                "FloatStorage"
+            },
+        );
+        self.str(&t.storage.to_string());
+        self.str("cpu");
+        self.int(st.bytes.len() / es);
+        self.out.push(b't');
+        self.put();
+        self.out.push(b'Q');
+        self.int(t.offset);
+        self.ints(&t.shape);
+        self.ints(&t.stride);
+        self.out.push(0x89);
+        self.global("collections", "OrderedDict");
+        self.out.extend([b')', b'R']);
+        self.put();
+        self.out.push(b't');
+        self.put();
+        self.out.push(b'R');
+        self.put();
+    }
+}
+
+/// `{'step': STEP, 'pipeline': OrderedDict(tensors), 'optimizers': {...}, 'scalers': {...}}`.
+fn pickle(sd: &StateDict) -> Vec<u8> {
+    let mut p = Pickle {
+        out: vec![0x80, 2, b'}'],
+        memo: 0,
+        globals: Vec::new(),
+    };
+    p.put();
+    p.out.push(b'(');
+    p.str("step");
+    p.int(STEP as usize);
+    p.str("pipeline");
+    p.global("collections", "OrderedDict");
+    p.out.extend([b')', b'R']);
+    p.put();
+    p.out.push(b'(');
+    for t in &sd.tensors {
+        p.str(&t.name);
+        p.tensor(t, &sd.storages);
+    }
+    p.out.push(b'u');
+    // `_metadata`, set by BUILD as torch's state dicts carry it.
+    p.out.push(b'}');
+    p.put();
+    p.str("_metadata");
+    p.global("collections", "OrderedDict");
+    p.out.extend([b')', b'R', b's', b'b']);
+    p.str("optimizers");
+    p.out.push(b'}');
+    p.put();
+    p.str("fields");
+    p.out.extend([b'}', b'(']);
+    p.str("state");
+    p.out.push(b'}');
+    p.str("param_groups");
+    p.out.extend([b']', b'(', b'}', b'(']);
+    p.str("lr");
+    p.float(0.01);
+    p.str("betas");
+    p.float(0.9);
+    p.float(0.99);
+    p.out.push(0x86);
+    p.str("amsgrad");
+    p.out.push(0x89);
+    p.str("foreach");
+    p.out.push(b'N');
+    p.str("params");
+    p.out.extend([b']', b'(', b'K', 0, b'K', 1, b'e']);
+    p.out.extend([b'u', b'e', b'u', b's']);
+    p.str("scalers");
+    p.out.extend([b'}', b'(']);
+    p.str("scale");
+    p.float(65536.0);
+    p.out.extend([b'u', b'u', b'.']);
+    p.out
+}
+
+/// A zip archive of stored entries, data aligned to 64 bytes by an extra field (as torch).
+pub fn zip(files: &[(String, Vec<u8>)]) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut central = Vec::new();
+    for (name, data) in files {
+        let mut crc = flate2::Crc::new();
+        crc.update(data);
+        let offset = out.len() as u32;
+        let header = 30 + name.len() + 4;
+        let pad = (64 - (out.len() + header) % 64) % 64;
+        out.extend(0x0403_4b50u32.to_le_bytes());
+        out.extend([20, 0, 0, 0, 0, 0, 0, 0, 0, 0]);
+        out.extend(crc.sum().to_le_bytes());
+        out.extend((data.len() as u32).to_le_bytes());
+        out.extend((data.len() as u32).to_le_bytes());
+        out.extend((name.len() as u16).to_le_bytes());
+        out.extend(((4 + pad) as u16).to_le_bytes());
+        out.extend(name.as_bytes());
+        out.extend(0x4246u16.to_le_bytes());
+        out.extend((pad as u16).to_le_bytes());
+        out.extend(std::iter::repeat_n(b'Z', pad));
+        out.extend(data);
+        central.extend(0x0201_4b50u32.to_le_bytes());
+        central.extend([20, 0, 20, 0, 0, 0, 0, 0, 0, 0, 0, 0]);
+        central.extend(crc.sum().to_le_bytes());
+        central.extend((data.len() as u32).to_le_bytes());
+        central.extend((data.len() as u32).to_le_bytes());
+        central.extend((name.len() as u16).to_le_bytes());
+        central.extend([0u8; 12]);
+        central.extend(offset.to_le_bytes());
+        central.extend(name.as_bytes());
+    }
+    let cd = out.len() as u32;
+    out.extend(&central);
+    out.extend(0x0605_4b50u32.to_le_bytes());
+    out.extend([0, 0, 0, 0]);
+    out.extend((files.len() as u16).to_le_bytes());
+    out.extend((files.len() as u16).to_le_bytes());
+    out.extend((central.len() as u32).to_le_bytes());
+    out.extend(cd.to_le_bytes());
+    out.extend([0, 0]);
+    out
+}
+
+/// The checkpoint file's bytes.
+pub fn checkpoint_bytes(s: &Spec) -> Vec<u8> {
+    let sd = state_dict(s);
+    let stem = format!("step-{STEP:09}");
+    let mut files = vec![(format!("{stem}/data.pkl"), pickle(&sd))];
+    files.push((format!("{stem}/byteorder"), b"little".to_vec()));
+    for (i, st) in sd.storages.iter().enumerate() {
+        files.push((format!("{stem}/data/{i}"), st.bytes.clone()));
+    }
+    files.push((format!("{stem}/version"), b"3\n".to_vec()));
+    zip(&files)
+}
+
+pub fn config_yml(s: &Spec) -> String {
+    format!(
+        "!!python/object:nerfstudio.engine.trainer.TrainerConfig
+_target: !!python/name:nerfstudio.engine.trainer.Trainer ''
+method_name: nerfacto
+pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConfig
+  datamanager: !!python/object:nerfstudio.data.datamanagers.base_datamanager.VanillaDataManagerConfig
+    camera_res_scale_factor: 1.0
+  model: !!python/object:nerfstudio.models.nerfacto.NerfactoModelConfig
+    _target: !!python/name:nerfstudio.models.nerfacto.NerfactoModel ''
+    appearance_embed_dim: {APPEARANCE}
+    average_init_density: {}
+    base_res: 16
+    collider_params:
+      far_plane: 1000.0
+      near_plane: 2.0
+    disable_scene_contraction: false
+    features_per_level: {FEATURES}
+    hidden_dim: 64
+    hidden_dim_color: 64
+    implementation: {}
+    log2_hashmap_size: {}
+    max_res: 2048
+    num_levels: {LEVELS}
+    proposal_net_args_list:
+    - hidden_dim: 16
+      log2_hashmap_size: 17
+      num_levels: 5
+      max_res: 128
+      use_linear: false
+    use_average_appearance_embedding: true
+",
+        s.average_init_density,
+        if s.torch { "torch" } else { "tcnn" },
+        s.log2_table_size,
+    )
+}
+
+/// A fresh scratch folder for one test.
+pub fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("nerfx-nerfacto-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Writes the run of `s` into `dir/run` (with a corrupt lower-step checkpoint next to the
+/// real one, which the loader must not pick); returns the run directory.
+pub fn write_run(dir: &Path, s: &Spec) -> PathBuf {
+    let run = dir.join("run");
+    let models = run.join("nerfstudio_models");
+    std::fs::create_dir_all(&models).unwrap();
+    std::fs::write(run.join("config.yml"), config_yml(s)).unwrap();
+    std::fs::write(
+        run.join("dataparser_transforms.json"),
+        r#"{"transform": [[0, 1, 0, 0.5], [-1, 0, 0, 0.25], [0, 0, 1, -1]], "scale": 0.2}"#,
+    )
+    .unwrap();
+    std::fs::write(
+        models.join(format!("step-{STEP:09}.ckpt")),
+        checkpoint_bytes(s),
+    )
+    .unwrap();
+    std::fs::write(models.join("step-000000999.ckpt"), b"not a checkpoint").unwrap();
+    run
+}

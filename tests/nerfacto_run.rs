@@ -1,0 +1,266 @@
+//! nerfstudio nerfacto runs: the loader against an independent NumPy evaluation of the same
+//! run (`tests/numpy/nerfacto_reference.py`) in both checkpoint layouts, the occupancy it
+//! computes, and corrupt input.
+//!
+//! The NumPy check needs `python3` with `numpy`; without it it fails with a message saying
+//! so, unless `NERFX_SKIP_NUMPY=1` (then it prints a skip line).
+
+mod common_nerfacto;
+
+use std::path::Path;
+use std::process::Command;
+
+use common_nerfacto::{scratch, write_run, Spec, SplitMix64, STEP};
+use glam::Vec3;
+use nerfx::field::{Aabb, Field, NerfactoField};
+
+/// Seeded points (inside the unit cube and out in the contracted shell) and directions.
+fn samples(n: usize, seed: u64) -> (Vec<Vec3>, Vec<Vec3>) {
+    let mut rng = SplitMix64::new(seed);
+    let pts = (0..n)
+        .map(|i| {
+            let r = if i % 2 == 0 { 1.0 } else { 2.0 };
+            rng.vec(-r, r)
+        })
+        .collect();
+    let dirs = (0..n)
+        .map(|_| loop {
+            let d = rng.vec(-1.0, 1.0);
+            if d.length() > 0.1 && d.length() <= 1.0 {
+                break d.normalize();
+            }
+        })
+        .collect();
+    (pts, dirs)
+}
+
+/// Runs the NumPy reference; `None` when skipped by `NERFX_SKIP_NUMPY=1`.
+fn numpy_reference(run: &Path, pts: &[Vec3], dirs: &[Vec3]) -> Option<Vec<[f32; 4]>> {
+    if std::env::var("NERFX_SKIP_NUMPY").as_deref() == Ok("1") {
+        println!("skipped: NumPy cross-check (NERFX_SKIP_NUMPY=1)");
+        return None;
+    }
+    let dir = run.parent().unwrap();
+    let (input, output) = (dir.join("points.bin"), dir.join("numpy_out.bin"));
+    let bytes: Vec<u8> = pts
+        .iter()
+        .zip(dirs)
+        .flat_map(|(p, d)| [p.x, p.y, p.z, d.x, d.y, d.z])
+        .flat_map(f32::to_le_bytes)
+        .collect();
+    std::fs::write(&input, bytes).unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/numpy/nerfacto_reference.py");
+    let out = Command::new("python3")
+        .arg(&script)
+        .arg(run)
+        .arg(&input)
+        .arg(&output)
+        .output()
+        .unwrap_or_else(|e| {
+            panic!("the NumPy cross-check needs python3 ({e}); install it with numpy (pip install numpy) or set NERFX_SKIP_NUMPY=1")
+        });
+    assert!(
+        out.status.success(),
+        "the NumPy reference failed (it needs numpy: pip install numpy; NERFX_SKIP_NUMPY=1 \
+         skips it):\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let raw = std::fs::read(&output).unwrap();
+    Some(
+        raw.chunks_exact(16)
+            .map(|c| {
+                [0, 1, 2, 3].map(|k| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().unwrap()))
+            })
+            .collect(),
+    )
+}
+
+fn rel_err(a: f32, b: f32) -> f32 {
+    if a == b {
+        0.0
+    } else {
+        (a - b).abs() / b.abs().max(1e-30)
+    }
+}
+
+fn check_against_numpy(name: &str, spec: &Spec) {
+    let dir = scratch(name);
+    let run = write_run(&dir, spec);
+    let field = NerfactoField::load(&run).unwrap();
+    println!("{}", field.describe().lines().last().unwrap());
+    let (pts, dirs) = samples(2000, spec.seed + 100);
+    let mut sigma = vec![0.0; pts.len()];
+    let mut rgb = vec![Vec3::ZERO; pts.len()];
+    field.density(&pts, &mut sigma);
+    field.radiance(&pts, &dirs, &mut rgb);
+    let Some(want) = numpy_reference(&run, &pts, &dirs) else {
+        return;
+    };
+    assert_eq!(want.len(), pts.len());
+    let (mut max_sigma, mut max_rgb, mut masked) = (0.0f32, 0.0f32, 0);
+    for (i, w) in want.iter().enumerate() {
+        if sigma[i] == 0.0 && w[0] > 0.0 {
+            // Masked by the occupancy grid: the point's cell must be empty, and the density
+            // there small (the rule keeps cells whose samples reach an opacity of 1e-3
+            // across a cell of diagonal 4/64·√3; allow 10 times that between samples).
+            let p = pts[i];
+            assert!(
+                !field.may_be_occupied(&Aabb::new(p, p)),
+                "{name}: sample {i} at {p}: σ zeroed in an occupied cell (NumPy {})",
+                w[0]
+            );
+            let cell_diagonal = 4.0 / 64.0 * 3f32.sqrt();
+            assert!(
+                w[0] * cell_diagonal < 1e-2,
+                "{name}: sample {i} at {p}: σ {} (NumPy) masked as empty",
+                w[0]
+            );
+            masked += 1;
+        } else {
+            let e = rel_err(sigma[i], w[0]);
+            assert!(
+                e <= 1e-4,
+                "{name}: sample {i} at {}: σ {} vs NumPy {}",
+                pts[i],
+                sigma[i],
+                w[0]
+            );
+            max_sigma = max_sigma.max(e);
+        }
+        for k in 0..3 {
+            let e = rel_err(rgb[i][k], w[k + 1]);
+            assert!(
+                e <= 1e-4,
+                "{name}: sample {i}: rgb[{k}] {} vs NumPy {}",
+                rgb[i][k],
+                w[k + 1]
+            );
+            max_rgb = max_rgb.max(e);
+        }
+    }
+    assert!(
+        masked <= pts.len() * 3 / 4 && (masked > 0) == spec.expect_empty_space,
+        "{name}: {masked} of {} samples masked",
+        pts.len()
+    );
+    println!(
+        "{name}: max relative error vs NumPy: density {max_sigma:.2e}, colour {max_rgb:.2e}; \
+         {masked} samples in empty occupancy cells"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn tcnn_layout_agrees_with_numpy() {
+    check_against_numpy("tcnn", &Spec::tcnn());
+}
+
+#[test]
+fn torch_fallback_layout_agrees_with_numpy() {
+    check_against_numpy("torch", &Spec::torch());
+}
+
+#[test]
+fn describe_names_the_run_and_architecture() {
+    let dir = scratch("describe");
+    let run = write_run(&dir, &Spec::tcnn());
+    let text = nerfx::field::describe(&run).unwrap();
+    println!("{text}");
+    for want in [
+        "nerfacto",
+        &format!("step {STEP}"),
+        "tiny-cuda-nn",
+        "16 levels x 2 features",
+        "average_init_density 0.01",
+        "fill ratio",
+    ] {
+        assert!(text.contains(want), "missing '{want}' in:\n{text}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn occupancy_is_conservative_at_sampled_points() {
+    let dir = scratch("occupancy");
+    let run = write_run(&dir, &Spec::tcnn());
+    let field = NerfactoField::load(&run).unwrap();
+    let b = field.bounds();
+    assert_eq!((b.min, b.max), (Vec3::splat(-2.0), Vec3::splat(2.0)));
+    // Wherever the density is non-zero, the point's region is occupied; outside the
+    // bounds the density is zero.
+    let (pts, _) = samples(4000, 5);
+    let mut sigma = vec![0.0; pts.len()];
+    field.density(&pts, &mut sigma);
+    for (p, s) in pts.iter().zip(&sigma) {
+        if *s > 0.0 {
+            assert!(field.may_be_occupied(&Aabb::new(*p, *p)), "{p}");
+        }
+    }
+    let far = [Vec3::new(2.5, 0.0, 0.0), Vec3::new(0.0, -7.0, 1.0)];
+    let mut s = [1.0; 2];
+    field.density(&far, &mut s);
+    assert_eq!(s, [0.0, 0.0]);
+    assert!(!field.may_be_occupied(&Aabb::new(Vec3::splat(3.0), Vec3::splat(4.0))));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn corrupt_and_truncated_runs_are_errors_naming_the_file() {
+    let dir = scratch("corrupt");
+    let run = write_run(&dir, &Spec::tcnn());
+    let ckpt = run.join(format!("nerfstudio_models/step-{STEP:09}.ckpt"));
+    let good = std::fs::read(&ckpt).unwrap();
+    // Truncations at many places, and flipped bytes through the whole file.
+    let cuts = (0..good.len()).step_by(good.len() / 97 + 1);
+    for cut in cuts {
+        std::fs::write(&ckpt, &good[..cut]).unwrap();
+        let e = NerfactoField::load(&run).expect_err("truncated checkpoint accepted");
+        assert!(e.to_string().contains("step-"), "cut {cut}: {e}");
+    }
+    for at in (0..good.len()).step_by(good.len() / 211 + 1) {
+        let mut bad = good.clone();
+        bad[at] ^= 0x5A;
+        std::fs::write(&ckpt, &bad).unwrap();
+        // Any outcome but a panic (a flip in padding is harmless); errors name the file.
+        if let Err(e) = NerfactoField::load(&run) {
+            assert!(e.to_string().contains("step-"), "flip at {at}: {e}");
+        }
+    }
+    std::fs::write(&ckpt, &good).unwrap();
+    // A missing config or dataparser file is named.
+    std::fs::remove_file(run.join("dataparser_transforms.json")).unwrap();
+    let e = NerfactoField::load(&run).unwrap_err().to_string();
+    assert!(e.contains("dataparser_transforms.json"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn scene_files_name_runs_relative_to_themselves() {
+    let dir = scratch("scene");
+    write_run(&dir, &Spec::tcnn());
+    let scene = dir.join("scene.json");
+    std::fs::write(
+        &scene,
+        r#"{"instances": [{"name": "poster", "field": {"nerfacto": {"path": "run"}}}]}"#,
+    )
+    .unwrap();
+    let loaded = nerfx::scene::SceneDesc::read(&scene)
+        .unwrap()
+        .load()
+        .unwrap();
+    assert_eq!(loaded.desc().instances.len(), 1);
+    // A missing run is an error naming it.
+    std::fs::write(
+        &scene,
+        r#"{"instances": [{"name": "x", "field": {"nerfacto": {"path": "nowhere"}}}]}"#,
+    )
+    .unwrap();
+    let e = nerfx::scene::SceneDesc::read(&scene)
+        .unwrap()
+        .load()
+        .err()
+        .expect("a missing run loaded")
+        .to_string();
+    assert!(e.contains("nowhere"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -19,6 +19,7 @@
 
 use glam::Vec3;
 use half::f16;
+use half::slice::HalfFloatSliceExt;
 
 /// How a hash grid keeps its tables in memory.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -70,22 +71,22 @@ pub struct HashGrid {
     tables: Tables,
 }
 
-/// A feature value that can be widened to f32.
-trait Feature: Copy {
-    fn widen(self) -> f32;
+/// A feature value that can be widened to f32 in bulk.
+trait Feature: Copy + Default {
+    /// `dst[i] = src[i]` widened (`dst.len() == src.len()`).
+    fn widen_all(src: &[Self], dst: &mut [f32]);
 }
 
 impl Feature for f16 {
-    #[inline]
-    fn widen(self) -> f32 {
-        self.to_f32()
+    fn widen_all(src: &[Self], dst: &mut [f32]) {
+        // F16C eight at a time where the CPU has it (detected by `half`).
+        src.convert_to_f32_slice(dst);
     }
 }
 
 impl Feature for f32 {
-    #[inline]
-    fn widen(self) -> f32 {
-        self
+    fn widen_all(src: &[Self], dst: &mut [f32]) {
+        dst.copy_from_slice(src);
     }
 }
 
@@ -194,23 +195,61 @@ impl HashGrid {
         }
     }
 
+    /// Level by level over the whole batch: the 8 corners' indices and weights first, then
+    /// (x86-64) a prefetch of every entry so the cache misses overlap, then the gather,
+    /// widened in bulk, then the blend, corner after corner (the same sums as one point at a time).
     fn encode_with<T: Feature>(&self, table: &[T], xs: &[Vec3], out: &mut [f32]) {
         let width = self.config.n_outputs();
         debug_assert_eq!(out.len(), xs.len() * width);
         let nf = self.config.n_features as usize;
+        let n = xs.len();
+        let mut index = vec![0u32; n * 8];
+        let mut weight = vec![0.0f32; n * 8];
+        let mut raw = vec![T::default(); n * 8 * nf];
+        let mut wide = vec![0.0f32; n * 8 * nf];
         for (l, level) in self.levels.iter().enumerate() {
             let t = &table[level.offset * nf..(level.offset + level.entries as usize) * nf];
-            for (x, row) in xs.iter().zip(out.chunks_exact_mut(width)) {
+            for ((x, ix), wx) in xs
+                .iter()
+                .zip(index.chunks_exact_mut(8))
+                .zip(weight.chunks_exact_mut(8))
+            {
+                level.corners(*x, ix, wx);
+            }
+            prefetch(t, nf, &index);
+            for (&i, dst) in index.iter().zip(raw.chunks_exact_mut(nf)) {
+                dst.copy_from_slice(&t[i as usize * nf..][..nf]);
+            }
+            T::widen_all(&raw, &mut wide);
+            for ((row, w), v) in out
+                .chunks_exact_mut(width)
+                .zip(weight.chunks_exact(8))
+                .zip(wide.chunks_exact(8 * nf))
+            {
                 let dst = &mut row[l * nf..(l + 1) * nf];
-                match nf {
-                    1 => level.lookup::<T, 1>(t, *x, dst),
-                    2 => level.lookup::<T, 2>(t, *x, dst),
-                    4 => level.lookup::<T, 4>(t, *x, dst),
-                    _ => level.lookup_any(t, nf, *x, dst),
+                dst.fill(0.0);
+                for (wc, e) in w.iter().zip(v.chunks_exact(nf)) {
+                    for (d, f) in dst.iter_mut().zip(e) {
+                        *d += wc * f;
+                    }
                 }
             }
         }
     }
+}
+
+/// Asks the CPU to start loading the table entries `index` (each `nf` values) into cache.
+#[inline]
+fn prefetch<T>(table: &[T], nf: usize, index: &[u32]) {
+    #[cfg(target_arch = "x86_64")]
+    for &i in index {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        let p = table[i as usize * nf..].as_ptr();
+        // SAFETY: a prefetch is a hint that never faults; `p` points into `table`.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (table, nf, index);
 }
 
 impl Level {
@@ -241,49 +280,25 @@ impl Level {
         (i % self.entries) as usize
     }
 
-    /// Trilinear lookup with `N` features per entry (monomorphised for the usual counts).
+    /// The table entries (`index`) and trilinear weights (`weight`) of the 8 corners of
+    /// `x`'s cell; corner `k` adds bit `a` of `k` along axis `a`, its weight is the product
+    /// over the axes of `w` or `1 − w` (in axis order).
     #[inline]
-    fn lookup<T: Feature, const N: usize>(&self, t: &[T], x: Vec3, dst: &mut [f32]) {
+    fn corners(&self, x: Vec3, index: &mut [u32], weight: &mut [f32]) {
         let (c, w) = self.locate(x);
-        let mut acc = [0.0f32; N];
-        for corner in 0..8u32 {
-            let mut weight = 1.0f32;
+        for (corner, (ix, wx)) in index.iter_mut().zip(weight.iter_mut()).enumerate() {
+            let mut wc = 1.0f32;
             let mut k = c;
             for a in 0..3 {
                 if corner >> a & 1 == 0 {
-                    weight *= 1.0 - w[a];
+                    wc *= 1.0 - w[a];
                 } else {
-                    weight *= w[a];
+                    wc *= w[a];
                     k[a] = k[a].wrapping_add(1);
                 }
             }
-            let e = &t[self.index(k) * N..][..N];
-            for f in 0..N {
-                acc[f] += weight * e[f].widen();
-            }
-        }
-        dst.copy_from_slice(&acc);
-    }
-
-    /// The same for any feature count.
-    fn lookup_any<T: Feature>(&self, t: &[T], nf: usize, x: Vec3, dst: &mut [f32]) {
-        let (c, w) = self.locate(x);
-        dst.fill(0.0);
-        for corner in 0..8u32 {
-            let mut weight = 1.0f32;
-            let mut k = c;
-            for a in 0..3 {
-                if corner >> a & 1 == 0 {
-                    weight *= 1.0 - w[a];
-                } else {
-                    weight *= w[a];
-                    k[a] = k[a].wrapping_add(1);
-                }
-            }
-            let e = &t[self.index(k) * nf..][..nf];
-            for (d, v) in dst.iter_mut().zip(e) {
-                *d += weight * v.widen();
-            }
+            *ix = self.index(k) as u32;
+            *wx = wc;
         }
     }
 }

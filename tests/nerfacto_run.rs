@@ -249,6 +249,30 @@ fn scene_files_name_runs_relative_to_themselves() {
         .load()
         .unwrap();
     assert_eq!(loaded.desc().instances.len(), 1);
+    // It renders: alpha in [0, 1], some coverage.
+    {
+        use glam::{DMat4, DVec3};
+        use nerfx::camera::{Camera, Perspective, Projection};
+        use nerfx::render::{render, Outputs, Quality, RenderSettings};
+        let placed = loaded.place(&|_| Ok(DMat4::IDENTITY)).unwrap();
+        let p = Perspective::from_vertical_fov(16, 12, 50.0).unwrap();
+        let eye = DVec3::new(0.5, -5.0, 1.0);
+        let camera = Camera::new(
+            nerfx::demo::look_at(eye, DVec3::ZERO),
+            Projection::Perspective(p),
+        )
+        .unwrap();
+        let settings = RenderSettings::new(Quality::Draft.params(), Outputs::all());
+        let planes = render(&placed, &camera, camera.full_window(), &settings).unwrap();
+        let alpha = planes.alpha.as_ref().unwrap();
+        let mut covered = 0;
+        for (x, y) in (0..12).flat_map(|y| (0..16).map(move |x| (x, y))) {
+            let a = alpha.get(x, y);
+            assert!((0.0..=1.0 + 1e-5).contains(&a), "alpha {a} at ({x}, {y})");
+            covered += usize::from(a > 0.01);
+        }
+        assert!(covered > 16 * 12 / 2, "{covered} pixels covered");
+    }
     // A missing run is an error naming it.
     std::fs::write(
         &scene,
@@ -263,4 +287,42 @@ fn scene_files_name_runs_relative_to_themselves() {
         .to_string();
     assert!(e.contains("nowhere"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_features_path_gives_the_same_samples() {
+    for spec in [Spec::tcnn(), Spec::torch()] {
+        let dir = scratch(&format!("features-{}", spec.seed));
+        let run = write_run(&dir, &spec);
+        let field = NerfactoField::load(&run).unwrap();
+        let (mut pts, dirs) = samples(700, 9);
+        pts[0] = Vec3::new(2.5, 0.0, 0.0);
+        let n = pts.len();
+        let (mut sigma, mut rgb) = (vec![0.0; n], vec![Vec3::ZERO; n]);
+        field.density(&pts, &mut sigma);
+        field.radiance(&pts, &dirs, &mut rgb);
+        assert_eq!(field.feature_count(), 15);
+        let (mut sigma2, mut rgb2) = (vec![0.0; n], vec![Vec3::ZERO; n]);
+        let mut features = vec![0.0; n * 15];
+        field.density_with_features(&pts, &mut sigma2, &mut features);
+        field.radiance_with_features(&pts, &dirs, &features, &mut rgb2);
+        for i in 0..n {
+            assert!(
+                rel_err(sigma2[i], sigma[i]) <= 1e-6,
+                "{i}: {} vs {}",
+                sigma2[i],
+                sigma[i]
+            );
+            for k in 0..3 {
+                assert!(
+                    rel_err(rgb2[i][k], rgb[i][k]) <= 1e-6,
+                    "{i}: {} vs {}",
+                    rgb2[i],
+                    rgb[i]
+                );
+            }
+        }
+        assert_eq!(sigma2[0], 0.0);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

@@ -261,8 +261,73 @@ impl NerfactoField {
             }
             self.base(&xs, &mut enc, &mut out);
             for (k, &i) in idx.iter().enumerate() {
-                let raw = out[k * self.n_base].min(MAX_LOG_DENSITY);
-                sig[i] = self.settings.average_init_density * raw.exp();
+                sig[i] = self.sigma_from_raw(out[k * self.n_base]);
+            }
+        }
+    }
+
+    /// `average_init_density · exp(raw)` (the exponent capped to keep σ finite).
+    #[inline]
+    fn sigma_from_raw(&self, raw: f32) -> f32 {
+        self.settings.average_init_density * raw.min(MAX_LOG_DENSITY).exp()
+    }
+
+    /// Whether `p` may have density: inside the bounds and in an occupied cell.
+    #[inline]
+    fn kept(&self, p: Vec3) -> bool {
+        self.bounds().contains(p) && self.occupancy.point(p)
+    }
+
+    /// Colours from the geometry features (`n_base − 1` per point) and directions.
+    fn colour(&self, geo: &[f32], dirs: &[Vec3], rgb: &mut [Vec3]) {
+        let n_geo = self.n_base - 1;
+        let width = 16 + n_geo + self.appearance.len();
+        let (mut input, mut colour, mut scratch) = (Vec::new(), Vec::new(), Vec::new());
+        let parts = geo.chunks(CHUNK * n_geo).zip(dirs.chunks(CHUNK));
+        for ((g, ds), dst) in parts.zip(rgb.chunks_mut(CHUNK)) {
+            input.resize(ds.len() * width, 0.0);
+            for ((row, d), o) in input
+                .chunks_exact_mut(width)
+                .zip(ds)
+                .zip(g.chunks_exact(n_geo))
+            {
+                row[..16].copy_from_slice(&match self.net {
+                    Net::Tcnn { .. } => sh4(*d),
+                    Net::Torch { .. } => torch_sh4((*d + Vec3::ONE) * 0.5),
+                });
+                row[16..16 + n_geo].copy_from_slice(o);
+                row[16 + n_geo..].copy_from_slice(&self.appearance);
+            }
+            colour.resize(ds.len() * 3, 0.0);
+            match &self.net {
+                Net::Tcnn { head, .. } => head.forward(&input, &mut colour),
+                Net::Torch { head, .. } => {
+                    for (x, y) in input.chunks_exact(width).zip(colour.chunks_exact_mut(3)) {
+                        head.forward(x, y, &mut scratch);
+                    }
+                }
+            }
+            for (c, v) in dst.iter_mut().zip(colour.chunks_exact(3)) {
+                *c = Vec3::from_array(
+                    [v[0], v[1], v[2]].map(|x| srgb_to_linear(1.0 / (1.0 + (-x).exp()))),
+                );
+            }
+        }
+    }
+
+    /// The density outputs at every point (nerfacto zeroes the position outside its
+    /// selector), calling `each(i, outputs)` per point.
+    fn for_each_base(&self, points: &[Vec3], mut each: impl FnMut(usize, &[f32])) {
+        let (mut xs, mut enc, mut out) = (Vec::with_capacity(CHUNK), Vec::new(), Vec::new());
+        for (c, pts) in points.chunks(CHUNK).enumerate() {
+            xs.clear();
+            xs.extend(
+                pts.iter()
+                    .map(|p| Self::unit_from_field(*p).unwrap_or(Vec3::ZERO)),
+            );
+            self.base(&xs, &mut enc, &mut out);
+            for (k, o) in out.chunks_exact(self.n_base).enumerate() {
+                each(c * CHUNK + k, o);
             }
         }
     }
@@ -726,46 +791,41 @@ impl Field for NerfactoField {
     }
 
     fn radiance(&self, points: &[Vec3], dirs: &[Vec3], rgb: &mut [Vec3]) {
-        let width = 16 + (self.n_base - 1) + self.appearance.len();
-        let (mut xs, mut enc, mut out) = (Vec::with_capacity(CHUNK), Vec::new(), Vec::new());
-        let (mut input, mut colour, mut scratch) = (Vec::new(), Vec::new(), Vec::new());
-        let parts = points.chunks(CHUNK).zip(dirs.chunks(CHUNK));
-        for ((pts, ds), dst) in parts.zip(rgb.chunks_mut(CHUNK)) {
-            xs.clear();
-            // nerfacto zeroes the position outside its selector.
-            xs.extend(
-                pts.iter()
-                    .map(|p| Self::unit_from_field(*p).unwrap_or(Vec3::ZERO)),
-            );
-            self.base(&xs, &mut enc, &mut out);
-            input.resize(pts.len() * width, 0.0);
-            for ((row, d), o) in input
-                .chunks_exact_mut(width)
-                .zip(ds)
-                .zip(out.chunks_exact(self.n_base))
-            {
-                row[..16].copy_from_slice(&match self.net {
-                    Net::Tcnn { .. } => sh4(*d),
-                    Net::Torch { .. } => torch_sh4((*d + Vec3::ONE) * 0.5),
-                });
-                row[16..16 + self.n_base - 1].copy_from_slice(&o[1..]);
-                row[16 + self.n_base - 1..].copy_from_slice(&self.appearance);
-            }
-            colour.resize(pts.len() * 3, 0.0);
-            match &self.net {
-                Net::Tcnn { head, .. } => head.forward(&input, &mut colour),
-                Net::Torch { head, .. } => {
-                    for (x, y) in input.chunks_exact(width).zip(colour.chunks_exact_mut(3)) {
-                        head.forward(x, y, &mut scratch);
-                    }
-                }
-            }
-            for (c, v) in dst.iter_mut().zip(colour.chunks_exact(3)) {
-                *c = Vec3::from_array(
-                    [v[0], v[1], v[2]].map(|x| srgb_to_linear(1.0 / (1.0 + (-x).exp()))),
-                );
-            }
-        }
+        let n_geo = self.n_base - 1;
+        let mut geo = vec![0.0; points.len() * n_geo];
+        self.for_each_base(points, |i, o| {
+            geo[i * n_geo..(i + 1) * n_geo].copy_from_slice(&o[1..]);
+        });
+        self.colour(&geo, dirs, rgb);
+    }
+
+    /// The geometry features (15 for nerfacto) of the density network.
+    fn feature_count(&self) -> usize {
+        self.n_base - 1
+    }
+
+    fn density_with_features(&self, points: &[Vec3], sigma: &mut [f32], features: &mut [f32]) {
+        let n_geo = self.n_base - 1;
+        self.for_each_base(points, |i, o| {
+            let p = points[i];
+            let inside = Self::unit_from_field(p).is_some() && self.kept(p);
+            sigma[i] = if inside {
+                self.sigma_from_raw(o[0])
+            } else {
+                0.0
+            };
+            features[i * n_geo..(i + 1) * n_geo].copy_from_slice(&o[1..]);
+        });
+    }
+
+    fn radiance_with_features(
+        &self,
+        _points: &[Vec3],
+        dirs: &[Vec3],
+        features: &[f32],
+        rgb: &mut [Vec3],
+    ) {
+        self.colour(features, dirs, rgb);
     }
 
     /// Twice the finest level's cell inside the unit ball: `4/1024` scene units (the

@@ -217,8 +217,16 @@ impl HashGrid {
                 level.corners(*x, ix, wx);
             }
             prefetch(t, nf, &index);
-            for (&i, dst) in index.iter().zip(raw.chunks_exact_mut(nf)) {
-                dst.copy_from_slice(&t[i as usize * nf..][..nf]);
+            match nf {
+                1 => gather::<T, 1>(t, &index, &mut raw),
+                2 => gather::<T, 2>(t, &index, &mut raw),
+                4 => gather::<T, 4>(t, &index, &mut raw),
+                8 => gather::<T, 8>(t, &index, &mut raw),
+                _ => {
+                    for (&i, dst) in index.iter().zip(raw.chunks_exact_mut(nf)) {
+                        dst.copy_from_slice(&t[i as usize * nf..][..nf]);
+                    }
+                }
             }
             T::widen_all(&raw, &mut wide);
             for ((row, w), v) in out
@@ -235,6 +243,18 @@ impl HashGrid {
                 }
             }
         }
+    }
+}
+
+/// `dst[k·N ..][.. N] = table[index[k]·N ..][.. N]`, with `N` known to the compiler (a
+/// few moves per entry instead of a call to `memcpy`).
+#[inline]
+fn gather<T: Copy, const N: usize>(table: &[T], index: &[u32], dst: &mut [T]) {
+    for (&i, d) in index.iter().zip(dst.chunks_exact_mut(N)) {
+        let e: &[T; N] = table[i as usize * N..][..N]
+            .try_into()
+            .expect("a slice of N values");
+        d.copy_from_slice(e);
     }
 }
 

@@ -12,7 +12,8 @@
 //! `config.yml`) encodes `u`; the density MLP (`L·F → 64 → 16`) gives `raw` and 15 geometry
 //! features; `σ = average_init_density · exp(raw)`. The colour MLP reads
 //! `[SH₄((d + 1)/2) (16), geometry (15), appearance (32)]` (the appearance is the mean of the
-//! trained per-image embedding table, nerfacto's `use_average_appearance_embedding`) →
+//! trained per-image embedding table, nerfacto's `use_average_appearance_embedding`; zeros
+//! when the config turns that off) →
 //! 64 → 64 → 3, sigmoid. nerfstudio trains on sRGB-encoded pixels, so the colour is
 //! converted to linear, as for instant-ngp snapshots.
 //!
@@ -104,7 +105,10 @@ impl NerfactoField {
         let (checkpoint, step) = latest_checkpoint(&run.join("nerfstudio_models"))?;
         let ckpt = Checkpoint::open(&checkpoint)?;
         let keys = Keys::find(&ckpt)?;
-        let (appearance, n_images) = read_appearance(&ckpt, &keys)?;
+        let (mut appearance, n_images) = read_appearance(&ckpt, &keys)?;
+        if !settings.use_average_appearance_embedding {
+            appearance.fill(0.0);
+        }
         let (net, n_base, n_params) = if keys.has("mlp_head.tcnn_encoding.params") {
             read_tcnn(&ckpt, &keys, &settings, appearance.len())?
         } else {
@@ -181,17 +185,26 @@ impl NerfactoField {
              format: nerfstudio {} run, checkpoint {} (step {}), {}, parameters {}\n\
              hash grid: {grid}\n\
              density MLP: {density} (average_init_density {} * exp)\n\
-             colour MLP: {head} (sigmoid, sRGB to linear); appearance: mean of {} embeddings of {}\n\
+             colour MLP: {head} (sigmoid, sRGB to linear); appearance: {} of {} embeddings of {}\n\
              scene contraction: L-infinity; dataparser scale {}\n\
              bounds (nerfstudio frame): [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]\n\
              occupancy: {}^3 cells computed at load, fill ratio {:.4}",
             self.run.display(),
-            if s.method_name.is_empty() { "(unnamed method)" } else { &s.method_name },
+            if s.method_name.is_empty() {
+                "(unnamed method)"
+            } else {
+                &s.method_name
+            },
             self.checkpoint.display(),
             self.step,
             layout,
             self.n_params,
             s.average_init_density,
+            if s.use_average_appearance_embedding {
+                "mean"
+            } else {
+                "zero instead"
+            },
             self.n_images,
             self.appearance.len(),
             self.dataparser.scale,

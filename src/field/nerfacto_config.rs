@@ -8,7 +8,8 @@
 //! defaults when absent: `num_levels` 16, `features_per_level` 2, `log2_hashmap_size` 19,
 //! `base_res` 16, `max_res` 2048, `hidden_dim` 64, `hidden_dim_color` 64,
 //! `average_init_density` (1.0: older versions had no such factor; the nerfacto method sets
-//! 0.01), `disable_scene_contraction` false; and the top-level `method_name`.
+//! 0.01), `disable_scene_contraction` false, `use_average_appearance_embedding` true (when
+//! false, nerfacto renders with a zero appearance); and the top-level `method_name`.
 
 use std::path::Path;
 
@@ -27,6 +28,7 @@ pub(crate) struct RunSettings {
     pub hidden_dim_color: usize,
     pub average_init_density: f32,
     pub disable_scene_contraction: bool,
+    pub use_average_appearance_embedding: bool,
 }
 
 /// The scalar value at the dotted `path`, if present.
@@ -101,6 +103,12 @@ impl RunSettings {
             hidden_dim_color: parsed(text, "hidden_dim_color", 64, file)?,
             average_init_density: parsed(text, "average_init_density", 1.0, file)?,
             disable_scene_contraction: parsed(text, "disable_scene_contraction", false, file)?,
+            use_average_appearance_embedding: parsed(
+                text,
+                "use_average_appearance_embedding",
+                true,
+                file,
+            )?,
         };
         let bad = |key: &str, why: &str| Error::format(file, format!("pipeline.model.{key}"), why);
         if !(1..=32).contains(&s.num_levels) {
@@ -160,6 +168,13 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
         // `datamanager.max_res` and `pipeline.num_levels` are other paths: defaults stay.
         assert_eq!((s.max_res, s.num_levels), (2048, 16));
         assert!(!s.disable_scene_contraction);
+        assert!(s.use_average_appearance_embedding);
+        let t = TEXT.replace(
+            "    hidden_dim: 32\n",
+            "    hidden_dim: 32\n    use_average_appearance_embedding: false\n",
+        );
+        let s = RunSettings::from_text(&t, Path::new("config.yml")).unwrap();
+        assert!(!s.use_average_appearance_embedding);
     }
 
     #[test]

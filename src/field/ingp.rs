@@ -565,6 +565,43 @@ fn srgb_to_linear(c: f32) -> f32 {
     }
 }
 
+/// Scratch of [`IngpField::colour`].
+#[derive(Default)]
+struct ColourScratch {
+    input: Vec<f32>,
+    colour: Vec<f32>,
+}
+
+impl IngpField {
+    /// Linear RGB from the density network's outputs (16 per point) and the view
+    /// directions: the colour network on [outputs, SH₄(d)], then sigmoid and sRGB → linear
+    /// (or instant-ngp's HDR exp).
+    fn colour(&self, outputs: &[f32], dirs: &[Vec3], dst: &mut [Vec3], s: &mut ColourScratch) {
+        let n = dirs.len();
+        s.input.resize(n * (DENSITY_OUTPUTS + 16), 0.0);
+        for ((row, d), o) in s
+            .input
+            .chunks_exact_mut(DENSITY_OUTPUTS + 16)
+            .zip(dirs)
+            .zip(outputs.chunks_exact(DENSITY_OUTPUTS))
+        {
+            row[..DENSITY_OUTPUTS].copy_from_slice(o);
+            row[DENSITY_OUTPUTS..].copy_from_slice(&sh4(Vec3::new(d.y, d.z, d.x)));
+        }
+        s.colour.resize(n * 3, 0.0);
+        self.rgb_mlp.forward(&s.input, &mut s.colour);
+        for (c, v) in dst.iter_mut().zip(s.colour.chunks_exact(3)) {
+            *c = Vec3::from_array([v[0], v[1], v[2]].map(|x| {
+                if self.hdr {
+                    x.clamp(-10.0, 10.0).exp()
+                } else {
+                    srgb_to_linear(1.0 / (1.0 + (-x).exp()))
+                }
+            }));
+        }
+    }
+}
+
 impl Field for IngpField {
     fn bounds(&self) -> Aabb {
         self.bounds
@@ -595,7 +632,7 @@ impl Field for IngpField {
     fn radiance(&self, points: &[Vec3], dirs: &[Vec3], rgb: &mut [Vec3]) {
         let mut xs = Vec::with_capacity(CHUNK);
         let (mut enc, mut out) = (Vec::new(), Vec::new());
-        let (mut input, mut colour) = (Vec::new(), Vec::new());
+        let mut scratch = ColourScratch::default();
         let parts = points.chunks(CHUNK).zip(dirs.chunks(CHUNK));
         for ((pts, ds), dst) in parts.zip(rgb.chunks_mut(CHUNK)) {
             xs.clear();
@@ -604,26 +641,55 @@ impl Field for IngpField {
                     .map(|p| self.unit_from_ngp(self.ngp_from_field(*p))),
             );
             self.density_outputs(&self.density_mlp, &xs, &mut enc, &mut out);
-            input.resize(pts.len() * (DENSITY_OUTPUTS + 16), 0.0);
-            for ((row, d), o) in input
-                .chunks_exact_mut(DENSITY_OUTPUTS + 16)
-                .zip(ds)
-                .zip(out.chunks_exact(DENSITY_OUTPUTS))
-            {
-                row[..DENSITY_OUTPUTS].copy_from_slice(o);
-                row[DENSITY_OUTPUTS..].copy_from_slice(&sh4(Vec3::new(d.y, d.z, d.x)));
+            self.colour(&out, ds, dst, &mut scratch);
+        }
+    }
+
+    /// The density network's 16 outputs: σ is the first, and the colour network takes all.
+    fn feature_count(&self) -> usize {
+        DENSITY_OUTPUTS
+    }
+
+    fn density_with_features(&self, points: &[Vec3], sigma: &mut [f32], features: &mut [f32]) {
+        let (mut xs, mut idx) = (Vec::with_capacity(CHUNK), Vec::with_capacity(CHUNK));
+        let (mut enc, mut out) = (Vec::new(), Vec::new());
+        let chunks = points
+            .chunks(CHUNK)
+            .zip(sigma.chunks_mut(CHUNK))
+            .zip(features.chunks_mut(CHUNK * DENSITY_OUTPUTS));
+        for ((pts, sig), feat) in chunks {
+            xs.clear();
+            idx.clear();
+            sig.fill(0.0);
+            feat.fill(0.0);
+            for (i, p) in pts.iter().enumerate() {
+                let q = self.ngp_from_field(*p);
+                if self.cascades.occupied_at(q) {
+                    xs.push(self.unit_from_ngp(q));
+                    idx.push(i);
+                }
             }
-            colour.resize(pts.len() * 3, 0.0);
-            self.rgb_mlp.forward(&input, &mut colour);
-            for (c, v) in dst.iter_mut().zip(colour.chunks_exact(3)) {
-                *c = Vec3::from_array([v[0], v[1], v[2]].map(|x| {
-                    if self.hdr {
-                        x.clamp(-10.0, 10.0).exp()
-                    } else {
-                        srgb_to_linear(1.0 / (1.0 + (-x).exp()))
-                    }
-                }));
+            self.density_outputs(&self.density_mlp, &xs, &mut enc, &mut out);
+            for (&i, o) in idx.iter().zip(out.chunks_exact(DENSITY_OUTPUTS)) {
+                sig[i] = self.scale * o[0].min(MAX_LOG_DENSITY).exp();
+                feat[i * DENSITY_OUTPUTS..(i + 1) * DENSITY_OUTPUTS].copy_from_slice(o);
             }
+        }
+    }
+
+    fn radiance_with_features(
+        &self,
+        _points: &[Vec3],
+        dirs: &[Vec3],
+        features: &[f32],
+        rgb: &mut [Vec3],
+    ) {
+        let mut scratch = ColourScratch::default();
+        let parts = features
+            .chunks(CHUNK * DENSITY_OUTPUTS)
+            .zip(dirs.chunks(CHUNK));
+        for ((feat, ds), dst) in parts.zip(rgb.chunks_mut(CHUNK)) {
+            self.colour(feat, ds, dst, &mut scratch);
         }
     }
 

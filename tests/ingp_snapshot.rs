@@ -388,3 +388,135 @@ fn nerfx_info_describes_a_snapshot_and_names_a_corrupt_one() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A 1920×1080 `Quality::Final` RGBA render of a surface-like snapshot (8×4 levels, fp16,
+/// 2^19-entry tables; three overlapping balls occupied, σ's output row scaled so rays
+/// terminate inside them): `cargo test --release --test ingp_snapshot -- --ignored
+/// --nocapture bench_render`. Timing is printed, never asserted.
+#[test]
+#[ignore]
+fn bench_render_1080p_final() {
+    use common_ingp::{write_blob_snapshot, Ball};
+    use glam::{DMat4, DVec3};
+    use nerfx::camera::{Camera, Perspective, Projection};
+    use nerfx::render::{render_with_progress, Outputs, Quality, RenderSettings};
+    use nerfx::scene::{FieldHandle, Instance, Scene};
+    use std::sync::Arc;
+    use std::time::Instant;
+
+    let dir = scratch("bench-render");
+    let spec = Spec {
+        log2_table_size: 19,
+        ..Spec::small_8x4()
+    };
+    // instant-ngp coordinates (the unit cube is cascade 0; s = 0.33, o = 0.5).
+    let balls = [
+        Ball {
+            centre: [0.5, 0.5, 0.5],
+            radius: 0.25,
+        },
+        Ball {
+            centre: [0.7, 0.55, 0.42],
+            radius: 0.16,
+        },
+        Ball {
+            centre: [0.33, 0.45, 0.62],
+            radius: 0.13,
+        },
+    ];
+    let gain = 4.0;
+    let (path, cascade0) = write_blob_snapshot(&dir, "blob", &spec, &balls, gain);
+    let field = IngpField::load(&path).unwrap();
+    let fill = field
+        .describe()
+        .lines()
+        .find(|l| l.contains("fill ratio"))
+        .unwrap_or_default()
+        .to_string();
+    // σ (field units) at seeded points of the main ball; field p = ((q.z − o)/s, (q.x − o)/s,
+    // (q.y − o)/s).
+    let mut rng = Rng::new(21);
+    let inside: Vec<Vec3> = (0..4000)
+        .filter_map(|_| {
+            let u = Vec3::new(
+                rng.uniform(-1.0, 1.0),
+                rng.uniform(-1.0, 1.0),
+                rng.uniform(-1.0, 1.0),
+            );
+            (u.length() < 0.9).then(|| u * 0.25 / 0.33)
+        })
+        .collect();
+    let mut sigma = vec![0.0; inside.len()];
+    field.density(&inside, &mut sigma);
+    sigma.sort_by(f32::total_cmp);
+    let pct = |p: f64| sigma[((sigma.len() - 1) as f64 * p) as usize];
+    let step = field.feature_size() / Quality::Final.params().steps_per_feature;
+    println!(
+        "snapshot: 8x4 fp16 2^19, density gain {gain}, cascade 0 occupied {:.2} %, {fill}",
+        100.0 * cascade0
+    );
+    println!(
+        "sigma inside (field units): p5 {:.3e}, p50 {:.3e}, p95 {:.3e}; Final base step {step:.3e} \
+         (optical depth per step at p50 {:.3})",
+        pct(0.05),
+        pct(0.5),
+        pct(0.95),
+        pct(0.5) * step
+    );
+    assert!(pct(0.05) > 0.0, "the blob's interior must be occupied");
+
+    let handle = FieldHandle::new(Arc::new(field));
+    let scene = Scene::new(vec![
+        Instance::new("blob", handle, DMat4::IDENTITY, None).unwrap()
+    ]);
+    let (w, h) = (1920, 1080);
+    let p = Perspective::from_vertical_fov(w, h, 40.0).unwrap();
+    let eye = DVec3::new(2.2, -1.6, 0.8);
+    let camera = Camera::new(
+        nerfx::demo::look_at(eye, DVec3::ZERO),
+        Projection::Perspective(p),
+    )
+    .unwrap();
+    let settings = RenderSettings::new(Quality::Final.params(), Outputs::rgba());
+    let run = || {
+        let t = Instant::now();
+        let out = render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {})
+            .unwrap();
+        (out, t.elapsed().as_secs_f64() * 1e3)
+    };
+    let (_, warm_ms) = run();
+    let ((planes, stats), ms) = run();
+    let alpha = planes.alpha.as_ref().unwrap();
+    let rgb = planes.rgb.as_ref().unwrap();
+    let n = (w * h) as usize;
+    assert_eq!(stats.pixels, n as u64);
+    let mut opaque = 0;
+    for i in 0..n {
+        let a = alpha.data[i];
+        assert!((0.0..=1.0 + 1e-5).contains(&a), "alpha {a} at pixel {i}");
+        for c in rgb {
+            let v = c.data[i];
+            // Sigmoid colours are in [0, 1]: premultiplied, at most alpha.
+            assert!(
+                v.is_finite() && v >= 0.0 && v <= a + 1e-4,
+                "rgb {v}, alpha {a} at pixel {i}"
+            );
+        }
+        opaque += usize::from(a > 0.5);
+    }
+    assert!(opaque > n / 20, "only {opaque} pixels opaque");
+    println!(
+        "1920x1080 Final rgba, {} rayon threads: {ms:.0} ms/frame (warm-up {warm_ms:.0} ms); \
+         per pixel: {:.2} density, {:.2} colour samples; alpha > 0.5: {:.2} % of pixels",
+        rayon::current_num_threads(),
+        stats.density_samples as f64 / n as f64,
+        stats.color_samples as f64 / n as f64,
+        100.0 * opaque as f64 / n as f64
+    );
+    println!(
+        "per opaque pixel: {:.1} density, {:.1} colour samples",
+        stats.density_samples as f64 / opaque as f64,
+        stats.color_samples as f64 / opaque as f64
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -233,7 +233,11 @@ pub fn snapshot_bytes(s: &Spec) -> Vec<u8> {
 
 /// The file's bytes: msgpack, gzip-framed when `s.gzip`.
 pub fn file_bytes(s: &Spec) -> Vec<u8> {
-    let raw = snapshot_bytes(s);
+    framed(s, snapshot_bytes(s))
+}
+
+/// `raw` msgpack, gzip-framed when `s.gzip`.
+fn framed(s: &Spec, raw: Vec<u8>) -> Vec<u8> {
     if !s.gzip {
         return raw;
     }
@@ -256,4 +260,86 @@ pub fn write_snapshot(dir: &Path, name: &str, s: &Spec) -> PathBuf {
     let path = dir.join(format!("{name}.{ext}"));
     std::fs::write(&path, file_bytes(s)).unwrap();
     path
+}
+
+/// A solid ball in instant-ngp coordinates.
+pub struct Ball {
+    pub centre: [f32; 3],
+    pub radius: f32,
+}
+
+/// Writes the snapshot of `s` made surface-like: the density grid of every cascade is 1 in
+/// the cells whose centre lies in one of `balls` and 0 elsewhere (so only the blob is
+/// occupied: the threshold is `min(0.01, mean)`), and the density MLP's σ row (the first
+/// 64 weights of its last layer, row-major `[out][in]`) is replaced by `|w|·gain`. The hidden
+/// activations being ReLUs (≥ 0), the log-density `out₀ = Σ gain·|w_j|·h_j` is then ≥ 0 and
+/// grows with `gain`, while the other 15 outputs (the colour network's geometry input) stay
+/// as written. Returns the path and the occupied fraction of cascade 0.
+pub fn write_blob_snapshot(
+    dir: &Path,
+    name: &str,
+    s: &Spec,
+    balls: &[Ball],
+    gain: f32,
+) -> (PathBuf, f64) {
+    let raw = snapshot_bytes(s);
+    let mut top = rmpv::decode::read_value(&mut &raw[..]).unwrap();
+    let n_in = ((s.n_levels * s.n_features) as usize).div_ceil(16) * 16;
+    let sigma_row = 64 * n_in..64 * n_in + 64;
+    let n3 = 128 * 128 * 128;
+    let mut cascade0 = 0usize;
+    let Value::Map(entries) = &mut top else {
+        panic!("top level is not a map")
+    };
+    let (_, Value::Map(snap)) = entries
+        .iter_mut()
+        .find(|(k, _)| k.as_str() == Some("snapshot"))
+        .unwrap()
+    else {
+        panic!("snapshot is not a map")
+    };
+    for (k, v) in snap.iter_mut() {
+        match (k.as_str(), v) {
+            (Some("params_binary"), Value::Binary(bytes)) => {
+                for i in sigma_row.clone() {
+                    if s.half {
+                        let b = &mut bytes[2 * i..2 * i + 2];
+                        let w = f16::from_le_bytes([b[0], b[1]]).to_f32().abs() * gain;
+                        b.copy_from_slice(&f16::from_f32(w).to_le_bytes());
+                    } else {
+                        let b = &mut bytes[4 * i..4 * i + 4];
+                        let w = f32::from_le_bytes(b.try_into().unwrap()).abs() * gain;
+                        b.copy_from_slice(&w.to_le_bytes());
+                    }
+                }
+            }
+            (Some("density_grid_binary"), Value::Binary(bytes)) => {
+                for c in 0..s.n_cascades {
+                    let width = (c as f32).exp2();
+                    for m in 0..n3 {
+                        // Morton index: bit 3k + a is bit k of axis a (x, y, z).
+                        let axis =
+                            |a: usize| (0..7).fold(0, |acc, k| acc | ((m >> (3 * k + a)) & 1) << k);
+                        let q =
+                            [0, 1, 2].map(|a| 0.5 + width * ((axis(a) as f32 + 0.5) / 128.0 - 0.5));
+                        let inside = balls.iter().any(|b| {
+                            (0..3).map(|a| (q[a] - b.centre[a]).powi(2)).sum::<f32>()
+                                < b.radius * b.radius
+                        });
+                        cascade0 += usize::from(inside && c == 0);
+                        let v = f16::from_f32(if inside { 1.0 } else { 0.0 });
+                        let at = 2 * (c * n3 + m);
+                        bytes[at..at + 2].copy_from_slice(&v.to_le_bytes());
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    let mut out = Vec::new();
+    rmpv::encode::write_value(&mut out, &top).unwrap();
+    let ext = if s.gzip { "ingp" } else { "msgpack" };
+    let path = dir.join(format!("{name}.{ext}"));
+    std::fs::write(&path, framed(s, out)).unwrap();
+    (path, cascade0 as f64 / n3 as f64)
 }

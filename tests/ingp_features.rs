@@ -1,11 +1,13 @@
 //! The instant-ngp field's two query routes agree: density and colour asked separately, and
 //! density handing its network outputs to the colour query (as the marcher asks).
 
-// The fixture writer serves several test crates; this one uses part of it.
+// The shared harness and the fixture writer serve several test crates; this one uses part of
+// each.
+mod common_fields;
 #[allow(dead_code)]
 mod common_ingp;
 
-use common_ingp::{scratch, write_snapshot, Rng, Spec};
+use common_ingp::{scratch, write_snapshot, Spec};
 use glam::Vec3;
 use nerfx::field::{Field, IngpField};
 
@@ -15,28 +17,8 @@ fn the_features_route_gives_the_same_samples() {
         let dir = scratch(&format!("features-{name}"));
         let field = IngpField::load(&write_snapshot(&dir, name, &spec)).unwrap();
         let b = field.bounds();
-        let mut rng = Rng::new(17);
         let n = 1500;
-        let pts: Vec<Vec3> = (0..n)
-            .map(|_| {
-                let u = Vec3::new(
-                    rng.uniform(0.0, 1.0),
-                    rng.uniform(0.0, 1.0),
-                    rng.uniform(0.0, 1.0),
-                );
-                b.min + u * (b.max - b.min)
-            })
-            .collect();
-        let dirs: Vec<Vec3> = (0..n)
-            .map(|_| {
-                Vec3::new(
-                    rng.uniform(-1.0, 1.0),
-                    rng.uniform(-1.0, 1.0),
-                    rng.uniform(-1.0, 1.0) + 2.0,
-                )
-                .normalize()
-            })
-            .collect();
+        let (pts, dirs) = common_fields::samples_in_box(b.min, b.max, n, 17);
         let (mut sigma, mut rgb) = (vec![0.0; n], vec![Vec3::ZERO; n]);
         field.density(&pts, &mut sigma);
         field.radiance(&pts, &dirs, &mut rgb);

@@ -4,92 +4,20 @@
 //! The NumPy check needs `python3` with `numpy` and `msgpack`; without them it fails with a
 //! message saying so, unless `NERFX_SKIP_NUMPY=1` (then it prints a skip line).
 
+mod common_fields;
 mod common_ingp;
 
-use std::path::Path;
 use std::process::Command;
 
-use common_ingp::{scratch, write_snapshot, Rng, Spec};
+use common_fields::{check_rgb, check_sigma, numpy_reference};
+use common_ingp::{scratch, write_snapshot, Spec, SplitMix64};
 use glam::Vec3;
 use nerfx::field::{Field, IngpField, TableStorage};
 
 /// Seeded points inside the field's bounds and unit directions.
 fn samples(field: &IngpField, n: usize, seed: u64) -> (Vec<Vec3>, Vec<Vec3>) {
-    let mut rng = Rng::new(seed);
     let b = field.bounds();
-    let pts = (0..n)
-        .map(|_| {
-            let u = Vec3::new(
-                rng.uniform(0.0, 1.0),
-                rng.uniform(0.0, 1.0),
-                rng.uniform(0.0, 1.0),
-            );
-            b.min + u * (b.max - b.min)
-        })
-        .collect();
-    let dirs = (0..n)
-        .map(|_| loop {
-            let d = Vec3::new(
-                rng.uniform(-1.0, 1.0),
-                rng.uniform(-1.0, 1.0),
-                rng.uniform(-1.0, 1.0),
-            );
-            if d.length() > 0.1 && d.length() <= 1.0 {
-                break d.normalize();
-            }
-        })
-        .collect();
-    (pts, dirs)
-}
-
-/// Runs the NumPy reference; `None` when skipped by `NERFX_SKIP_NUMPY=1`.
-fn numpy_reference(snapshot: &Path, pts: &[Vec3], dirs: &[Vec3]) -> Option<Vec<[f32; 4]>> {
-    if std::env::var("NERFX_SKIP_NUMPY").as_deref() == Ok("1") {
-        println!("skipped: NumPy cross-check (NERFX_SKIP_NUMPY=1)");
-        return None;
-    }
-    let dir = snapshot.parent().unwrap();
-    let (input, output) = (dir.join("points.bin"), dir.join("numpy_out.bin"));
-    let bytes: Vec<u8> = pts
-        .iter()
-        .zip(dirs)
-        .flat_map(|(p, d)| [p.x, p.y, p.z, d.x, d.y, d.z])
-        .flat_map(f32::to_le_bytes)
-        .collect();
-    std::fs::write(&input, bytes).unwrap();
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/numpy/ingp_reference.py");
-    let run = Command::new("python3")
-        .arg(&script)
-        .arg(snapshot)
-        .arg(&input)
-        .arg(&output)
-        .output()
-        .unwrap_or_else(|e| {
-            panic!("the NumPy cross-check needs python3 ({e}); install it with numpy and msgpack (pip install numpy msgpack) or set NERFX_SKIP_NUMPY=1")
-        });
-    assert!(
-        run.status.success(),
-        "the NumPy reference failed (it needs numpy and msgpack: pip install numpy msgpack; \
-         NERFX_SKIP_NUMPY=1 skips it):\n{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let out = std::fs::read(&output).unwrap();
-    Some(
-        out.chunks_exact(16)
-            .map(|c| {
-                [0, 1, 2, 3].map(|k| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().unwrap()))
-            })
-            .collect(),
-    )
-}
-
-/// `|a − b| ≤ tol·|b|`, with zero matched exactly.
-fn rel_err(a: f32, b: f32) -> f32 {
-    if a == b {
-        0.0
-    } else {
-        (a - b).abs() / b.abs().max(1e-30)
-    }
+    common_fields::samples_in_box(b.min, b.max, n, seed)
 }
 
 fn check_against_numpy(name: &str, spec: &Spec) {
@@ -106,31 +34,20 @@ fn check_against_numpy(name: &str, spec: &Spec) {
         occupied > 300 && occupied < 2700,
         "{name}: {occupied} occupied samples"
     );
-    let Some(want) = numpy_reference(&path, &pts, &dirs) else {
+    let Some(want) = numpy_reference(
+        "ingp_reference.py",
+        &["numpy", "msgpack"],
+        &path,
+        &pts,
+        &dirs,
+    ) else {
         return;
     };
     assert_eq!(want.len(), pts.len());
     let (mut max_sigma, mut max_rgb) = (0.0f32, 0.0f32);
     for (i, w) in want.iter().enumerate() {
-        let e = rel_err(sigma[i], w[0]);
-        assert!(
-            e <= 1e-4,
-            "{name}: sample {i} at {}: σ {} vs NumPy {}",
-            pts[i],
-            sigma[i],
-            w[0]
-        );
-        max_sigma = max_sigma.max(e);
-        for k in 0..3 {
-            let e = rel_err(rgb[i][k], w[k + 1]);
-            assert!(
-                e <= 1e-4,
-                "{name}: sample {i}: rgb[{k}] {} vs NumPy {}",
-                rgb[i][k],
-                w[k + 1]
-            );
-            max_rgb = max_rgb.max(e);
-        }
+        max_sigma = max_sigma.max(check_sigma(name, i, pts[i], sigma[i], w));
+        max_rgb = max_rgb.max(check_rgb(name, i, rgb[i], w));
     }
     println!("{name}: max relative error vs NumPy: density {max_sigma:.2e}, colour {max_rgb:.2e}");
     let _ = std::fs::remove_dir_all(&dir);
@@ -233,7 +150,7 @@ fn truncated_and_corrupt_files_give_errors_naming_the_file() {
             assert!(msg.contains("cut."), "cut at {cut}: {msg}");
         }
         // Flipped bytes: an error or a field, never a panic.
-        let mut rng = Rng::new(5);
+        let mut rng = SplitMix64::new(5);
         for _ in 0..40 {
             let mut bad = full.clone();
             let i = (rng.next_u64() % bad.len().min(4096) as u64) as usize;
@@ -435,14 +352,10 @@ fn bench_render_1080p_final() {
         .to_string();
     // σ (field units) at seeded points of the main ball; field p = ((q.z − o)/s, (q.x − o)/s,
     // (q.y − o)/s).
-    let mut rng = Rng::new(21);
+    let mut rng = SplitMix64::new(21);
     let inside: Vec<Vec3> = (0..4000)
         .filter_map(|_| {
-            let u = Vec3::new(
-                rng.uniform(-1.0, 1.0),
-                rng.uniform(-1.0, 1.0),
-                rng.uniform(-1.0, 1.0),
-            );
+            let u = rng.vec(-1.0, 1.0);
             (u.length() < 0.9).then(|| u * 0.25 / 0.33)
         })
         .collect();

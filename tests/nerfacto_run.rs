@@ -5,82 +5,20 @@
 //! The NumPy check needs `python3` with `numpy`; without it it fails with a message saying
 //! so, unless `NERFX_SKIP_NUMPY=1` (then it prints a skip line).
 
+mod common_fields;
 mod common_nerfacto;
 
-use std::path::Path;
-use std::process::Command;
-
-use common_nerfacto::{scratch, write_run, Spec, SplitMix64, STEP};
+use common_fields::{check_rgb, check_sigma, numpy_reference, rel_err};
+use common_nerfacto::{scratch, write_run, Spec, STEP};
 use glam::Vec3;
 use nerfx::field::{Aabb, Field, NerfactoField};
 
 /// Seeded points (inside the unit cube and out in the contracted shell) and directions.
 fn samples(n: usize, seed: u64) -> (Vec<Vec3>, Vec<Vec3>) {
-    let mut rng = SplitMix64::new(seed);
-    let pts = (0..n)
-        .map(|i| {
-            let r = if i % 2 == 0 { 1.0 } else { 2.0 };
-            rng.vec(-r, r)
-        })
-        .collect();
-    let dirs = (0..n)
-        .map(|_| loop {
-            let d = rng.vec(-1.0, 1.0);
-            if d.length() > 0.1 && d.length() <= 1.0 {
-                break d.normalize();
-            }
-        })
-        .collect();
-    (pts, dirs)
-}
-
-/// Runs the NumPy reference; `None` when skipped by `NERFX_SKIP_NUMPY=1`.
-fn numpy_reference(run: &Path, pts: &[Vec3], dirs: &[Vec3]) -> Option<Vec<[f32; 4]>> {
-    if std::env::var("NERFX_SKIP_NUMPY").as_deref() == Ok("1") {
-        println!("skipped: NumPy cross-check (NERFX_SKIP_NUMPY=1)");
-        return None;
-    }
-    let dir = run.parent().unwrap();
-    let (input, output) = (dir.join("points.bin"), dir.join("numpy_out.bin"));
-    let bytes: Vec<u8> = pts
-        .iter()
-        .zip(dirs)
-        .flat_map(|(p, d)| [p.x, p.y, p.z, d.x, d.y, d.z])
-        .flat_map(f32::to_le_bytes)
-        .collect();
-    std::fs::write(&input, bytes).unwrap();
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/numpy/nerfacto_reference.py");
-    let out = Command::new("python3")
-        .arg(&script)
-        .arg(run)
-        .arg(&input)
-        .arg(&output)
-        .output()
-        .unwrap_or_else(|e| {
-            panic!("the NumPy cross-check needs python3 ({e}); install it with numpy (pip install numpy) or set NERFX_SKIP_NUMPY=1")
-        });
-    assert!(
-        out.status.success(),
-        "the NumPy reference failed (it needs numpy: pip install numpy; NERFX_SKIP_NUMPY=1 \
-         skips it):\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let raw = std::fs::read(&output).unwrap();
-    Some(
-        raw.chunks_exact(16)
-            .map(|c| {
-                [0, 1, 2, 3].map(|k| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().unwrap()))
-            })
-            .collect(),
-    )
-}
-
-fn rel_err(a: f32, b: f32) -> f32 {
-    if a == b {
-        0.0
-    } else {
-        (a - b).abs() / b.abs().max(1e-30)
-    }
+    common_fields::samples(n, seed, |rng, i| {
+        let r = if i % 2 == 0 { 1.0 } else { 2.0 };
+        rng.vec(-r, r)
+    })
 }
 
 fn check_against_numpy(name: &str, spec: &Spec) {
@@ -93,7 +31,7 @@ fn check_against_numpy(name: &str, spec: &Spec) {
     let mut rgb = vec![Vec3::ZERO; pts.len()];
     field.density(&pts, &mut sigma);
     field.radiance(&pts, &dirs, &mut rgb);
-    let Some(want) = numpy_reference(&run, &pts, &dirs) else {
+    let Some(want) = numpy_reference("nerfacto_reference.py", &["numpy"], &run, &pts, &dirs) else {
         return;
     };
     assert_eq!(want.len(), pts.len());
@@ -117,26 +55,9 @@ fn check_against_numpy(name: &str, spec: &Spec) {
             );
             masked += 1;
         } else {
-            let e = rel_err(sigma[i], w[0]);
-            assert!(
-                e <= 1e-4,
-                "{name}: sample {i} at {}: σ {} vs NumPy {}",
-                pts[i],
-                sigma[i],
-                w[0]
-            );
-            max_sigma = max_sigma.max(e);
+            max_sigma = max_sigma.max(check_sigma(name, i, pts[i], sigma[i], w));
         }
-        for k in 0..3 {
-            let e = rel_err(rgb[i][k], w[k + 1]);
-            assert!(
-                e <= 1e-4,
-                "{name}: sample {i}: rgb[{k}] {} vs NumPy {}",
-                rgb[i][k],
-                w[k + 1]
-            );
-            max_rgb = max_rgb.max(e);
-        }
+        max_rgb = max_rgb.max(check_rgb(name, i, rgb[i], w));
     }
     assert!(
         masked <= pts.len() * 3 / 4 && (masked > 0) == spec.expect_empty_space,

@@ -6,6 +6,9 @@ use std::path::{Path, PathBuf};
 
 use half::f16;
 use rmpv::Value;
+// The tests' one generator, through the shared harness (which every crate using this
+// writer declares as `mod common_fields`).
+pub use super::common_fields::SplitMix64;
 
 /// What to write.
 #[derive(Clone, Debug)]
@@ -71,27 +74,6 @@ impl Spec {
     }
 }
 
-/// SplitMix64, as in `tests/common`.
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Rng(seed)
-    }
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in `[lo, hi)`.
-    pub fn uniform(&mut self, lo: f32, hi: f32) -> f32 {
-        let u = (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
-        lo + (hi - lo) * u
-    }
-}
-
 /// Hash-grid entries per level, from the facts: scale `2^(l·log2 b)·N_min − 1`,
 /// resolution `⌈scale⌉ + 1`, `min(next multiple of 8 of res³, 2^log2T)`.
 fn grid_entries(s: &Spec) -> usize {
@@ -126,18 +108,18 @@ fn kv(k: &str, v: Value) -> (Value, Value) {
 
 /// The snapshot's msgpack bytes (before any gzip framing).
 pub fn snapshot_bytes(s: &Spec) -> Vec<u8> {
-    let mut rng = Rng::new(s.seed);
+    let mut rng = SplitMix64::new(s.seed);
     let (nd, nr, ng) = param_counts(s);
     let n_in = ((s.n_levels * s.n_features) as usize).div_ceil(16) * 16;
     let mut params = Vec::with_capacity(nd + nr + ng);
     // Weights scaled like a trained network's (±√(6/fan_in)), grid entries ±1.
-    params.extend((0..64 * n_in).map(|_| rng.uniform(-1.0, 1.0) * (6.0 / n_in as f32).sqrt()));
-    params.extend((0..16 * 64).map(|_| rng.uniform(-1.0, 1.0) * (6.0f32 / 64.0).sqrt()));
+    params.extend((0..64 * n_in).map(|_| rng.range(-1.0, 1.0) * (6.0 / n_in as f32).sqrt()));
+    params.extend((0..16 * 64).map(|_| rng.range(-1.0, 1.0) * (6.0f32 / 64.0).sqrt()));
     params.extend((0..nr).map(|i| {
         let fan_in = if i < 64 * 32 { 32.0 } else { 64.0f32 };
-        rng.uniform(-1.0, 1.0) * (6.0 / fan_in).sqrt()
+        rng.range(-1.0, 1.0) * (6.0 / fan_in).sqrt()
     }));
-    params.extend((0..ng).map(|_| rng.uniform(-1.0, 1.0)));
+    params.extend((0..ng).map(|_| rng.range(-1.0, 1.0)));
     let params_binary: Vec<u8> = if s.half {
         params
             .iter()
@@ -148,7 +130,7 @@ pub fn snapshot_bytes(s: &Spec) -> Vec<u8> {
     };
     let n3 = 128 * 128 * 128;
     let grid: Vec<u8> = (0..n3 * s.n_cascades)
-        .flat_map(|_| f16::from_f32(rng.uniform(0.0, 0.02)).to_le_bytes())
+        .flat_map(|_| f16::from_f32(rng.range(0.0, 0.02)).to_le_bytes())
         .collect();
     let half = 0.5 * s.aabb_scale.min(128) as f32;
     let f = |x: f32| Value::from(x as f64);

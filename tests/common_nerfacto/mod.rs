@@ -4,13 +4,12 @@
 //! `dataparser_transforms.json` and `nerfstudio_models/step-<n>.ckpt`.
 #![allow(dead_code)]
 
-#[path = "../common/rng.rs"]
-mod rng;
-
 use std::path::{Path, PathBuf};
 
 use half::f16;
-pub use rng::SplitMix64;
+// The tests' one generator, through the shared harness (which every crate using this
+// writer declares as `mod common_fields`).
+pub use super::common_fields::SplitMix64;
 
 /// What to write.
 #[derive(Clone, Debug)]

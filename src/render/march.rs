@@ -458,7 +458,7 @@ fn split_candidates(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut 
             continue;
         }
         let weight = (b.t - a.t) * s.rays[r as usize].pieces.transmittance();
-        if (b.sigma - a.sigma).abs() * weight > tolerance {
+        if step_change(nodes, i as usize) * weight > tolerance {
             s.pending.push(Pending {
                 ray: r,
                 t: 0.5 * (a.t + b.t),
@@ -514,6 +514,27 @@ fn split_candidates(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut 
                 starts_run: false,
             });
         }
+    }
+}
+
+/// How much the density changes across the step from node `i` to `i + 1` in a way the
+/// trapezoid rule may get wrong: the jump `|σ_b − σ_a|`, unless the second differences through
+/// the step's ends and their outer neighbours say the density is (nearly) linear there, which
+/// the rule integrates exactly: the smaller of the jump and the larger second difference. An
+/// edge keeps its full jump; a steady slope of a smooth field is not bisected.
+#[inline]
+fn step_change(nodes: &[Node], i: usize) -> f64 {
+    let (a, b) = (&nodes[i], &nodes[i + 1]);
+    let jump = (b.sigma - a.sigma).abs();
+    let before = (i > 0 && !a.starts_run).then(|| nodes[i - 1].sigma);
+    let after = nodes.get(i + 2).filter(|n| !n.starts_run).map(|n| n.sigma);
+    match (before, after) {
+        (Some(p), Some(q)) => jump.min(
+            (p - 2.0 * a.sigma + b.sigma)
+                .abs()
+                .max((a.sigma - 2.0 * b.sigma + q).abs()),
+        ),
+        _ => jump,
     }
 }
 

@@ -172,7 +172,7 @@ impl Instance {
 
     /// The field-space interval `[u0, u1]` of the field-space ray `o + u·d` (`d` unit) inside
     /// the field's bounds and the crop box, in f64.
-    pub fn clip_local(&self, o: DVec3, d: DVec3) -> Option<(f64, f64)> {
+    fn clip_local(&self, o: DVec3, d: DVec3) -> Option<(f64, f64)> {
         let b = self.field().bounds();
         let (mut lo, mut hi) = (0.0f64, f64::INFINITY);
         for axis in 0..3 {

@@ -22,6 +22,8 @@ pub mod error;
 pub mod field;
 pub mod frames;
 pub mod graph;
+#[cfg(feature = "host")]
+pub mod host;
 pub mod image;
 pub mod reference;
 pub mod render;

@@ -1,0 +1,1 @@
+//! PLACEHOLDER: a small, strict OpenFX host (owner: host helper).

@@ -24,6 +24,7 @@
 mod cache;
 mod compositing;
 mod desc;
+mod file;
 mod nerf_render;
 mod node;
 mod values;
@@ -32,6 +33,7 @@ use std::sync::OnceLock;
 
 pub use cache::{cached_scene, cached_shot, purge_caches, FileCache, CAMERA_PATH_OBJECT};
 pub use desc::{ClipDesc, ClipKind, Context, NodeDesc, ParamDesc, ParamKind, Range};
+pub use file::{Graph, GraphNode};
 pub use node::{single_channel, IdentityFn, Node, RenderFn, RenderRequest, RodFn};
 pub use values::{ParamValues, Value};
 

@@ -83,6 +83,7 @@ pub type RodFn = fn(&ParamValues, f64) -> Result<(u32, u32)>;
 pub type IdentityFn = fn(&ParamValues) -> Result<Option<&'static str>>;
 
 /// A node of the registry: described once, rendered once.
+#[derive(Debug)]
 pub struct Node {
     /// The description adapters publish.
     pub desc: NodeDesc,

@@ -1,0 +1,388 @@
+//! The graph file (`comp.json`): named instances of registry nodes, their parameter values,
+//! their connections, the node whose image is written, and extra EXR layers.
+//!
+//! ```json
+//! {"nodes": [
+//!    {"name": "env",  "node": "org.nerfx.NeRFRender",
+//!     "params": {"file": "env_scene.json", "shot": "shot.json", "quality": "final"}},
+//!    {"name": "obj",  "node": "org.nerfx.NeRFRender",
+//!     "params": {"file": "obj_scene.json", "shot": "shot.json"}},
+//!    {"name": "comp", "node": "org.nerfx.ShadowCatcherMerge",
+//!     "inputs": {"A": "obj", "B": "env"}, "params": {"tint": [0.1, 0.1, 0.2]}}],
+//!  "output": "comp",
+//!  "layers": {"env": "env"}}
+//! ```
+//!
+//! Values are typed by the node's description: numbers, booleans, strings, arrays for
+//! colours and 3-vectors, 16 numbers (row-major) or 4 rows for a matrix, and a choice by its
+//! option identifier (`"final"`) or index. File parameters are relative to the graph file.
+//! Everything is checked at load — unknown nodes, parameters, clips or upstream names,
+//! out-of-range values, unconnected mandatory clips, cycles — with errors naming the file and
+//! the node, so a farm job fails before its first frame rather than on it.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde_json::Value as Json;
+
+use super::desc::ParamKind;
+use super::node::Node;
+use super::values::{ParamValues, Value};
+use crate::error::{Error, Result};
+
+/// One node instance of a graph.
+#[derive(Clone, Debug)]
+pub struct GraphNode {
+    /// Its name in the graph, unique.
+    pub name: String,
+    /// The registry node it instantiates.
+    pub node: &'static Node,
+    /// Its parameter values (file paths made absolute).
+    pub values: ParamValues,
+    /// Connected input clips: clip name → upstream node name.
+    pub inputs: BTreeMap<String, String>,
+}
+
+/// A checked node graph.
+#[derive(Clone, Debug)]
+pub struct Graph {
+    /// The nodes, upstream before downstream (every node after all its inputs).
+    pub nodes: Vec<GraphNode>,
+    /// The node whose image is the main (`R G B A`) layer of the output.
+    pub output: String,
+    /// Extra output layers: EXR layer name → node name (written as `layer.R` … `layer.A`).
+    pub layers: Vec<(String, String)>,
+}
+
+impl Graph {
+    /// Reads and checks the graph file at `path`.
+    pub fn read(path: &Path) -> Result<Graph> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        Graph::from_json_str(&text, path)
+    }
+
+    /// Parses and checks a graph; `path` names the file in errors and anchors relative file
+    /// parameters.
+    pub fn from_json_str(text: &str, path: &Path) -> Result<Graph> {
+        let bad = |location: &str, message: String| Error::format(path, location, message);
+        let json: Json = serde_json::from_str(text).map_err(|e| {
+            bad(
+                &format!("line {} column {}", e.line(), e.column()),
+                e.to_string(),
+            )
+        })?;
+        let base = path.parent().unwrap_or(Path::new(""));
+        let list = json
+            .get("nodes")
+            .and_then(Json::as_array)
+            .ok_or_else(|| bad("nodes", "expected a list of nodes".into()))?;
+        let mut nodes = Vec::with_capacity(list.len());
+        for (i, entry) in list.iter().enumerate() {
+            let node = read_node(entry, base).map_err(|e| match e {
+                Error::Invalid { what, message } => bad(&format!("nodes[{i}]: {what}"), message),
+                other => other,
+            })?;
+            if nodes.iter().any(|n: &GraphNode| n.name == node.name) {
+                return Err(bad(
+                    &format!("nodes[{i}].name"),
+                    format!("{:?} is used twice", node.name),
+                ));
+            }
+            nodes.push(node);
+        }
+        let named = |key: &str, v: &Json| -> Result<String> {
+            let name = v
+                .as_str()
+                .ok_or_else(|| bad(key, "expected a node name".into()))?;
+            if !nodes.iter().any(|n| n.name == name) {
+                return Err(bad(key, format!("no node is named {name:?}")));
+            }
+            Ok(name.to_string())
+        };
+        let output = named("output", json.get("output").unwrap_or(&Json::Null))?;
+        let mut layers = Vec::new();
+        if let Some(map) = json.get("layers") {
+            let map = map
+                .as_object()
+                .ok_or_else(|| bad("layers", "expected {\"layer\": \"node\", …}".into()))?;
+            for (layer, node) in map {
+                if layer.is_empty() || !layer.chars().all(|c| c.is_alphanumeric() || c == '_') {
+                    return Err(bad(
+                        &format!("layers.{layer}"),
+                        "a layer name is letters, digits and _".into(),
+                    ));
+                }
+                layers.push((layer.clone(), named(&format!("layers.{layer}"), node)?));
+            }
+        }
+        let nodes = upstream_first(nodes).map_err(|m| bad("nodes", m))?;
+        Ok(Graph {
+            nodes,
+            output,
+            layers,
+        })
+    }
+
+    /// The node named `name`.
+    pub fn node(&self, name: &str) -> Option<&GraphNode> {
+        self.nodes.iter().find(|n| n.name == name)
+    }
+}
+
+/// One entry of `nodes`; errors are [`Error::Invalid`] naming the field within the entry.
+fn read_node(entry: &Json, base: &Path) -> Result<GraphNode> {
+    let text = |key: &str| {
+        entry
+            .get(key)
+            .and_then(Json::as_str)
+            .ok_or_else(|| Error::invalid(key, "expected a string"))
+    };
+    let name = text("name")?.to_string();
+    let node = super::node(text("node")?)?;
+    let mut values = node.defaults();
+    for (key, json) in object(entry, "params")? {
+        let param = node.desc.param(key).ok_or_else(|| {
+            let names: Vec<&str> = node.desc.params.iter().map(|p| p.name).collect();
+            Error::invalid(
+                format!("params.{key}"),
+                format!("no such parameter (parameters: {})", names.join(", ")),
+            )
+        })?;
+        let value = to_value(&param.kind, json, base)
+            .ok_or_else(|| Error::invalid(format!("params.{key}"), describe(&param.kind)))?;
+        values.set(key, value).map_err(|e| match e {
+            Error::Invalid { message, .. } => Error::invalid(format!("params.{key}"), message),
+            other => other,
+        })?;
+    }
+    let mut inputs = BTreeMap::new();
+    for (clip, upstream) in object(entry, "inputs")? {
+        if node.desc.clip(clip).is_none() {
+            let clips: Vec<&str> = node.desc.clips.iter().map(|c| c.name).collect();
+            return Err(Error::invalid(
+                format!("inputs.{clip}"),
+                format!(
+                    "{} has no such clip (clips: {})",
+                    node.desc.id,
+                    clips.join(", ")
+                ),
+            ));
+        }
+        let upstream = upstream
+            .as_str()
+            .ok_or_else(|| Error::invalid(format!("inputs.{clip}"), "expected a node name"))?;
+        inputs.insert(clip.clone(), upstream.to_string());
+    }
+    if let Some(c) = node
+        .desc
+        .clips
+        .iter()
+        .find(|c| !c.optional && !inputs.contains_key(c.name))
+    {
+        return Err(Error::invalid(
+            format!("inputs.{}", c.name),
+            format!("{} needs it connected", node.desc.id),
+        ));
+    }
+    Ok(GraphNode {
+        name,
+        node,
+        values,
+        inputs,
+    })
+}
+
+/// The object under `key` (absent = empty).
+fn object<'a>(entry: &'a Json, key: &str) -> Result<Vec<(&'a String, &'a Json)>> {
+    match entry.get(key) {
+        None => Ok(Vec::new()),
+        Some(Json::Object(map)) => Ok(map.iter().collect()),
+        Some(_) => Err(Error::invalid(key, "expected an object")),
+    }
+}
+
+/// The JSON value as a parameter value of `kind`, or `None` if it has the wrong shape (the
+/// range is checked by [`ParamValues::set`]).
+fn to_value(kind: &ParamKind, json: &Json, base: &Path) -> Option<Value> {
+    let numbers =
+        |j: &Json| -> Option<Vec<f64>> { j.as_array()?.iter().map(Json::as_f64).collect() };
+    Some(match kind {
+        ParamKind::Double { .. } => Value::Double(json.as_f64()?),
+        ParamKind::Int { .. } => Value::Int(json.as_i64()?),
+        ParamKind::Bool { .. } => Value::Bool(json.as_bool()?),
+        ParamKind::Choice { options, .. } => Value::Choice(match json {
+            Json::String(s) => options.iter().position(|(id, _)| id == s)?,
+            other => usize::try_from(other.as_u64()?).ok()?,
+        }),
+        ParamKind::File => {
+            let file = Path::new(json.as_str()?);
+            let path: PathBuf = if file.as_os_str().is_empty() || file.is_absolute() {
+                file.into()
+            } else {
+                base.join(file)
+            };
+            Value::Text(path.to_string_lossy().into_owned())
+        }
+        ParamKind::Text { .. } => Value::Text(json.as_str()?.to_string()),
+        ParamKind::Rgb { .. } | ParamKind::Rgba { .. } | ParamKind::Double3 { .. } => {
+            Value::Doubles(numbers(json)?)
+        }
+        ParamKind::Matrix { .. } => {
+            let rows = json.as_array()?;
+            if rows.iter().all(Json::is_array) {
+                let mut flat = Vec::with_capacity(16);
+                for row in rows {
+                    flat.extend(numbers(row)?);
+                }
+                Value::Doubles(flat)
+            } else {
+                Value::Doubles(numbers(json)?)
+            }
+        }
+    })
+}
+
+/// What a parameter of `kind` is written as.
+fn describe(kind: &ParamKind) -> String {
+    match kind {
+        ParamKind::Double { .. } => "expected a number".into(),
+        ParamKind::Int { .. } => "expected a whole number".into(),
+        ParamKind::Bool { .. } => "expected true or false".into(),
+        ParamKind::Choice { options, .. } => {
+            let ids: Vec<&str> = options.iter().map(|o| o.0).collect();
+            format!("expected one of {}", ids.join(", "))
+        }
+        ParamKind::File | ParamKind::Text { .. } => "expected a string".into(),
+        ParamKind::Rgb { .. } | ParamKind::Double3 { .. } => "expected 3 numbers".into(),
+        ParamKind::Rgba { .. } => "expected 4 numbers".into(),
+        ParamKind::Matrix { .. } => "expected 16 numbers (row-major) or 4 rows of 4".into(),
+    }
+}
+
+/// The nodes reordered so that every node comes after its inputs (Kahn's algorithm, stable:
+/// otherwise the file's order); unknown upstream names and cycles are refused.
+fn upstream_first(nodes: Vec<GraphNode>) -> std::result::Result<Vec<GraphNode>, String> {
+    for n in &nodes {
+        for (clip, up) in &n.inputs {
+            if !nodes.iter().any(|m| &m.name == up) {
+                return Err(format!("{}.inputs.{clip}: no node is named {up:?}", n.name));
+            }
+        }
+    }
+    let mut pending = nodes;
+    let mut ordered: Vec<GraphNode> = Vec::with_capacity(pending.len());
+    while !pending.is_empty() {
+        let ready = pending.iter().position(|n| {
+            n.inputs
+                .values()
+                .all(|up| ordered.iter().any(|m| &m.name == up))
+        });
+        match ready {
+            Some(i) => ordered.push(pending.remove(i)),
+            None => {
+                let names: Vec<&str> = pending.iter().map(|n| n.name.as_str()).collect();
+                return Err(format!("the inputs of {} form a cycle", names.join(", ")));
+            }
+        }
+    }
+    Ok(ordered)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Graph> {
+        Graph::from_json_str(text, Path::new("/shots/a/comp.json"))
+    }
+
+    const GOOD: &str = r#"{"nodes": [
+        {"name": "comp", "node": "org.nerfx.DepthMerge",
+         "inputs": {"A": "obj", "ADepth": "objZ", "B": "env", "BDepth": "envZ"},
+         "params": {"softness": 0.25}},
+        {"name": "env", "node": "org.nerfx.NeRFRender",
+         "params": {"file": "env.json", "shot": "/abs/shot.json", "quality": "draft",
+                    "objectTransform": [[2,0,0,1],[0,2,0,0],[0,0,2,0],[0,0,0,1]]}},
+        {"name": "envZ", "node": "org.nerfx.NeRFRender", "params": {"output": 2}},
+        {"name": "obj", "node": "org.nerfx.NeRFRender", "params": {"background": [0,0,0,0]}},
+        {"name": "objZ", "node": "org.nerfx.NeRFRender"}],
+      "output": "comp", "layers": {"env": "env"}}"#;
+
+    #[test]
+    fn a_graph_is_read_typed_and_ordered_upstream_first() {
+        let g = parse(GOOD).unwrap();
+        let order: Vec<&str> = g.nodes.iter().map(|n| n.name.as_str()).collect();
+        assert_eq!(order, ["env", "envZ", "obj", "objZ", "comp"]);
+        let env = &g.node("env").unwrap().values;
+        assert_eq!(env.text("file").unwrap(), "/shots/a/env.json");
+        assert_eq!(env.text("shot").unwrap(), "/abs/shot.json");
+        assert_eq!(env.choice("quality").unwrap(), "draft");
+        let m = env.doubles("objectTransform").unwrap();
+        assert_eq!((m[0], m[3], m[5], m[15]), (2.0, 1.0, 2.0, 1.0));
+        assert_eq!(
+            g.node("comp").unwrap().values.double("softness").unwrap(),
+            0.25
+        );
+        assert_eq!(g.layers, [("env".to_string(), "env".to_string())]);
+    }
+
+    #[test]
+    fn mistakes_are_refused_naming_file_and_node() {
+        let cases = [
+            (
+                GOOD.replace("\"softness\": 0.25", "\"softness\": -1"),
+                "softness",
+            ),
+            (
+                GOOD.replace("\"quality\": \"draft\"", "\"quality\": \"best\""),
+                "draft, preview, final",
+            ),
+            (
+                GOOD.replace("\"BDepth\": \"envZ\"", "\"BDepth\": \"nowhere\""),
+                "nowhere",
+            ),
+            (GOOD.replace("\"B\": \"env\", ", ""), "inputs.B"),
+            (GOOD.replace("\"ADepth\"", "\"Depth\""), "no such clip"),
+            (
+                GOOD.replace("org.nerfx.DepthMerge", "org.nerfx.Blur"),
+                "no such node",
+            ),
+            (
+                GOOD.replace("\"name\": \"objZ\"", "\"name\": \"obj\""),
+                "used twice",
+            ),
+            (
+                GOOD.replace("\"output\": \"comp\"", "\"output\": \"final\""),
+                "final",
+            ),
+            (
+                GOOD.replace("{\"output\": 2}", "{\"output\": 2, \"size\": 1}"),
+                "params.size",
+            ),
+            (GOOD.replace("[0,0,0,0]", "[0,0,0]"), "expected 4 values"),
+            (
+                GOOD.replace("\"layers\": {\"env\"", "\"layers\": {\"a.b\""),
+                "layer name",
+            ),
+            (
+                GOOD.replace("\"comp\", \"node\"", "\"comp\" \"node\""),
+                "line 2",
+            ),
+        ];
+        for (text, needle) in cases {
+            let e = parse(&text).unwrap_err().to_string();
+            assert!(e.contains("/shots/a/comp.json"), "{e}");
+            assert!(e.contains(needle), "{needle:?} not in {e}");
+        }
+    }
+
+    #[test]
+    fn cycles_are_refused() {
+        let text = r#"{"nodes": [
+            {"name": "a", "node": "org.nerfx.AccumulationMatte", "inputs": {"Source": "b"}},
+            {"name": "b", "node": "org.nerfx.AccumulationMatte", "inputs": {"Source": "a"}}],
+          "output": "a"}"#;
+        let e = parse(text).unwrap_err().to_string();
+        assert!(e.contains("a, b form a cycle"), "{e}");
+    }
+}

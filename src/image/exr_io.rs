@@ -41,9 +41,28 @@ pub const BACKGROUND_DEPTH: f32 = 1.0e10;
 /// Errors: [`Error::Invalid`] when no plane is present, the image is empty, or a plane's size
 /// disagrees with `planes`; [`Error::Io`] naming `path` when the file cannot be written.
 pub fn write_exr(path: &Path, planes: &Planes) -> Result<()> {
-    let channels = channels_of(planes)?;
+    write_exr_layers(path, planes, &[])
+}
+
+/// Writes `main` as [`write_exr`] does plus each of `layers` under its name, as channels
+/// `name.R`, `name.G`, `name.B`, `name.A` (`name.Z`, … for depths): one file a compositor
+/// splits into layers. Every layer must have `main`'s size.
+pub fn write_exr_layers(path: &Path, main: &Planes, layers: &[(&str, &Planes)]) -> Result<()> {
+    let mut channels = channels_of(main, "")?;
+    for (name, planes) in layers {
+        if (planes.width, planes.height) != (main.width, main.height) {
+            return Err(Error::invalid(
+                format!("EXR output: layer {name}"),
+                format!(
+                    "is {}×{}, the image {}×{}",
+                    planes.width, planes.height, main.width, main.height
+                ),
+            ));
+        }
+        channels.extend(channels_of(planes, &format!("{name}."))?);
+    }
     let layer = Layer::new(
-        (planes.width as usize, planes.height as usize),
+        (main.width as usize, main.height as usize),
         LayerAttributes {
             software_name: Some("nerfx".into()),
             ..LayerAttributes::default()
@@ -94,8 +113,9 @@ pub fn read_exr_channels(path: &Path) -> Result<Vec<(String, Plane)>> {
     Ok(out)
 }
 
-/// The EXR channels for the present planes, checked against the image size.
-fn channels_of(planes: &Planes) -> Result<SmallVec<[AnyChannel<FlatSamples>; 4]>> {
+/// The EXR channels for the present planes, names prefixed by `prefix`, checked against the
+/// image size.
+fn channels_of(planes: &Planes, prefix: &str) -> Result<SmallVec<[AnyChannel<FlatSamples>; 4]>> {
     if planes.width == 0 || planes.height == 0 {
         return Err(Error::invalid(
             "EXR output",
@@ -155,7 +175,10 @@ fn channels_of(planes: &Planes) -> Result<SmallVec<[AnyChannel<FlatSamples>; 4]>
             } else {
                 plane.data.clone()
             };
-            Ok(AnyChannel::new(name, FlatSamples::F32(data)))
+            Ok(AnyChannel::new(
+                format!("{prefix}{name}").as_str(),
+                FlatSamples::F32(data),
+            ))
         })
         .collect()
 }
@@ -257,6 +280,43 @@ mod tests {
             let want = if i == 5 { 1.0e10 } else { *want };
             assert_eq!(got.to_bits(), want.to_bits(), "Z sample {i}");
         }
+    }
+
+    #[test]
+    fn layers_are_written_under_their_names() {
+        let (w, h) = (5, 4);
+        let rgba = |seed| Planes {
+            width: w,
+            height: h,
+            rgb: Some([
+                pattern(w, h, seed),
+                pattern(w, h, seed + 0.1),
+                pattern(w, h, 0.2),
+            ]),
+            alpha: Some(pattern(w, h, seed + 0.3)),
+            depth_z: None,
+            depth_ray: None,
+            depth_median: None,
+        };
+        let (main, env) = (rgba(0.1), rgba(0.5));
+        let file = TempFile::new("layers");
+        write_exr_layers(&file.0, &main, &[("env", &env)]).unwrap();
+        let channels = read_exr_channels(&file.0).unwrap();
+        let mut names: Vec<&str> = channels.iter().map(|(n, _)| n.as_str()).collect();
+        names.sort_unstable();
+        assert_eq!(
+            names,
+            ["A", "B", "G", "R", "env.A", "env.B", "env.G", "env.R"]
+        );
+        assert_eq!(
+            find(&channels, "env.R").data,
+            env.rgb.as_ref().unwrap()[0].data
+        );
+        assert_eq!(find(&channels, "A").data, main.alpha.as_ref().unwrap().data);
+        let small = rgba(0.2);
+        let small = Planes { width: 4, ..small };
+        let e = write_exr_layers(&file.0, &main, &[("x", &small)]).unwrap_err();
+        assert!(e.to_string().contains("layer x"), "{e}");
     }
 
     #[test]

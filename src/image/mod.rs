@@ -5,6 +5,6 @@ mod plane;
 // Crate-visible so that other modules' tests can use its test PNG decoder.
 pub(crate) mod png;
 
-pub use exr_io::{read_exr_channels, write_exr, BACKGROUND_DEPTH};
+pub use exr_io::{read_exr_channels, write_exr, write_exr_layers, BACKGROUND_DEPTH};
 pub use plane::{Plane, Planes, Window};
 pub use png::{encode_png_rgba8, write_png_preview};

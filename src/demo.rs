@@ -8,7 +8,7 @@
 //! front of and behind the object correctly.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use glam::{DMat4, DQuat, DVec3, Vec3};
 
@@ -16,7 +16,7 @@ use crate::camera::{
     BlenderIntrinsics, Camera, Perspective, Projection, SensorFit, Shot, ShotCamera,
     ShotCameraKind, ShotFrame,
 };
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::field::{Analytic, Primitive, ShColor, Shape};
 use crate::scene::{FieldSource, InstanceDesc, Scene, SceneDesc};
 
@@ -154,6 +154,78 @@ pub fn scene_desc() -> SceneDesc {
             },
         ],
     }
+}
+
+/// The shadow the object would cast on the ground, as a field: a Gaussian flattened onto the
+/// ground under it, rendered as an accumulation pass it stands in for a Blender
+/// shadow-catcher render in the demo graph (the catcher's alpha is the shadow).
+fn shadow_desc() -> SceneDesc {
+    let flatten = DMat4::from_scale_rotation_translation(
+        DVec3::new(1.6, 1.3, 0.05),
+        DQuat::IDENTITY,
+        DVec3::new(0.2, 0.3, 0.0),
+    );
+    SceneDesc {
+        instances: vec![InstanceDesc {
+            name: "shadow".into(),
+            field: FieldSource::Analytic(Analytic {
+                primitives: vec![prim(
+                    Shape::Gaussian {
+                        center: Vec3::ZERO,
+                        sigma: 0.6,
+                        cutoff: 3.0,
+                    },
+                    6.0,
+                    rgb(0.0, 0.0, 0.0),
+                )],
+            }),
+            world_from_field: Some(flatten.transpose().to_cols_array_2d()),
+            object: None,
+            crop: None,
+        }],
+    }
+}
+
+/// Writes the demo's node graph and everything it reads into `dir` and returns the graph's
+/// path: the environment and the object as separate scene files, each rendered as RGBA and
+/// as depth, a shadow pass, a shadow-catcher merge of the shadow onto the environment and a
+/// depth merge of the object into the result (the object inside the environment), with the
+/// object and the shadow pass as extra EXR layers. `nerfx render` evaluates it through the
+/// OpenFX bundle, the path a compositor takes.
+pub fn write_graph(dir: &Path, width: u32, height: u32) -> Result<PathBuf> {
+    let [environment, object] = [0, 1].map(|i| SceneDesc {
+        instances: vec![scene_desc().instances[i].clone()],
+    });
+    environment.write(&dir.join("demo_environment.json"))?;
+    object.write(&dir.join("demo_object.json"))?;
+    shadow_desc().write(&dir.join("demo_shadow.json"))?;
+    shot(width, height).write(dir.join("demo_shot.json"))?;
+    let render = |name: &str, file: &str, output: &str| {
+        serde_json::json!({"name": name, "node": "org.nerfx.NeRFRender",
+            "params": {"file": file, "shot": "demo_shot.json", "output": output}})
+    };
+    let graph = serde_json::json!({
+        "nodes": [
+            render("env", "demo_environment.json", "rgba"),
+            render("envZ", "demo_environment.json", "depthZ"),
+            render("obj", "demo_object.json", "rgba"),
+            render("objZ", "demo_object.json", "depthZ"),
+            render("shadow", "demo_shadow.json", "accumulation"),
+            {"name": "caught", "node": "org.nerfx.ShadowCatcherMerge",
+             "inputs": {"Shadow": "shadow", "B": "env"},
+             "params": {"opacity": 0.8, "tint": [0.05, 0.06, 0.1]}},
+            {"name": "comp", "node": "org.nerfx.DepthMerge",
+             "inputs": {"A": "obj", "ADepth": "objZ", "B": "caught", "BDepth": "envZ"},
+             "params": {"softness": 0.05}}
+        ],
+        "output": "comp",
+        "layers": {"object": "obj", "shadow": "shadow"}
+    });
+    let path = dir.join("demo_comp.json");
+    let text = serde_json::to_string_pretty(&graph)
+        .map_err(|e| Error::invalid("demo graph", e.to_string()))?;
+    std::fs::write(&path, text).map_err(|e| Error::io(&path, e))?;
+    Ok(path)
 }
 
 /// The NeRF object's `matrix_world` at `frame`: lifted, turning slowly, non-uniformly scaled.

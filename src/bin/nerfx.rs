@@ -114,7 +114,7 @@ fn run(cli: Cli) -> Result<()> {
             let (scene, camera) = demo::scene_and_camera(width, height)?;
             if write_inputs {
                 demo::scene_desc().write(&out.join("demo_scene.json"))?;
-                demo::shot(width, height).write(out.join("demo_shot.json"))?;
+                demo::write_graph(&out, width, height)?;
             }
             let settings = RenderSettings::new(quality.params(), Outputs::all());
             let bar = progress_bar(camera.full_window().area() as u64, "demo");

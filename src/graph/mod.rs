@@ -24,6 +24,7 @@
 mod cache;
 mod compositing;
 mod desc;
+mod evaluate;
 mod file;
 mod nerf_render;
 mod node;
@@ -33,6 +34,7 @@ use std::sync::OnceLock;
 
 pub use cache::{cached_scene, cached_shot, purge_caches, FileCache, CAMERA_PATH_OBJECT};
 pub use desc::{ClipDesc, ClipKind, Context, NodeDesc, ParamDesc, ParamKind, Range};
+pub use evaluate::{evaluate, render_direct, RenderNode};
 pub use file::{Graph, GraphNode};
 pub use node::{single_channel, IdentityFn, Node, RenderFn, RenderRequest, RodFn};
 pub use values::{ParamValues, Value};

@@ -1,0 +1,152 @@
+//! Evaluating a graph for one frame: every needed node once, upstream first, each over its
+//! whole image.
+//!
+//! Who renders a node is the caller's choice: the registry directly ([`render_direct`]), or
+//! an OpenFX instance of the bundle through the host (the farm's path, `host` feature). Both
+//! see the same requests, so their images can be compared pixel for pixel.
+
+use std::collections::BTreeMap;
+
+use super::file::{Graph, GraphNode};
+use super::node::RenderRequest;
+use crate::error::{Error, Result};
+use crate::image::{Planes, Window};
+
+/// Renders one node for `request` (whose inputs are its upstream nodes' whole images).
+pub type RenderNode<'a> = dyn FnMut(&GraphNode, &RenderRequest) -> Result<Planes> + 'a;
+
+/// The image size of `node` at `render_scale`: its own region of definition (a NeRF Render:
+/// the shot's resolution, `ceil(n·s)` as the camera has it), else that of its inputs, which
+/// must agree.
+fn image_size(
+    node: &GraphNode,
+    time: f64,
+    render_scale: f64,
+    inputs: &BTreeMap<String, Planes>,
+) -> Result<(u32, u32)> {
+    let side = |n: u32| ((f64::from(n) * render_scale).ceil() as u32).max(1);
+    if let Some((w, h)) = node.node.region_of_definition(&node.values, time)? {
+        return Ok((side(w), side(h)));
+    }
+    let mut sizes = inputs.iter().map(|(clip, p)| (clip, (p.width, p.height)));
+    let Some((_, size)) = sizes.next() else {
+        return Err(Error::invalid(
+            format!("graph node {}", node.name),
+            "has no input to take its size from",
+        ));
+    };
+    match sizes.find(|(_, s)| *s != size) {
+        Some((clip, (w, h))) => Err(Error::invalid(
+            format!("graph node {}: clip {clip}", node.name),
+            format!("is {w}×{h}, the other inputs {}×{}", size.0, size.1),
+        )),
+        None => Ok(size),
+    }
+}
+
+/// The names of the nodes the outputs depend on (the output, the layers, and everything
+/// upstream of them): nothing else is rendered.
+fn needed(graph: &Graph) -> Vec<bool> {
+    let mut need: Vec<bool> = graph
+        .nodes
+        .iter()
+        .map(|n| n.name == graph.output || graph.layers.iter().any(|(_, l)| *l == n.name))
+        .collect();
+    // Downstream nodes come last, so one backward pass reaches every ancestor.
+    for i in (0..graph.nodes.len()).rev() {
+        if need[i] {
+            for up in graph.nodes[i].inputs.values() {
+                if let Some(j) = graph.nodes.iter().position(|n| &n.name == up) {
+                    need[j] = true;
+                }
+            }
+        }
+    }
+    need
+}
+
+/// Renders the nodes of `graph` that its outputs need at `time` and `render_scale` with
+/// `render_node`, and returns their whole images by node name. `on_node` hears each node's
+/// name as it finishes (for a progress bar).
+pub fn evaluate(
+    graph: &Graph,
+    time: f64,
+    render_scale: f64,
+    draft: bool,
+    render_node: &mut RenderNode<'_>,
+    on_node: &dyn Fn(&str),
+) -> Result<BTreeMap<String, Planes>> {
+    let need = needed(graph);
+    let mut images: BTreeMap<String, Planes> = BTreeMap::new();
+    for (node, _) in graph.nodes.iter().zip(&need).filter(|(_, &n)| n) {
+        let inputs: BTreeMap<String, Planes> = node
+            .inputs
+            .iter()
+            .filter_map(|(clip, up)| images.get(up).map(|p| (clip.clone(), p.clone())))
+            .collect();
+        let (w, h) = image_size(node, time, render_scale, &inputs)?;
+        let request = RenderRequest {
+            draft,
+            inputs,
+            ..RenderRequest::new(time, Window::new(0, 0, w, h), render_scale)
+        };
+        let planes = render_node(node, &request).map_err(|e| match e {
+            Error::Invalid { what, message } => {
+                Error::invalid(format!("graph node {}: {what}", node.name), message)
+            }
+            other => other,
+        })?;
+        on_node(&node.name);
+        images.insert(node.name.clone(), planes);
+    }
+    Ok(images)
+}
+
+/// Renders a node with the registry, in process: the reference for the OpenFX path.
+pub fn render_direct(node: &GraphNode, request: &RenderRequest) -> Result<Planes> {
+    node.node.render(&node.values, request)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    fn graph() -> Graph {
+        let text = r#"{"nodes": [
+            {"name": "a", "node": "org.nerfx.NeRFRender"},
+            {"name": "unused", "node": "org.nerfx.NeRFRender"},
+            {"name": "m", "node": "org.nerfx.AccumulationMatte", "inputs": {"Source": "a"}},
+            {"name": "b", "node": "org.nerfx.NeRFRender"}],
+          "output": "m", "layers": {"extra": "b"}}"#;
+        Graph::from_json_str(text, Path::new("comp.json")).unwrap()
+    }
+
+    #[test]
+    fn only_needed_nodes_render_upstream_first_with_their_inputs() {
+        let g = graph();
+        let rendered = std::cell::RefCell::new(Vec::new());
+        // A stand-in renderer: NeRF Renders have no shot here, so it makes 3×2 images.
+        let mut render = |node: &GraphNode, request: &RenderRequest| -> Result<Planes> {
+            let clips: Vec<&String> = request.inputs.keys().collect();
+            rendered
+                .borrow_mut()
+                .push(format!("{}{clips:?}", node.name));
+            let p = crate::image::Plane::filled(3, 2, 0.5);
+            Ok(Planes {
+                width: 3,
+                height: 2,
+                rgb: Some([p.clone(), p.clone(), p.clone()]),
+                alpha: Some(p),
+                depth_z: None,
+                depth_ray: None,
+                depth_median: None,
+            })
+        };
+        // Without a shot the NeRF Render's region of definition is an error naming the node.
+        let e = evaluate(&g, 1.0, 1.0, false, &mut render, &|_| {}).unwrap_err();
+        assert!(e.to_string().contains("org.nerfx.NeRFRender"), "{e}");
+        assert!(rendered.borrow().is_empty());
+        assert_eq!(needed(&g), [true, false, true, true]);
+    }
+}

@@ -1,4 +1,29 @@
-//! The OpenFX adapter over the nerfx core.
+//! The OpenFX plugin over the nerfx core: one image effect per registry node.
 //!
-//! An empty shell for now: the entry points (`OfxGetNumberOfPlugins`, `OfxGetPlugin`,
-//! `OfxSetHost`), each behind `catch_unwind`, arrive with the node registry (issue 4).
+//! A thin, generic adapter: everything a node is (contexts, clips, parameters, rendering)
+//! comes from [`nerfx::graph::nodes`], so adding a node to the registry never touches this
+//! crate. The binary is the bundle's `nerfx.ofx` (`bash bundle/build.sh`).
+//!
+//! - `entry`: `OfxGetNumberOfPlugins`, `OfxGetPlugin`, `OfxSetHost`, per-node trampolines,
+//!   `catch_unwind` around everything.
+//! - `actions`: each action's meaning in terms of the core; `describe` and
+//!   `param_defs` publish nodes; `instance` keeps per-instance handles; `render` renders.
+//! - `params`: parameter values at a time; `images` and `pixels`: clip images ⇄
+//!   [`nerfx::image::Planes`]; `coords`: OpenFX pixel rectangles ⇄ raster windows.
+//! - `props`, `suites`, `message`, `status`: the host's suites made safe, and errors.
+#![deny(missing_docs)]
+
+mod actions;
+mod coords;
+mod describe;
+mod entry;
+mod images;
+mod instance;
+mod message;
+mod param_defs;
+mod params;
+mod pixels;
+mod props;
+mod render;
+mod status;
+mod suites;

@@ -141,7 +141,9 @@ pub enum ParamKind {
         /// Range of each component.
         range: Range,
     },
-    /// A 4×4 matrix, 16 finite reals, row-major (an OpenFX custom parameter).
+    /// A 4×4 matrix, 16 finite reals, row-major. OpenFX has no matrix type: the plugin
+    /// publishes it as a single-line string parameter holding the 16 numbers row-major
+    /// (separated by spaces or commas; its hint says so).
     Matrix {
         /// Default.
         default: [f64; 16],

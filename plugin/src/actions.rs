@@ -1,0 +1,231 @@
+//! The actions of one registry node, by name: what each one does with the core.
+//!
+//! - load: fetch the host's suites; unload: nothing to free (suites stay valid while loaded).
+//! - describe / describeInContext: [`crate::describe`].
+//! - createInstance / destroyInstance: [`crate::instance`].
+//! - getRegionOfDefinition: the node's own size `(w, h)` → canonical `(0, 0, w·par, h)`
+//!   with `par` the output's pixel aspect ratio; nodes sized by their inputs reply default.
+//! - getRegionsOfInterest: each connected input needs exactly the region asked for (every
+//!   node works pixel by pixel).
+//! - getClipPreferences: float everywhere, RGBA output premultiplied, Alpha or RGBA inputs
+//!   as each clip accepts, frame varying as the node says.
+//! - isIdentity: the clip the node passes through with these values, at the same time.
+//! - begin/endSequenceRender: nothing to prepare (files are cached on first use).
+//! - render: [`crate::render`].
+//! - instanceChanged: clears the instance's persistent error (the next render re-checks).
+//! - purgeCaches: drops the core's cached files.
+//!
+//! Anything else is replied the host's default.
+
+use std::ffi::{c_void, CStr};
+
+use nerfx::graph::{ClipKind, Node};
+use openfx_sys::*;
+
+use crate::images::{connected, pixel_aspect};
+use crate::instance::{self, Instance};
+use crate::message::{self, Target};
+use crate::params::values_at;
+use crate::props::{name, Props};
+use crate::status::{Failure, Result, OK, REPLY_DEFAULT};
+use crate::suites::{self, suites};
+use crate::{describe, render};
+
+/// Wraps an action argument (`null` for actions without one).
+fn props(set: OfxPropertySetHandle, what: &str) -> Result<Props> {
+    if set.is_null() {
+        return Err(Failure::failed(format!("the host passed no {what}")));
+    }
+    // SAFETY: a property set the host passed for the duration of this action.
+    Ok(unsafe { Props::new(set, suites()?.property) })
+}
+
+/// Where an error in `action` on `handle` is reported.
+pub fn message_target(action: &CStr, handle: *const c_void) -> Target {
+    let is = |a: &'static [u8]| action == name(a);
+    let h = handle.cast_mut();
+    if handle.is_null() || is(kOfxActionLoad) || is(kOfxActionUnload) {
+        Target::Plugin
+    } else if is(kOfxActionDescribe) || is(kOfxImageEffectActionDescribeInContext) {
+        Target::Descriptor(h)
+    } else {
+        Target::Instance(h)
+    }
+}
+
+/// Runs `action` of `node`.
+pub fn run(
+    node: &'static Node,
+    action: &CStr,
+    handle: *const c_void,
+    in_args: OfxPropertySetHandle,
+    out_args: OfxPropertySetHandle,
+) -> Result<OfxStatus> {
+    let is = |a: &'static [u8]| action == name(a);
+    let effect: OfxImageEffectHandle = handle.cast_mut().cast();
+    if is(kOfxActionLoad) {
+        suites::load()?;
+        return Ok(OK);
+    }
+    if is(kOfxActionUnload) {
+        return Ok(OK);
+    }
+    if is(kOfxActionDescribe) {
+        describe::describe(node, effect)?;
+        return Ok(OK);
+    }
+    if is(kOfxImageEffectActionDescribeInContext) {
+        describe::describe_in_context(node, effect, props(in_args, "inArgs")?)?;
+        return Ok(OK);
+    }
+    if is(kOfxActionCreateInstance) {
+        instance::create(node, effect)?;
+        return Ok(OK);
+    }
+    if is(kOfxActionDestroyInstance) {
+        instance::destroy(effect)?;
+        return Ok(OK);
+    }
+    if is(kOfxActionPurgeCaches) {
+        nerfx::graph::purge_caches();
+        return Ok(OK);
+    }
+    if is(kOfxActionInstanceChanged) {
+        message::clear(effect.cast());
+        return Ok(OK);
+    }
+    if is(kOfxImageEffectActionBeginSequenceRender) || is(kOfxImageEffectActionEndSequenceRender) {
+        return Ok(OK);
+    }
+    let known = [
+        kOfxImageEffectActionGetRegionOfDefinition.as_slice(),
+        kOfxImageEffectActionGetRegionsOfInterest,
+        kOfxImageEffectActionGetClipPreferences,
+        kOfxImageEffectActionIsIdentity,
+        kOfxImageEffectActionRender,
+    ];
+    if !known.iter().any(|a| action.to_bytes_with_nul() == *a) {
+        return Ok(REPLY_DEFAULT);
+    }
+    // SAFETY: these actions are instance actions, called between create and destroy.
+    let inst = unsafe { instance::get(effect) }?;
+    if is(kOfxImageEffectActionGetRegionOfDefinition) {
+        region_of_definition(inst, props(in_args, "inArgs")?, props(out_args, "outArgs")?)
+    } else if is(kOfxImageEffectActionGetRegionsOfInterest) {
+        regions_of_interest(inst, props(in_args, "inArgs")?, props(out_args, "outArgs")?)
+    } else if is(kOfxImageEffectActionGetClipPreferences) {
+        clip_preferences(inst, props(out_args, "outArgs")?)
+    } else if is(kOfxImageEffectActionIsIdentity) {
+        is_identity(inst, props(in_args, "inArgs")?, props(out_args, "outArgs")?)
+    } else {
+        render::render(inst, props(in_args, "inArgs")?)?;
+        Ok(OK)
+    }
+}
+
+fn region_of_definition(inst: &Instance, in_args: Props, out: Props) -> Result<OfxStatus> {
+    let time = in_args.double(name(kOfxPropTime))?;
+    let values = values_at(inst, time)?;
+    match inst.node.region_of_definition(&values, time)? {
+        Some((w, h)) => {
+            let par = pixel_aspect(&inst.output);
+            let rod = [0.0, 0.0, f64::from(w) * par, f64::from(h)];
+            out.set_doubles(name(kOfxImageEffectPropRegionOfDefinition), &rod)?;
+            Ok(OK)
+        }
+        None => Ok(REPLY_DEFAULT),
+    }
+}
+
+fn regions_of_interest(inst: &Instance, in_args: Props, out: Props) -> Result<OfxStatus> {
+    let roi = in_args.doubles::<4>(name(kOfxImageEffectPropRegionOfInterest))?;
+    let mut set = false;
+    for (clip, handle) in &inst.inputs {
+        if connected(handle)? {
+            let prop = std::ffi::CString::new(format!("OfxImageClipPropRoI_{}", clip.name))
+                .map_err(|_| Failure::failed("clip name with NUL"))?;
+            out.set_doubles(&prop, &roi)?;
+            set = true;
+        }
+    }
+    Ok(if set { OK } else { REPLY_DEFAULT })
+}
+
+fn clip_preferences(inst: &Instance, out: Props) -> Result<OfxStatus> {
+    let text = |c: &'static [u8]| name(c).to_string_lossy().into_owned();
+    let (float, rgba, alpha) = (
+        text(kOfxBitDepthFloat),
+        text(kOfxImageComponentRGBA),
+        text(kOfxImageComponentAlpha),
+    );
+    let prop = |prefix: &str, clip: &str| {
+        std::ffi::CString::new(format!("{prefix}{clip}"))
+            .map_err(|_| Failure::failed("clip name with NUL"))
+    };
+    let output = text(kOfxImageEffectOutputClipName);
+    out.set_string(&prop("OfxImageClipPropComponents_", &output)?, &rgba)?;
+    out.set_string(&prop("OfxImageClipPropDepth_", &output)?, &float)?;
+    for (clip, handle) in &inst.inputs {
+        if !connected(handle)? {
+            continue;
+        }
+        let components = prop("OfxImageClipPropComponents_", clip.name)?;
+        // Mattes, alphas and depths may stay Alpha; everything else is asked for as RGBA.
+        let keep_alpha = clip.kind != ClipKind::Rgba && out.string(&components)? == alpha;
+        if !keep_alpha {
+            out.set_string(&components, &rgba)?;
+        }
+        out.set_string(&prop("OfxImageClipPropDepth_", clip.name)?, &float)?;
+    }
+    out.set_string(
+        name(kOfxImageEffectPropPreMultiplication),
+        &text(kOfxImagePreMultiplied),
+    )?;
+    out.set_int(
+        name(kOfxImageEffectFrameVarying),
+        i32::from(inst.node.desc.frame_varying),
+    )?;
+    Ok(OK)
+}
+
+fn is_identity(inst: &Instance, in_args: Props, out: Props) -> Result<OfxStatus> {
+    let time = in_args.double(name(kOfxPropTime))?;
+    let values = values_at(inst, time)?;
+    let Some(clip) = inst.node.identity(&values)? else {
+        return Ok(REPLY_DEFAULT);
+    };
+    let Some((_, handle)) = inst.inputs.iter().find(|(c, _)| c.name == clip) else {
+        return Ok(REPLY_DEFAULT);
+    };
+    if !connected(handle)? {
+        return Ok(REPLY_DEFAULT);
+    }
+    out.set_string(name(kOfxPropName), clip)?;
+    out.set_double(name(kOfxPropTime), time)?;
+    Ok(OK)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn messages_go_to_instances_only_in_instance_actions() {
+        let h = 8usize as *const c_void;
+        let target = |a: &'static [u8]| message_target(name(a), h);
+        assert!(matches!(target(kOfxActionLoad), Target::Plugin));
+        assert!(matches!(target(kOfxActionDescribe), Target::Descriptor(_)));
+        assert!(matches!(
+            target(kOfxImageEffectActionDescribeInContext),
+            Target::Descriptor(_)
+        ));
+        assert!(matches!(
+            target(kOfxImageEffectActionRender),
+            Target::Instance(_)
+        ));
+        assert!(matches!(
+            message_target(name(kOfxImageEffectActionRender), std::ptr::null()),
+            Target::Plugin
+        ));
+    }
+}

@@ -1,0 +1,176 @@
+//! `kOfxActionDescribe` and `kOfxImageEffectActionDescribeInContext`, generically from a
+//! registry [`Node`]'s description.
+//!
+//! The plugin: label, grouping, description, the node's contexts, float pixels only, tiles and
+//! multi-resolution, fully thread-safe rendering (the host may call render on many threads at
+//! once), no host frame threading, one clip depth, no temporal access. In a context: the RGBA
+//! `Output` clip, every registry clip that exists there (RGBA; RGBA or Alpha for mattes,
+//! alphas and depths), and every parameter ([`crate::param_defs`]).
+
+use nerfx::graph::{ClipKind, Context, Node, ParamKind};
+use openfx_sys::*;
+
+use crate::instance::effect_props;
+use crate::param_defs::define_param;
+use crate::props::{name, Props};
+use crate::status::{check, Failure, Result, ERR_UNSUPPORTED};
+use crate::suites::suites;
+
+/// The OpenFX name of `context`.
+pub fn context_name(context: Context) -> &'static [u8] {
+    match context {
+        Context::Generator => kOfxImageEffectContextGenerator,
+        Context::Filter => kOfxImageEffectContextFilter,
+        Context::General => kOfxImageEffectContextGeneral,
+    }
+}
+
+/// The context named `text`; other contexts are unsupported.
+pub fn context_from_name(text: &str) -> Result<Context> {
+    [Context::Generator, Context::Filter, Context::General]
+        .into_iter()
+        .find(|c| name(context_name(*c)).to_bytes() == text.as_bytes())
+        .ok_or_else(|| Failure {
+            status: ERR_UNSUPPORTED,
+            message: format!("context {text:?} is not supported"),
+        })
+}
+
+/// `kOfxActionDescribe`.
+pub fn describe(node: &Node, effect: OfxImageEffectHandle) -> Result<()> {
+    let p = effect_props(effect)?;
+    let d = &node.desc;
+    p.set_string(name(kOfxPropLabel), d.label)?;
+    p.set_string(name(kOfxImageEffectPluginPropGrouping), d.group)?;
+    p.set_string(name(kOfxPropPluginDescription), d.hint)?;
+    let contexts: Vec<&str> = d
+        .contexts
+        .iter()
+        .map(|c| name(context_name(*c)).to_str().unwrap_or_default())
+        .collect();
+    p.set_strings(name(kOfxImageEffectPropSupportedContexts), &contexts)?;
+    let float = name(kOfxBitDepthFloat).to_str().unwrap_or_default();
+    p.set_strings(name(kOfxImageEffectPropSupportedPixelDepths), &[float])?;
+    p.set_int(name(kOfxImageEffectPropSupportsTiles), 1)?;
+    p.set_int(name(kOfxImageEffectPropSupportsMultiResolution), 1)?;
+    let safe = name(kOfxImageEffectRenderFullySafe)
+        .to_str()
+        .unwrap_or_default();
+    p.set_string(name(kOfxImageEffectPluginRenderThreadSafety), safe)?;
+    p.set_int(name(kOfxImageEffectPluginPropHostFrameThreading), 0)?;
+    p.set_int(name(kOfxImageEffectPropSupportsMultipleClipDepths), 0)?;
+    p.set_int(name(kOfxImageEffectPropTemporalClipAccess), 0)?;
+    Ok(())
+}
+
+fn define_clip(effect: OfxImageEffectHandle, clip: &str) -> Result<Props> {
+    let s = suites()?;
+    let define = s
+        .effect
+        .clipDefine
+        .ok_or_else(|| Failure::missing_suite("image effect suite's clipDefine"))?;
+    let c = std::ffi::CString::new(clip).map_err(|_| Failure::failed("clip name with NUL"))?;
+    let mut set: OfxPropertySetHandle = std::ptr::null_mut();
+    // SAFETY: the descriptor handle of this describeInContext, a C string, an out pointer.
+    check(format_args!("clipDefine({clip})"), unsafe {
+        define(effect, c.as_ptr(), &mut set)
+    })?;
+    // SAFETY: the clip descriptor lives as long as the effect descriptor.
+    Ok(unsafe { Props::new(set, s.property) })
+}
+
+/// The components a clip of `kind` accepts.
+fn components(kind: ClipKind) -> Vec<&'static str> {
+    let rgba = name(kOfxImageComponentRGBA).to_str().unwrap_or_default();
+    let alpha = name(kOfxImageComponentAlpha).to_str().unwrap_or_default();
+    match kind {
+        ClipKind::Rgba => vec![rgba],
+        ClipKind::Matte | ClipKind::Alpha | ClipKind::Depth => vec![rgba, alpha],
+    }
+}
+
+/// `kOfxImageEffectActionDescribeInContext` for the context named in `in_args`.
+pub fn describe_in_context(
+    node: &Node,
+    effect: OfxImageEffectHandle,
+    in_args: Props,
+) -> Result<()> {
+    let context = context_from_name(&in_args.string(name(kOfxImageEffectPropContext))?)?;
+    if !node.desc.contexts.contains(&context) {
+        return Err(Failure {
+            status: ERR_UNSUPPORTED,
+            message: format!("{}: context {context:?} is not supported", node.desc.id),
+        });
+    }
+    let output = define_clip(
+        effect,
+        &name(kOfxImageEffectOutputClipName).to_string_lossy(),
+    )?;
+    output.set_strings(
+        name(kOfxImageEffectPropSupportedComponents),
+        &components(ClipKind::Rgba),
+    )?;
+    output.set_int(name(kOfxImageEffectPropSupportsTiles), 1)?;
+    for c in node
+        .desc
+        .clips
+        .iter()
+        .filter(|c| c.contexts.contains(&context))
+    {
+        let clip = define_clip(effect, c.name)?;
+        clip.set_string(name(kOfxPropLabel), c.label)?;
+        clip.set_strings(
+            name(kOfxImageEffectPropSupportedComponents),
+            &components(c.kind),
+        )?;
+        clip.set_int(name(kOfxImageClipPropOptional), i32::from(c.optional))?;
+        clip.set_int(name(kOfxImageEffectPropSupportsTiles), 1)?;
+        // Clip descriptors have no standard tooltip property; hosts that know the parameter
+        // hint on clips show it, strict ones refuse it, which is no error.
+        let _ = clip.set_string(name(kOfxParamPropHint), c.hint);
+    }
+    let s = suites()?;
+    let get_set = s
+        .effect
+        .getParamSet
+        .ok_or_else(|| Failure::missing_suite("image effect suite's getParamSet"))?;
+    let mut set: OfxParamSetHandle = std::ptr::null_mut();
+    // SAFETY: the descriptor handle and an out pointer.
+    check("getParamSet", unsafe { get_set(effect, &mut set) })?;
+    for p in &node.desc.params {
+        define_param(set, p)?;
+    }
+    // Files decide the region of definition and frame variance: changing one re-asks the
+    // clip preferences.
+    let files: Vec<&str> = node
+        .desc
+        .params
+        .iter()
+        .filter(|p| matches!(p.kind, ParamKind::File))
+        .map(|p| p.name)
+        .collect();
+    if !files.is_empty() {
+        effect_props(effect)?
+            .set_strings(name(kOfxImageEffectPropClipPreferencesSlaveParam), &files)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn context_names_round_trip() {
+        for c in [Context::Generator, Context::Filter, Context::General] {
+            let text = name(context_name(c)).to_str().unwrap();
+            assert_eq!(context_from_name(text).unwrap(), c);
+        }
+        assert_eq!(
+            context_from_name("OfxImageEffectContextFilter").unwrap(),
+            Context::Filter
+        );
+        let e = context_from_name("OfxImageEffectContextPaint").unwrap_err();
+        assert_eq!(e.status, ERR_UNSUPPORTED);
+    }
+}

@@ -1,0 +1,134 @@
+//! Clip images fetched from the host, released on every path.
+//!
+//! [`ClipImage::fetch`] wraps `clipGetImage`; the image is released by `clipReleaseImage`
+//! when the value drops, so an error anywhere in a render still releases everything it
+//! fetched. Only float pixels in RGBA or Alpha are accepted (the plugin declares float only).
+
+use openfx_sys::*;
+
+use crate::coords::PixelRect;
+use crate::instance::ClipRef;
+use crate::pixels::PixelView;
+use crate::props::{name, Props};
+use crate::status::{check, Failure, Result, FAILED};
+use crate::suites::suites;
+
+/// An image handle that is released on drop.
+struct Held(OfxPropertySetHandle);
+
+impl Drop for Held {
+    fn drop(&mut self) {
+        if let Ok(s) = suites() {
+            if let Some(release) = s.effect.clipReleaseImage {
+                // SAFETY: the handle came from clipGetImage and is released once, here.
+                unsafe { release(self.0) };
+            }
+        }
+    }
+}
+
+/// A fetched image and a checked view of its pixels.
+pub struct ClipImage {
+    _held: Held,
+    /// The pixels (bounds, row bytes and channels checked).
+    pub view: PixelView,
+}
+
+/// Floats per pixel for a components string, if the plugin reads it.
+fn channels(components: &str) -> Option<usize> {
+    let is = |c: &'static [u8]| name(c).to_bytes() == components.as_bytes();
+    if is(kOfxImageComponentRGBA) {
+        Some(4)
+    } else if is(kOfxImageComponentAlpha) {
+        Some(1)
+    } else {
+        None
+    }
+}
+
+impl ClipImage {
+    /// The image of `clip` at `time` over `region` (canonical coordinates; `None`: the host's
+    /// default region). `Ok(None)` when the host has no image there (`kOfxStatFailed`: the
+    /// spec says to treat it as transparent black).
+    pub fn fetch(
+        clip: &ClipRef,
+        clip_name: &str,
+        time: f64,
+        region: Option<[f64; 4]>,
+    ) -> Result<Option<Self>> {
+        let s = suites()?;
+        let get = s
+            .effect
+            .clipGetImage
+            .ok_or_else(|| Failure::missing_suite("image effect suite's clipGetImage"))?;
+        let rect = region.map(|r| OfxRectD {
+            x1: r[0],
+            y1: r[1],
+            x2: r[2],
+            y2: r[3],
+        });
+        let rect_ptr = rect
+            .as_ref()
+            .map_or(std::ptr::null(), |r| r as *const OfxRectD);
+        let mut handle: OfxPropertySetHandle = std::ptr::null_mut();
+        // SAFETY: a live clip handle, a rectangle or null, an out pointer.
+        let status = unsafe { get(clip.handle, time, rect_ptr, &mut handle) };
+        if status == FAILED {
+            return Ok(None);
+        }
+        check(format_args!("clipGetImage({clip_name}, {time})"), status)?;
+        if handle.is_null() {
+            return Ok(None);
+        }
+        let held = Held(handle);
+        // SAFETY: the image's property set is valid until released (by `held`).
+        let props = unsafe { Props::new(handle, s.property) };
+        let err = |what: String| Failure::failed(format!("clip {clip_name}: {what}"));
+        let depth = props.string(name(kOfxImageEffectPropPixelDepth))?;
+        if depth.as_bytes() != name(kOfxBitDepthFloat).to_bytes() {
+            return Err(err(format!("pixel depth {depth}, expected 32-bit float")));
+        }
+        let components = props.string(name(kOfxImageEffectPropComponents))?;
+        let n = channels(&components)
+            .ok_or_else(|| err(format!("components {components}, expected RGBA or Alpha")))?;
+        let bounds = PixelRect::from_ints(props.ints::<4>(name(kOfxImagePropBounds))?);
+        let row_bytes = props.int(name(kOfxImagePropRowBytes))?;
+        let data = props.pointer(name(kOfxImagePropData))?;
+        // SAFETY: the host lays the image out as its bounds and row bytes say, for as long
+        // as it is held, which `ClipImage` ensures by holding `held` with the view.
+        let view = unsafe { PixelView::new(data, bounds, row_bytes, n) }.map_err(err)?;
+        Ok(Some(ClipImage { _held: held, view }))
+    }
+}
+
+/// Whether `clip` is connected.
+pub fn connected(clip: &ClipRef) -> Result<bool> {
+    let s = suites()?;
+    // SAFETY: the clip's property set lives as long as the instance.
+    let p = unsafe { Props::new(clip.props, s.property) };
+    Ok(p.int(name(kOfxImageClipPropConnected))? != 0)
+}
+
+/// The pixel aspect ratio of `clip` (1 when the host does not say or says nonsense).
+pub fn pixel_aspect(clip: &ClipRef) -> f64 {
+    let Ok(s) = suites() else { return 1.0 };
+    // SAFETY: as in `connected`.
+    let p = unsafe { Props::new(clip.props, s.property) };
+    match p.double(name(kOfxImagePropPixelAspectRatio)) {
+        Ok(par) if par.is_finite() && par > 0.0 => par,
+        _ => 1.0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_rgba_and_alpha_only() {
+        assert_eq!(channels("OfxImageComponentRGBA"), Some(4));
+        assert_eq!(channels("OfxImageComponentAlpha"), Some(1));
+        assert_eq!(channels("OfxImageComponentRGB"), None);
+        assert_eq!(channels(""), None);
+    }
+}

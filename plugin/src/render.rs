@@ -1,0 +1,105 @@
+//! `kOfxImageEffectActionRender`: host images in, the core's node render, host image out.
+//!
+//! 1. Read the render time, window (pixel coordinates, `y` up), render scale and draft flag.
+//! 2. Read every parameter at that time ([`crate::params::values_at`]).
+//! 3. Place the core's raster image: a node with its own region of definition renders the
+//!    `ceil(w·s) × ceil(h·s)` image at scale `s`; one whose region is its inputs' works
+//!    pixel by pixel on the window alone ([`Frame`]).
+//! 4. Fetch each connected input over the render window only, convert it to planes, render,
+//!    and write the result into the output image inside the render window (pixels of the
+//!    window outside the node's image become transparent black).
+
+use nerfx::graph::RenderRequest;
+use nerfx::image::{Plane, Planes, Window};
+use openfx_sys::*;
+
+use crate::coords::{Frame, PixelRect};
+use crate::images::{connected, pixel_aspect, ClipImage};
+use crate::instance::Instance;
+use crate::params::values_at;
+use crate::pixels::{read_planes, write_planes};
+use crate::props::{name, Props};
+use crate::status::{Failure, Result};
+
+/// Transparent black RGBA of `window`'s size (an input the host has no image for).
+fn clear(window: Window) -> Planes {
+    let zero = Plane::filled(window.width(), window.height(), 0.0);
+    Planes {
+        width: zero.width,
+        height: zero.height,
+        rgb: Some([zero.clone(), zero.clone(), zero.clone()]),
+        alpha: Some(zero),
+        depth_z: None,
+        depth_ray: None,
+        depth_median: None,
+    }
+}
+
+/// The render scale, one number: the core scales both axes alike.
+pub fn uniform_scale(scale: [f64; 2]) -> Result<f64> {
+    if (scale[0] - scale[1]).abs() > 1e-9 * scale[0].abs().max(1.0) {
+        return Err(Failure::failed(format!(
+            "render scale {}×{}: different scales in x and y are not supported",
+            scale[0], scale[1]
+        )));
+    }
+    Ok(scale[0])
+}
+
+/// Renders one window of `instance`.
+pub fn render(instance: &Instance, in_args: Props) -> Result<()> {
+    let node = instance.node;
+    let time = in_args.double(name(kOfxPropTime))?;
+    let render = PixelRect::from_ints(in_args.ints::<4>(name(kOfxImageEffectPropRenderWindow))?);
+    let scale = in_args.doubles::<2>(name(kOfxImageEffectPropRenderScale))?;
+    let s = uniform_scale(scale)?;
+    let draft = in_args
+        .int(name(kOfxImageEffectPropRenderQualityDraft))
+        .is_ok_and(|v| v != 0);
+    let values = values_at(instance, time)?;
+    let frame = match node.region_of_definition(&values, time)? {
+        Some((w, h)) => Frame::of_rod(w, h, s),
+        None => Frame::of_window(render),
+    };
+    let window = frame.raster(render);
+    let mut output =
+        ClipImage::fetch(&instance.output, "Output", time, None)?.ok_or_else(|| {
+            Failure::failed(format!("{}: the host gave no output image", node.desc.id))
+        })?;
+    let planes = if window.area() == 0 {
+        clear(window)
+    } else {
+        let region = render.canonical(scale, pixel_aspect(&instance.output));
+        let mut request = RenderRequest::new(time, window, s);
+        request.draft = draft;
+        for (clip, handle) in &instance.inputs {
+            if !connected(handle)? {
+                continue;
+            }
+            let planes = match ClipImage::fetch(handle, clip.name, time, Some(region))? {
+                Some(image) => read_planes(&image.view, frame, window),
+                None => clear(window),
+            };
+            request = request.with_input(clip.name, planes);
+        }
+        node.render(&values, &request)?
+    };
+    write_planes(&mut output.view, frame, window, render, &planes)
+        .map_err(|e| Failure::failed(format!("{}: Output: {e}", node.desc.id)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scales_must_agree() {
+        assert_eq!(uniform_scale([0.5, 0.5]).unwrap(), 0.5);
+        let e = uniform_scale([0.5, 0.25]).unwrap_err();
+        assert!(e.message.contains("0.5×0.25"), "{}", e.message);
+        assert_eq!(
+            clear(Window::new(1, 1, 4, 3)).alpha.unwrap().data,
+            vec![0.0; 6]
+        );
+    }
+}

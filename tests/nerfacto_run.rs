@@ -247,3 +247,77 @@ fn the_features_path_gives_the_same_samples() {
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
+
+/// The occupancy decision at a lattice of small boxes over the bounds (what a cached grid
+/// must reproduce).
+fn occupancy_pattern(field: &NerfactoField) -> Vec<bool> {
+    let h = 4.0 / 40.0;
+    (0..40 * 40 * 40)
+        .map(|i| {
+            let c = Vec3::new((i % 40) as f32, (i / 40 % 40) as f32, (i / 1600) as f32);
+            let lo = Vec3::splat(-2.0) + c * h + Vec3::splat(0.3 * h);
+            field.may_be_occupied(&Aabb::new(lo, lo + Vec3::splat(0.2 * h)))
+        })
+        .collect()
+}
+
+#[test]
+fn the_occupancy_grid_is_cached_next_to_the_run() {
+    let dir = scratch("occupancy-cache");
+    // The torch-layout run has empty space (a grid that is neither empty nor full).
+    let run = write_run(&dir, &Spec::torch());
+    let cache = run.join("nerfx_occupancy.bin");
+    let occupancy_line = |f: &NerfactoField| {
+        let text = f.describe();
+        text.lines().last().unwrap_or_default().to_string()
+    };
+    // First load: computed, and the cache written.
+    let first = NerfactoField::load(&run).unwrap();
+    assert!(
+        occupancy_line(&first).contains("computed at load"),
+        "{}",
+        first.describe()
+    );
+    assert!(cache.is_file());
+    let want = occupancy_pattern(&first);
+    assert!(want.iter().any(|&o| o) && !want.iter().all(|&o| o));
+    // Second load: read from the cache, the same grid.
+    let second = NerfactoField::load(&run).unwrap();
+    assert!(occupancy_line(&second).contains("read from nerfx_occupancy.bin"));
+    assert_eq!(
+        occupancy_line(&second),
+        occupancy_line(&first).replace("computed at load", "read from nerfx_occupancy.bin")
+    );
+    assert_eq!(occupancy_pattern(&second), want);
+    // A corrupted cache (one flipped byte in the cells, then a truncated one) is ignored:
+    // recomputed, the same grid, and rewritten.
+    let good = std::fs::read(&cache).unwrap();
+    let mut bad = good.clone();
+    let at = good.len() - 100;
+    bad[at] ^= 0x01;
+    std::fs::write(&cache, &bad).unwrap();
+    let third = NerfactoField::load(&run).unwrap();
+    assert!(occupancy_line(&third).contains("computed at load"));
+    assert_eq!(occupancy_pattern(&third), want);
+    assert_eq!(std::fs::read(&cache).unwrap(), good);
+    std::fs::write(&cache, &good[..good.len() / 2]).unwrap();
+    let fourth = NerfactoField::load(&run).unwrap();
+    assert!(occupancy_line(&fourth).contains("computed at load"));
+    assert_eq!(occupancy_pattern(&fourth), want);
+    // A rewritten checkpoint (same bytes, new modification time) makes the cache stale.
+    std::thread::sleep(std::time::Duration::from_millis(20));
+    let ckpt = run.join(format!("nerfstudio_models/step-{STEP:09}.ckpt"));
+    let bytes = std::fs::read(&ckpt).unwrap();
+    std::fs::write(&ckpt, &bytes).unwrap();
+    let fifth = NerfactoField::load(&run).unwrap();
+    assert!(occupancy_line(&fifth).contains("computed at load"));
+    assert_eq!(occupancy_pattern(&fifth), want);
+    assert!(occupancy_line(&NerfactoField::load(&run).unwrap()).contains("read from"));
+    // A cache path that cannot be written (a directory there): computed, no error.
+    std::fs::remove_file(&cache).unwrap();
+    std::fs::create_dir(&cache).unwrap();
+    let sixth = NerfactoField::load(&run).unwrap();
+    assert!(occupancy_line(&sixth).contains("computed at load"));
+    assert_eq!(occupancy_pattern(&sixth), want);
+    let _ = std::fs::remove_dir_all(&dir);
+}

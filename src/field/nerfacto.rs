@@ -33,13 +33,13 @@
 //! occupied set is then dilated by one cell (26-neighbourhood). This is conservative in
 //! practice, not by proof (a peak narrower than half a cell between samples could be
 //! missed); so that the [`Field`] contract holds exactly, the density is set to zero in
-//! empty cells. The grid is not cached on disk (recomputed at each load, ~0.5 s).
+//! empty cells. The grid is cached next to the run (`nerfx_occupancy.bin`, keyed by the
+//! checkpoint, `config.yml` and the grid settings; see `nerfacto/occupancy.rs`).
 
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 use half::f16;
-use rayon::prelude::*;
 
 use super::nerfacto_config::RunSettings;
 use super::nerfacto_torch::{torch_sh4, BiasedMlp, TorchHashGrid};
@@ -47,6 +47,9 @@ use super::torch_ckpt::{Checkpoint, DType};
 use super::{sh4, Aabb, Field, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage};
 use crate::camera::DataparserTransform;
 use crate::error::{Error, Result};
+use occupancy::{cache_key, GridSettings, OccupancyGrid, Source, CACHE_FILE};
+
+mod occupancy;
 
 /// Points per batch (bounds the scratch memory).
 const CHUNK: usize = 512;
@@ -54,10 +57,13 @@ const CHUNK: usize = 512;
 const MAX_LOG_DENSITY: f32 = 80.0;
 /// Half the side of the field's bounds, scene units.
 const HALF_EXTENT: f32 = 2.0;
-/// Occupancy cells per axis.
-const OCC_RES: usize = 64;
-/// Opacity across a cell above which it is occupied.
-const OCC_OPACITY: f32 = 1e-3;
+/// The occupancy grid's settings: `64³` cells over the bounds, occupied at an opacity of
+/// 10⁻³ across a cell.
+const OCCUPANCY: GridSettings = GridSettings {
+    n: 64,
+    opacity: 1e-3,
+    half_extent: HALF_EXTENT,
+};
 
 /// The networks, in one of the two layouts.
 #[derive(Clone, Debug)]
@@ -125,9 +131,13 @@ impl NerfactoField {
             n_params: n_params + appearance.len() * n_images,
             appearance,
             n_images,
-            occupancy: OccupancyGrid::full(),
+            occupancy: OccupancyGrid::full(&OCCUPANCY),
         };
-        field.occupancy = OccupancyGrid::build(&field);
+        let config = run.join("config.yml");
+        let key = cache_key(&OCCUPANCY, &field.checkpoint, &config);
+        field.occupancy = OccupancyGrid::load_or_build(&OCCUPANCY, run, key.as_deref(), |p, s| {
+            field.density_unmasked(p, s)
+        });
         Ok(field)
     }
 
@@ -188,7 +198,7 @@ impl NerfactoField {
              colour MLP: {head} (sigmoid, sRGB to linear); appearance: {} of {} embeddings of {}\n\
              scene contraction: L-infinity; dataparser scale {}\n\
              bounds (nerfstudio frame): [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]\n\
-             occupancy: {}^3 cells computed at load, fill ratio {:.4}",
+             occupancy: {}^3 cells {}, fill ratio {:.4}",
             self.run.display(),
             if s.method_name.is_empty() {
                 "(unnamed method)"
@@ -214,7 +224,11 @@ impl NerfactoField {
             b.max.x,
             b.max.y,
             b.max.z,
-            OCC_RES,
+            self.occupancy.resolution(),
+            match self.occupancy.source() {
+                Source::Computed => "computed at load".to_string(),
+                Source::Cached => format!("read from {CACHE_FILE}"),
+            },
             self.occupancy.fill_ratio(),
         )
     }
@@ -659,136 +673,6 @@ fn srgb_to_linear(c: f32) -> f32 {
     }
 }
 
-/// The occupancy computed at load (see the module docs): a bit per cell and 3-D prefix
-/// sums, so a region's test is eight lookups.
-#[derive(Clone, Debug)]
-struct OccupancyGrid {
-    /// `(n+1)³` prefix counts: `sums[(z·(n+1) + y)·(n+1) + x]` = occupied cells below.
-    sums: Vec<u32>,
-}
-
-impl OccupancyGrid {
-    const N: usize = OCC_RES;
-
-    /// Every cell occupied (before the grid is computed).
-    fn full() -> Self {
-        Self::from_cells(&vec![true; Self::N.pow(3)])
-    }
-
-    fn from_cells(cells: &[bool]) -> Self {
-        let m = Self::N + 1;
-        let mut sums = vec![0u32; m * m * m];
-        for z in 1..m {
-            for y in 1..m {
-                for x in 1..m {
-                    let c = u32::from(cells[((z - 1) * Self::N + y - 1) * Self::N + x - 1]);
-                    let at = |x: usize, y: usize, z: usize| sums[(z * m + y) * m + x];
-                    sums[(z * m + y) * m + x] =
-                        c + at(x - 1, y, z) + at(x, y - 1, z) + at(x, y, z - 1)
-                            - at(x - 1, y - 1, z)
-                            - at(x - 1, y, z - 1)
-                            - at(x, y - 1, z - 1)
-                            + at(x - 1, y - 1, z - 1);
-                }
-            }
-        }
-        OccupancyGrid { sums }
-    }
-
-    /// Samples the field's (unmasked) density and applies the rule of the module docs.
-    fn build(field: &NerfactoField) -> Self {
-        let n = Self::N;
-        let cell = 2.0 * HALF_EXTENT / n as f32;
-        let threshold = OCC_OPACITY / (cell * 3f32.sqrt());
-        let at = |i: f32| -HALF_EXTENT + i * cell;
-        // Per z-slab of cells: the max density over its corners and centres.
-        let slabs: Vec<Vec<f32>> = (0..n)
-            .into_par_iter()
-            .map(|z| {
-                let mut pts = Vec::with_capacity(2 * (n + 1) * (n + 1) + n * n);
-                for dz in 0..2 {
-                    for y in 0..=n {
-                        for x in 0..=n {
-                            pts.push(Vec3::new(at(x as f32), at(y as f32), at((z + dz) as f32)));
-                        }
-                    }
-                }
-                for y in 0..n {
-                    for x in 0..n {
-                        let c = Vec3::new(x as f32 + 0.5, y as f32 + 0.5, z as f32 + 0.5);
-                        pts.push(Vec3::new(at(c.x), at(c.y), at(c.z)));
-                    }
-                }
-                let mut sigma = vec![0.0; pts.len()];
-                field.density_unmasked(&pts, &mut sigma);
-                let corner =
-                    |x: usize, y: usize, dz: usize| sigma[(dz * (n + 1) + y) * (n + 1) + x];
-                let centres = &sigma[2 * (n + 1) * (n + 1)..];
-                (0..n * n)
-                    .map(|i| {
-                        let (x, y) = (i % n, i / n);
-                        let mut m = centres[i];
-                        for k in 0..8 {
-                            m = m.max(corner(x + (k & 1), y + (k >> 1 & 1), k >> 2));
-                        }
-                        m
-                    })
-                    .collect()
-            })
-            .collect();
-        let hot: Vec<bool> = slabs.concat().iter().map(|&s| s >= threshold).collect();
-        let mut cells = vec![false; n * n * n];
-        for z in 0..n {
-            for y in 0..n {
-                for x in 0..n {
-                    let near = |v: usize| v.saturating_sub(1)..=(v + 1).min(n - 1);
-                    cells[(z * n + y) * n + x] = near(z)
-                        .any(|zz| near(y).any(|yy| near(x).any(|xx| hot[(zz * n + yy) * n + xx])));
-                }
-            }
-        }
-        Self::from_cells(&cells)
-    }
-
-    /// Occupied cells in the index box `lo..hi` (exclusive).
-    fn count(&self, lo: [usize; 3], hi: [usize; 3]) -> u32 {
-        let m = Self::N + 1;
-        let s = |x: usize, y: usize, z: usize| i64::from(self.sums[(z * m + y) * m + x]);
-        let v = s(hi[0], hi[1], hi[2])
-            - s(lo[0], hi[1], hi[2])
-            - s(hi[0], lo[1], hi[2])
-            - s(hi[0], hi[1], lo[2])
-            + s(lo[0], lo[1], hi[2])
-            + s(lo[0], hi[1], lo[2])
-            + s(hi[0], lo[1], lo[2])
-            - s(lo[0], lo[1], lo[2]);
-        v as u32
-    }
-
-    /// Cell index range covering `[a, b]` along one axis (clamped to the grid).
-    fn range(a: f32, b: f32) -> (usize, usize) {
-        let n = Self::N as f32;
-        let to = |v: f32| ((v + HALF_EXTENT) / (2.0 * HALF_EXTENT) * n).clamp(0.0, n);
-        let lo = to(a).floor() as usize;
-        let hi = (to(b).floor() as usize + 1).min(Self::N);
-        (lo.min(Self::N - 1), hi)
-    }
-
-    fn region(&self, region: &Aabb) -> bool {
-        let r = [0, 1, 2].map(|a| Self::range(region.min[a], region.max[a]));
-        self.count([r[0].0, r[1].0, r[2].0], [r[0].1, r[1].1, r[2].1]) > 0
-    }
-
-    fn point(&self, p: Vec3) -> bool {
-        self.region(&Aabb::new(p, p))
-    }
-
-    fn fill_ratio(&self) -> f64 {
-        let n = Self::N;
-        f64::from(self.count([0; 3], [n; 3])) / (n * n * n) as f64
-    }
-}
-
 impl Field for NerfactoField {
     fn bounds(&self) -> Aabb {
         Aabb::new(Vec3::splat(-HALF_EXTENT), Vec3::splat(HALF_EXTENT))
@@ -872,24 +756,5 @@ mod tests {
         assert!((u - (c + Vec3::splat(2.0)) / 4.0).length() < 1e-6);
         // Infinitely far: u reaches 1 and leaves the selector.
         assert!(NerfactoField::unit_from_field(Vec3::new(f32::INFINITY, 0.0, 0.0)).is_none());
-    }
-
-    #[test]
-    fn occupancy_regions_count_cells() {
-        let n = OccupancyGrid::N;
-        let mut cells = vec![false; n * n * n];
-        // One occupied cell at (10, 20, 30): x ∈ [−2 + 10·h, −2 + 11·h], h = 4/64.
-        cells[(30 * n + 20) * n + 10] = true;
-        let g = OccupancyGrid::from_cells(&cells);
-        let h = 4.0 / n as f32;
-        let centre = Vec3::new(-2.0 + 10.5 * h, -2.0 + 20.5 * h, -2.0 + 30.5 * h);
-        assert!(g.point(centre));
-        assert!(!g.point(centre + Vec3::new(h, 0.0, 0.0)));
-        assert!(g.region(&Aabb::new(
-            centre - Vec3::splat(2.0 * h),
-            centre - Vec3::splat(0.4 * h)
-        )));
-        assert!(!g.region(&Aabb::new(Vec3::splat(-2.0), Vec3::splat(-1.0))));
-        assert!((g.fill_ratio() - 1.0 / (n * n * n) as f64).abs() < 1e-12);
     }
 }

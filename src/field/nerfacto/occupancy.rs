@@ -1,0 +1,436 @@
+//! The occupancy grid a nerfacto run gets at load (nerfacto has none of its own), and its
+//! on-disk cache next to the run.
+//!
+//! **Grid.** `N³` cells over the field's bounds `[−h, h]³`; a cell is occupied when the
+//! largest density sampled at its corners and centre reaches `opacity / cell diagonal`, and
+//! the occupied set is dilated by one cell (26-neighbourhood). A bit per cell is kept as 3-D
+//! prefix sums, so a region's test is eight lookups.
+//!
+//! **Cache** (`<run>/nerfx_occupancy.bin`). Computing the grid takes `(N + 1)²·2N + N³`
+//! density samples (~0.5 M for `N = 64`: about a second), so it is kept next to the run:
+//! `"NERFXOCC"`, format version (u32 LE), key length (u32 LE) and key, `N` (u32 LE), the cells
+//! as bits (x fastest, then y, then z; bit `i % 8` of byte `i / 8`), then an FNV-1a 64 hash
+//! of everything before it (u64 LE). The key names what the grid depends on: the grid
+//! settings, the checkpoint (path, size, modification time and a hash of its first and last
+//! 64 KiB) and `config.yml` (size, modification time). A cache that is missing, stale (another
+//! key), truncated or corrupt (hash) is recomputed and rewritten (through a temporary file
+//! and a rename, so a reader never sees half a file); one that cannot be written is not an
+//! error, the grid is simply not cached.
+
+use std::io::{Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use crate::field::Aabb;
+
+/// The cache file's name inside the run directory.
+pub(super) const CACHE_FILE: &str = "nerfx_occupancy.bin";
+/// Bumped whenever the grid rule or the file layout changes.
+const CACHE_VERSION: u32 = 1;
+const MAGIC: &[u8; 8] = b"NERFXOCC";
+/// Bytes hashed at each end of the checkpoint for the key.
+const KEY_SAMPLE: u64 = 64 * 1024;
+
+/// How the grid is computed: cells per axis, the opacity rule and the bounds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct GridSettings {
+    /// Cells per axis `N`.
+    pub n: usize,
+    /// Opacity across a cell above which it is occupied.
+    pub opacity: f32,
+    /// Half the side of the bounds `h`.
+    pub half_extent: f32,
+}
+
+/// Where a grid came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Source {
+    /// Sampled from the field at this load.
+    Computed,
+    /// Read from the cache file.
+    Cached,
+}
+
+/// A bit per cell, as prefix sums.
+#[derive(Clone, Debug)]
+pub(super) struct OccupancyGrid {
+    n: usize,
+    half_extent: f32,
+    /// `(n+1)³` prefix counts: `sums[(z·(n+1) + y)·(n+1) + x]` = occupied cells below.
+    sums: Vec<u32>,
+    source: Source,
+}
+
+impl OccupancyGrid {
+    /// Every cell occupied (before the grid is computed).
+    pub fn full(settings: &GridSettings) -> Self {
+        Self::from_cells(settings, &vec![true; settings.n.pow(3)], Source::Computed)
+    }
+
+    /// The grid of `cells` (`n³`, x fastest).
+    pub fn from_cells(settings: &GridSettings, cells: &[bool], source: Source) -> Self {
+        let n = settings.n;
+        let m = n + 1;
+        let mut sums = vec![0u32; m * m * m];
+        for z in 1..m {
+            for y in 1..m {
+                for x in 1..m {
+                    let c = u32::from(cells[((z - 1) * n + y - 1) * n + x - 1]);
+                    let at = |x: usize, y: usize, z: usize| sums[(z * m + y) * m + x];
+                    sums[(z * m + y) * m + x] =
+                        c + at(x - 1, y, z) + at(x, y - 1, z) + at(x, y, z - 1)
+                            - at(x - 1, y - 1, z)
+                            - at(x - 1, y, z - 1)
+                            - at(x, y - 1, z - 1)
+                            + at(x - 1, y - 1, z - 1);
+                }
+            }
+        }
+        OccupancyGrid {
+            n,
+            half_extent: settings.half_extent,
+            sums,
+            source,
+        }
+    }
+
+    /// The grid for a run: read from the cache in `run` when it is current for `key`,
+    /// otherwise computed from `density` (the field's unmasked density) and cached; with no
+    /// key (the checkpoint could not be examined), computed and not cached.
+    pub fn load_or_build(
+        settings: &GridSettings,
+        run: &Path,
+        key: Option<&str>,
+        density: impl Fn(&[Vec3], &mut [f32]) + Sync,
+    ) -> Self {
+        let path = run.join(CACHE_FILE);
+        if let Some(cells) = key.and_then(|k| read_cache(&path, k, settings.n)) {
+            return Self::from_cells(settings, &cells, Source::Cached);
+        }
+        let cells = compute_cells(settings, density);
+        if let Some(k) = key {
+            write_cache(&path, k, settings.n, &cells);
+        }
+        Self::from_cells(settings, &cells, Source::Computed)
+    }
+
+    /// Where the grid came from.
+    pub fn source(&self) -> Source {
+        self.source
+    }
+
+    /// Cells per axis.
+    pub fn resolution(&self) -> usize {
+        self.n
+    }
+
+    /// Occupied cells in the index box `lo..hi` (exclusive).
+    fn count(&self, lo: [usize; 3], hi: [usize; 3]) -> u32 {
+        let m = self.n + 1;
+        let s = |x: usize, y: usize, z: usize| i64::from(self.sums[(z * m + y) * m + x]);
+        let v = s(hi[0], hi[1], hi[2])
+            - s(lo[0], hi[1], hi[2])
+            - s(hi[0], lo[1], hi[2])
+            - s(hi[0], hi[1], lo[2])
+            + s(lo[0], lo[1], hi[2])
+            + s(lo[0], hi[1], lo[2])
+            + s(hi[0], lo[1], lo[2])
+            - s(lo[0], lo[1], lo[2]);
+        v as u32
+    }
+
+    /// Cell index range covering `[a, b]` along one axis (clamped to the grid).
+    fn range(&self, a: f32, b: f32) -> (usize, usize) {
+        let (n, h) = (self.n as f32, self.half_extent);
+        let to = |v: f32| ((v + h) / (2.0 * h) * n).clamp(0.0, n);
+        let lo = to(a).floor() as usize;
+        let hi = (to(b).floor() as usize + 1).min(self.n);
+        (lo.min(self.n - 1), hi)
+    }
+
+    /// Whether any cell meeting `region` is occupied.
+    pub fn region(&self, region: &Aabb) -> bool {
+        let r = [0, 1, 2].map(|a| self.range(region.min[a], region.max[a]));
+        self.count([r[0].0, r[1].0, r[2].0], [r[0].1, r[1].1, r[2].1]) > 0
+    }
+
+    /// Whether the cell of `p` is occupied.
+    pub fn point(&self, p: Vec3) -> bool {
+        self.region(&Aabb::new(p, p))
+    }
+
+    /// Occupied cells over all cells.
+    pub fn fill_ratio(&self) -> f64 {
+        let n = self.n;
+        f64::from(self.count([0; 3], [n; 3])) / (n * n * n) as f64
+    }
+}
+
+/// Samples `density` and applies the rule of the module docs: the occupied cells (`n³`).
+fn compute_cells(s: &GridSettings, density: impl Fn(&[Vec3], &mut [f32]) + Sync) -> Vec<bool> {
+    let n = s.n;
+    let cell = 2.0 * s.half_extent / n as f32;
+    let threshold = s.opacity / (cell * 3f32.sqrt());
+    let at = |i: f32| -s.half_extent + i * cell;
+    // Per z-slab of cells: the max density over its corners and centres.
+    let slabs: Vec<Vec<f32>> = (0..n)
+        .into_par_iter()
+        .map(|z| {
+            let mut pts = Vec::with_capacity(2 * (n + 1) * (n + 1) + n * n);
+            for dz in 0..2 {
+                for y in 0..=n {
+                    for x in 0..=n {
+                        pts.push(Vec3::new(at(x as f32), at(y as f32), at((z + dz) as f32)));
+                    }
+                }
+            }
+            for y in 0..n {
+                for x in 0..n {
+                    let c = Vec3::new(x as f32 + 0.5, y as f32 + 0.5, z as f32 + 0.5);
+                    pts.push(Vec3::new(at(c.x), at(c.y), at(c.z)));
+                }
+            }
+            let mut sigma = vec![0.0; pts.len()];
+            density(&pts, &mut sigma);
+            let corner = |x: usize, y: usize, dz: usize| sigma[(dz * (n + 1) + y) * (n + 1) + x];
+            let centres = &sigma[2 * (n + 1) * (n + 1)..];
+            (0..n * n)
+                .map(|i| {
+                    let (x, y) = (i % n, i / n);
+                    let mut m = centres[i];
+                    for k in 0..8 {
+                        m = m.max(corner(x + (k & 1), y + (k >> 1 & 1), k >> 2));
+                    }
+                    m
+                })
+                .collect()
+        })
+        .collect();
+    let hot: Vec<bool> = slabs.concat().iter().map(|&s| s >= threshold).collect();
+    let mut cells = vec![false; n * n * n];
+    for z in 0..n {
+        for y in 0..n {
+            for x in 0..n {
+                let near = |v: usize| v.saturating_sub(1)..=(v + 1).min(n - 1);
+                cells[(z * n + y) * n + x] = near(z)
+                    .any(|zz| near(y).any(|yy| near(x).any(|xx| hot[(zz * n + yy) * n + xx])));
+            }
+        }
+    }
+    cells
+}
+
+/// The cache key of a run: the grid settings, the checkpoint and `config.yml`. `None` when
+/// the checkpoint cannot be examined (then nothing is cached).
+pub(super) fn cache_key(
+    settings: &GridSettings,
+    checkpoint: &Path,
+    config: &Path,
+) -> Option<String> {
+    let stamp = |p: &Path| -> Option<(u64, u128)> {
+        let meta = std::fs::metadata(p).ok()?;
+        let mtime = meta
+            .modified()
+            .ok()?
+            .duration_since(std::time::UNIX_EPOCH)
+            .ok()?
+            .as_nanos();
+        Some((meta.len(), mtime))
+    };
+    let (size, mtime) = stamp(checkpoint)?;
+    let (config_size, config_mtime) = stamp(config)?;
+    let mut file = std::fs::File::open(checkpoint).ok()?;
+    let mut ends = Vec::new();
+    (&mut file).take(KEY_SAMPLE).read_to_end(&mut ends).ok()?;
+    if size > KEY_SAMPLE {
+        file.seek(SeekFrom::Start(
+            size.saturating_sub(KEY_SAMPLE).max(KEY_SAMPLE),
+        ))
+        .ok()?;
+        file.take(KEY_SAMPLE).read_to_end(&mut ends).ok()?;
+    }
+    let path = std::fs::canonicalize(checkpoint).unwrap_or_else(|_| PathBuf::from(checkpoint));
+    Some(format!(
+        "grid n={} opacity={:08x} half_extent={:08x} dilation=1; checkpoint {} size={size} \
+         mtime={mtime} ends={:016x}; config size={config_size} mtime={config_mtime}",
+        settings.n,
+        settings.opacity.to_bits(),
+        settings.half_extent.to_bits(),
+        path.display(),
+        fnv1a(&ends),
+    ))
+}
+
+/// FNV-1a, 64 bits.
+fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
+/// The file's bytes for `cells` under `key`.
+fn encode(key: &str, n: usize, cells: &[bool]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(24 + key.len() + cells.len() / 8 + 8);
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&CACHE_VERSION.to_le_bytes());
+    out.extend_from_slice(&(key.len() as u32).to_le_bytes());
+    out.extend_from_slice(key.as_bytes());
+    out.extend_from_slice(&(n as u32).to_le_bytes());
+    let mut bits = vec![0u8; cells.len().div_ceil(8)];
+    for (i, _) in cells.iter().enumerate().filter(|(_, &c)| c) {
+        bits[i / 8] |= 1 << (i % 8);
+    }
+    out.extend_from_slice(&bits);
+    let hash = fnv1a(&out);
+    out.extend_from_slice(&hash.to_le_bytes());
+    out
+}
+
+/// The cells in `bytes` when they are a whole, intact cache for `key` and `n`.
+fn decode(bytes: &[u8], key: &str, n: usize) -> Option<Vec<bool>> {
+    let (body, hash) = bytes.split_at_checked(bytes.len().checked_sub(8)?)?;
+    if fnv1a(body) != u64::from_le_bytes(hash.try_into().ok()?) {
+        return None;
+    }
+    let mut rest = body.strip_prefix(MAGIC.as_slice())?;
+    let mut u32_field = || -> Option<u32> {
+        let (v, r) = rest.split_first_chunk::<4>()?;
+        rest = r;
+        Some(u32::from_le_bytes(*v))
+    };
+    if u32_field()? != CACHE_VERSION {
+        return None;
+    }
+    let key_len = u32_field()? as usize;
+    let (stored_key, r) = rest.split_at_checked(key_len)?;
+    rest = r;
+    if stored_key != key.as_bytes() {
+        return None;
+    }
+    let (stored_n, bits) = rest.split_first_chunk::<4>()?;
+    let count = n.pow(3);
+    if u32::from_le_bytes(*stored_n) as usize != n || bits.len() != count.div_ceil(8) {
+        return None;
+    }
+    Some(
+        (0..count)
+            .map(|i| bits[i / 8] >> (i % 8) & 1 == 1)
+            .collect(),
+    )
+}
+
+fn read_cache(path: &Path, key: &str, n: usize) -> Option<Vec<bool>> {
+    decode(&std::fs::read(path).ok()?, key, n)
+}
+
+/// Writes the cache through a temporary file and a rename; failures leave no cache.
+fn write_cache(path: &Path, key: &str, n: usize, cells: &[bool]) {
+    let tmp = path.with_extension(format!("tmp-{}", std::process::id()));
+    if std::fs::write(&tmp, encode(key, n, cells)).is_err() || std::fs::rename(&tmp, path).is_err()
+    {
+        let _ = std::fs::remove_file(&tmp);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SETTINGS: GridSettings = GridSettings {
+        n: 8,
+        opacity: 1e-3,
+        half_extent: 2.0,
+    };
+
+    #[test]
+    fn regions_count_cells() {
+        let n = 64;
+        let settings = GridSettings { n, ..SETTINGS };
+        let mut cells = vec![false; n * n * n];
+        // One occupied cell at (10, 20, 30): x ∈ [−2 + 10·h, −2 + 11·h], h = 4/64.
+        cells[(30 * n + 20) * n + 10] = true;
+        let g = OccupancyGrid::from_cells(&settings, &cells, Source::Computed);
+        let h = 4.0 / n as f32;
+        let centre = Vec3::new(-2.0 + 10.5 * h, -2.0 + 20.5 * h, -2.0 + 30.5 * h);
+        assert!(g.point(centre));
+        assert!(!g.point(centre + Vec3::new(h, 0.0, 0.0)));
+        assert!(g.region(&Aabb::new(
+            centre - Vec3::splat(2.0 * h),
+            centre - Vec3::splat(0.4 * h)
+        )));
+        assert!(!g.region(&Aabb::new(Vec3::splat(-2.0), Vec3::splat(-1.0))));
+        assert!((g.fill_ratio() - 1.0 / (n * n * n) as f64).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_point_of_density_occupies_its_cells_and_their_neighbours() {
+        // σ = 1 only within 0.01 of the centre of cell (5, 2, 3) (h = 0.5): sampled at that
+        // centre only, so cells 4..=6 × 1..=3 × 2..=4 are occupied after dilation.
+        let c = Vec3::new(-2.0 + 5.5 * 0.5, -2.0 + 2.5 * 0.5, -2.0 + 3.5 * 0.5);
+        let cells = compute_cells(&SETTINGS, |pts, sigma| {
+            for (p, s) in pts.iter().zip(sigma.iter_mut()) {
+                *s = if (*p - c).length() < 0.01 { 1.0 } else { 0.0 };
+            }
+        });
+        for z in 0..8 {
+            for y in 0..8 {
+                for x in 0..8 {
+                    let want = (4..=6).contains(&x) && (1..=3).contains(&y) && (2..=4).contains(&z);
+                    assert_eq!(cells[(z * 8 + y) * 8 + x], want, "({x}, {y}, {z})");
+                }
+            }
+        }
+    }
+
+    fn seeded_cells(n: usize) -> Vec<bool> {
+        (0..n * n * n).map(|i| (i * 7 + i / 5) % 3 == 0).collect()
+    }
+
+    #[test]
+    fn cache_bytes_round_trip_and_refuse_any_change() {
+        let cells = seeded_cells(8);
+        let bytes = encode("key A", 8, &cells);
+        // Layout: magic, version, key length and key, n, 64 bits, hash.
+        assert_eq!(&bytes[..8], b"NERFXOCC");
+        assert_eq!(bytes.len(), 8 + 4 + 4 + 5 + 4 + 64 + 8);
+        assert_eq!(decode(&bytes, "key A", 8), Some(cells));
+        assert_eq!(decode(&bytes, "key B", 8), None);
+        assert_eq!(decode(&bytes, "key A", 4), None);
+        for i in 0..bytes.len() {
+            let mut bad = bytes.clone();
+            bad[i] ^= 0x10;
+            assert_eq!(decode(&bad, "key A", 8), None, "flipped byte {i}");
+        }
+        for cut in 0..bytes.len() {
+            assert_eq!(decode(&bytes[..cut], "key A", 8), None, "cut at {cut}");
+        }
+    }
+
+    #[test]
+    fn the_cache_is_used_until_its_key_changes() {
+        let dir = std::env::temp_dir().join(format!("nerfx-occ-cache-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let calls = std::sync::atomic::AtomicUsize::new(0);
+        let density = |pts: &[Vec3], sigma: &mut [f32]| {
+            calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            for (p, s) in pts.iter().zip(sigma.iter_mut()) {
+                *s = if p.x < 0.0 { 1.0 } else { 0.0 };
+            }
+        };
+        let a = OccupancyGrid::load_or_build(&SETTINGS, &dir, Some("k1"), density);
+        assert_eq!(a.source(), Source::Computed);
+        let computed = calls.load(std::sync::atomic::Ordering::Relaxed);
+        assert!(computed > 0);
+        let b = OccupancyGrid::load_or_build(&SETTINGS, &dir, Some("k1"), density);
+        assert_eq!(b.source(), Source::Cached);
+        assert_eq!(calls.load(std::sync::atomic::Ordering::Relaxed), computed);
+        assert_eq!(a.sums, b.sums);
+        // Another key: recomputed (and the cache rewritten for it).
+        let c = OccupancyGrid::load_or_build(&SETTINGS, &dir, Some("k2"), density);
+        assert_eq!(c.source(), Source::Computed);
+        assert_eq!(a.sums, c.sums);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

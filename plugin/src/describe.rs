@@ -5,7 +5,8 @@
 //! multi-resolution, fully thread-safe rendering (the host may call render on many threads at
 //! once), no host frame threading, one clip depth, no temporal access. In a context: the RGBA
 //! `Output` clip, every registry clip that exists there (RGBA; RGBA or Alpha for mattes,
-//! alphas and depths), and every parameter ([`crate::param_defs`]).
+//! alphas and depths; label and optional flag: OpenFX clip descriptors have no tooltip
+//! property, so a clip's hint is not published), and every parameter ([`crate::param_defs`]).
 
 use nerfx::graph::{ClipKind, Context, Node, ParamKind};
 use openfx_sys::*;
@@ -125,9 +126,6 @@ pub fn describe_in_context(
         )?;
         clip.set_int(name(kOfxImageClipPropOptional), i32::from(c.optional))?;
         clip.set_int(name(kOfxImageEffectPropSupportsTiles), 1)?;
-        // Clip descriptors have no standard tooltip property; hosts that know the parameter
-        // hint on clips show it, strict ones refuse it, which is no error.
-        let _ = clip.set_string(name(kOfxParamPropHint), c.hint);
     }
     let s = suites()?;
     let get_set = s

@@ -1,0 +1,875 @@
+//! An effect instance: parameters, connected inputs, and the actions a render needs.
+
+use std::collections::HashMap;
+use std::ffi::c_void;
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+
+use openfx_sys as ofx;
+
+use super::bundle::{context_name, failure, Bundle, Plugin};
+use super::effect::{self, Effect, Output, RenderScope, GUARD, SENTINEL_BITS};
+use super::props::{args, PropSet, PropValue};
+use super::spec::{cstr, ParamType};
+use super::status;
+use crate::error::{Error, Result};
+use crate::graph::{Context, Value};
+use crate::image::{Plane, Planes, Window};
+
+/// Renders a window of an input: `(time, window, render_scale)` → planes of the window's
+/// size, in the core's raster convention (window at the render scale, `y` down).
+pub type SourceFn = dyn Fn(f64, Window, f64) -> Result<Planes> + Send + Sync;
+
+/// What feeds an input clip.
+#[derive(Clone)]
+pub struct ClipSource {
+    /// The source's region of definition `(width, height)` in full-resolution pixels.
+    pub rod: (u32, u32),
+    /// Its pixels.
+    pub render: Arc<SourceFn>,
+}
+
+impl ClipSource {
+    /// A source of size `rod` rendering through `render`.
+    pub fn new(
+        rod: (u32, u32),
+        render: impl Fn(f64, Window, f64) -> Result<Planes> + Send + Sync + 'static,
+    ) -> Self {
+        ClipSource {
+            rod,
+            render: Arc::new(render),
+        }
+    }
+
+    /// A source that is a fixed full-resolution image, the same at every time; it serves
+    /// render scale 1 only.
+    pub fn image(planes: Planes) -> Self {
+        let rod = (planes.width, planes.height);
+        ClipSource::new(rod, move |_, w, s| {
+            if s != 1.0 {
+                return Err(Error::Unsupported(format!(
+                    "a fixed image at render scale {s}"
+                )));
+            }
+            crop(&planes, w)
+        })
+    }
+}
+
+/// The window `w` of `p` (every plane present).
+fn crop(p: &Planes, w: Window) -> Result<Planes> {
+    if w.x1 > p.width || w.y1 > p.height {
+        return Err(Error::invalid(
+            "clip source",
+            format!("window {w:?} outside a {}×{} image", p.width, p.height),
+        ));
+    }
+    let c = |q: &Plane| Plane {
+        width: w.width(),
+        height: w.height(),
+        data: (w.y0..w.y1)
+            .flat_map(|y| (w.x0..w.x1).map(move |x| (x, y)))
+            .map(|(x, y)| q.get(x, y))
+            .collect(),
+    };
+    Ok(Planes {
+        width: w.width(),
+        height: w.height(),
+        rgb: p.rgb.as_ref().map(|[r, g, b]| [c(r), c(g), c(b)]),
+        alpha: p.alpha.as_ref().map(c),
+        depth_z: p.depth_z.as_ref().map(c),
+        depth_ray: p.depth_ray.as_ref().map(c),
+        depth_median: p.depth_median.as_ref().map(c),
+    })
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Safety {
+    Unsafe,
+    Instance,
+    Fully,
+}
+
+/// A plugin instance. `render` (and the other render-time actions) may be called from many
+/// threads at once; the host serialises them as the plugin's declared thread safety asks.
+pub struct Instance {
+    bundle: Bundle,
+    plugin: usize,
+    context: Context,
+    effect: Box<Effect>,
+    _descriptor: Box<Effect>,
+    safety: Safety,
+    render_lock: Mutex<()>,
+}
+
+impl Instance {
+    pub(crate) fn create(bundle: &Bundle, id: &str, context: Context) -> Result<Instance> {
+        let (descriptor, plugin) = bundle.descriptor(id, context)?;
+        let plugin_index = bundle
+            .plugin_ids()
+            .iter()
+            .position(|p| p == &plugin.id)
+            .unwrap_or(0);
+        let effect = descriptor.instantiate(context_name(context));
+        let safety = match descriptor
+            .props
+            .string(ofx::kOfxImageEffectPluginRenderThreadSafety)
+            .as_str()
+        {
+            s if s == cstr(ofx::kOfxImageEffectRenderFullySafe) => Safety::Fully,
+            s if s == cstr(ofx::kOfxImageEffectRenderUnsafe) => Safety::Unsafe,
+            _ => Safety::Instance,
+        };
+        let instance = Instance {
+            bundle: bundle.clone(),
+            plugin: plugin_index,
+            context,
+            effect,
+            _descriptor: descriptor,
+            safety,
+            render_lock: Mutex::new(()),
+        };
+        {
+            let _main = instance.main();
+            instance.run("createInstance", ofx::kOfxActionCreateInstance, None, None)?;
+        }
+        instance.clip_preferences()?;
+        Ok(instance)
+    }
+
+    /// The handle the plugin gets for this instance.
+    pub(crate) fn effect_handle(&self) -> ofx::OfxImageEffectHandle {
+        self.effect.handle()
+    }
+
+    fn plugin(&self) -> &Plugin {
+        // The index came from the same binary's plugin list.
+        self.bundle
+            .binary
+            .plugin(&self.bundle.plugin_ids()[self.plugin])
+            .unwrap_or_else(|_| unreachable!("the plugin list of a loaded binary does not change"))
+    }
+
+    fn main(&self) -> MutexGuard<'_, ()> {
+        self.bundle
+            .binary
+            .main_lock
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+    }
+
+    fn render_guard(&self) -> Option<MutexGuard<'_, ()>> {
+        let lock = match self.safety {
+            Safety::Fully => return None,
+            Safety::Instance => &self.render_lock,
+            Safety::Unsafe => &self.bundle.binary.render_lock,
+        };
+        Some(lock.lock().unwrap_or_else(PoisonError::into_inner))
+    }
+
+    fn run(
+        &self,
+        what: &str,
+        action: &[u8],
+        in_args: Option<&PropSet>,
+        out_args: Option<&PropSet>,
+    ) -> Result<status::Status> {
+        let handle = self.effect.handle() as *const c_void;
+        self.plugin()
+            .run(&self.bundle.log, what, action, handle, in_args, out_args)
+    }
+
+    fn args(&self, out: bool, what: &str, values: &[(&[u8], PropValue)]) -> Box<PropSet> {
+        let named: Vec<(&str, PropValue)> = values
+            .iter()
+            .map(|(n, v)| (super::spec::cstr_dyn(n), v.clone()))
+            .collect();
+        let side = if out { "outArgs" } else { "inArgs" };
+        args(
+            out,
+            format!("{} {what} {side}", self.effect.id),
+            &named,
+            self.bundle.log.clone(),
+        )
+    }
+
+    fn input_clips(&self) -> Vec<String> {
+        self.effect
+            .lock_clips()
+            .iter()
+            .filter(|c| c.name != "Output")
+            .map(|c| c.name.clone())
+            .collect()
+    }
+
+    /// Sets a parameter, checked against its declared type and range: `Double` for double
+    /// parameters, `Int` for integers, `Bool` for booleans, `Choice` (an index) for choices,
+    /// `Text` for string and custom parameters (file paths, the matrix string), `Doubles`
+    /// for RGB, RGBA and 2D/3D doubles. Then asks the plugin for its clip preferences again.
+    pub fn set_param(&mut self, name: &str, value: &Value) -> Result<()> {
+        let id = self.effect.id.clone();
+        let what = format!("{id}: parameter {name}");
+        let set = self.effect.params.with(name, |p| {
+            let v = match (p.ty, value) {
+                (ParamType::Double, Value::Double(x)) => PropValue::Double(vec![*x]),
+                (ParamType::Integer, Value::Int(i)) => {
+                    PropValue::Int(vec![i32::try_from(*i)
+                        .map_err(|_| format!("{i} does not fit an OFX integer"))?])
+                }
+                (ParamType::Boolean, Value::Bool(b)) => PropValue::Int(vec![i32::from(*b)]),
+                (ParamType::Choice, Value::Choice(i)) => PropValue::Int(vec![
+                    i32::try_from(*i).map_err(|_| format!("option {i} is out of range"))?
+                ]),
+                (ParamType::String | ParamType::Custom, Value::Text(s)) => {
+                    PropValue::String(vec![s.clone()])
+                }
+                (
+                    ParamType::Double2D | ParamType::Double3D | ParamType::Rgb | ParamType::Rgba,
+                    Value::Doubles(v),
+                ) => PropValue::Double(v.clone()),
+                (t, v) => return Err(format!("a {} parameter cannot take {v:?}", t.name())),
+            };
+            p.set_value(&v)
+        });
+        match set {
+            None => return Err(Error::invalid(what, "no such parameter")),
+            Some(Err(why)) => return Err(Error::invalid(what, why)),
+            Some(Ok(())) => {}
+        }
+        self.clip_preferences()
+    }
+
+    /// The current value of a parameter (as the plugin would read it).
+    pub fn param(&self, name: &str) -> Result<PropValue> {
+        self.effect.params.with(name, |p| p.value()).ok_or_else(|| {
+            Error::invalid(
+                format!("{}: parameter {name}", self.effect.id),
+                "no such parameter",
+            )
+        })
+    }
+
+    /// Connects the input clip `clip` to `source`, then asks for the clip preferences again.
+    pub fn connect(&mut self, clip: &str, source: ClipSource) -> Result<()> {
+        let id = self.effect.id.clone();
+        let found = self.effect.with_clip(clip, |c| {
+            if c.name == "Output" {
+                return false;
+            }
+            let float = cstr(ofx::kOfxBitDepthFloat);
+            let _ = c.props.set_str(ofx::kOfxImageEffectPropPixelDepth, float);
+            let _ = c
+                .props
+                .set_str(ofx::kOfxImageClipPropUnmappedPixelDepth, float);
+            let _ = c.props.set_ints(ofx::kOfxImageClipPropConnected, &[1]);
+            *c.source.lock().unwrap_or_else(PoisonError::into_inner) = Some(source);
+            true
+        });
+        if found != Some(true) {
+            return Err(Error::invalid(
+                format!("{id}: clip {clip}"),
+                format!(
+                    "no such input clip (inputs: {})",
+                    self.input_clips().join(", ")
+                ),
+            ));
+        }
+        self.clip_preferences()
+    }
+
+    /// getClipPreferences: the plugin's choices are checked (components it declared for the
+    /// clip) and applied to the clip properties.
+    fn clip_preferences(&self) -> Result<()> {
+        let clips: Vec<(String, String)> = self
+            .effect
+            .lock_clips()
+            .iter()
+            .map(|c| {
+                (
+                    c.name.clone(),
+                    c.props.string(ofx::kOfxImageEffectPropComponents),
+                )
+            })
+            .collect();
+        let mut names = Vec::new();
+        for (c, components) in &clips {
+            names.push((
+                format!("OfxImageClipPropComponents_{c}"),
+                PropValue::String(vec![components.clone()]),
+            ));
+            names.push((
+                format!("OfxImageClipPropDepth_{c}"),
+                PropValue::String(vec![cstr(ofx::kOfxBitDepthFloat).to_string()]),
+            ));
+            names.push((
+                format!("OfxImageClipPropPAR_{c}"),
+                PropValue::Double(vec![1.0]),
+            ));
+        }
+        let fixed: [(&[u8], PropValue); 6] = [
+            (
+                ofx::kOfxImageEffectPropFrameRate,
+                PropValue::Double(vec![24.0]),
+            ),
+            (
+                ofx::kOfxImagePropPixelAspectRatio,
+                PropValue::Double(vec![1.0]),
+            ),
+            (
+                ofx::kOfxImageEffectPropPreMultiplication,
+                PropValue::String(vec![cstr(ofx::kOfxImagePreMultiplied).to_string()]),
+            ),
+            (
+                ofx::kOfxImageClipPropContinuousSamples,
+                PropValue::Int(vec![0]),
+            ),
+            (ofx::kOfxImageEffectFrameVarying, PropValue::Int(vec![0])),
+            (
+                ofx::kOfxImageClipPropFieldOrder,
+                PropValue::String(vec![cstr(ofx::kOfxImageFieldNone).to_string()]),
+            ),
+        ];
+        let mut values: Vec<(&[u8], PropValue)> = names
+            .iter()
+            .map(|(n, v)| (n.as_bytes(), v.clone()))
+            .collect();
+        values.extend(fixed);
+        let out = self.args(true, "getClipPreferences", &values);
+        {
+            let _main = self.main();
+            self.run(
+                "getClipPreferences",
+                ofx::kOfxImageEffectActionGetClipPreferences,
+                None,
+                Some(&out),
+            )?;
+        }
+        let log = &self.bundle.log;
+        for c in self.effect.lock_clips().iter() {
+            let chosen = out.string(format!("OfxImageClipPropComponents_{}", c.name).as_bytes());
+            let supported = c.props.strings(ofx::kOfxImageEffectPropSupportedComponents);
+            if !supported.contains(&chosen) {
+                log.violation(format!("{}: getClipPreferences chose {chosen} for clip {}, which it does not support ({})", self.effect.id, c.name, supported.join(", ")));
+                continue;
+            }
+            let _ = c.props.set_str(ofx::kOfxImageEffectPropComponents, &chosen);
+            if c.name == "Output" {
+                let premult = out.string(ofx::kOfxImageEffectPropPreMultiplication);
+                let _ = c
+                    .props
+                    .set_str(ofx::kOfxImageEffectPropPreMultiplication, &premult);
+            }
+        }
+        Ok(())
+    }
+
+    /// The region of definition at `time`: `(width, height)` in full-resolution pixels.
+    /// A region not starting at the origin is refused (the core's images start there).
+    pub fn region_of_definition(&self, time: f64) -> Result<(u32, u32)> {
+        let default = match self.context {
+            Context::Generator => [0.0, 0.0, 1920.0, 1080.0],
+            _ => {
+                let mut r = [0.0f64; 4];
+                for c in self.effect.lock_clips().iter() {
+                    if let Some(s) = c
+                        .source
+                        .lock()
+                        .unwrap_or_else(PoisonError::into_inner)
+                        .as_ref()
+                    {
+                        r[2] = r[2].max(f64::from(s.rod.0));
+                        r[3] = r[3].max(f64::from(s.rod.1));
+                    }
+                }
+                r
+            }
+        };
+        let in_args = self.args(
+            false,
+            "getRegionOfDefinition",
+            &[
+                (ofx::kOfxPropTime, PropValue::Double(vec![time])),
+                (
+                    ofx::kOfxImageEffectPropRenderScale,
+                    PropValue::Double(vec![1.0, 1.0]),
+                ),
+            ],
+        );
+        let out = self.args(
+            true,
+            "getRegionOfDefinition",
+            &[(
+                ofx::kOfxImageEffectPropRegionOfDefinition,
+                PropValue::Double(default.to_vec()),
+            )],
+        );
+        {
+            let _g = self.render_guard();
+            self.run(
+                "getRegionOfDefinition",
+                ofx::kOfxImageEffectActionGetRegionOfDefinition,
+                Some(&in_args),
+                Some(&out),
+            )?;
+        }
+        let r = out.doubles(ofx::kOfxImageEffectPropRegionOfDefinition);
+        let what = format!("{}: region of definition at {time}", self.effect.id);
+        let ok = r.len() == 4
+            && r.iter().all(|v| v.is_finite())
+            && r[0] == 0.0
+            && r[1] == 0.0
+            && r[2] >= 0.0
+            && r[3] >= 0.0
+            && r[2] <= f64::from(u32::MAX)
+            && r[3] <= f64::from(u32::MAX);
+        if !ok {
+            return Err(Error::invalid(what, format!("{r:?} is not [0, 0, w, h]")));
+        }
+        *self
+            .effect
+            .output_rod
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner) = Some([r[0], r[1], r[2], r[3]]);
+        Ok((r[2].ceil() as u32, r[3].ceil() as u32))
+    }
+
+    /// The OFX render window of a raster `window` at scale `s` for an output of height
+    /// `hs` pixels at that scale.
+    fn ofx_window(window: Window, hs: i64) -> [i32; 4] {
+        [
+            window.x0 as i32,
+            (hs - i64::from(window.y1)) as i32,
+            window.x1 as i32,
+            (hs - i64::from(window.y0)) as i32,
+        ]
+    }
+
+    fn check_scale(&self, s: f64) -> Result<()> {
+        if s.is_finite() && s > 0.0 && s <= 1.0 {
+            Ok(())
+        } else {
+            Err(Error::invalid(
+                format!("{}: render scale", self.effect.id),
+                format!("expected (0, 1], got {s}"),
+            ))
+        }
+    }
+
+    /// The input clip the plugin passes through unchanged for this render, if any.
+    pub fn is_identity(
+        &self,
+        time: f64,
+        window: Window,
+        render_scale: f64,
+    ) -> Result<Option<String>> {
+        self.check_scale(render_scale)?;
+        let rod = self.region_of_definition(time)?;
+        let (_, hs) = effect::scaled(rod, render_scale);
+        let in_args = self.args(
+            false,
+            "isIdentity",
+            &[
+                (ofx::kOfxPropTime, PropValue::Double(vec![time])),
+                (
+                    ofx::kOfxImageEffectPropFieldToRender,
+                    PropValue::String(vec![cstr(ofx::kOfxImageFieldNone).to_string()]),
+                ),
+                (
+                    ofx::kOfxImageEffectPropRenderWindow,
+                    PropValue::Int(Self::ofx_window(window, hs).to_vec()),
+                ),
+                (
+                    ofx::kOfxImageEffectPropRenderScale,
+                    PropValue::Double(vec![render_scale, render_scale]),
+                ),
+            ],
+        );
+        let out = self.args(
+            true,
+            "isIdentity",
+            &[
+                (ofx::kOfxPropName, PropValue::String(vec![String::new()])),
+                (ofx::kOfxPropTime, PropValue::Double(vec![time])),
+            ],
+        );
+        let s = {
+            let _g = self.render_guard();
+            self.run(
+                "isIdentity",
+                ofx::kOfxImageEffectActionIsIdentity,
+                Some(&in_args),
+                Some(&out),
+            )?
+        };
+        if s == status::REPLY_DEFAULT {
+            return Ok(None);
+        }
+        let name = out.string(ofx::kOfxPropName);
+        if !self.input_clips().contains(&name) {
+            self.bundle.log.violation(format!(
+                "{}: isIdentity named \"{name}\", not an input clip",
+                self.effect.id
+            ));
+            return Err(Error::invalid(
+                &self.effect.id,
+                format!("isIdentity named \"{name}\", not an input clip"),
+            ));
+        }
+        Ok(Some(name))
+    }
+
+    /// The regions of interest for a render (canonical), by input clip.
+    fn regions_of_interest(
+        &self,
+        time: f64,
+        canonical: [f64; 4],
+        s: f64,
+    ) -> Result<HashMap<String, [f64; 4]>> {
+        let inputs = self.input_clips();
+        let in_args = self.args(
+            false,
+            "getRegionsOfInterest",
+            &[
+                (ofx::kOfxPropTime, PropValue::Double(vec![time])),
+                (
+                    ofx::kOfxImageEffectPropRenderScale,
+                    PropValue::Double(vec![s, s]),
+                ),
+                (
+                    ofx::kOfxImageEffectPropRegionOfInterest,
+                    PropValue::Double(canonical.to_vec()),
+                ),
+            ],
+        );
+        let names: Vec<String> = inputs
+            .iter()
+            .map(|c| format!("OfxImageClipPropRoI_{c}"))
+            .collect();
+        let values: Vec<(&[u8], PropValue)> = names
+            .iter()
+            .map(|n| (n.as_bytes(), PropValue::Double(canonical.to_vec())))
+            .collect();
+        let out = self.args(true, "getRegionsOfInterest", &values);
+        self.run(
+            "getRegionsOfInterest",
+            ofx::kOfxImageEffectActionGetRegionsOfInterest,
+            Some(&in_args),
+            Some(&out),
+        )?;
+        Ok(inputs
+            .into_iter()
+            .zip(&names)
+            .map(|(c, n)| {
+                let r = out.doubles(n.as_bytes());
+                (c, [r[0], r[1], r[2], r[3]])
+            })
+            .collect())
+    }
+
+    /// Renders `window` (raster, `y` down, at `render_scale`) at `time`: getRegionsOfInterest,
+    /// then render into a guarded buffer; returns premultiplied RGBA planes of the window's
+    /// size. A write outside the window, a pixel left unwritten or an image left unreleased
+    /// is a violation and an error.
+    pub fn render(
+        &self,
+        time: f64,
+        window: Window,
+        render_scale: f64,
+        draft: bool,
+    ) -> Result<Planes> {
+        let s = render_scale;
+        self.check_scale(s)?;
+        let id = self.effect.id.clone();
+        let rod = self.region_of_definition(time)?;
+        let (ws, hs) = effect::scaled(rod, s);
+        let bounds = Self::ofx_window(window, hs);
+        let canonical = bounds.map(|v| f64::from(v) / s);
+        let (w, h) = (window.width() as usize, window.height() as usize);
+        let (bw, bh) = (w + 2 * GUARD, h + 2 * GUARD);
+        let mut buffer = vec![f32::from_bits(SENTINEL_BITS); bw * bh * 4];
+        let origin = (GUARD * bw + GUARD) * 4;
+        let output = Output {
+            ptr: buffer[origin..].as_mut_ptr() as usize,
+            bounds,
+            rod: [0, 0, ws as i32, hs as i32],
+            row_bytes: (bw * 16) as i32,
+        };
+        let in_args = self.args(
+            false,
+            "render",
+            &[
+                (ofx::kOfxPropTime, PropValue::Double(vec![time])),
+                (
+                    ofx::kOfxImageEffectPropFieldToRender,
+                    PropValue::String(vec![cstr(ofx::kOfxImageFieldNone).to_string()]),
+                ),
+                (
+                    ofx::kOfxImageEffectPropRenderWindow,
+                    PropValue::Int(bounds.to_vec()),
+                ),
+                (
+                    ofx::kOfxImageEffectPropRenderScale,
+                    PropValue::Double(vec![s, s]),
+                ),
+                (
+                    ofx::kOfxImageEffectPropSequentialRenderStatus,
+                    PropValue::Int(vec![0]),
+                ),
+                (
+                    ofx::kOfxImageEffectPropInteractiveRenderStatus,
+                    PropValue::Int(vec![0]),
+                ),
+                (
+                    ofx::kOfxImageEffectPropRenderQualityDraft,
+                    PropValue::Int(vec![i32::from(draft)]),
+                ),
+            ],
+        );
+        let (result, leaked) = {
+            let _g = self.render_guard();
+            let rois = self.regions_of_interest(time, canonical, s)?;
+            let render_id = self.effect.begin_render(time, s, rois, output);
+            let scope =
+                RenderScope::enter(Some((&*self.effect as *const Effect as usize, render_id)));
+            let handle = self.effect.handle() as *const c_void;
+            let (st, said) = self.plugin().call(
+                &self.bundle.log,
+                ofx::kOfxImageEffectActionRender,
+                handle,
+                Some(&in_args),
+                None,
+            );
+            drop(scope);
+            let leaked = self.effect.end_render(render_id);
+            (
+                if st == status::OK {
+                    Ok(())
+                } else {
+                    Err(failure(&id, "render", st, &said))
+                },
+                leaked,
+            )
+        };
+        result?;
+        let log = &self.bundle.log;
+        if !leaked.is_empty() {
+            let m = format!(
+                "render at {time}: images not released: {}",
+                leaked.join(", ")
+            );
+            log.violation(format!("{id}: {m}"));
+            return Err(Error::invalid(&id, m));
+        }
+        check_guard(&buffer, bw, bh, w, h).map_err(|m| {
+            log.violation(format!("{id}: render at {time} of {window:?}: {m}"));
+            Error::invalid(&id, format!("render at {time}: {m}"))
+        })?;
+        Ok(to_planes(&buffer, bw, w, h))
+    }
+
+    fn sequence(&self, what: &str, action: &[u8], first: f64, last: f64, s: f64) -> Result<()> {
+        self.check_scale(s)?;
+        let in_args = self.args(
+            false,
+            what,
+            &[
+                (
+                    ofx::kOfxImageEffectPropFrameRange,
+                    PropValue::Double(vec![first, last]),
+                ),
+                (
+                    ofx::kOfxImageEffectPropFrameStep,
+                    PropValue::Double(vec![1.0]),
+                ),
+                (ofx::kOfxPropIsInteractive, PropValue::Int(vec![0])),
+                (
+                    ofx::kOfxImageEffectPropRenderScale,
+                    PropValue::Double(vec![s, s]),
+                ),
+                (
+                    ofx::kOfxImageEffectPropSequentialRenderStatus,
+                    PropValue::Int(vec![0]),
+                ),
+                (
+                    ofx::kOfxImageEffectPropInteractiveRenderStatus,
+                    PropValue::Int(vec![0]),
+                ),
+                (
+                    ofx::kOfxImageEffectPropRenderQualityDraft,
+                    PropValue::Int(vec![0]),
+                ),
+            ],
+        );
+        let _g = self.render_guard();
+        self.run(what, action, Some(&in_args), None).map(|_| ())
+    }
+
+    /// beginSequenceRender for frames `first..=last`.
+    pub fn begin_sequence(&self, first: f64, last: f64, render_scale: f64) -> Result<()> {
+        self.sequence(
+            "beginSequenceRender",
+            ofx::kOfxImageEffectActionBeginSequenceRender,
+            first,
+            last,
+            render_scale,
+        )
+    }
+
+    /// endSequenceRender for frames `first..=last`.
+    pub fn end_sequence(&self, first: f64, last: f64, render_scale: f64) -> Result<()> {
+        self.sequence(
+            "endSequenceRender",
+            ofx::kOfxImageEffectActionEndSequenceRender,
+            first,
+            last,
+            render_scale,
+        )
+    }
+
+    /// Tells the plugin the user edited `param` (beginInstanceChanged, instanceChanged,
+    /// endInstanceChanged, at time 0 and render scale 1).
+    pub fn instance_changed(&self, param: &str) -> Result<()> {
+        if self.effect.params.with(param, |_| ()).is_none() {
+            return Err(Error::invalid(
+                format!("{}: parameter {param}", self.effect.id),
+                "no such parameter",
+            ));
+        }
+        let reason = PropValue::String(vec![cstr(ofx::kOfxChangeUserEdited).to_string()]);
+        let begin = self.args(
+            false,
+            "beginInstanceChanged",
+            &[(ofx::kOfxPropChangeReason, reason.clone())],
+        );
+        let changed = self.args(
+            false,
+            "instanceChanged",
+            &[
+                (
+                    ofx::kOfxPropType,
+                    PropValue::String(vec![cstr(ofx::kOfxTypeParameter).to_string()]),
+                ),
+                (
+                    ofx::kOfxPropName,
+                    PropValue::String(vec![param.to_string()]),
+                ),
+                (ofx::kOfxPropChangeReason, reason),
+                (ofx::kOfxPropTime, PropValue::Double(vec![0.0])),
+                (
+                    ofx::kOfxImageEffectPropRenderScale,
+                    PropValue::Double(vec![1.0, 1.0]),
+                ),
+            ],
+        );
+        let _main = self.main();
+        self.run(
+            "beginInstanceChanged",
+            ofx::kOfxActionBeginInstanceChanged,
+            Some(&begin),
+            None,
+        )?;
+        self.run(
+            "instanceChanged",
+            ofx::kOfxActionInstanceChanged,
+            Some(&changed),
+            None,
+        )?;
+        self.run(
+            "endInstanceChanged",
+            ofx::kOfxActionEndInstanceChanged,
+            Some(&begin),
+            None,
+        )?;
+        Ok(())
+    }
+
+    /// purgeCaches.
+    pub fn purge_caches(&self) -> Result<()> {
+        let _main = self.main();
+        self.run("purgeCaches", ofx::kOfxActionPurgeCaches, None, None)
+            .map(|_| ())
+    }
+}
+
+impl Drop for Instance {
+    fn drop(&mut self) {
+        let _main = self.main();
+        let handle = self.effect.handle() as *const c_void;
+        let (s, said) = self.plugin().call(
+            &self.bundle.log,
+            ofx::kOfxActionDestroyInstance,
+            handle,
+            None,
+            None,
+        );
+        if s != status::OK && s != status::REPLY_DEFAULT {
+            self.bundle
+                .log
+                .violation(failure(&self.effect.id, "destroyInstance", s, &said).to_string());
+        }
+    }
+}
+
+/// Checks that the guard border still holds the sentinel and that no pixel of the window
+/// does.
+fn check_guard(
+    buffer: &[f32],
+    bw: usize,
+    bh: usize,
+    w: usize,
+    h: usize,
+) -> std::result::Result<(), String> {
+    for y in 0..bh {
+        for x in 0..bw {
+            let inside = (GUARD..GUARD + w).contains(&x) && (GUARD..GUARD + h).contains(&y);
+            let i = (y * bw + x) * 4;
+            let untouched = buffer[i..i + 4]
+                .iter()
+                .all(|v| v.to_bits() == SENTINEL_BITS);
+            let written = buffer[i..i + 4]
+                .iter()
+                .all(|v| v.to_bits() != SENTINEL_BITS);
+            let (ox, oy) = (x as i64 - GUARD as i64, y as i64 - GUARD as i64);
+            if !inside && !untouched {
+                return Err(format!(
+                    "wrote outside the render window at window pixel ({ox}, {oy}) (y up)"
+                ));
+            }
+            if inside && !written {
+                return Err(format!("left window pixel ({ox}, {oy}) (y up) unwritten"));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Raster RGBA planes from the window of the guarded buffer (rows bottom up).
+fn to_planes(buffer: &[f32], bw: usize, w: usize, h: usize) -> Planes {
+    let mut ch: [Vec<f32>; 4] = Default::default();
+    for c in &mut ch {
+        c.reserve(w * h);
+    }
+    for r in 0..h {
+        let y = GUARD + (h - 1 - r);
+        for x in 0..w {
+            let i = (y * bw + GUARD + x) * 4;
+            for (k, c) in ch.iter_mut().enumerate() {
+                c.push(buffer[i + k]);
+            }
+        }
+    }
+    let [r, g, b, a] = ch;
+    let p = |data| Plane {
+        width: w as u32,
+        height: h as u32,
+        data,
+    };
+    Planes {
+        width: w as u32,
+        height: h as u32,
+        rgb: Some([p(r), p(g), p(b)]),
+        alpha: Some(p(a)),
+        depth_z: None,
+        depth_ray: None,
+        depth_median: None,
+    }
+}

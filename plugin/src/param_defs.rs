@@ -33,7 +33,8 @@ pub fn param_type(kind: &ParamKind) -> &'static [u8] {
 pub fn hint(p: &ParamDesc) -> String {
     match p.kind {
         ParamKind::Matrix { .. } => format!(
-            "{} 16 numbers, row-major (row 1, then row 2, …), separated by spaces or commas.",
+            "{} Typed as 16 numbers, row-major (row 1, then row 2, …), separated by spaces or \
+             commas.",
             p.hint
         ),
         _ => p.hint.to_string(),

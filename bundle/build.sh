@@ -24,10 +24,16 @@ esac
 cargo build --quiet -p nerfx-ofx --profile "$profile" >&2
 target="${CARGO_TARGET_DIR:-target}/$dir"
 bundle="$target/nerfx.ofx.bundle"
-# A fresh copy (new inode), so a process that still maps the old binary is not disturbed.
-rm -rf "$bundle"
-mkdir -p "$bundle/Contents/Linux-x86-64" "$bundle/Contents/Resources"
-cp "$target/libnerfx_ofx.so" "$bundle/Contents/Linux-x86-64/nerfx.ofx"
+# Several test binaries may assemble at once: one at a time, and only when the binary changed.
+# A changed binary goes in as a fresh copy (new inode), so a process that still maps the old
+# one is not disturbed.
+exec 9>"$target/.nerfx-bundle.lock"
+flock 9
+if ! cmp -s "$target/libnerfx_ofx.so" "$bundle/Contents/Linux-x86-64/nerfx.ofx"; then
+    rm -rf "$bundle"
+    mkdir -p "$bundle/Contents/Linux-x86-64" "$bundle/Contents/Resources"
+    cp "$target/libnerfx_ofx.so" "$bundle/Contents/Linux-x86-64/nerfx.ofx"
+fi
 cp bundle/Info.plist "$bundle/Contents/"
 cp bundle/Resources/*.png "$bundle/Contents/Resources/"
 realpath "$bundle"

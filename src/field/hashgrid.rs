@@ -19,7 +19,6 @@
 
 use glam::Vec3;
 use half::f16;
-use half::slice::HalfFloatSliceExt;
 
 /// How a hash grid keeps its tables in memory.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -71,22 +70,30 @@ pub struct HashGrid {
     tables: Tables,
 }
 
-/// A feature value that can be widened to f32 in bulk.
+/// A table value that can be widened to f32.
 trait Feature: Copy + Default {
-    /// `dst[i] = src[i]` widened (`dst.len() == src.len()`).
-    fn widen_all(src: &[Self], dst: &mut [f32]);
+    /// The `N ≤ 8` values of one entry, widened (exactly); `F16C`: with the x86 F16C
+    /// instructions (only instantiated from code compiled for, and run on, CPUs with them).
+    fn widen<const N: usize, const F16C: bool>(e: &[Self; N]) -> [f32; N];
 }
 
 impl Feature for f16 {
-    fn widen_all(src: &[Self], dst: &mut [f32]) {
-        // F16C eight at a time where the CPU has it (detected by `half`).
-        src.convert_to_f32_slice(dst);
+    #[inline(always)]
+    fn widen<const N: usize, const F16C: bool>(e: &[Self; N]) -> [f32; N] {
+        #[cfg(target_arch = "x86_64")]
+        if F16C {
+            // SAFETY: `F16C` is set only under `HashGrid::encode_avx2`, which runs where
+            // the CPU has AVX2 and F16C.
+            return unsafe { simd::widen_f16c(e) };
+        }
+        e.map(f16::to_f32)
     }
 }
 
 impl Feature for f32 {
-    fn widen_all(src: &[Self], dst: &mut [f32]) {
-        dst.copy_from_slice(src);
+    #[inline(always)]
+    fn widen<const N: usize, const F16C: bool>(e: &[Self; N]) -> [f32; N] {
+        *e
     }
 }
 
@@ -137,6 +144,11 @@ impl HashGridConfig {
         self.n_entries() * self.n_features as usize
     }
 
+    /// Whether the encoder handles this shape (the feature counts tiny-cuda-nn allows).
+    fn supported(&self) -> bool {
+        [1, 2, 4, 8].contains(&self.n_features)
+    }
+
     /// Output width `L·F`.
     pub fn n_outputs(&self) -> usize {
         (self.n_levels * self.n_features) as usize
@@ -146,15 +158,15 @@ impl HashGridConfig {
 impl HashGrid {
     /// A grid of `config` with the parameters `params` (`config.n_params()` values, level
     /// after level, entry after entry, feature after feature), stored as `storage`. `None`
-    /// when the count does not match.
+    /// when the count does not match or the feature count is not 1, 2, 4 or 8.
     pub fn new(config: HashGridConfig, params: &[f16], storage: TableStorage) -> Option<Self> {
         let levels = config.levels();
-        if params.len() != config.n_params() {
+        if params.len() != config.n_params() || !config.supported() {
             return None;
         }
         let tables = match storage {
-            TableStorage::F16 => Tables::F16(params.to_vec()),
-            TableStorage::F32 => Tables::F32(params.iter().map(|v| v.to_f32()).collect()),
+            TableStorage::F16 => Tables::F16(table_of(params.iter().copied())),
+            TableStorage::F32 => Tables::F32(table_of(params.iter().map(|v| v.to_f32()))),
         };
         Some(HashGrid {
             config,
@@ -163,13 +175,13 @@ impl HashGrid {
         })
     }
 
-    /// A grid with f32 parameters (kept in f32).
+    /// A grid with f32 parameters (kept in f32); `None` as for [`Self::new`].
     pub fn from_f32(config: HashGridConfig, params: Vec<f32>) -> Option<Self> {
         let levels = config.levels();
-        (params.len() == config.n_params()).then_some(HashGrid {
+        (params.len() == config.n_params() && config.supported()).then(|| HashGrid {
             config,
             levels,
-            tables: Tables::F32(params),
+            tables: Tables::F32(table_of(params.into_iter())),
         })
     }
 
@@ -189,73 +201,115 @@ impl HashGrid {
     /// Encodes each point `xs[i]` (unit cube) into `out[i·L·F .. (i+1)·L·F]`.
     /// Level by level, so one level's table stays in cache across the batch.
     pub fn encode(&self, xs: &[Vec3], out: &mut [f32]) {
-        match &self.tables {
-            Tables::F16(t) => self.encode_with(t, xs, out),
-            Tables::F32(t) => self.encode_with(t, xs, out),
+        #[cfg(target_arch = "x86_64")]
+        if simd::available() {
+            // SAFETY: the CPU has AVX2 and F16C (checked just above).
+            return unsafe { self.encode_avx2(xs, out) };
+        }
+        self.encode_by_shape::<false>(xs, out);
+    }
+
+    /// [`Self::encode`] compiled for AVX2 and F16C: the same arithmetic in the same order
+    /// (Rust never fuses a multiply and an add by itself), with inline `floor`, vector
+    /// index arithmetic and F16C widening.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,f16c")]
+    fn encode_avx2(&self, xs: &[Vec3], out: &mut [f32]) {
+        self.encode_by_shape::<true>(xs, out);
+    }
+
+    /// Picks the table type and the feature count once for the batch.
+    #[inline(always)]
+    fn encode_by_shape<const F16C: bool>(&self, xs: &[Vec3], out: &mut [f32]) {
+        match (&self.tables, self.config.n_features) {
+            (Tables::F16(t), 1) => self.encode_with::<f16, 1, F16C>(t, xs, out),
+            (Tables::F16(t), 2) => self.encode_with::<f16, 2, F16C>(t, xs, out),
+            (Tables::F16(t), 4) => self.encode_with::<f16, 4, F16C>(t, xs, out),
+            (Tables::F16(t), _) => self.encode_with::<f16, 8, F16C>(t, xs, out),
+            (Tables::F32(t), 1) => self.encode_with::<f32, 1, F16C>(t, xs, out),
+            (Tables::F32(t), 2) => self.encode_with::<f32, 2, F16C>(t, xs, out),
+            (Tables::F32(t), 4) => self.encode_with::<f32, 4, F16C>(t, xs, out),
+            (Tables::F32(t), _) => self.encode_with::<f32, 8, F16C>(t, xs, out),
         }
     }
 
-    /// Level by level over the whole batch: the 8 corners' indices and weights first, then
-    /// (x86-64) a prefetch of every entry so the cache misses overlap, then the gather,
-    /// widened in bulk, then the blend, corner after corner (the same sums as one point at a time).
-    fn encode_with<T: Feature>(&self, table: &[T], xs: &[Vec3], out: &mut [f32]) {
+    /// Level by level over the whole batch: the 8 corners' indices and weights first, each
+    /// entry prefetched as soon as its index is known (x86-64) so the cache misses overlap,
+    /// then per point the blend of the 8 entries, corner after corner (the same sums as one
+    /// point at a time: `f = Σ_k w_k·e_k` left to right, each product rounded).
+    #[inline(always)]
+    fn encode_with<T: Feature, const NF: usize, const F16C: bool>(
+        &self,
+        table: &[T],
+        xs: &[Vec3],
+        out: &mut [f32],
+    ) {
         let width = self.config.n_outputs();
         debug_assert_eq!(out.len(), xs.len() * width);
-        let nf = self.config.n_features as usize;
         let n = xs.len();
         let mut index = vec![0u32; n * 8];
         let mut weight = vec![0.0f32; n * 8];
-        let mut raw = vec![T::default(); n * 8 * nf];
-        let mut wide = vec![0.0f32; n * 8 * nf];
         for (l, level) in self.levels.iter().enumerate() {
-            let t = &table[level.offset * nf..(level.offset + level.entries as usize) * nf];
-            for ((x, ix), wx) in xs
-                .iter()
-                .zip(index.chunks_exact_mut(8))
-                .zip(weight.chunks_exact_mut(8))
-            {
-                level.corners(*x, ix, wx);
-            }
-            prefetch(t, nf, &index);
-            match nf {
-                1 => gather::<T, 1>(t, &index, &mut raw),
-                2 => gather::<T, 2>(t, &index, &mut raw),
-                4 => gather::<T, 4>(t, &index, &mut raw),
-                8 => gather::<T, 8>(t, &index, &mut raw),
-                _ => {
-                    for (&i, dst) in index.iter().zip(raw.chunks_exact_mut(nf)) {
-                        dst.copy_from_slice(&t[i as usize * nf..][..nf]);
-                    }
+            let t = &table[level.offset * NF..(level.offset + level.entries as usize) * NF];
+            let corners = index.chunks_exact_mut(8).zip(weight.chunks_exact_mut(8));
+            if level.dense {
+                for (x, (ix, wx)) in xs.iter().zip(corners) {
+                    level.corners::<true>(*x, ix, wx);
+                    prefetch(t, NF, ix);
+                }
+            } else {
+                for (x, (ix, wx)) in xs.iter().zip(corners) {
+                    level.corners::<false>(*x, ix, wx);
+                    prefetch(t, NF, ix);
                 }
             }
-            T::widen_all(&raw, &mut wide);
-            for ((row, w), v) in out
+            for ((row, w), ix) in out
                 .chunks_exact_mut(width)
                 .zip(weight.chunks_exact(8))
-                .zip(wide.chunks_exact(8 * nf))
+                .zip(index.chunks_exact(8))
             {
-                let dst = &mut row[l * nf..(l + 1) * nf];
-                dst.fill(0.0);
-                for (wc, e) in w.iter().zip(v.chunks_exact(nf)) {
-                    for (d, f) in dst.iter_mut().zip(e) {
-                        *d += wc * f;
+                let mut acc = [0.0f32; NF];
+                for (&wc, &i) in w.iter().zip(ix) {
+                    let e: &[T; NF] = t[i as usize * NF..][..NF]
+                        .try_into()
+                        .expect("a slice of NF values");
+                    for (a, f) in acc.iter_mut().zip(T::widen::<NF, F16C>(e)) {
+                        *a += wc * f;
                     }
                 }
+                row[l * NF..(l + 1) * NF].copy_from_slice(&acc);
             }
         }
     }
 }
 
-/// `dst[k·N ..][.. N] = table[index[k]·N ..][.. N]`, with `N` known to the compiler (a
-/// few moves per entry instead of a call to `memcpy`).
-#[inline]
-fn gather<T: Copy, const N: usize>(table: &[T], index: &[u32], dst: &mut [T]) {
-    for (&i, d) in index.iter().zip(dst.chunks_exact_mut(N)) {
-        let e: &[T; N] = table[i as usize * N..][..N]
-            .try_into()
-            .expect("a slice of N values");
-        d.copy_from_slice(e);
+/// The values of `values` in a vector whose memory the kernel is asked, before it is first
+/// touched, to back with 2 MiB pages where it can (Linux transparent huge pages in `madvise`
+/// mode): the lookups are random over tens of megabytes, and with 4 KiB pages nearly every
+/// one would also miss the TLB (a page walk, two-dimensional under a hypervisor).
+fn table_of<T: Copy>(values: impl ExactSizeIterator<Item = T>) -> Vec<T> {
+    let mut v = Vec::with_capacity(values.len());
+    #[cfg(target_os = "linux")]
+    {
+        const HUGE: usize = 2 << 20;
+        let bytes = v.capacity() * std::mem::size_of::<T>();
+        if bytes >= HUGE {
+            extern "C" {
+                fn madvise(addr: *mut std::ffi::c_void, len: usize, advice: i32) -> i32;
+            }
+            /// `MADV_HUGEPAGE` of Linux's `<sys/mman.h>`.
+            const MADV_HUGEPAGE: i32 = 14;
+            let start = v.as_mut_ptr() as usize;
+            let (lo, hi) = (start.next_multiple_of(4096), (start + bytes) / 4096 * 4096);
+            if hi > lo {
+                // SAFETY: advice on pages of this vector's own (unused) allocation; it
+                // changes no contents and an error (an old kernel) only means no advice.
+                unsafe { madvise(lo as *mut std::ffi::c_void, hi - lo, MADV_HUGEPAGE) };
+            }
+        }
     }
+    v.extend(values);
+    v
 }
 
 /// Asks the CPU to start loading the table entries `index` (each `nf` values) into cache.
@@ -285,41 +339,83 @@ impl Level {
         )
     }
 
-    /// Table entry of grid point `k`.
-    #[inline]
-    fn index(&self, k: [u32; 3]) -> usize {
-        let i = if self.dense {
-            let r = self.resolution;
-            k[0].wrapping_add(k[1].wrapping_mul(r))
-                .wrapping_add(k[2].wrapping_mul(r.wrapping_mul(r)))
+    /// The table entry of index `i` (before the modulo): `i % T`, as a mask when `T` is a
+    /// power of two (every hashed level), and without a division when `i < T` already (a
+    /// dense level inside the unit cube).
+    #[inline(always)]
+    fn entry(&self, i: u32) -> u32 {
+        if self.entries.is_power_of_two() {
+            i & (self.entries - 1)
+        } else if i < self.entries {
+            i
         } else {
-            (k[0].wrapping_mul(PRIMES[0]))
-                ^ (k[1].wrapping_mul(PRIMES[1]))
-                ^ (k[2].wrapping_mul(PRIMES[2]))
-        };
-        (i % self.entries) as usize
+            i % self.entries
+        }
     }
 
     /// The table entries (`index`) and trilinear weights (`weight`) of the 8 corners of
-    /// `x`'s cell; corner `k` adds bit `a` of `k` along axis `a`, its weight is the product
-    /// over the axes of `w` or `1 − w` (in axis order).
-    #[inline]
-    fn corners(&self, x: Vec3, index: &mut [u32], weight: &mut [f32]) {
+    /// `x`'s cell (`DENSE`: this level is dense); corner `k` adds bit `a` of `k` along axis
+    /// `a`, its weight is the product over the axes of `w` or `1 − w` (in axis order). The
+    /// index is a sum (dense: `k.x + k.y·r + k.z·r²`) or an exclusive or (hashed) of one
+    /// term per axis, each term computed once for both of the axis's grid coordinates.
+    #[inline(always)]
+    fn corners<const DENSE: bool>(&self, x: Vec3, index: &mut [u32], weight: &mut [f32]) {
         let (c, w) = self.locate(x);
+        let r = self.resolution;
+        let mul = if DENSE {
+            [1, r, r.wrapping_mul(r)]
+        } else {
+            PRIMES
+        };
+        let term: [[u32; 2]; 3] = [0, 1, 2].map(|a| {
+            [
+                c[a].wrapping_mul(mul[a]),
+                c[a].wrapping_add(1).wrapping_mul(mul[a]),
+            ]
+        });
+        let wa: [[f32; 2]; 3] = [0, 1, 2].map(|a| [1.0 - w[a], w[a]]);
         for (corner, (ix, wx)) in index.iter_mut().zip(weight.iter_mut()).enumerate() {
-            let mut wc = 1.0f32;
-            let mut k = c;
-            for a in 0..3 {
-                if corner >> a & 1 == 0 {
-                    wc *= 1.0 - w[a];
-                } else {
-                    wc *= w[a];
-                    k[a] = k[a].wrapping_add(1);
-                }
-            }
-            *ix = self.index(k) as u32;
-            *wx = wc;
+            let b = [corner & 1, corner >> 1 & 1, corner >> 2 & 1];
+            let i = if DENSE {
+                term[0][b[0]]
+                    .wrapping_add(term[1][b[1]])
+                    .wrapping_add(term[2][b[2]])
+            } else {
+                term[0][b[0]] ^ term[1][b[1]] ^ term[2][b[2]]
+            };
+            *ix = self.entry(i);
+            *wx = wa[0][b[0]] * wa[1][b[1]] * wa[2][b[2]];
         }
+    }
+}
+
+/// The x86-64 kernels' pieces.
+#[cfg(target_arch = "x86_64")]
+mod simd {
+    use half::f16;
+    use std::arch::x86_64::*;
+
+    /// Whether this CPU runs [`super::HashGrid::encode_avx2`].
+    pub(super) fn available() -> bool {
+        is_x86_feature_detected!("avx2") && is_x86_feature_detected!("f16c")
+    }
+
+    /// `N ≤ 8` half-precision values widened by one F16C conversion (exact, as
+    /// [`f16::to_f32`]).
+    #[inline]
+    #[target_feature(enable = "avx2,f16c")]
+    pub(super) fn widen_f16c<const N: usize>(e: &[f16; N]) -> [f32; N] {
+        let mut bits = [0u16; 8];
+        for (b, v) in bits.iter_mut().zip(e) {
+            *b = v.to_bits();
+        }
+        let mut wide = [0.0f32; 8];
+        // SAFETY: `bits` holds 16 bytes and `wide` 32.
+        unsafe {
+            let v = _mm256_cvtph_ps(_mm_loadu_si128(bits.as_ptr().cast()));
+            _mm256_storeu_ps(wide.as_mut_ptr(), v);
+        }
+        std::array::from_fn(|i| wide[i])
     }
 }
 
@@ -479,5 +575,7 @@ mod tests {
         let c = config(2, 2, 10, 2.0);
         assert!(HashGrid::new(c, &params(c.n_params() - 1, 1), TableStorage::F16).is_none());
         assert!(HashGrid::from_f32(c, vec![0.0; c.n_params() + 2]).is_none());
+        let c3 = config(2, 3, 10, 2.0);
+        assert!(HashGrid::from_f32(c3, vec![0.0; c3.n_params()]).is_none());
     }
 }

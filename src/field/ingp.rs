@@ -372,6 +372,24 @@ impl IngpField {
         (q - self.aabb_min) / self.aabb_size
     }
 
+    /// The unit-cube points `xs` of those of `points` in occupied cells, and their indices
+    /// `idx`. Branch-free: the occupancy bits of a batch are scattered over megabytes, and
+    /// a branch on each (taken about half the time) would stop the CPU from having several
+    /// of those cache misses in flight at once.
+    fn occupied_points(&self, points: &[Vec3], xs: &mut Vec<Vec3>, idx: &mut Vec<usize>) {
+        xs.resize(points.len(), Vec3::ZERO);
+        idx.resize(points.len(), 0);
+        let mut kept = 0;
+        for (i, p) in points.iter().enumerate() {
+            let q = self.ngp_from_field(*p);
+            xs[kept] = self.unit_from_ngp(q);
+            idx[kept] = i;
+            kept += usize::from(self.cascades.occupied_at(q));
+        }
+        xs.truncate(kept);
+        idx.truncate(kept);
+    }
+
     /// The outputs of `mlp` (the density MLP, whole or σ only) at `n` points (unit cube):
     /// `enc` and `out` are scratch.
     fn density_outputs(&self, mlp: &Mlp, xs: &[Vec3], enc: &mut Vec<f32>, out: &mut Vec<f32>) {
@@ -611,16 +629,8 @@ impl Field for IngpField {
         let (mut xs, mut idx) = (Vec::with_capacity(CHUNK), Vec::with_capacity(CHUNK));
         let (mut enc, mut out) = (Vec::new(), Vec::new());
         for (pts, sig) in points.chunks(CHUNK).zip(sigma.chunks_mut(CHUNK)) {
-            xs.clear();
-            idx.clear();
-            for (i, p) in pts.iter().enumerate() {
-                let q = self.ngp_from_field(*p);
-                sig[i] = 0.0;
-                if self.cascades.occupied_at(q) {
-                    xs.push(self.unit_from_ngp(q));
-                    idx.push(i);
-                }
-            }
+            sig.fill(0.0);
+            self.occupied_points(pts, &mut xs, &mut idx);
             self.density_outputs(&self.sigma_mlp, &xs, &mut enc, &mut out);
             for (&i, &raw) in idx.iter().zip(out.iter()) {
                 let raw = raw.min(MAX_LOG_DENSITY);
@@ -658,17 +668,9 @@ impl Field for IngpField {
             .zip(sigma.chunks_mut(CHUNK))
             .zip(features.chunks_mut(CHUNK * DENSITY_OUTPUTS));
         for ((pts, sig), feat) in chunks {
-            xs.clear();
-            idx.clear();
             sig.fill(0.0);
             feat.fill(0.0);
-            for (i, p) in pts.iter().enumerate() {
-                let q = self.ngp_from_field(*p);
-                if self.cascades.occupied_at(q) {
-                    xs.push(self.unit_from_ngp(q));
-                    idx.push(i);
-                }
-            }
+            self.occupied_points(pts, &mut xs, &mut idx);
             self.density_outputs(&self.density_mlp, &xs, &mut enc, &mut out);
             for (&i, o) in idx.iter().zip(out.chunks_exact(DENSITY_OUTPUTS)) {
                 sig[i] = self.scale * o[0].min(MAX_LOG_DENSITY).exp();

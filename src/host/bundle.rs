@@ -9,7 +9,7 @@ use openfx_sys as ofx;
 use openfx_sys::OfxPlugin;
 
 use super::effect::Effect;
-use super::host;
+use super::globals as host;
 use super::instance::Instance;
 use super::log::{self, ActionScope, Log, Message};
 use super::props::{args, PropSet, PropValue};
@@ -166,7 +166,8 @@ fn context_of(name: &str) -> Option<Context> {
 
 /// The binary inside a bundle directory (`Contents/Linux-x86-64/<name>.ofx`), or `path`.
 fn binary_path(path: &Path) -> Result<PathBuf> {
-    if !path.is_dir() {
+    let named_bundle = path.extension().is_some_and(|e| e == "bundle");
+    if !path.is_dir() && !named_bundle {
         return Ok(path.to_path_buf());
     }
     let stem = path

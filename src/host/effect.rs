@@ -41,6 +41,10 @@ pub(crate) struct Effect {
     pub(crate) props: Box<PropSet>,
     /// Its parameters.
     pub(crate) params: Box<ParamSet>,
+    #[allow(
+        clippy::vec_box,
+        reason = "a clip's address is its handle: it must not move"
+    )]
     clips: Mutex<Vec<Box<Clip>>>,
     /// Whether this is an instance.
     pub(crate) instance: bool,
@@ -62,10 +66,10 @@ pub(crate) struct Clip {
     pub(crate) source: Mutex<Option<ClipSource>>,
 }
 
-/// The output buffer of one render: `ptr` is the bottom-left pixel of the render window in
-/// a buffer with a [`GUARD`] border.
+/// Where an image's pixels are: for the output of a render, `ptr` is the bottom-left pixel
+/// of the render window in a buffer with a [`GUARD`] border.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Output {
+pub(crate) struct Layout {
     /// Address of the render window's bottom-left pixel.
     pub(crate) ptr: usize,
     /// OFX bounds of the render window.
@@ -88,7 +92,7 @@ pub(crate) struct RenderCtx {
     /// The regions of interest the plugin declared, canonical `[x1, y1, x2, y2]`, by clip.
     pub(crate) rois: HashMap<String, [f64; 4]>,
     /// The output buffer.
-    pub(crate) output: Output,
+    pub(crate) output: Layout,
 }
 
 /// An image the plugin holds.
@@ -144,8 +148,8 @@ impl Effect {
             format!("{id} descriptor"),
             Some(log.clone()),
         );
-        let _ = props.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeImageEffect));
-        let _ = props.set_str(ofx::kOfxPluginPropFilePath, path);
+        props.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeImageEffect));
+        props.set_str(ofx::kOfxPluginPropFilePath, path);
         Effect::boxed(id, props, ParamSet::new(id, false, log.clone()), false, log)
     }
 
@@ -181,10 +185,10 @@ impl Effect {
             Some(log.clone()),
         );
         props.copy_values_from(&self.props);
-        let _ = props.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeImageEffectInstance));
-        let _ = props.set_str(ofx::kOfxImageEffectPropContext, context);
-        let _ = props.set_doubles(ofx::kOfxImageEffectPropProjectSize, &[1920.0, 1080.0]);
-        let _ = props.set_doubles(ofx::kOfxImageEffectPropProjectExtent, &[1920.0, 1080.0]);
+        props.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeImageEffectInstance));
+        props.set_str(ofx::kOfxImageEffectPropContext, context);
+        props.set_doubles(ofx::kOfxImageEffectPropProjectSize, &[1920.0, 1080.0]);
+        props.set_doubles(ofx::kOfxImageEffectPropProjectExtent, &[1920.0, 1080.0]);
         let params = self
             .params
             .instantiate(&format!("{id} instance"), log.clone());
@@ -212,7 +216,7 @@ impl Effect {
                     &ofx::kOfxImageEffectPropComponents[..],
                     ofx::kOfxImageClipPropUnmappedComponents,
                 ] {
-                    let _ = p.set_str(name, &components);
+                    p.set_str(name, &components);
                 }
                 let output = d.name == "Output";
                 let depth = cstr(if output {
@@ -224,10 +228,10 @@ impl Effect {
                     &ofx::kOfxImageEffectPropPixelDepth[..],
                     ofx::kOfxImageClipPropUnmappedPixelDepth,
                 ] {
-                    let _ = p.set_str(name, depth);
+                    p.set_str(name, depth);
                 }
-                let _ = p.set_ints(ofx::kOfxImageClipPropConnected, &[i32::from(output)]);
-                let _ = p.set_str(
+                p.set_ints(ofx::kOfxImageClipPropConnected, &[i32::from(output)]);
+                p.set_str(
                     ofx::kOfxImageEffectPropPreMultiplication,
                     cstr(ofx::kOfxImagePreMultiplied),
                 );
@@ -243,6 +247,10 @@ impl Effect {
         self as *const Effect as OfxImageEffectHandle
     }
 
+    #[allow(
+        clippy::vec_box,
+        reason = "a clip's address is its handle: it must not move"
+    )]
     pub(crate) fn lock_clips(&self) -> MutexGuard<'_, Vec<Box<Clip>>> {
         self.clips.lock().unwrap_or_else(PoisonError::into_inner)
     }
@@ -261,7 +269,7 @@ impl Effect {
         time: f64,
         scale: f64,
         rois: HashMap<String, [f64; 4]>,
-        output: Output,
+        output: Layout,
     ) -> u64 {
         let id = NEXT_ID.fetch_add(1, Ordering::Relaxed);
         self.renders
@@ -459,8 +467,8 @@ unsafe extern "C" fn clip_define(
             format!("{} clip {n}", e.id),
             Some(e.log.clone()),
         );
-        let _ = p.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeClip));
-        let _ = p.set_str(ofx::kOfxPropName, n);
+        p.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeClip));
+        p.set_str(ofx::kOfxPropName, n);
         put(out, p.handle());
         clips.push(Clip::boxed(n, p, e as *const Effect as usize));
         Ok(())
@@ -595,34 +603,31 @@ fn image_props(
     time: f64,
     scale: f64,
     components: &str,
-    data: usize,
-    bounds: [i32; 4],
-    rod: [i32; 4],
-    row_bytes: i32,
+    layout: Layout,
 ) -> Box<PropSet> {
     static SERIAL: AtomicU64 = AtomicU64::new(1);
     let what = format!("{} clip {} image at {time}", e.id, c.name);
     let p = props::new_set(SetKind::Image, &c.name, what, Some(e.log.clone()));
-    let _ = p.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeImage));
-    let _ = p.set_str(
+    p.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeImage));
+    p.set_str(
         ofx::kOfxImageEffectPropPixelDepth,
         cstr(ofx::kOfxBitDepthFloat),
     );
-    let _ = p.set_str(ofx::kOfxImageEffectPropComponents, components);
-    let _ = p.set_str(
+    p.set_str(ofx::kOfxImageEffectPropComponents, components);
+    p.set_str(
         ofx::kOfxImageEffectPropPreMultiplication,
         cstr(ofx::kOfxImagePreMultiplied),
     );
-    let _ = p.set_doubles(ofx::kOfxImageEffectPropRenderScale, &[scale, scale]);
-    let _ = p.set(
+    p.set_doubles(ofx::kOfxImageEffectPropRenderScale, &[scale, scale]);
+    p.put(
         cstr(ofx::kOfxImagePropData),
-        props::PropValue::Pointer(vec![data]),
+        props::PropValue::Pointer(vec![layout.ptr]),
     );
-    let _ = p.set_ints(ofx::kOfxImagePropBounds, &bounds);
-    let _ = p.set_ints(ofx::kOfxImagePropRegionOfDefinition, &rod);
-    let _ = p.set_ints(ofx::kOfxImagePropRowBytes, &[row_bytes]);
+    p.set_ints(ofx::kOfxImagePropBounds, &layout.bounds);
+    p.set_ints(ofx::kOfxImagePropRegionOfDefinition, &layout.rod);
+    p.set_ints(ofx::kOfxImagePropRowBytes, &[layout.row_bytes]);
     let serial = SERIAL.fetch_add(1, Ordering::Relaxed);
-    let _ = p.set_str(
+    p.set_str(
         ofx::kOfxImagePropUniqueIdentifier,
         &format!("{}:{time}:{serial}", c.name),
     );
@@ -636,17 +641,13 @@ fn output_image(e: &Effect, c: &Clip, ctx: Option<&RenderCtx>, time: f64) -> Mad
             Some("the output image exists only during a render".into()),
         ));
     };
-    let o = ctx.output;
     let props = image_props(
         e,
         c,
         time,
         ctx.scale,
         cstr(ofx::kOfxImageComponentRGBA),
-        o.ptr,
-        o.bounds,
-        o.rod,
-        o.row_bytes,
+        ctx.output,
     );
     Ok(LiveImage {
         what: format!("{} clip {} image at {time}", e.id, c.name),
@@ -740,10 +741,12 @@ fn input_image(
         time,
         scale,
         &components,
-        data.as_ptr() as usize,
-        bounds,
-        [0, 0, ws as i32, hs as i32],
-        row_bytes,
+        Layout {
+            ptr: data.as_ptr() as usize,
+            bounds,
+            rod: [0, 0, ws as i32, hs as i32],
+            row_bytes,
+        },
     );
     Ok(LiveImage {
         what: format!("{} clip {} image at {time}", e.id, c.name),

@@ -29,13 +29,13 @@ fn globals() -> &'static Globals {
         let p = props::new_set(SetKind::Host, "org.nerfx.host", "host".to_string(), None);
         let strings = |name: &[u8], values: &[&[u8]]| {
             let v = values.iter().map(|s| cstr_owned(s)).collect();
-            let _ = p.set(super::spec::cstr_dyn(name), PropValue::String(v));
+            p.put(super::spec::cstr_dyn(name), PropValue::String(v));
         };
         strings(ofx::kOfxPropType, &[ofx::kOfxTypeImageEffectHost]);
-        let _ = p.set_str(ofx::kOfxPropLabel, "nerfx strict host");
-        let _ = p.set_ints(ofx::kOfxPropAPIVersion, &[1, 4]);
-        let _ = p.set_ints(ofx::kOfxPropVersion, &[0, 1, 0]);
-        let _ = p.set_str(ofx::kOfxPropVersionLabel, "0.1.0");
+        p.set_str(ofx::kOfxPropLabel, "nerfx strict host");
+        p.set_ints(ofx::kOfxPropAPIVersion, &[1, 4]);
+        p.set_ints(ofx::kOfxPropVersion, &[0, 1, 0]);
+        p.set_str(ofx::kOfxPropVersionLabel, "0.1.0");
         strings(
             ofx::kOfxImageEffectPropSupportedComponents,
             &[ofx::kOfxImageComponentRGBA, ofx::kOfxImageComponentAlpha],
@@ -56,7 +56,7 @@ fn globals() -> &'static Globals {
             ofx::kOfxImageEffectHostPropNativeOrigin,
             &[b"kOfxImageEffectHostPropNativeOriginBottomLeft\0"],
         );
-        let _ = p.set_ints(ofx::kOfxParamHostPropPageRowColumnCount, &[0, 0]);
+        p.set_ints(ofx::kOfxParamHostPropPageRowColumnCount, &[0, 0]);
         let host = OfxHost {
             host: p.handle(),
             fetchSuite: Some(fetch_suite),
@@ -132,6 +132,7 @@ unsafe extern "C" fn fetch_suite(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::host::spec::cstr;
 
     #[test]
     fn fetch_suite_knows_the_suites_and_refuses_others() {

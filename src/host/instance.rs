@@ -7,7 +7,7 @@ use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use openfx_sys as ofx;
 
 use super::bundle::{context_name, failure, Bundle, Plugin};
-use super::effect::{self, Effect, Output, RenderScope, GUARD, SENTINEL_BITS};
+use super::effect::{self, Effect, Layout, RenderScope, GUARD, SENTINEL_BITS};
 use super::props::{args, PropSet, PropValue};
 use super::spec::{cstr, ParamType};
 use super::status;
@@ -256,11 +256,10 @@ impl Instance {
                 return false;
             }
             let float = cstr(ofx::kOfxBitDepthFloat);
-            let _ = c.props.set_str(ofx::kOfxImageEffectPropPixelDepth, float);
-            let _ = c
-                .props
+            c.props.set_str(ofx::kOfxImageEffectPropPixelDepth, float);
+            c.props
                 .set_str(ofx::kOfxImageClipPropUnmappedPixelDepth, float);
-            let _ = c.props.set_ints(ofx::kOfxImageClipPropConnected, &[1]);
+            c.props.set_ints(ofx::kOfxImageClipPropConnected, &[1]);
             *c.source.lock().unwrap_or_else(PoisonError::into_inner) = Some(source);
             true
         });
@@ -351,11 +350,10 @@ impl Instance {
                 log.violation(format!("{}: getClipPreferences chose {chosen} for clip {}, which it does not support ({})", self.effect.id, c.name, supported.join(", ")));
                 continue;
             }
-            let _ = c.props.set_str(ofx::kOfxImageEffectPropComponents, &chosen);
+            c.props.set_str(ofx::kOfxImageEffectPropComponents, &chosen);
             if c.name == "Output" {
                 let premult = out.string(ofx::kOfxImageEffectPropPreMultiplication);
-                let _ = c
-                    .props
+                c.props
                     .set_str(ofx::kOfxImageEffectPropPreMultiplication, &premult);
             }
         }
@@ -587,7 +585,7 @@ impl Instance {
         let (bw, bh) = (w + 2 * GUARD, h + 2 * GUARD);
         let mut buffer = vec![f32::from_bits(SENTINEL_BITS); bw * bh * 4];
         let origin = (GUARD * bw + GUARD) * 4;
-        let output = Output {
+        let output = Layout {
             ptr: buffer[origin..].as_mut_ptr() as usize,
             bounds,
             rod: [0, 0, ws as i32, hs as i32],

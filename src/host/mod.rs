@@ -33,8 +33,8 @@
 
 mod bundle;
 mod effect;
+mod globals;
 mod handles;
-mod host;
 mod instance;
 mod log;
 mod messages;
@@ -81,12 +81,12 @@ pub mod testing {
 
     /// The host descriptor's property set.
     pub fn host_properties() -> ofx::OfxPropertySetHandle {
-        super::host::host_props()
+        super::globals::host_props()
     }
 
     /// The `OfxHost` handed to plugins.
     pub fn host() -> *mut ofx::OfxHost {
-        super::host::host()
+        super::globals::host()
     }
 
     /// The effect handle the plugin gets for `instance`.

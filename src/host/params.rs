@@ -163,6 +163,10 @@ fn default_value(ty: ParamType, props: &PropSet) -> Val {
 pub(crate) struct ParamSet {
     /// The set's own properties.
     pub(crate) props: Box<PropSet>,
+    #[allow(
+        clippy::vec_box,
+        reason = "a parameter's address is its handle: it must not move"
+    )]
     params: Mutex<Vec<Box<Param>>>,
     edits: Mutex<i32>,
     instance: bool,
@@ -208,7 +212,7 @@ impl ParamSet {
                 Some(log.clone()),
             );
             props.copy_values_from(&d.props);
-            let _ = props.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeParameterInstance));
+            props.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeParameterInstance));
             params.push(Param::boxed(&d.name, d.ty, props, true, log.clone()));
         }
         *set.params.lock().unwrap_or_else(PoisonError::into_inner) = params;
@@ -355,8 +359,8 @@ unsafe extern "C" fn define(
             format!("{} parameter {name}", set.what),
             Some(set.log.clone()),
         );
-        let _ = props.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeParameter));
-        let _ = props.set_str(ofx::kOfxParamPropType, t.name());
+        props.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeParameter));
+        props.set_str(ofx::kOfxParamPropType, t.name());
         put(props_out, props.handle());
         let p = Param::boxed(name, t, props, false, set.log.clone());
         set.params

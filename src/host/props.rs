@@ -437,22 +437,30 @@ impl PropSet {
         Ok(())
     }
 
+    /// [`PropSet::set`], with a failure (a host bug) recorded as a violation so that a
+    /// test sees it.
+    pub(crate) fn put(&self, name: &str, value: PropValue) {
+        if let Err(e) = self.set(name, value) {
+            self.log().violation(format!("host bug: {e}"));
+        }
+    }
+
     /// The host sets `name` to one string.
-    pub(crate) fn set_str(&self, name: &[u8], value: &str) -> crate::Result<()> {
-        self.set(
+    pub(crate) fn set_str(&self, name: &[u8], value: &str) {
+        self.put(
             spec::cstr_dyn(name),
             PropValue::String(vec![value.to_string()]),
         )
     }
 
     /// The host sets `name` to ints.
-    pub(crate) fn set_ints(&self, name: &[u8], values: &[i32]) -> crate::Result<()> {
-        self.set(spec::cstr_dyn(name), PropValue::Int(values.to_vec()))
+    pub(crate) fn set_ints(&self, name: &[u8], values: &[i32]) {
+        self.put(spec::cstr_dyn(name), PropValue::Int(values.to_vec()))
     }
 
     /// The host sets `name` to doubles.
-    pub(crate) fn set_doubles(&self, name: &[u8], values: &[f64]) -> crate::Result<()> {
-        self.set(spec::cstr_dyn(name), PropValue::Double(values.to_vec()))
+    pub(crate) fn set_doubles(&self, name: &[u8], values: &[f64]) {
+        self.put(spec::cstr_dyn(name), PropValue::Double(values.to_vec()))
     }
 
     /// The value of `name`, if the set has it.

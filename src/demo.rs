@@ -161,7 +161,7 @@ pub fn scene_desc() -> SceneDesc {
 /// shadow-catcher render in the demo graph (the catcher's alpha is the shadow).
 fn shadow_desc() -> SceneDesc {
     let flatten = DMat4::from_scale_rotation_translation(
-        DVec3::new(1.6, 1.3, 0.05),
+        DVec3::new(1.3, 1.1, 0.05),
         DQuat::IDENTITY,
         DVec3::new(0.2, 0.3, 0.0),
     );

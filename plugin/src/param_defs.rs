@@ -4,13 +4,12 @@
 //! labels, in order; the value is the index), File → string in file-path mode that must
 //! exist and never animates, Text → single-line string, Rgb/Rgba → RGB/RGBA, Double3 →
 //! double3D, Matrix → single-line string of 16 numbers, row-major (OpenFX has no matrix
-//! type; see [`crate::params::parse_matrix`]). Every parameter gets its label, hint,
+//! type; see [`nerfx::graph::parse_matrix`]). Every parameter gets its label, hint,
 //! default, ranges, animation flag and evaluate-on-change.
 
-use nerfx::graph::{ParamDesc, ParamKind, Range};
+use nerfx::graph::{matrix_text, ParamDesc, ParamKind, Range};
 use openfx_sys::*;
 
-use crate::params::matrix_text;
 use crate::props::{name, Props};
 use crate::status::{check, Failure, Result};
 use crate::suites::suites;

@@ -47,12 +47,13 @@ enum Command {
         #[arg(long)]
         write_inputs: bool,
     },
-    /// Render a scene file through a shot file for a list of frames.
+    /// Render a scene file through a shot file, or a node graph (`comp.json`) through the
+    /// OpenFX bundle, for a list of frames.
     Render {
-        /// Scene file (JSON).
+        /// Scene file (JSON), or a node graph file when no shot is given.
         scene: PathBuf,
         /// Shot file (JSON, written by the Blender add-on), or a nerfstudio camera_path.json.
-        shot: PathBuf,
+        shot: Option<PathBuf>,
         /// With a nerfstudio camera path: the scene's object the path's frame belongs to.
         #[arg(long, default_value = "NeRF")]
         nerf_object: String,
@@ -68,6 +69,13 @@ enum Command {
         /// Also write a PNG preview beside each EXR.
         #[arg(long)]
         png: bool,
+        /// Graphs: the OpenFX bundle (default: $NERFX_OFX_BUNDLE, then nerfx.ofx.bundle in
+        /// each folder of $OFX_PLUGIN_PATH, beside this program, and in /usr/OFX/Plugins).
+        #[arg(long)]
+        bundle: Option<PathBuf>,
+        /// Graphs: render scale in (0, 1] (0.5: half-resolution proxies).
+        #[arg(long, default_value_t = 1.0)]
+        scale: f64,
     },
     /// Describe a field file: format, architecture, parameters, bounds, occupancy.
     Info {
@@ -141,8 +149,13 @@ fn run(cli: Cli) -> Result<()> {
             output,
             quality,
             png,
+            bundle,
+            scale,
         } => {
             let frames = parse_frames(&frames)?;
+            let Some(shot) = shot else {
+                return graph::render(&scene, &frames, &output, png, bundle, scale);
+            };
             let scene = SceneDesc::read(&scene)?.load()?;
             let shot = read_shot(&shot, &nerf_object)?;
             let settings = RenderSettings::new(quality.params(), Outputs::all());
@@ -177,6 +190,128 @@ fn run(cli: Cli) -> Result<()> {
             println!("wrote {}", out.display());
             Ok(())
         }
+    }
+}
+
+/// Graph rendering through the OpenFX host and bundle (`host` feature).
+#[cfg(feature = "host")]
+mod graph {
+    use super::*;
+    use nerfx::graph::{Graph, OfxGraph};
+    use nerfx::host::Bundle;
+    use nerfx::image::write_exr_layers;
+
+    /// Where the bundle is looked for, in order.
+    fn bundle_candidates(given: Option<PathBuf>) -> Vec<PathBuf> {
+        if let Some(path) = given {
+            return vec![path];
+        }
+        let name = "nerfx.ofx.bundle";
+        let mut places: Vec<PathBuf> = std::env::var_os("NERFX_OFX_BUNDLE")
+            .map(PathBuf::from)
+            .into_iter()
+            .collect();
+        if let Some(paths) = std::env::var_os("OFX_PLUGIN_PATH") {
+            places.extend(std::env::split_paths(&paths).map(|dir| dir.join(name)));
+        }
+        if let Some(dir) = std::env::current_exe()
+            .ok()
+            .and_then(|e| e.parent().map(Path::to_path_buf))
+        {
+            places.push(dir.join(name));
+        }
+        places.push(Path::new("/usr/OFX/Plugins").join(name));
+        places
+    }
+
+    fn load_bundle(given: Option<PathBuf>) -> Result<Bundle> {
+        let places = bundle_candidates(given);
+        match places.iter().find(|p| p.exists()) {
+            Some(path) => Bundle::load(path),
+            None => Err(Error::invalid(
+                "OpenFX bundle",
+                format!(
+                    "nerfx.ofx.bundle not found (looked at {}); build it with `bash bundle/build.sh` \
+                     or pass --bundle",
+                    places
+                        .iter()
+                        .map(|p| p.display().to_string())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            )),
+        }
+    }
+
+    /// Renders `frames` of the graph at `path`: the output node as `R G B A`, each layer as
+    /// `layer.R …`, through the bundle's plugins.
+    pub fn render(
+        path: &Path,
+        frames: &[i64],
+        output: &Path,
+        png: bool,
+        bundle: Option<PathBuf>,
+        scale: f64,
+    ) -> Result<()> {
+        let graph = Graph::read(path)?;
+        let nodes = graph.needed().iter().filter(|&&n| n).count();
+        let mut graph = OfxGraph::new(graph, &load_bundle(bundle)?)?;
+        let (first, last) = match (frames.iter().min(), frames.iter().max()) {
+            (Some(&a), Some(&b)) => (a as f64, b as f64),
+            _ => return Ok(()),
+        };
+        graph.begin_sequence(first, last, scale)?;
+        let bar = progress_bar((frames.len() * nodes) as u64, "nodes");
+        for &frame in frames {
+            let target = frame_path(output, frame, frames.len() > 1);
+            if let Some(dir) = target.parent() {
+                create_dir(dir)?;
+            }
+            let images = graph.render(frame as f64, scale, false, &|node| {
+                bar.set_message(format!("frame {frame} {node}"));
+                bar.inc(1);
+            })?;
+            let image = |name: &str| {
+                images
+                    .get(name)
+                    .ok_or_else(|| Error::invalid(format!("graph node {name}"), "was not rendered"))
+            };
+            let main = image(&graph.graph().output)?;
+            let layers = graph
+                .graph()
+                .layers
+                .iter()
+                .map(|(layer, node)| Ok((layer.as_str(), image(node)?)))
+                .collect::<Result<Vec<_>>>()?;
+            write_exr_layers(&target, main, &layers)?;
+            if png {
+                write_png_preview(&target.with_extension("png"), main)?;
+            }
+            bar.suspend(|| println!("frame {frame} → {}", target.display()));
+        }
+        bar.finish_and_clear();
+        graph.end_sequence(first, last, scale)
+    }
+}
+
+/// Without the `host` feature there is no OpenFX host to render graphs with.
+#[cfg(not(feature = "host"))]
+mod graph {
+    use super::*;
+
+    pub fn render(
+        path: &Path,
+        _: &[i64],
+        _: &Path,
+        _: bool,
+        _: Option<PathBuf>,
+        _: f64,
+    ) -> Result<()> {
+        Err(Error::Unsupported(format!(
+            "{}: rendering a node graph needs the OpenFX host; this nerfx was built without it \
+             (build with `cargo build --release --features host`)",
+            path.display()
+        )))
     }
 }
 

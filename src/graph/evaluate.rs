@@ -44,27 +44,6 @@ fn image_size(
     }
 }
 
-/// The names of the nodes the outputs depend on (the output, the layers, and everything
-/// upstream of them): nothing else is rendered.
-fn needed(graph: &Graph) -> Vec<bool> {
-    let mut need: Vec<bool> = graph
-        .nodes
-        .iter()
-        .map(|n| n.name == graph.output || graph.layers.iter().any(|(_, l)| *l == n.name))
-        .collect();
-    // Downstream nodes come last, so one backward pass reaches every ancestor.
-    for i in (0..graph.nodes.len()).rev() {
-        if need[i] {
-            for up in graph.nodes[i].inputs.values() {
-                if let Some(j) = graph.nodes.iter().position(|n| &n.name == up) {
-                    need[j] = true;
-                }
-            }
-        }
-    }
-    need
-}
-
 /// Renders the nodes of `graph` that its outputs need at `time` and `render_scale` with
 /// `render_node`, and returns their whole images by node name. `on_node` hears each node's
 /// name as it finishes (for a progress bar).
@@ -76,7 +55,7 @@ pub fn evaluate(
     render_node: &mut RenderNode<'_>,
     on_node: &dyn Fn(&str),
 ) -> Result<BTreeMap<String, Planes>> {
-    let need = needed(graph);
+    let need = graph.needed();
     let mut images: BTreeMap<String, Planes> = BTreeMap::new();
     for (node, _) in graph.nodes.iter().zip(&need).filter(|(_, &n)| n) {
         let inputs: BTreeMap<String, Planes> = node
@@ -147,6 +126,6 @@ mod tests {
         let e = evaluate(&g, 1.0, 1.0, false, &mut render, &|_| {}).unwrap_err();
         assert!(e.to_string().contains("org.nerfx.NeRFRender"), "{e}");
         assert!(rendered.borrow().is_empty());
-        assert_eq!(needed(&g), [true, false, true, true]);
+        assert_eq!(g.needed(), [true, false, true, true]);
     }
 }

@@ -123,6 +123,27 @@ impl Graph {
         })
     }
 
+    /// Which nodes (in [`Graph::nodes`] order) the outputs depend on: the output, the layers,
+    /// and everything upstream of them. Nothing else is rendered.
+    pub fn needed(&self) -> Vec<bool> {
+        let mut need: Vec<bool> = self
+            .nodes
+            .iter()
+            .map(|n| n.name == self.output || self.layers.iter().any(|(_, l)| *l == n.name))
+            .collect();
+        // Downstream nodes come last, so one backward pass reaches every ancestor.
+        for i in (0..self.nodes.len()).rev() {
+            if need[i] {
+                for up in self.nodes[i].inputs.values() {
+                    if let Some(j) = self.nodes.iter().position(|n| &n.name == up) {
+                        need[j] = true;
+                    }
+                }
+            }
+        }
+        need
+    }
+
     /// The node named `name`.
     pub fn node(&self, name: &str) -> Option<&GraphNode> {
         self.nodes.iter().find(|n| n.name == name)

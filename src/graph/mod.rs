@@ -26,8 +26,11 @@ mod compositing;
 mod desc;
 mod evaluate;
 mod file;
+mod matrix_text;
 mod nerf_render;
 mod node;
+#[cfg(feature = "host")]
+mod ofx;
 mod values;
 
 use std::sync::OnceLock;
@@ -36,7 +39,10 @@ pub use cache::{cached_scene, cached_shot, purge_caches, FileCache, CAMERA_PATH_
 pub use desc::{ClipDesc, ClipKind, Context, NodeDesc, ParamDesc, ParamKind, Range};
 pub use evaluate::{evaluate, render_direct, RenderNode};
 pub use file::{Graph, GraphNode};
+pub use matrix_text::{matrix_text, parse_matrix};
 pub use node::{single_channel, IdentityFn, Node, RenderFn, RenderRequest, RodFn};
+#[cfg(feature = "host")]
+pub use ofx::OfxGraph;
 pub use values::{ParamValues, Value};
 
 use crate::error::{Error, Result};

@@ -152,6 +152,14 @@ impl ParamValues {
         Ok(())
     }
 
+    /// Every parameter with its value, in the description's order.
+    pub fn iter(&self) -> impl Iterator<Item = (&'static str, &Value)> + '_ {
+        self.desc
+            .params
+            .iter()
+            .filter_map(|p| self.values.get(p.name).map(|v| (p.name, v)))
+    }
+
     /// The value of `name`.
     pub fn get(&self, name: &str) -> Result<&Value> {
         self.values

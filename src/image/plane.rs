@@ -1,5 +1,7 @@
 //! Planar f32 images and the windows they cover.
 
+use crate::error::{Error, Result};
+
 /// A pixel rectangle `[x0, x1) × [y0, y1)` in raster space (top-left origin, `y` down).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Window {
@@ -95,4 +97,69 @@ pub struct Planes {
     /// Median depth (ray distance where the cumulative weight reaches half the
     /// accumulation), world units (`inf` where nothing was hit).
     pub depth_median: Option<Plane>,
+}
+
+impl Planes {
+    /// The part of every present plane inside `window` (which must lie within the image).
+    pub fn crop(&self, window: Window) -> Result<Planes> {
+        if window.x1 > self.width || window.y1 > self.height {
+            return Err(Error::invalid(
+                "crop",
+                format!(
+                    "window {window:?} is outside the {}×{} image",
+                    self.width, self.height
+                ),
+            ));
+        }
+        let cut = |p: &Plane| Plane {
+            width: window.width(),
+            height: window.height(),
+            data: (window.y0..window.y1)
+                .flat_map(|y| {
+                    let row = (y * p.width) as usize;
+                    p.data[row + window.x0 as usize..row + window.x1 as usize].iter()
+                })
+                .copied()
+                .collect(),
+        };
+        Ok(Planes {
+            width: window.width(),
+            height: window.height(),
+            rgb: self.rgb.as_ref().map(|[r, g, b]| [cut(r), cut(g), cut(b)]),
+            alpha: self.alpha.as_ref().map(cut),
+            depth_z: self.depth_z.as_ref().map(cut),
+            depth_ray: self.depth_ray.as_ref().map(cut),
+            depth_median: self.depth_median.as_ref().map(cut),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crop_takes_the_window_of_every_plane() {
+        let numbered = |w: u32, h: u32, k: f32| Plane {
+            width: w,
+            height: h,
+            data: (0..w * h).map(|i| i as f32 + k).collect(),
+        };
+        let planes = Planes {
+            width: 5,
+            height: 4,
+            rgb: None,
+            alpha: Some(numbered(5, 4, 0.0)),
+            depth_z: Some(numbered(5, 4, 0.5)),
+            depth_ray: None,
+            depth_median: None,
+        };
+        let c = planes.crop(Window::new(1, 2, 4, 4)).unwrap();
+        assert_eq!((c.width, c.height), (3, 2));
+        // Pixel (x, y) of the 5-wide image is number 5y + x.
+        assert_eq!(c.alpha.unwrap().data, [11.0, 12.0, 13.0, 16.0, 17.0, 18.0]);
+        assert_eq!(c.depth_z.unwrap().data[0], 11.5);
+        assert!(c.rgb.is_none());
+        assert!(planes.crop(Window::new(0, 0, 6, 4)).is_err());
+    }
 }

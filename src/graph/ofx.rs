@@ -1,0 +1,142 @@
+//! A graph rendered through the OpenFX bundle: one plugin instance per node, created and set
+//! once, fed its upstream images through the host. This is the farm's path, and it runs the
+//! very code an artist's compositor runs.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use super::desc::{Context, ParamKind};
+use super::evaluate::evaluate;
+use super::file::{Graph, GraphNode};
+use super::matrix_text::matrix_text;
+use super::node::RenderRequest;
+use super::values::Value;
+use crate::error::{Error, Result};
+use crate::host::{Bundle, ClipSource, Instance};
+use crate::image::Planes;
+
+/// The context a graph node is instantiated in: Generator without inputs, Filter when its
+/// only input is `Source`, otherwise General — each where the node supports it.
+fn context_of(node: &GraphNode) -> Context {
+    let supports = |c| node.node.desc.contexts.contains(&c);
+    let only_source = node.inputs.keys().all(|clip| clip == "Source");
+    if node.inputs.is_empty() && supports(Context::Generator) {
+        Context::Generator
+    } else if only_source && supports(Context::Filter) {
+        Context::Filter
+    } else if supports(Context::General) {
+        Context::General
+    } else {
+        node.node.desc.contexts[0]
+    }
+}
+
+/// A graph whose nodes are instances of a loaded bundle.
+pub struct OfxGraph {
+    graph: Graph,
+    instances: BTreeMap<String, Instance>,
+}
+
+impl OfxGraph {
+    /// Instantiates every node of `graph` in `bundle` and sets its parameter values.
+    pub fn new(graph: Graph, bundle: &Bundle) -> Result<OfxGraph> {
+        let mut instances = BTreeMap::new();
+        for node in &graph.nodes {
+            let named = |e: Error| match e {
+                Error::Invalid { what, message } => {
+                    Error::invalid(format!("graph node {}: {what}", node.name), message)
+                }
+                other => other,
+            };
+            let mut instance = bundle
+                .instance(node.node.desc.id, context_of(node))
+                .map_err(named)?;
+            for (name, value) in node.values.iter() {
+                let value = as_published(node, name, value);
+                instance.set_param(name, &value).map_err(named)?;
+            }
+            instances.insert(node.name.clone(), instance);
+        }
+        Ok(OfxGraph { graph, instances })
+    }
+
+    /// The graph.
+    pub fn graph(&self) -> &Graph {
+        &self.graph
+    }
+
+    /// Tells every instance a sequence of frames `first..=last` is about to render (plugins
+    /// may load what the whole range needs once).
+    pub fn begin_sequence(&self, first: f64, last: f64, render_scale: f64) -> Result<()> {
+        self.instances
+            .values()
+            .try_for_each(|i| i.begin_sequence(first, last, render_scale))
+    }
+
+    /// Tells every instance the sequence begun by [`OfxGraph::begin_sequence`] is over.
+    pub fn end_sequence(&self, first: f64, last: f64, render_scale: f64) -> Result<()> {
+        self.instances
+            .values()
+            .try_for_each(|i| i.end_sequence(first, last, render_scale))
+    }
+
+    /// Renders the nodes the outputs need at `time` through the bundle (whole images at
+    /// `render_scale`), as [`evaluate`] does; `on_node` hears each finished node's name.
+    pub fn render(
+        &mut self,
+        time: f64,
+        render_scale: f64,
+        draft: bool,
+        on_node: &dyn Fn(&str),
+    ) -> Result<BTreeMap<String, Planes>> {
+        let instances = &mut self.instances;
+        let mut render = |node: &GraphNode, request: &RenderRequest| -> Result<Planes> {
+            let instance = instances.get_mut(&node.name).ok_or_else(|| {
+                Error::invalid(format!("graph node {}", node.name), "was not instantiated")
+            })?;
+            for (clip, image) in &request.inputs {
+                instance.connect(clip, upstream(image, request.render_scale))?;
+            }
+            instance.render(
+                request.time,
+                request.window,
+                request.render_scale,
+                request.draft,
+            )
+        };
+        evaluate(&self.graph, time, render_scale, draft, &mut render, on_node)
+    }
+}
+
+/// `value` as the plugin publishes the parameter: a matrix as its text (see
+/// [`matrix_text`]), everything else as it is.
+fn as_published(node: &GraphNode, name: &str, value: &Value) -> Value {
+    let is_matrix = matches!(
+        node.node.desc.param(name).map(|p| &p.kind),
+        Some(ParamKind::Matrix { .. })
+    );
+    match value {
+        Value::Doubles(m) if is_matrix => match <&[f64; 16]>::try_from(m.as_slice()) {
+            Ok(m) => Value::Text(matrix_text(m)),
+            Err(_) => value.clone(),
+        },
+        _ => value.clone(),
+    }
+}
+
+/// An upstream node's whole image at `scale` as a clip source; its region of definition in
+/// full-resolution pixels is the image's size undone by the scale.
+fn upstream(image: &Planes, scale: f64) -> ClipSource {
+    let image = Arc::new(image.clone());
+    let full = |n: u32| (f64::from(n) / scale).floor().max(1.0) as u32;
+    let rod = (full(image.width), full(image.height));
+    ClipSource::new(rod, move |_, window, s| {
+        if s != scale {
+            return Err(Error::invalid(
+                "clip source",
+                format!("rendered at render scale {scale}, asked for {s}"),
+            ));
+        }
+        image.crop(window)
+    })
+}

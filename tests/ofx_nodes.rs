@@ -343,10 +343,13 @@ fn pattern(seed: u32, window: Window, scale: f64) -> Planes {
     })
 }
 
+/// A compositing node to test: identifier, context, connected clips, parameter values.
+type Case<'a> = (&'a str, Context, &'a [&'a str], &'a [(&'a str, Value)]);
+
 #[test]
 fn compositing_nodes_through_the_host_equal_the_core() {
     let (w, h) = (23, 17);
-    let cases: [(&str, Context, &[&str], &[(&str, Value)]); 4] = [
+    let cases: [Case; 4] = [
         (
             "org.nerfx.AccumulationMatte",
             Context::Filter,

@@ -142,8 +142,9 @@ def occupied(q, grids):
     return out
 
 
-def main():
-    snap_path, pts_path, out_path = sys.argv[1:4]
+def field(snap_path):
+    """The snapshot at `snap_path` as a function (points, directions) -> (sigma, rgb), NeRF
+    world frame, float32."""
     doc = load(snap_path)
     snap = doc["snapshot"]
     enc = doc["encoding"]
@@ -189,8 +190,13 @@ def main():
     o = np.array(ds.get("offset", [0.5, 0.5, 0.5]), dtype=F32)
     hdr = bool(ds.get("is_hdr", False))
 
-    rows = np.fromfile(pts_path, dtype="<f4").reshape(-1, 6)
-    pts, dirs = rows[:, :3], rows[:, 3:]
+    def evaluate(pts, dirs):
+        return evaluate_at(pts, dirs, s, o, aabb_scale, levels, table, n_feat, dmats, rmats, grids, hdr)
+
+    return evaluate
+
+
+def evaluate_at(pts, dirs, s, o, aabb_scale, levels, table, n_feat, dmats, rmats, grids, hdr):
     # NeRF world -> instant-ngp: scale, offset, then cycle (x, y, z) <- (y, z, x).
     q = np.stack([pts[:, 1] * s + o[1], pts[:, 2] * s + o[2], pts[:, 0] * s + o[0]], axis=1).astype(F32)
     half = F32(0.5 * min(aabb_scale, 128.0))
@@ -208,7 +214,15 @@ def main():
     else:
         srgb = F32(1.0) / (F32(1.0) + np.exp(-rgb_raw))
         rgb = np.where(srgb <= 0.04045, srgb / F32(12.92), ((srgb + F32(0.055)) / F32(1.055)) ** F32(2.4))
-    np.concatenate([sigma[:, None], rgb.astype(F32)], axis=1).astype("<f4").tofile(out_path)
+    return sigma, rgb.astype(F32)
+
+
+def main():
+    snap_path, pts_path, out_path = sys.argv[1:4]
+    evaluate = field(snap_path)
+    rows = np.fromfile(pts_path, dtype="<f4").reshape(-1, 6)
+    sigma, rgb = evaluate(rows[:, :3], rows[:, 3:])
+    np.concatenate([sigma[:, None], rgb], axis=1).astype("<f4").tofile(out_path)
 
 
 if __name__ == "__main__":

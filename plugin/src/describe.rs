@@ -7,13 +7,20 @@
 //! `Output` clip, every registry clip that exists there (RGBA; RGBA or Alpha for mattes,
 //! alphas and depths; label and optional flag: OpenFX clip descriptors have no tooltip
 //! property, so a clip's hint is not published), and every parameter ([`crate::param_defs`]).
+//!
+//! Fielded footage: every node works pixel by pixel or renders a whole frame from a camera,
+//! so inputs are fetched as full interlaced frames (`kOfxImageFieldBoth`) and the host is asked
+//! to render fields twice only when parameters animate (`FieldRenderTwiceAlways` 0).
+//!
+//! Properties that are niceties (description, field handling, clip-preference slaves, …)
+//! are set with [`optional`]: a host that does not know one must not lose the plugin.
 
 use nerfx::graph::{ClipKind, Context, Node, ParamKind};
 use openfx_sys::*;
 
 use crate::instance::effect_props;
 use crate::param_defs::define_param;
-use crate::props::{name, Props};
+use crate::props::{name, optional, Props};
 use crate::status::{check, Failure, Result, ERR_UNSUPPORTED};
 use crate::suites::suites;
 
@@ -43,7 +50,7 @@ pub fn describe(node: &Node, effect: OfxImageEffectHandle) -> Result<()> {
     let d = &node.desc;
     p.set_string(name(kOfxPropLabel), d.label)?;
     p.set_string(name(kOfxImageEffectPluginPropGrouping), d.group)?;
-    p.set_string(name(kOfxPropPluginDescription), d.hint)?;
+    optional(p.set_string(name(kOfxPropPluginDescription), d.hint));
     let contexts: Vec<&str> = d
         .contexts
         .iter()
@@ -58,9 +65,10 @@ pub fn describe(node: &Node, effect: OfxImageEffectHandle) -> Result<()> {
         .to_str()
         .unwrap_or_default();
     p.set_string(name(kOfxImageEffectPluginRenderThreadSafety), safe)?;
-    p.set_int(name(kOfxImageEffectPluginPropHostFrameThreading), 0)?;
-    p.set_int(name(kOfxImageEffectPropSupportsMultipleClipDepths), 0)?;
-    p.set_int(name(kOfxImageEffectPropTemporalClipAccess), 0)?;
+    optional(p.set_int(name(kOfxImageEffectPluginPropHostFrameThreading), 0));
+    optional(p.set_int(name(kOfxImageEffectPropSupportsMultipleClipDepths), 0));
+    optional(p.set_int(name(kOfxImageEffectPropTemporalClipAccess), 0));
+    optional(p.set_int(name(kOfxImageEffectPluginPropFieldRenderTwiceAlways), 0));
     Ok(())
 }
 
@@ -111,7 +119,7 @@ pub fn describe_in_context(
         name(kOfxImageEffectPropSupportedComponents),
         &components(ClipKind::Rgba),
     )?;
-    output.set_int(name(kOfxImageEffectPropSupportsTiles), 1)?;
+    optional(output.set_int(name(kOfxImageEffectPropSupportsTiles), 1));
     for c in node
         .desc
         .clips
@@ -125,7 +133,11 @@ pub fn describe_in_context(
             &components(c.kind),
         )?;
         clip.set_int(name(kOfxImageClipPropOptional), i32::from(c.optional))?;
-        clip.set_int(name(kOfxImageEffectPropSupportsTiles), 1)?;
+        optional(clip.set_int(name(kOfxImageEffectPropSupportsTiles), 1));
+        optional(clip.set_string(
+            name(kOfxImageClipPropFieldExtraction),
+            &name(kOfxImageFieldBoth).to_string_lossy(),
+        ));
     }
     let s = suites()?;
     let get_set = s
@@ -148,8 +160,10 @@ pub fn describe_in_context(
         .map(|p| p.name)
         .collect();
     if !files.is_empty() {
-        effect_props(effect)?
-            .set_strings(name(kOfxImageEffectPropClipPreferencesSlaveParam), &files)?;
+        optional(
+            effect_props(effect)?
+                .set_strings(name(kOfxImageEffectPropClipPreferencesSlaveParam), &files),
+        );
     }
     Ok(())
 }

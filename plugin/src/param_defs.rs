@@ -10,7 +10,7 @@
 use nerfx::graph::{matrix_text, ParamDesc, ParamKind, Range};
 use openfx_sys::*;
 
-use crate::props::{name, Props};
+use crate::props::{name, optional, Props};
 use crate::status::{check, Failure, Result};
 use crate::suites::suites;
 
@@ -48,8 +48,9 @@ fn int_bound(v: f64) -> i32 {
 fn set_range(p: Props, r: &Range, n: usize) -> Result<()> {
     p.set_doubles(name(kOfxParamPropMin), &vec![r.min; n])?;
     p.set_doubles(name(kOfxParamPropMax), &vec![r.max; n])?;
-    p.set_doubles(name(kOfxParamPropDisplayMin), &vec![r.display_min; n])?;
-    p.set_doubles(name(kOfxParamPropDisplayMax), &vec![r.display_max; n])
+    optional(p.set_doubles(name(kOfxParamPropDisplayMin), &vec![r.display_min; n]));
+    optional(p.set_doubles(name(kOfxParamPropDisplayMax), &vec![r.display_max; n]));
+    Ok(())
 }
 
 /// Defines `param` in the descriptor's parameter set.
@@ -75,10 +76,10 @@ pub fn define_param(set: OfxParamSetHandle, param: &ParamDesc) -> Result<()> {
     // SAFETY: the parameter descriptor lives as long as the effect descriptor.
     let p = unsafe { Props::new(props, s.property) };
     p.set_string(name(kOfxPropLabel), param.label)?;
-    p.set_string(name(kOfxParamPropHint), &hint(param))?;
+    optional(p.set_string(name(kOfxParamPropHint), &hint(param)));
     let animates = param.animates && !matches!(param.kind, ParamKind::File);
     p.set_int(name(kOfxParamPropAnimates), i32::from(animates))?;
-    p.set_int(name(kOfxParamPropEvaluateOnChange), 1)?;
+    optional(p.set_int(name(kOfxParamPropEvaluateOnChange), 1));
     let mode =
         |m: &'static [u8]| p.set_string(name(kOfxParamPropStringMode), &name(m).to_string_lossy());
     match &param.kind {
@@ -90,8 +91,8 @@ pub fn define_param(set: OfxParamSetHandle, param: &ParamDesc) -> Result<()> {
             p.set_int(name(kOfxParamPropDefault), int_bound(*default as f64))?;
             p.set_int(name(kOfxParamPropMin), int_bound(range.min))?;
             p.set_int(name(kOfxParamPropMax), int_bound(range.max))?;
-            p.set_int(name(kOfxParamPropDisplayMin), int_bound(range.display_min))?;
-            p.set_int(name(kOfxParamPropDisplayMax), int_bound(range.display_max))?;
+            optional(p.set_int(name(kOfxParamPropDisplayMin), int_bound(range.display_min)));
+            optional(p.set_int(name(kOfxParamPropDisplayMax), int_bound(range.display_max)));
         }
         ParamKind::Bool { default } => {
             p.set_int(name(kOfxParamPropDefault), i32::from(*default))?
@@ -103,7 +104,7 @@ pub fn define_param(set: OfxParamSetHandle, param: &ParamDesc) -> Result<()> {
         }
         ParamKind::File => {
             mode(kOfxParamStringIsFilePath)?;
-            p.set_int(name(kOfxParamPropStringFilePathExists), 1)?;
+            optional(p.set_int(name(kOfxParamPropStringFilePathExists), 1));
             p.set_string(name(kOfxParamPropDefault), "")?;
         }
         ParamKind::Text { default } => {

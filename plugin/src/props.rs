@@ -21,6 +21,15 @@ pub fn c_string(text: &str) -> CString {
     CString::new(text.replace('\0', " ")).unwrap_or_default()
 }
 
+/// Drops the failure of setting a descriptor property an older or stricter host may not know
+/// (a description, display ranges, field handling, …): hosts answer an unknown property with
+/// an error, and failing `describe` for a nicety would lose the whole plugin there.
+pub fn optional(result: Result<()>) {
+    if let Err(e) = result {
+        eprintln!("nerfx.ofx: ignored: {e}");
+    }
+}
+
 /// A property set and the suite that reads it.
 #[derive(Clone, Copy)]
 pub struct Props {

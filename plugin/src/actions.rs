@@ -1,30 +1,39 @@
 //! The actions of one registry node, by name: what each one does with the core.
 //!
-//! - load: fetch the host's suites; unload: nothing to free (suites stay valid while loaded).
+//! - load: fetch the host's suites; unload: the last one forgets them ([`crate::suites`]).
 //! - describe / describeInContext: [`crate::describe`].
 //! - createInstance / destroyInstance: [`crate::instance`].
 //! - getRegionOfDefinition: the node's own size `(w, h)` → canonical `(0, 0, w·par, h)`
-//!   with `par` the output's pixel aspect ratio; nodes sized by their inputs reply default.
+//!   with `par` the output's pixel aspect ratio (whatever render scale the host passes: the
+//!   region is canonical); nodes sized by their inputs reply default.
+//! - A node with a file parameter still empty (a node just created, before the artist picked
+//!   its files) is *not ready*: where its region of definition needs the file it replies
+//!   default, it renders transparent black or passes its first connected RGBA input through,
+//!   and it never posts an error — hosts ask for the region at once, and a dialog before the
+//!   artist could pick a file is noise. A file that is set but unreadable is an error.
 //! - getRegionsOfInterest: each connected input needs exactly the region asked for (every
 //!   node works pixel by pixel).
 //! - getClipPreferences: float everywhere, RGBA output premultiplied, Alpha or RGBA inputs
 //!   as each clip accepts, frame varying as the node says.
-//! - isIdentity: the clip the node passes through with these values, at the same time.
+//! - isIdentity: the clip the node passes through with these values, at the same time
+//!   (the host's time, whole frame or not: `kOfxPropTime` is set as an out-argument).
 //! - begin/endSequenceRender: nothing to prepare (files are cached on first use).
 //! - render: [`crate::render`].
-//! - instanceChanged: clears the instance's persistent error (the next render re-checks).
+//! - instanceChanged: an edit by the artist or the plugin (`kOfxPropChangeReason`) clears the
+//!   instance's persistent error (the next action re-checks); a change because the time
+//!   moved changes nothing.
 //! - purgeCaches: drops the core's cached files.
 //!
 //! Anything else is replied the host's default.
 
 use std::ffi::{c_void, CStr};
 
-use nerfx::graph::{ClipKind, Node};
+use nerfx::graph::{ClipKind, Node, ParamKind, ParamValues};
 use openfx_sys::*;
 
 use crate::images::{connected, pixel_aspect};
 use crate::instance::{self, Instance};
-use crate::message::{self, Target};
+use crate::message::{self, Target, Urgency};
 use crate::params::values_at;
 use crate::props::{name, Props};
 use crate::status::{Failure, Result, OK, REPLY_DEFAULT};
@@ -48,9 +57,26 @@ pub fn message_target(action: &CStr, handle: *const c_void) -> Target {
         Target::Plugin
     } else if is(kOfxActionDescribe) || is(kOfxImageEffectActionDescribeInContext) {
         Target::Descriptor(h)
+    } else if is(kOfxImageEffectActionRender) || is(kOfxActionCreateInstance) {
+        Target::Instance(h, Urgency::Render)
     } else {
-        Target::Instance(h)
+        Target::Instance(h, Urgency::Query)
     }
+}
+
+/// The first file parameter of the node still empty in `values`: the node is not ready.
+pub fn unset_file(node: &Node, values: &ParamValues) -> Option<&'static str> {
+    node.desc
+        .params
+        .iter()
+        .filter(|p| matches!(p.kind, ParamKind::File))
+        .find(|p| values.text(p.name).is_ok_and(str::is_empty))
+        .map(|p| p.name)
+}
+
+/// Whether `reason` (`kOfxPropChangeReason`) is an edit, not the time moving.
+fn is_edit(reason: &str) -> bool {
+    reason.as_bytes() != name(kOfxChangeTime).to_bytes()
 }
 
 /// Runs `action` of `node`.
@@ -68,6 +94,7 @@ pub fn run(
         return Ok(OK);
     }
     if is(kOfxActionUnload) {
+        suites::unload();
         return Ok(OK);
     }
     if is(kOfxActionDescribe) {
@@ -91,7 +118,15 @@ pub fn run(
         return Ok(OK);
     }
     if is(kOfxActionInstanceChanged) {
-        message::clear(effect.cast());
+        // A host that passes no reason is taken to mean an edit.
+        let edit = props(in_args, "inArgs")
+            .and_then(|p| p.string(name(kOfxPropChangeReason)))
+            .map_or(true, |r| is_edit(&r));
+        if edit {
+            // SAFETY: an instance action, between create and destroy.
+            let inst = unsafe { instance::get(effect) }?;
+            message::reset(effect.cast(), &inst.shown);
+        }
         return Ok(OK);
     }
     if is(kOfxImageEffectActionBeginSequenceRender) || is(kOfxImageEffectActionEndSequenceRender) {
@@ -119,6 +154,7 @@ pub fn run(
         is_identity(inst, props(in_args, "inArgs")?, props(out_args, "outArgs")?)
     } else {
         render::render(inst, props(in_args, "inArgs")?)?;
+        message::succeeded(effect.cast(), &inst.shown);
         Ok(OK)
     }
 }
@@ -126,7 +162,11 @@ pub fn run(
 fn region_of_definition(inst: &Instance, in_args: Props, out: Props) -> Result<OfxStatus> {
     let time = in_args.double(name(kOfxPropTime))?;
     let values = values_at(inst, time)?;
-    match inst.node.region_of_definition(&values, time)? {
+    let rod = match inst.node.region_of_definition(&values, time) {
+        Err(_) if unset_file(inst.node, &values).is_some() => return Ok(REPLY_DEFAULT),
+        rod => rod?,
+    };
+    match rod {
         Some((w, h)) => {
             let par = pixel_aspect(&inst.output);
             let rod = [0.0, 0.0, f64::from(w) * par, f64::from(h)];
@@ -191,7 +231,15 @@ fn clip_preferences(inst: &Instance, out: Props) -> Result<OfxStatus> {
 fn is_identity(inst: &Instance, in_args: Props, out: Props) -> Result<OfxStatus> {
     let time = in_args.double(name(kOfxPropTime))?;
     let values = values_at(inst, time)?;
-    let Some(clip) = inst.node.identity(&values)? else {
+    let clip = if unset_file(inst.node, &values).is_some() {
+        inst.inputs
+            .iter()
+            .find(|(c, _)| c.kind == ClipKind::Rgba)
+            .map(|(c, _)| c.name)
+    } else {
+        inst.node.identity(&values)?
+    };
+    let Some(clip) = clip else {
         return Ok(REPLY_DEFAULT);
     };
     let Some((_, handle)) = inst.inputs.iter().find(|(c, _)| c.name == clip) else {
@@ -221,11 +269,59 @@ mod tests {
         ));
         assert!(matches!(
             target(kOfxImageEffectActionRender),
-            Target::Instance(_)
+            Target::Instance(_, Urgency::Render)
+        ));
+        assert!(matches!(
+            target(kOfxImageEffectActionGetRegionOfDefinition),
+            Target::Instance(_, Urgency::Query)
+        ));
+        assert!(matches!(
+            target(kOfxImageEffectActionGetClipPreferences),
+            Target::Instance(_, Urgency::Query)
         ));
         assert!(matches!(
             message_target(name(kOfxImageEffectActionRender), std::ptr::null()),
             Target::Plugin
         ));
+    }
+
+    #[test]
+    fn only_the_time_moving_is_not_an_edit() {
+        assert!(!is_edit("OfxChangeTime"));
+        assert!(is_edit("OfxChangeUserEdited"));
+        assert!(is_edit("OfxChangePluginEdited"));
+    }
+
+    #[test]
+    fn a_node_with_an_empty_file_is_not_ready() {
+        let node = nerfx::graph::node("org.nerfx.NeRFRender").unwrap();
+        let files: Vec<&str> = node
+            .desc
+            .params
+            .iter()
+            .filter(|p| matches!(p.kind, ParamKind::File))
+            .map(|p| p.name)
+            .collect();
+        assert!(!files.is_empty());
+        let mut values = node.defaults();
+        // Defaults: every file empty; the first one is named.
+        assert_eq!(unset_file(node, &values), Some(files[0]));
+        for (i, f) in files.iter().enumerate() {
+            values
+                .set(f, nerfx::graph::Value::Text(format!("/x/{i}.json")))
+                .unwrap();
+        }
+        assert_eq!(unset_file(node, &values), None);
+        // Nodes without files are always ready.
+        for n in nerfx::graph::nodes() {
+            if !n
+                .desc
+                .params
+                .iter()
+                .any(|p| matches!(p.kind, ParamKind::File))
+            {
+                assert_eq!(unset_file(n, &n.defaults()), None, "{}", n.desc.id);
+            }
+        }
     }
 }

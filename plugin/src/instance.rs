@@ -1,11 +1,13 @@
 //! Per-instance data: the node, its context and the host handles fetched once at
 //! `kOfxActionCreateInstance`, boxed in the effect's `kOfxPropInstanceData`.
 //!
-//! The data never changes after creation, so render threads share it without locks (the
+//! The handles never change after creation, so render threads share them without locks (the
 //! plugin declares itself fully thread safe): every value a render needs is read from the host
-//! per call, and the core's caches are internally synchronised.
+//! per call, and the core's caches are internally synchronised. The one mutable part is the
+//! record of messages shown to the artist, behind its own mutex.
 
 use std::ffi::CString;
+use std::sync::Mutex;
 
 use nerfx::graph::{ClipDesc, Node};
 use openfx_sys::{
@@ -15,6 +17,7 @@ use openfx_sys::{
 };
 
 use crate::describe::context_from_name;
+use crate::message::Shown;
 use crate::props::{name, Props};
 use crate::status::{check, Failure, Result};
 use crate::suites::suites;
@@ -40,6 +43,8 @@ pub struct Instance {
     pub output: ClipRef,
     /// The node's input clips that exist in this context.
     pub inputs: Vec<(&'static ClipDesc, ClipRef)>,
+    /// What the instance has shown the artist ([`crate::message`]).
+    pub shown: Mutex<Shown>,
 }
 
 /// The effect's property set.
@@ -117,6 +122,7 @@ pub fn create(node: &'static Node, effect: OfxImageEffectHandle) -> Result<()> {
         params,
         output,
         inputs,
+        shown: Mutex::new(Shown::default()),
     });
     let ptr = Box::into_raw(data);
     if let Err(e) = props.set_pointer(name(kOfxPropInstanceData), ptr.cast()) {

@@ -1,72 +1,240 @@
 //! Error messages for the artist, through the host's message suite.
 //!
-//! On an effect instance with the V2 suite the message is *persistent* (the host marks the
-//! node until the plugin clears it, see [`clear`]); otherwise it is a transient message. The
-//! text always goes through a `"%s"` format, so no `%` in a file name is ever interpreted.
+//! Hosts show the two kinds very differently: a *persistent* message (message suite V2) marks
+//! the node until the plugin clears it, while a transient message is, in most hosts, a modal
+//! dialog. Hosts call the instance queries (region of definition, clip preferences, identity,
+//! regions of interest) at will, many times per second while the artist scrubs or edits, so:
+//!
+//! - with V2 every instance failure becomes the node's persistent message, cleared by the next
+//!   successful render and by an edit of the artist ([`reset`]);
+//! - without V2 only render failures reach the artist, as a transient message, and the same
+//!   text only once until the artist edits something (queries and repeats go to standard
+//!   error);
+//! - descriptors and the plugin itself get transient messages (or standard error).
+//!
+//! The text always goes through a `"%s"` format, so no `%` in a file name is ever interpreted.
 
 use std::ffi::c_void;
+use std::sync::{Mutex, PoisonError};
 
 use openfx_sys::kOfxMessageError;
 
+use crate::instance;
 use crate::props::{c_string, name};
 use crate::suites::{suites, MessageSuite};
 
+/// Which instance action failed: whether the artist must be told even without V2.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Urgency {
+    /// A render (or instance creation): the artist waits for a picture.
+    Render,
+    /// A query the host repeats at will: only ever a persistent message.
+    Query,
+}
+
 /// Where a message goes.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 pub enum Target {
     /// No handle (entry points outside any action).
     Plugin,
     /// A descriptor (describe actions): transient messages only.
     Descriptor(*mut c_void),
     /// An effect instance: persistent messages where the host offers them.
-    Instance(*mut c_void),
+    Instance(*mut c_void, Urgency),
 }
 
-/// Posts `text` as an error; falls back to standard error when the host's suites are not
-/// loaded yet (a failure in `OfxSetHost` or `kOfxActionLoad` itself).
-pub fn post_error(target: Target, text: &str) {
-    let Ok(s) = suites() else {
-        eprintln!("nerfx.ofx: {text}");
-        return;
+/// What an instance has shown the artist.
+#[derive(Debug, Default)]
+pub struct Shown {
+    /// A persistent message is set on the node.
+    persistent: bool,
+    /// The last transient message, not to be repeated.
+    transient: Option<String>,
+}
+
+/// How to deliver a message, given the host's suite and what the instance already showed.
+#[derive(Debug, PartialEq, Eq)]
+enum Delivery {
+    Persistent,
+    Transient,
+    StandardError,
+}
+
+/// The pure decision of [`post_error`] (updates `shown`).
+fn delivery(v2: Option<bool>, target: Target, shown: Option<&mut Shown>, text: &str) -> Delivery {
+    let Some(v2) = v2 else {
+        return Delivery::StandardError;
     };
-    let text = c_string(text);
-    let kind = name(kOfxMessageError).as_ptr();
-    let id = c"".as_ptr();
-    let format = c"%s".as_ptr();
-    let handle = match target {
-        Target::Plugin => std::ptr::null_mut(),
-        Target::Descriptor(h) | Target::Instance(h) => h,
-    };
-    // SAFETY: the suite functions are the host's; "%s" takes exactly one C string argument.
-    unsafe {
-        match (s.message, target) {
-            (MessageSuite::V2(m), Target::Instance(_)) => {
-                if let Some(f) = m.setPersistentMessage {
-                    f(handle, kind, id, format, text.as_ptr());
+    match target {
+        Target::Plugin | Target::Descriptor(_) => Delivery::Transient,
+        Target::Instance(_, urgency) => {
+            if v2 {
+                if let Some(s) = shown {
+                    s.persistent = true;
                 }
+                return Delivery::Persistent;
             }
-            (MessageSuite::V2(m), _) => {
-                if let Some(f) = m.message {
-                    f(handle, kind, id, format, text.as_ptr());
-                }
+            if urgency == Urgency::Query {
+                return Delivery::StandardError;
             }
-            (MessageSuite::V1(m), _) => {
-                if let Some(f) = m.message {
-                    f(handle, kind, id, format, text.as_ptr());
+            match shown {
+                Some(s) if s.transient.as_deref() == Some(text) => Delivery::StandardError,
+                Some(s) => {
+                    s.transient = Some(text.to_string());
+                    Delivery::Transient
                 }
+                None => Delivery::Transient,
             }
         }
     }
 }
 
-/// Clears the instance's persistent message (after the artist changed something).
-pub fn clear(instance: *mut c_void) {
+/// Posts `text` as an error as the module explains; standard error when the host has no
+/// message suite or its suites are not loaded yet.
+pub fn post_error(target: Target, text: &str) {
+    let Ok(s) = suites() else {
+        eprintln!("nerfx.ofx: {text}");
+        return;
+    };
+    let v2 = s.message.map(|m| matches!(m, MessageSuite::V2(_)));
+    let inst = match target {
+        // SAFETY: messages go to an instance only during its actions, between its create and
+        // destroy actions; the reference does not outlive this call.
+        Target::Instance(h, _) => unsafe { instance::get(h.cast()) }.ok(),
+        _ => None,
+    };
+    let how = match inst {
+        Some(i) => {
+            let mut shown = i.shown.lock().unwrap_or_else(PoisonError::into_inner);
+            delivery(v2, target, Some(&mut shown), text)
+        }
+        None => delivery(v2, target, None, text),
+    };
+    let c_text = c_string(text);
+    let kind = name(kOfxMessageError).as_ptr();
+    let id = c"".as_ptr();
+    let format = c"%s".as_ptr();
+    let handle = match target {
+        Target::Plugin => std::ptr::null_mut(),
+        Target::Descriptor(h) | Target::Instance(h, _) => h,
+    };
+    // SAFETY: the suite functions are the host's; "%s" takes exactly one C string argument.
+    unsafe {
+        match (s.message, how) {
+            (Some(MessageSuite::V2(m)), Delivery::Persistent) => {
+                if let Some(f) = m.setPersistentMessage {
+                    f(handle, kind, id, format, c_text.as_ptr());
+                }
+            }
+            (Some(MessageSuite::V2(m)), Delivery::Transient) => {
+                if let Some(f) = m.message {
+                    f(handle, kind, id, format, c_text.as_ptr());
+                }
+            }
+            (Some(MessageSuite::V1(m)), Delivery::Transient) => {
+                if let Some(f) = m.message {
+                    f(handle, kind, id, format, c_text.as_ptr());
+                }
+            }
+            _ => eprintln!("nerfx.ofx: {text}"),
+        }
+    }
+}
+
+/// After a successful render: clears the node's persistent message, if one is set.
+pub fn succeeded(instance: *mut c_void, shown: &Mutex<Shown>) {
+    let was = std::mem::take(
+        &mut shown
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .persistent,
+    );
+    if was {
+        clear_persistent(instance);
+    }
+}
+
+/// After an edit of the artist: clears the persistent message and lets a transient one be
+/// shown again (the next action re-checks and reports what is still wrong).
+pub fn reset(instance: *mut c_void, shown: &Mutex<Shown>) {
+    *shown.lock().unwrap_or_else(PoisonError::into_inner) = Shown::default();
+    clear_persistent(instance);
+}
+
+fn clear_persistent(instance: *mut c_void) {
     if let Ok(s) = suites() {
-        if let MessageSuite::V2(m) = s.message {
+        if let Some(MessageSuite::V2(m)) = s.message {
             if let Some(f) = m.clearPersistentMessage {
                 // SAFETY: `instance` is the effect instance handle of the current action.
                 unsafe { f(instance) };
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const H: *mut c_void = 8usize as *mut c_void;
+
+    #[test]
+    fn with_v2_instance_failures_are_persistent_and_remembered() {
+        let mut shown = Shown::default();
+        for urgency in [Urgency::Query, Urgency::Render] {
+            let t = Target::Instance(H, urgency);
+            assert_eq!(
+                delivery(Some(true), t, Some(&mut shown), "x"),
+                Delivery::Persistent
+            );
+            assert!(shown.persistent);
+        }
+        assert_eq!(
+            delivery(Some(true), Target::Descriptor(H), None, "x"),
+            Delivery::Transient
+        );
+    }
+
+    #[test]
+    fn without_v2_only_new_render_failures_pop_up() {
+        let mut shown = Shown::default();
+        let query = Target::Instance(H, Urgency::Query);
+        let render = Target::Instance(H, Urgency::Render);
+        assert_eq!(
+            delivery(Some(false), query, Some(&mut shown), "a"),
+            Delivery::StandardError
+        );
+        assert_eq!(
+            delivery(Some(false), render, Some(&mut shown), "a"),
+            Delivery::Transient
+        );
+        // The same text again (next frame): not another dialog.
+        assert_eq!(
+            delivery(Some(false), render, Some(&mut shown), "a"),
+            Delivery::StandardError
+        );
+        // A different problem is news.
+        assert_eq!(
+            delivery(Some(false), render, Some(&mut shown), "b"),
+            Delivery::Transient
+        );
+        assert!(!shown.persistent);
+        // After an edit the same text may be shown again.
+        shown = Shown::default();
+        assert_eq!(
+            delivery(Some(false), render, Some(&mut shown), "b"),
+            Delivery::Transient
+        );
+    }
+
+    #[test]
+    fn no_message_suite_means_standard_error() {
+        for t in [
+            Target::Plugin,
+            Target::Descriptor(H),
+            Target::Instance(H, Urgency::Render),
+        ] {
+            assert_eq!(delivery(None, t, None, "x"), Delivery::StandardError);
         }
     }
 }

@@ -1,12 +1,19 @@
 //! The host and the suites fetched from it.
 //!
 //! `OfxSetHost` (or each plugin's `setHost`) hands over the host; `kOfxActionLoad` fetches the
-//! suites once. Suites are `'static` references: the spec keeps them valid while the binary is
+//! suites. Suites are `'static` references: the spec keeps them valid while the binary is
 //! loaded, and they hold only function pointers, so every render thread may copy them.
+//!
+//! Real hosts differ in order and repetition: `OfxSetHost` before or after `OfxGetPlugin`,
+//! `setHost` once per plugin, load/unload per plugin (some hosts load, describe and unload at
+//! start-up, then load again). So: a host pointer different from the one the suites came from
+//! forgets them; the last `unload` forgets them; and an action finding none fetches them from
+//! the current host (a host that skipped `load` for this plugin after a new `setHost`). The
+//! message suite is optional (errors then go to standard error).
 
 use std::ffi::CStr;
 use std::os::raw::c_int;
-use std::sync::atomic::{AtomicPtr, Ordering};
+use std::sync::atomic::{AtomicPtr, AtomicUsize, Ordering};
 use std::sync::{PoisonError, RwLock};
 
 use openfx_sys::{
@@ -34,16 +41,26 @@ pub struct Suites {
     pub effect: &'static OfxImageEffectSuiteV1,
     /// Parameter definition and values.
     pub param: &'static OfxParameterSuiteV1,
-    /// Error messages for the artist.
-    pub message: MessageSuite,
+    /// Error messages for the artist, if the host has a message suite.
+    pub message: Option<MessageSuite>,
 }
 
 static HOST: AtomicPtr<OfxHost> = AtomicPtr::new(std::ptr::null_mut());
 static SUITES: RwLock<Option<Suites>> = RwLock::new(None);
+/// Plugins of the binary loaded and not unloaded yet.
+static LOADED: AtomicUsize = AtomicUsize::new(0);
 
-/// Remembers the host (`OfxSetHost`, `OfxPlugin::setHost`).
+fn forget() {
+    *SUITES.write().unwrap_or_else(PoisonError::into_inner) = None;
+}
+
+/// Remembers the host (`OfxSetHost`, `OfxPlugin::setHost`); a different host than before
+/// makes the plugin fetch its suites again.
 pub fn set_host(host: *const OfxHost) {
-    HOST.store(host.cast_mut(), Ordering::Release);
+    let before = HOST.swap(host.cast_mut(), Ordering::AcqRel);
+    if before != host.cast_mut() {
+        forget();
+    }
 }
 
 /// One suite, or `None` when the host does not offer it.
@@ -61,9 +78,25 @@ unsafe fn fetch<T>(host: &OfxHost, name: &[u8], version: c_int) -> Option<&'stat
     }
 }
 
-/// Fetches every suite (`kOfxActionLoad`): a missing mandatory suite is
+/// `kOfxActionLoad` of one plugin: fetches every suite; a missing mandatory suite is
 /// `kOfxStatErrMissingHostFeature`.
 pub fn load() -> Result<()> {
+    fetch_all()?;
+    LOADED.fetch_add(1, Ordering::AcqRel);
+    Ok(())
+}
+
+/// `kOfxActionUnload` of one plugin: the last one forgets the suites (the host may go away).
+pub fn unload() {
+    let last = LOADED
+        .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| n.checked_sub(1))
+        .is_ok_and(|n| n == 1);
+    if last {
+        forget();
+    }
+}
+
+fn fetch_all() -> Result<Suites> {
     let host = HOST.load(Ordering::Acquire);
     // SAFETY: the host pointer stays valid while the binary is loaded (ofxCore.h).
     let Some(host) = (unsafe { host.as_ref() }) else {
@@ -75,11 +108,8 @@ pub fn load() -> Result<()> {
     // SAFETY: each name is fetched with the struct its header defines for that version.
     let suites = unsafe {
         let message = match fetch::<OfxMessageSuiteV2>(host, kOfxMessageSuite, 2) {
-            Some(v2) => MessageSuite::V2(v2),
-            None => MessageSuite::V1(
-                fetch(host, kOfxMessageSuite, 1)
-                    .ok_or_else(|| Failure::missing_suite("OfxMessageSuite (V1 or V2)"))?,
-            ),
+            Some(v2) => Some(MessageSuite::V2(v2)),
+            None => fetch(host, kOfxMessageSuite, 1).map(MessageSuite::V1),
         };
         Suites {
             property: fetch(host, kOfxPropertySuite, 1)
@@ -92,13 +122,14 @@ pub fn load() -> Result<()> {
         }
     };
     *SUITES.write().unwrap_or_else(PoisonError::into_inner) = Some(suites);
-    Ok(())
+    Ok(suites)
 }
 
-/// The suites, once loaded.
+/// The suites: those loaded, or fetched now from the current host.
 pub fn suites() -> Result<Suites> {
-    SUITES
-        .read()
-        .unwrap_or_else(PoisonError::into_inner)
-        .ok_or_else(|| Failure::failed("action before kOfxActionLoad: no host suites"))
+    let loaded = *SUITES.read().unwrap_or_else(PoisonError::into_inner);
+    match loaded {
+        Some(s) => Ok(s),
+        None => fetch_all(),
+    }
 }

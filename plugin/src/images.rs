@@ -2,7 +2,8 @@
 //!
 //! [`ClipImage::fetch`] wraps `clipGetImage`; the image is released by `clipReleaseImage`
 //! when the value drops, so an error anywhere in a render still releases everything it
-//! fetched. Only float pixels in RGBA or Alpha are accepted (the plugin declares float only).
+//! fetched. Only float pixels are accepted (the plugin declares float only), in RGBA or Alpha
+//! as declared, or RGB from a host that ignores the declared components.
 
 use openfx_sys::*;
 
@@ -32,6 +33,9 @@ pub struct ClipImage {
     _held: Held,
     /// The pixels (bounds, row bytes and channels checked).
     pub view: PixelView,
+    /// The image holds a single field of fielded footage (`kOfxImagePropField` lower or
+    /// upper), not a full frame.
+    pub single_field: bool,
 }
 
 /// Floats per pixel for a components string, if the plugin reads it.
@@ -39,6 +43,8 @@ fn channels(components: &str) -> Option<usize> {
     let is = |c: &'static [u8]| name(c).to_bytes() == components.as_bytes();
     if is(kOfxImageComponentRGBA) {
         Some(4)
+    } else if is(kOfxImageComponentRGB) {
+        Some(3)
     } else if is(kOfxImageComponentAlpha) {
         Some(1)
     } else {
@@ -97,7 +103,15 @@ impl ClipImage {
         // SAFETY: the host lays the image out as its bounds and row bytes say, for as long
         // as it is held, which `ClipImage` ensures by holding `held` with the view.
         let view = unsafe { PixelView::new(data, bounds, row_bytes, n) }.map_err(err)?;
-        Ok(Some(ClipImage { _held: held, view }))
+        let field = props.string(name(kOfxImagePropField)).unwrap_or_default();
+        let single_field = [kOfxImageFieldLower.as_slice(), kOfxImageFieldUpper]
+            .into_iter()
+            .any(|f| name(f).to_bytes() == field.as_bytes());
+        Ok(Some(ClipImage {
+            _held: held,
+            view,
+            single_field,
+        }))
     }
 }
 
@@ -125,10 +139,11 @@ mod tests {
     use super::*;
 
     #[test]
-    fn reads_rgba_and_alpha_only() {
+    fn reads_rgba_rgb_and_alpha_only() {
         assert_eq!(channels("OfxImageComponentRGBA"), Some(4));
         assert_eq!(channels("OfxImageComponentAlpha"), Some(1));
-        assert_eq!(channels("OfxImageComponentRGB"), None);
+        assert_eq!(channels("OfxImageComponentRGB"), Some(3));
+        assert_eq!(channels("OfxImageComponentRGBAZ"), None);
         assert_eq!(channels(""), None);
     }
 }

@@ -1,7 +1,7 @@
 //! OpenFX image buffers ⇄ the core's [`Planes`], pure and host-free.
 //!
-//! An OpenFX image is interleaved float pixels (`channels` per pixel: 4 for RGBA, 1 for
-//! Alpha) whose rows are `row_bytes` apart, **possibly negative**; the data pointer is the
+//! An OpenFX image is interleaved float pixels (`channels` per pixel: 4 for RGBA, 3 for RGB,
+//! 1 for Alpha) whose rows are `row_bytes` apart, **possibly negative**; the data pointer is the
 //! bottom-left pixel of `bounds` (`kOfxImagePropBounds`), so pixel `(x, y)` starts at
 //! `data + (y − y1)·row_bytes + (x − x1)·channels·4`. A [`PixelView`] checks that layout
 //! once; [`read_planes`] and [`write_planes`] then move pixels through a [`Frame`].
@@ -91,13 +91,39 @@ impl PixelView {
     }
 }
 
+/// Which rows of the output a render writes. A host rendering fielded footage one field at a
+/// time asks for the lower field (rows 0, 2, 4… counted from `y` = 0, `y` up) or the upper
+/// one (rows 1, 3, 5…) of a full-frame image: the other field's rows are not ours to write.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rows {
+    /// Every row (unfielded, both fields, or an image holding a single field).
+    All,
+    /// Rows with even `y` (`kOfxImageFieldLower`).
+    Even,
+    /// Rows with odd `y` (`kOfxImageFieldUpper`).
+    Odd,
+}
+
+impl Rows {
+    /// Whether row `y` is written.
+    pub fn has(self, y: i32) -> bool {
+        match self {
+            Rows::All => true,
+            Rows::Even => y.rem_euclid(2) == 0,
+            Rows::Odd => y.rem_euclid(2) == 1,
+        }
+    }
+}
+
 /// The pixels of `view` under raster `window` of `frame` as planes of the window's size: RGB
-/// and alpha from a 4-channel image, alpha alone from a 1-channel one; pixels outside the
+/// and alpha from a 4-channel image, RGB and opaque alpha from a 3-channel one (a host that
+/// ignores the declared components), alpha alone from a 1-channel one; pixels outside the
 /// image's bounds are transparent black.
 pub fn read_planes(view: &PixelView, frame: Frame, window: Window) -> Planes {
     let (w, h) = (window.width(), window.height());
     let mut planes = [(); 4].map(|_| Plane::filled(w, h, 0.0));
-    let rgba = view.channels() >= 4;
+    let n = view.channels();
+    let rgba = n >= 3;
     for ry in window.y0..window.y1 {
         for rx in window.x0..window.x1 {
             let (x, y) = frame.pixel(rx, ry);
@@ -106,6 +132,9 @@ pub fn read_planes(view: &PixelView, frame: Frame, window: Window) -> Planes {
             if rgba {
                 for (plane, v) in planes.iter_mut().zip(px) {
                     plane.data[i] = *v;
+                }
+                if n == 3 {
+                    planes[3].data[i] = 1.0;
                 }
             } else {
                 planes[3].data[i] = px[0];
@@ -125,14 +154,15 @@ pub fn read_planes(view: &PixelView, frame: Frame, window: Window) -> Planes {
 }
 
 /// Writes `planes` (the core's output for raster `window` of `frame`) into a 4-channel
-/// `view`, touching only pixels inside `render` (the host's render window) and the view's
-/// bounds; render-window pixels the window does not cover become transparent black. Missing
-/// RGB is black; missing alpha is opaque when RGB is present.
+/// `view`, touching only pixels inside `render` (the host's render window), the view's bounds
+/// and the `rows` of the field being rendered; render-window pixels the window does not cover
+/// become transparent black. Missing RGB is black; missing alpha is opaque when RGB is present.
 pub fn write_planes(
     view: &mut PixelView,
     frame: Frame,
     window: Window,
     render: PixelRect,
+    rows: Rows,
     planes: &Planes,
 ) -> Result<(), String> {
     if view.channels() != 4 {
@@ -153,7 +183,7 @@ pub fn write_planes(
     let b = view.bounds();
     let opaque = if planes.rgb.is_some() { 1.0 } else { 0.0 };
     let top = i64::from(frame.y0) + i64::from(frame.height);
-    for y in render.y1.max(b.y1)..render.y2.min(b.y2) {
+    for y in (render.y1.max(b.y1)..render.y2.min(b.y2)).filter(|&y| rows.has(y)) {
         for x in render.x1.max(b.x1)..render.x2.min(b.x2) {
             let rx = i64::from(x) - i64::from(frame.x0);
             let ry = top - 1 - i64::from(y);
@@ -310,7 +340,7 @@ mod tests {
                 depth_median: None,
             };
             let mut view = buf.view();
-            write_planes(&mut view, frame, window, render, &planes).unwrap();
+            write_planes(&mut view, frame, window, render, Rows::All, &planes).unwrap();
             for y in 0..5 {
                 for x in 0..7 {
                     let got: Vec<f32> = (0..4).map(|c| buf.store[buf.index(x, y, c)]).collect();
@@ -346,6 +376,7 @@ mod tests {
             Frame::of_rod(4, 1, 1.0),
             Window::new(0, 0, 4, 1),
             bounds,
+            Rows::All,
             &planes,
         );
         assert!(e.unwrap_err().contains("RGBA"));
@@ -355,8 +386,56 @@ mod tests {
             Frame::of_rod(4, 1, 1.0),
             Window::new(0, 0, 2, 1),
             bounds,
+            Rows::All,
             &planes,
         );
         assert!(e.unwrap_err().contains("4×1 pixels for a 2×1 window"));
+    }
+
+    #[test]
+    fn an_rgb_image_reads_as_opaque_rgba() {
+        let mut buf = Buffer::new(PixelRect::from_ints([0, 0, 2, 2]), 3, 2, false);
+        // The frame reaches one column past the image: that column stays transparent.
+        let frame = Frame::of_rod(3, 2, 1.0);
+        let p = read_planes(&buf.view(), frame, Window::new(0, 0, 3, 2));
+        let rgb = p.rgb.as_ref().unwrap();
+        let alpha = p.alpha.as_ref().unwrap();
+        // Raster (1, 0) is pixel (1, 1).
+        assert_eq!(rgb[1].get(1, 0), f(1, 1, 1));
+        assert_eq!(rgb[2].get(0, 1), f(0, 0, 2));
+        assert_eq!((alpha.get(1, 0), alpha.get(0, 1)), (1.0, 1.0));
+        assert_eq!((alpha.get(2, 0), rgb[0].get(2, 0)), (0.0, 0.0));
+    }
+
+    #[test]
+    fn a_field_render_writes_only_its_rows() {
+        // Output 3×6 at y = −1..5; lower field = even y, upper = odd y (negative y too).
+        for (rows, parity) in [(Rows::Even, 0), (Rows::Odd, 1)] {
+            let bounds = PixelRect::from_ints([0, -1, 3, 5]);
+            let mut buf = Buffer::new(bounds, 4, 0, false);
+            let frame = Frame::of_window(bounds);
+            let window = Window::new(0, 0, 3, 6);
+            let one = Plane::filled(3, 6, 0.5);
+            let planes = Planes {
+                width: 3,
+                height: 6,
+                rgb: Some([one.clone(), one.clone(), one.clone()]),
+                alpha: Some(one),
+                depth_z: None,
+                depth_ray: None,
+                depth_median: None,
+            };
+            let mut view = buf.view();
+            write_planes(&mut view, frame, window, bounds, rows, &planes).unwrap();
+            for y in -1..5 {
+                for x in 0..3 {
+                    let got = buf.store[buf.index(x, y, 3)];
+                    let mine = (y % 2 + 2) % 2 == parity;
+                    let want = if mine { 0.5 } else { f(x, y, 3) };
+                    assert_eq!(got, want, "{rows:?} ({x},{y})");
+                }
+            }
+        }
+        assert!(Rows::All.has(-3) && Rows::All.has(4));
     }
 }

@@ -8,16 +8,24 @@
 //! 4. Fetch each connected input over the render window only, convert it to planes, render,
 //!    and write the result into the output image inside the render window (pixels of the
 //!    window outside the node's image become transparent black).
+//!
+//! A node that is not ready (a file parameter still empty, [`crate::actions::unset_file`])
+//! renders its first connected RGBA input unchanged, or transparent black, and no error.
+//! When the host renders one field of fielded footage into a full-frame image
+//! (`kOfxImageEffectPropFieldToRender` lower or upper), only that field's rows are written;
+//! the render time may then be a half frame, which the core maps to a shot frame as it does
+//! any sub-frame time.
 
-use nerfx::graph::RenderRequest;
+use nerfx::graph::{ClipKind, RenderRequest};
 use nerfx::image::{Plane, Planes, Window};
 use openfx_sys::*;
 
+use crate::actions::unset_file;
 use crate::coords::{Frame, PixelRect};
 use crate::images::{connected, pixel_aspect, ClipImage};
 use crate::instance::Instance;
 use crate::params::values_at;
-use crate::pixels::{read_planes, write_planes};
+use crate::pixels::{read_planes, write_planes, Rows};
 use crate::props::{name, Props};
 use crate::status::{Failure, Result};
 
@@ -46,6 +54,21 @@ pub fn uniform_scale(scale: [f64; 2]) -> Result<f64> {
     Ok(scale[0])
 }
 
+/// The rows to write for `kOfxImageEffectPropFieldToRender` = `field` into an image that holds
+/// a full frame (`single_field` false) or one field.
+pub fn field_rows(field: &str, single_field: bool) -> Rows {
+    let is = |f: &'static [u8]| name(f).to_bytes() == field.as_bytes();
+    if single_field {
+        Rows::All
+    } else if is(kOfxImageFieldLower) {
+        Rows::Even
+    } else if is(kOfxImageFieldUpper) {
+        Rows::Odd
+    } else {
+        Rows::All
+    }
+}
+
 /// Renders one window of `instance`.
 pub fn render(instance: &Instance, in_args: Props) -> Result<()> {
     let node = instance.node;
@@ -56,8 +79,17 @@ pub fn render(instance: &Instance, in_args: Props) -> Result<()> {
     let draft = in_args
         .int(name(kOfxImageEffectPropRenderQualityDraft))
         .is_ok_and(|v| v != 0);
+    let field = in_args
+        .string(name(kOfxImageEffectPropFieldToRender))
+        .unwrap_or_default();
     let values = values_at(instance, time)?;
-    let frame = match node.region_of_definition(&values, time)? {
+    let ready = unset_file(node, &values).is_none();
+    let rod = if ready {
+        node.region_of_definition(&values, time)?
+    } else {
+        None
+    };
+    let frame = match rod {
         Some((w, h)) => Frame::of_rod(w, h, s),
         None => Frame::of_window(render),
     };
@@ -66,8 +98,21 @@ pub fn render(instance: &Instance, in_args: Props) -> Result<()> {
         ClipImage::fetch(&instance.output, "Output", time, None)?.ok_or_else(|| {
             Failure::failed(format!("{}: the host gave no output image", node.desc.id))
         })?;
+    let rows = field_rows(&field, output.single_field);
     let planes = if window.area() == 0 {
         clear(window)
+    } else if !ready {
+        let region = render.canonical(scale, pixel_aspect(&instance.output));
+        let mut planes = clear(window);
+        for (clip, handle) in &instance.inputs {
+            if clip.kind == ClipKind::Rgba && connected(handle)? {
+                if let Some(image) = ClipImage::fetch(handle, clip.name, time, Some(region))? {
+                    planes = read_planes(&image.view, frame, window);
+                }
+                break;
+            }
+        }
+        planes
     } else {
         let region = render.canonical(scale, pixel_aspect(&instance.output));
         let mut request = RenderRequest::new(time, window, s);
@@ -84,7 +129,7 @@ pub fn render(instance: &Instance, in_args: Props) -> Result<()> {
         }
         node.render(&values, &request)?
     };
-    write_planes(&mut output.view, frame, window, render, &planes)
+    write_planes(&mut output.view, frame, window, render, rows, &planes)
         .map_err(|e| Failure::failed(format!("{}: Output: {e}", node.desc.id)))
 }
 
@@ -101,5 +146,16 @@ mod tests {
             clear(Window::new(1, 1, 4, 3)).alpha.unwrap().data,
             vec![0.0; 6]
         );
+    }
+
+    #[test]
+    fn one_field_into_a_full_frame_writes_its_rows_only() {
+        // ofxImageEffect.h: lower = rows 0, 2, 4…; upper = rows 1, 3, 5….
+        assert_eq!(field_rows("OfxFieldLower", false), Rows::Even);
+        assert_eq!(field_rows("OfxFieldUpper", false), Rows::Odd);
+        assert_eq!(field_rows("OfxFieldUpper", true), Rows::All);
+        assert_eq!(field_rows("OfxFieldBoth", false), Rows::All);
+        assert_eq!(field_rows("OfxFieldNone", false), Rows::All);
+        assert_eq!(field_rows("", false), Rows::All);
     }
 }

@@ -529,3 +529,29 @@ fn bad_input_fails_with_a_status_and_a_message_and_the_host_goes_on() {
     assert_eq!((ok.width, ok.height), (8, 8));
     assert_eq!(bundle().violations(), Vec::<String>::new());
 }
+
+#[test]
+fn a_changed_field_file_is_read_again_and_caches_purge() {
+    let dir = demo_dir();
+    let file = dir.join("changing_scene.json");
+    std::fs::copy(dir.join("demo_environment.json"), &file).unwrap();
+    let (mut instance, _) = nerf_instance(Context::Generator, "demo_environment.json", 0);
+    instance.set_param("file", &text(&file)).unwrap();
+    let window = Window::new(0, 0, 45, 27);
+    let before = instance.render(1001.0, window, 1.0, false).unwrap();
+    // Another scene under the same path (a different size, so the cache key changes even
+    // within the file system's mtime resolution).
+    std::fs::copy(dir.join("demo_object.json"), &file).unwrap();
+    let after = instance.render(1001.0, window, 1.0, false).unwrap();
+    assert_ne!(before, after, "the changed file was not read again");
+    let (object, _) = nerf_instance(Context::Generator, "demo_object.json", 0);
+    assert_same(
+        &after,
+        &object.render(1001.0, window, 1.0, false).unwrap(),
+        "reloaded",
+    );
+    instance.purge_caches().unwrap();
+    let purged = instance.render(1001.0, window, 1.0, false).unwrap();
+    assert_same(&purged, &after, "after purgeCaches");
+    assert_eq!(bundle().violations(), Vec::<String>::new());
+}

@@ -33,7 +33,7 @@ use openfx_sys::*;
 
 use crate::images::{connected, pixel_aspect};
 use crate::instance::{self, Instance};
-use crate::message::{self, Target, Urgency};
+use crate::message::{self, Target};
 use crate::params::values_at;
 use crate::props::{name, Props};
 use crate::status::{Failure, Result, OK, REPLY_DEFAULT};
@@ -57,10 +57,8 @@ pub fn message_target(action: &CStr, handle: *const c_void) -> Target {
         Target::Plugin
     } else if is(kOfxActionDescribe) || is(kOfxImageEffectActionDescribeInContext) {
         Target::Descriptor(h)
-    } else if is(kOfxImageEffectActionRender) || is(kOfxActionCreateInstance) {
-        Target::Instance(h, Urgency::Render)
     } else {
-        Target::Instance(h, Urgency::Query)
+        Target::Instance(h)
     }
 }
 
@@ -269,15 +267,11 @@ mod tests {
         ));
         assert!(matches!(
             target(kOfxImageEffectActionRender),
-            Target::Instance(_, Urgency::Render)
+            Target::Instance(_)
         ));
         assert!(matches!(
             target(kOfxImageEffectActionGetRegionOfDefinition),
-            Target::Instance(_, Urgency::Query)
-        ));
-        assert!(matches!(
-            target(kOfxImageEffectActionGetClipPreferences),
-            Target::Instance(_, Urgency::Query)
+            Target::Instance(_)
         ));
         assert!(matches!(
             message_target(name(kOfxImageEffectActionRender), std::ptr::null()),

@@ -7,9 +7,10 @@
 //!
 //! - with V2 every instance failure becomes the node's persistent message, cleared by the next
 //!   successful render and by an edit of the artist ([`reset`]);
-//! - without V2 only render failures reach the artist, as a transient message, and the same
-//!   text only once until the artist edits something (queries and repeats go to standard
-//!   error);
+//! - without V2 the first failure after an edit of the artist becomes one transient message
+//!   (a dialog) and later ones go to standard error until the next edit: a query must be able
+//!   to speak (a host does not render a node whose region of definition failed), but texts
+//!   often name the frame, so one per distinct text would still be a dialog per frame;
 //! - descriptors and the plugin itself get transient messages (or standard error).
 //!
 //! The text always goes through a `"%s"` format, so no `%` in a file name is ever interpreted.
@@ -23,15 +24,6 @@ use crate::instance;
 use crate::props::{c_string, name};
 use crate::suites::{suites, MessageSuite};
 
-/// Which instance action failed: whether the artist must be told even without V2.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Urgency {
-    /// A render (or instance creation): the artist waits for a picture.
-    Render,
-    /// A query the host repeats at will: only ever a persistent message.
-    Query,
-}
-
 /// Where a message goes.
 #[derive(Clone, Copy, Debug)]
 pub enum Target {
@@ -40,7 +32,7 @@ pub enum Target {
     /// A descriptor (describe actions): transient messages only.
     Descriptor(*mut c_void),
     /// An effect instance: persistent messages where the host offers them.
-    Instance(*mut c_void, Urgency),
+    Instance(*mut c_void),
 }
 
 /// What an instance has shown the artist.
@@ -48,8 +40,8 @@ pub enum Target {
 pub struct Shown {
     /// A persistent message is set on the node.
     persistent: bool,
-    /// The last transient message, not to be repeated.
-    transient: Option<String>,
+    /// A transient message was shown since the last edit.
+    transient: bool,
 }
 
 /// How to deliver a message, given the host's suite and what the instance already showed.
@@ -61,31 +53,25 @@ enum Delivery {
 }
 
 /// The pure decision of [`post_error`] (updates `shown`).
-fn delivery(v2: Option<bool>, target: Target, shown: Option<&mut Shown>, text: &str) -> Delivery {
+fn delivery(v2: Option<bool>, target: Target, shown: Option<&mut Shown>) -> Delivery {
     let Some(v2) = v2 else {
         return Delivery::StandardError;
     };
     match target {
         Target::Plugin | Target::Descriptor(_) => Delivery::Transient,
-        Target::Instance(_, urgency) => {
-            if v2 {
-                if let Some(s) = shown {
-                    s.persistent = true;
-                }
-                return Delivery::Persistent;
+        Target::Instance(_) => match shown {
+            Some(s) if v2 => {
+                s.persistent = true;
+                Delivery::Persistent
             }
-            if urgency == Urgency::Query {
-                return Delivery::StandardError;
+            _ if v2 => Delivery::Persistent,
+            Some(s) if s.transient => Delivery::StandardError,
+            Some(s) => {
+                s.transient = true;
+                Delivery::Transient
             }
-            match shown {
-                Some(s) if s.transient.as_deref() == Some(text) => Delivery::StandardError,
-                Some(s) => {
-                    s.transient = Some(text.to_string());
-                    Delivery::Transient
-                }
-                None => Delivery::Transient,
-            }
-        }
+            None => Delivery::Transient,
+        },
     }
 }
 
@@ -100,15 +86,15 @@ pub fn post_error(target: Target, text: &str) {
     let inst = match target {
         // SAFETY: messages go to an instance only during its actions, between its create and
         // destroy actions; the reference does not outlive this call.
-        Target::Instance(h, _) => unsafe { instance::get(h.cast()) }.ok(),
+        Target::Instance(h) => unsafe { instance::get(h.cast()) }.ok(),
         _ => None,
     };
     let how = match inst {
         Some(i) => {
             let mut shown = i.shown.lock().unwrap_or_else(PoisonError::into_inner);
-            delivery(v2, target, Some(&mut shown), text)
+            delivery(v2, target, Some(&mut shown))
         }
-        None => delivery(v2, target, None, text),
+        None => delivery(v2, target, None),
     };
     let c_text = c_string(text);
     let kind = name(kOfxMessageError).as_ptr();
@@ -116,7 +102,7 @@ pub fn post_error(target: Target, text: &str) {
     let format = c"%s".as_ptr();
     let handle = match target {
         Target::Plugin => std::ptr::null_mut(),
-        Target::Descriptor(h) | Target::Instance(h, _) => h,
+        Target::Descriptor(h) | Target::Instance(h) => h,
     };
     // SAFETY: the suite functions are the host's; "%s" takes exactly one C string argument.
     unsafe {
@@ -181,60 +167,51 @@ mod tests {
     #[test]
     fn with_v2_instance_failures_are_persistent_and_remembered() {
         let mut shown = Shown::default();
-        for urgency in [Urgency::Query, Urgency::Render] {
-            let t = Target::Instance(H, urgency);
+        for _ in 0..2 {
+            let t = Target::Instance(H);
             assert_eq!(
-                delivery(Some(true), t, Some(&mut shown), "x"),
+                delivery(Some(true), t, Some(&mut shown)),
                 Delivery::Persistent
             );
             assert!(shown.persistent);
         }
         assert_eq!(
-            delivery(Some(true), Target::Descriptor(H), None, "x"),
+            delivery(Some(true), Target::Descriptor(H), None),
             Delivery::Transient
         );
     }
 
     #[test]
-    fn without_v2_only_new_render_failures_pop_up() {
+    fn without_v2_one_dialog_per_edit() {
         let mut shown = Shown::default();
-        let query = Target::Instance(H, Urgency::Query);
-        let render = Target::Instance(H, Urgency::Render);
+        // The same instance, asked for its region, then rendered.
+        let query = Target::Instance(H);
+        let render = Target::Instance(H);
+        // A failed region of definition must speak: the host will not render.
         assert_eq!(
-            delivery(Some(false), query, Some(&mut shown), "a"),
-            Delivery::StandardError
-        );
-        assert_eq!(
-            delivery(Some(false), render, Some(&mut shown), "a"),
+            delivery(Some(false), query, Some(&mut shown)),
             Delivery::Transient
         );
-        // The same text again (next frame): not another dialog.
-        assert_eq!(
-            delivery(Some(false), render, Some(&mut shown), "a"),
-            Delivery::StandardError
-        );
-        // A different problem is news.
-        assert_eq!(
-            delivery(Some(false), render, Some(&mut shown), "b"),
-            Delivery::Transient
-        );
+        // Everything after it (other frames, the render) waits for an edit.
+        for t in [render, query, render] {
+            assert_eq!(
+                delivery(Some(false), t, Some(&mut shown)),
+                Delivery::StandardError
+            );
+        }
         assert!(!shown.persistent);
-        // After an edit the same text may be shown again.
+        // After an edit a failure is shown again.
         shown = Shown::default();
         assert_eq!(
-            delivery(Some(false), render, Some(&mut shown), "b"),
+            delivery(Some(false), render, Some(&mut shown)),
             Delivery::Transient
         );
     }
 
     #[test]
     fn no_message_suite_means_standard_error() {
-        for t in [
-            Target::Plugin,
-            Target::Descriptor(H),
-            Target::Instance(H, Urgency::Render),
-        ] {
-            assert_eq!(delivery(None, t, None, "x"), Delivery::StandardError);
+        for t in [Target::Plugin, Target::Descriptor(H), Target::Instance(H)] {
+            assert_eq!(delivery(None, t, None), Delivery::StandardError);
         }
     }
 }

@@ -17,6 +17,10 @@
 //!   as each clip accepts, frame varying as the node says.
 //! - isIdentity: the clip the node passes through with these values, at the same time
 //!   (the host's time, whole frame or not: `kOfxPropTime` is set as an out-argument).
+//! - getTimeDomain: the node's frame range ([`Node::time_domain`]: a NeRF Render's is its
+//!   shot's) as `kOfxImageEffectPropFrameRange`; default when it has none or is not ready.
+//!   The 1.4 header has hosts ask only in the General context; hosts also ask generators
+//!   (Natron), and the answer does not depend on the context.
 //! - begin/endSequenceRender: nothing to prepare (files are cached on first use).
 //! - render: [`crate::render`].
 //! - instanceChanged: an edit by the artist or the plugin (`kOfxPropChangeReason`) clears the
@@ -135,6 +139,7 @@ pub fn run(
         kOfxImageEffectActionGetRegionsOfInterest,
         kOfxImageEffectActionGetClipPreferences,
         kOfxImageEffectActionIsIdentity,
+        kOfxImageEffectActionGetTimeDomain,
         kOfxImageEffectActionRender,
     ];
     if !known.iter().any(|a| action.to_bytes_with_nul() == *a) {
@@ -150,6 +155,8 @@ pub fn run(
         clip_preferences(inst, props(out_args, "outArgs")?)
     } else if is(kOfxImageEffectActionIsIdentity) {
         is_identity(inst, props(in_args, "inArgs")?, props(out_args, "outArgs")?)
+    } else if is(kOfxImageEffectActionGetTimeDomain) {
+        time_domain(inst, props(out_args, "outArgs")?)
     } else {
         render::render(inst, props(in_args, "inArgs")?)?;
         message::succeeded(effect.cast(), &inst.shown);
@@ -169,6 +176,21 @@ fn region_of_definition(inst: &Instance, in_args: Props, out: Props) -> Result<O
             let par = pixel_aspect(&inst.output);
             let rod = [0.0, 0.0, f64::from(w) * par, f64::from(h)];
             out.set_doubles(name(kOfxImageEffectPropRegionOfDefinition), &rod)?;
+            Ok(OK)
+        }
+        None => Ok(REPLY_DEFAULT),
+    }
+}
+
+fn time_domain(inst: &Instance, out: Props) -> Result<OfxStatus> {
+    // The action has no time; what decides the range (files, frame offset) does not animate.
+    let values = values_at(inst, 0.0)?;
+    if unset_file(inst.node, &values).is_some() {
+        return Ok(REPLY_DEFAULT);
+    }
+    match inst.node.time_domain(&values)? {
+        Some((first, last)) => {
+            out.set_doubles(name(kOfxImageEffectPropFrameRange), &[first, last])?;
             Ok(OK)
         }
         None => Ok(REPLY_DEFAULT),

@@ -40,7 +40,9 @@ pub use desc::{ClipDesc, ClipKind, Context, NodeDesc, ParamDesc, ParamKind, Rang
 pub use evaluate::{evaluate, render_direct, RenderNode};
 pub use file::{Graph, GraphNode};
 pub use matrix_text::{matrix_text, parse_matrix};
-pub use node::{single_channel, IdentityFn, Node, RenderFn, RenderRequest, RodFn};
+pub use node::{
+    single_channel, Format, IdentityFn, Node, RenderFn, RenderRequest, RodFn, TimeDomainFn,
+};
 #[cfg(feature = "host")]
 pub use ofx::OfxGraph;
 pub use values::{ParamValues, Value};

@@ -15,7 +15,7 @@ use glam::DMat4;
 
 use super::cache::{cached_scene, cached_shot};
 use super::desc::{ClipDesc, ClipKind, Context, NodeDesc, ParamDesc, ParamKind, Range};
-use super::node::{Node, RenderRequest};
+use super::node::{Format, Node, RenderRequest};
 use super::values::ParamValues;
 use crate::camera::{
     Camera, Eye, Shot, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, DEFAULT_IPD,
@@ -207,7 +207,10 @@ pub(crate) fn nerf_render_node() -> Node {
             frame_varying: true,
         },
         render: render_node,
-        rod: Some(|values, time| Ok(camera(values, time, 1.0)?.1.resolution())),
+        rod: Some(Format {
+            size: |values, time| Ok(camera(values, time, 1.0)?.1.resolution()),
+            time_domain: Some(time_domain),
+        }),
         identity: None,
     }
 }
@@ -218,6 +221,18 @@ fn file<'a>(values: &'a ParamValues, name: &str) -> Result<&'a Path> {
         return Err(Error::invalid(format!("parameter {name}"), "no file given"));
     }
     Ok(Path::new(path))
+}
+
+/// The host frames the shot covers: its first and last frame less the frame offset (the
+/// node renders shot frame `time + frameOffset`).
+fn time_domain(values: &ParamValues) -> Result<Option<(f64, f64)>> {
+    let shot = cached_shot(file(values, "shot")?)?;
+    let offset = values.int("frameOffset")? as f64;
+    let first = shot.frames.iter().map(|f| f.frame).min();
+    let last = shot.frames.iter().map(|f| f.frame).max();
+    Ok(first
+        .zip(last)
+        .map(|(a, b)| (a as f64 - offset, b as f64 - offset)))
 }
 
 /// The shot frame for `time` and its camera at render scale `scale`.

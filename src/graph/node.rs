@@ -79,6 +79,19 @@ pub fn single_channel(kind: ClipKind, planes: &Planes) -> Plane {
 pub type RenderFn = fn(&ParamValues, &RenderRequest) -> Result<Planes>;
 /// A node's region of definition at a time (full-resolution pixels).
 pub type RodFn = fn(&ParamValues, f64) -> Result<(u32, u32)>;
+/// The frames a node can produce, `(first, last)` in the host's time, or `None` when that
+/// is not known with these values.
+pub type TimeDomainFn = fn(&ParamValues) -> Result<Option<(f64, f64)>>;
+
+/// The image format of a node that makes its own images (a generator) rather than taking its
+/// inputs' (the compositing nodes).
+#[derive(Clone, Copy, Debug)]
+pub struct Format {
+    /// Its region of definition at a time.
+    pub size: RodFn,
+    /// The frames it can produce (a shot's range); `None`: any frame.
+    pub time_domain: Option<TimeDomainFn>,
+}
 /// The input clip a node passes through unchanged with these values (e.g. `mix` = 0).
 pub type IdentityFn = fn(&ParamValues) -> Result<Option<&'static str>>;
 
@@ -88,7 +101,9 @@ pub struct Node {
     /// The description adapters publish.
     pub desc: NodeDesc,
     pub(crate) render: RenderFn,
-    pub(crate) rod: Option<RodFn>,
+    /// The node's own format; `None`: its inputs' (region of definition, pixel aspect and
+    /// frame range).
+    pub(crate) rod: Option<Format>,
     pub(crate) identity: Option<IdentityFn>,
 }
 
@@ -169,9 +184,20 @@ impl Node {
     ) -> Result<Option<(u32, u32)>> {
         self.own(values)?;
         self.rod
-            .map(|rod| rod(values, time))
+            .map(|format| (format.size)(values, time))
             .transpose()
             .map_err(|e| self.in_context(e))
+    }
+
+    /// The frames `(first, last)` the node can produce with `values` (host time, inclusive),
+    /// or `None` when it can produce any (a node sized by its inputs, or one without a
+    /// range). A host asks this of a generator to size its timeline to the shot.
+    pub fn time_domain(&self, values: &ParamValues) -> Result<Option<(f64, f64)>> {
+        self.own(values)?;
+        match self.rod.and_then(|format| format.time_domain) {
+            Some(f) => f(values).map_err(|e| self.in_context(e)),
+            None => Ok(None),
+        }
     }
 
     /// The input clip the node would pass through unchanged with `values`, if any.

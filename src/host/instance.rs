@@ -430,6 +430,48 @@ impl Instance {
         Ok((r[2].ceil() as u32, r[3].ceil() as u32))
     }
 
+    /// The frames the effect can produce, `(first, last)`, by getTimeDomain; `None` when it
+    /// replies default (the host's default: its non-optional inputs' range, else infinite).
+    /// The 1.4 header allows the action only in the General context; like Natron, this host
+    /// also asks generators, whose range is otherwise unknown. In the Filter context the
+    /// host decides the range and asks nothing: `None`. A range that is not two finite
+    /// numbers in order is a violation and an error.
+    pub fn time_domain(&self) -> Result<Option<(f64, f64)>> {
+        if !matches!(self.context, Context::General | Context::Generator) {
+            return Ok(None);
+        }
+        let infinite = [f64::from(i32::MIN), f64::from(i32::MAX)];
+        let out = self.args(
+            true,
+            "getTimeDomain",
+            &[(
+                ofx::kOfxImageEffectPropFrameRange,
+                PropValue::Double(infinite.to_vec()),
+            )],
+        );
+        let s = {
+            let _main = self.main();
+            self.run(
+                "getTimeDomain",
+                ofx::kOfxImageEffectActionGetTimeDomain,
+                None,
+                Some(&out),
+            )?
+        };
+        if s == status::REPLY_DEFAULT {
+            return Ok(None);
+        }
+        let r = out.doubles(ofx::kOfxImageEffectPropFrameRange);
+        if r.len() != 2 || !r.iter().all(|v| v.is_finite()) || r[0] > r[1] {
+            let m = format!("getTimeDomain gave the frame range {r:?}, not [first, last]");
+            self.bundle
+                .log
+                .violation(format!("{}: {m}", self.effect.id));
+            return Err(Error::invalid(&self.effect.id, m));
+        }
+        Ok(Some((r[0], r[1])))
+    }
+
     /// The OFX render window of a raster `window` at scale `s` for an output of height
     /// `hs` pixels at that scale.
     fn ofx_window(window: Window, hs: i64) -> [i32; 4] {

@@ -10,8 +10,9 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use nerfx::demo;
-use nerfx::graph::{node, Context, Value};
+use nerfx::graph::{node, Context, RenderRequest, Value};
 use nerfx::host::{Bundle, Instance};
+use nerfx::image::{Plane, Planes, Window};
 
 fn bundle() -> &'static Bundle {
     static BUNDLE: OnceLock<Bundle> = OnceLock::new();
@@ -96,4 +97,129 @@ fn a_generator_tells_the_host_its_shots_frame_range() {
     let (broken, _) = nerf_instance(Context::Generator, &corrupt);
     let e = broken.time_domain().unwrap_err().to_string();
     assert!(e.contains("corrupt_range_shot.json"), "{e}");
+}
+
+fn side(n: u32, scale: f64) -> u32 {
+    ((f64::from(n) * scale).ceil() as u32).max(1)
+}
+
+/// The demo shot with `pixel_aspect_x`, `pixel_aspect_y` changed, written under `name`.
+fn anamorphic_shot(name: &str, pa_x: f64, pa_y: f64) -> PathBuf {
+    let dir = demo_dir();
+    let shot = std::fs::read_to_string(dir.join("demo_shot.json")).unwrap();
+    let mut json: serde_json::Value = serde_json::from_str(&shot).unwrap();
+    json["pixel_aspect_x"] = pa_x.into();
+    json["pixel_aspect_y"] = pa_y.into();
+    let path = dir.join(name);
+    std::fs::write(&path, json.to_string()).unwrap();
+    path
+}
+
+/// Odd-sized tiles (7×5) covering `w × h`, rendered through `instance` and assembled.
+fn render_tiled(instance: &Instance, time: f64, w: u32, h: u32, scale: f64) -> Planes {
+    let mut rgba: [Vec<f32>; 4] = std::array::from_fn(|_| vec![f32::NAN; (w * h) as usize]);
+    for y in (0..h).step_by(5) {
+        for x in (0..w).step_by(7) {
+            let tile = Window::new(x, y, (x + 7).min(w), (y + 5).min(h));
+            let got = instance
+                .render(time, tile, scale, false)
+                .unwrap_or_else(|e| panic!("tile {tile:?} at scale {scale}: {e}"));
+            let [r, g, b] = got.rgb.unwrap();
+            for (c, p) in [r, g, b, got.alpha.unwrap()].iter().enumerate() {
+                for ty in 0..tile.height() {
+                    for tx in 0..tile.width() {
+                        let d = ((tile.y0 + ty) * w + tile.x0 + tx) as usize;
+                        rgba[c][d] = p.data[(ty * tile.width() + tx) as usize];
+                    }
+                }
+            }
+        }
+    }
+    let [r, g, b, a] = rgba.map(|data| Plane {
+        width: w,
+        height: h,
+        data,
+    });
+    Planes {
+        width: w,
+        height: h,
+        rgb: Some([r, g, b]),
+        alpha: Some(a),
+        depth_z: None,
+        depth_ray: None,
+        depth_median: None,
+    }
+}
+
+/// How many samples of the RGBA planes differ bit for bit.
+fn differing(got: &Planes, want: &Planes) -> usize {
+    let planes = |p: &Planes| {
+        let [r, g, b] = p.rgb.clone().unwrap();
+        [r, g, b, p.alpha.clone().unwrap()]
+    };
+    planes(got)
+        .iter()
+        .zip(planes(want).iter())
+        .map(|(g, w)| {
+            assert_eq!(g.data.len(), w.data.len());
+            g.data
+                .iter()
+                .zip(&w.data)
+                .filter(|(a, b)| a.to_bits() != b.to_bits())
+                .count()
+        })
+        .sum()
+}
+
+#[test]
+fn an_anamorphic_shot_has_non_square_pixels_through_the_host() {
+    let n = node("org.nerfx.NeRFRender").unwrap();
+    let wide = anamorphic_shot("anamorphic_shot.json", 2.0, 1.0);
+    let (instance, values) = nerf_instance(Context::Generator, &wide);
+    // Pixels twice as wide as tall: the output clip says 2, the region of definition is the
+    // shot's 45×27 pixels (90×27 canonical).
+    assert_eq!(n.pixel_aspect(&values, 1005.0).unwrap(), Some(2.0));
+    assert_eq!(instance.pixel_aspect(), 2.0);
+    assert_eq!(instance.region_of_definition(1005.0).unwrap(), (45, 27));
+    assert_eq!(
+        n.region_of_definition(&values, 1005.0).unwrap(),
+        Some((45, 27))
+    );
+    for scale in [1.0, 0.5] {
+        let (w, h) = (side(45, scale), side(27, scale));
+        let want = n
+            .render(
+                &values,
+                &RenderRequest::new(1005.0, Window::new(0, 0, w, h), scale),
+            )
+            .unwrap();
+        let got = render_tiled(&instance, 1005.0, w, h, scale);
+        assert_eq!(differing(&got, &want), 0, "scale {scale}");
+    }
+    // The pixel aspect reaches the camera: the square-pixel render differs.
+    let (square, _) = nerf_instance(Context::Generator, &demo_dir().join("demo_shot.json"));
+    assert_eq!(square.pixel_aspect(), 1.0);
+    let full = Window::new(0, 0, 45, 27);
+    assert!(
+        differing(
+            &square.render(1005.0, full, 1.0, false).unwrap(),
+            &instance.render(1005.0, full, 1.0, false).unwrap()
+        ) > 0
+    );
+    // Tall pixels: x over y.
+    let tall = anamorphic_shot("tall_pixel_shot.json", 1.0, 2.0);
+    let (instance, values) = nerf_instance(Context::Generator, &tall);
+    assert_eq!(n.pixel_aspect(&values, 1001.0).unwrap(), Some(0.5));
+    assert_eq!(instance.pixel_aspect(), 0.5);
+    assert_eq!(instance.region_of_definition(1001.0).unwrap(), (45, 27));
+    // A panorama from the shot's position has square pixels.
+    let (mut pano, mut values) = nerf_instance(Context::Generator, &wide);
+    pano.set_param("cameraModel", &Value::Choice(1)).unwrap();
+    values.set("cameraModel", Value::Choice(1)).unwrap();
+    assert_eq!(n.pixel_aspect(&values, 1001.0).unwrap(), Some(1.0));
+    assert_eq!(pano.pixel_aspect(), 1.0);
+    // Nodes sized by their inputs have no pixel aspect of their own.
+    let merge = node("org.nerfx.DepthMerge").unwrap();
+    assert_eq!(merge.pixel_aspect(&merge.defaults(), 1.0).unwrap(), None);
+    assert_eq!(bundle().violations(), Vec::<String>::new());
 }

@@ -14,7 +14,12 @@
 //! - getRegionsOfInterest: each connected input needs exactly the region asked for (every
 //!   node works pixel by pixel).
 //! - getClipPreferences: float everywhere, RGBA output premultiplied, Alpha or RGBA inputs
-//!   as each clip accepts, frame varying as the node says.
+//!   as each clip accepts, frame varying as the node says; the node's pixel aspect
+//!   ([`Node::pixel_aspect`], a shot's `pixel_aspect_x / pixel_aspect_y`) for the output and
+//!   the connected inputs (`OfxImageClipPropPAR_`: inputs are asked for on the output's pixel
+//!   grid, as every node works pixel by pixel), taken at the first frame of its time domain
+//!   (the action has no time). A node not ready, or whose files fail, keeps the host's
+//!   default: the error is the region of definition's and the render's to report.
 //! - isIdentity: the clip the node passes through with these values, at the same time
 //!   (the host's time, whole frame or not: `kOfxPropTime` is set as an out-argument).
 //! - getTimeDomain: the node's frame range ([`Node::time_domain`]: a NeRF Render's is its
@@ -245,7 +250,31 @@ fn clip_preferences(inst: &Instance, out: Props) -> Result<OfxStatus> {
         name(kOfxImageEffectFrameVarying),
         i32::from(inst.node.desc.frame_varying),
     )?;
+    if let Some(par) = node_pixel_aspect(inst) {
+        out.set_double(&prop("OfxImageClipPropPAR_", &output)?, par)?;
+        for (clip, handle) in &inst.inputs {
+            if connected(handle)? {
+                out.set_double(&prop("OfxImageClipPropPAR_", clip.name)?, par)?;
+            }
+        }
+    }
     Ok(OK)
+}
+
+/// The node's own pixel aspect at the start of its time domain (time 0 without one), if it
+/// has one and can say.
+fn node_pixel_aspect(inst: &Instance) -> Option<f64> {
+    let values = values_at(inst, 0.0).ok()?;
+    if unset_file(inst.node, &values).is_some() {
+        return None;
+    }
+    let time = inst
+        .node
+        .time_domain(&values)
+        .ok()?
+        .map_or(0.0, |(first, _)| first);
+    let values = values_at(inst, time).ok()?;
+    inst.node.pixel_aspect(&values, time).ok()?
 }
 
 fn is_identity(inst: &Instance, in_args: Props, out: Props) -> Result<OfxStatus> {

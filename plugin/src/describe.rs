@@ -67,6 +67,12 @@ pub fn describe(node: &Node, effect: OfxImageEffectHandle) -> Result<()> {
     p.set_string(name(kOfxImageEffectPluginRenderThreadSafety), safe)?;
     optional(p.set_int(name(kOfxImageEffectPluginPropHostFrameThreading), 0));
     optional(p.set_int(name(kOfxImageEffectPropSupportsMultipleClipDepths), 0));
+    // A generator's pixel aspect is its shot's, not the project's: it sets its clips' pixel
+    // aspect in getClipPreferences, which hosts allow to plugins declaring this.
+    optional(p.set_int(
+        name(kOfxImageEffectPropSupportsMultipleClipPARs),
+        i32::from(node.has_own_format()),
+    ));
     optional(p.set_int(name(kOfxImageEffectPropTemporalClipAccess), 0));
     optional(p.set_int(name(kOfxImageEffectPluginPropFieldRenderTwiceAlways), 0));
     Ok(())

@@ -18,7 +18,7 @@ use super::desc::{ClipDesc, ClipKind, Context, NodeDesc, ParamDesc, ParamKind, R
 use super::node::{Format, Node, RenderRequest};
 use super::values::ParamValues;
 use crate::camera::{
-    Camera, Eye, Shot, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, DEFAULT_IPD,
+    Camera, Eye, Projection, Shot, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, DEFAULT_IPD,
 };
 use crate::composite::{over, rgba_pixels, rgba_planes};
 use crate::error::{Error, Result};
@@ -210,6 +210,7 @@ pub(crate) fn nerf_render_node() -> Node {
         rod: Some(Format {
             size: |values, time| Ok(camera(values, time, 1.0)?.1.resolution()),
             time_domain: Some(time_domain),
+            pixel_aspect: Some(pixel_aspect),
         }),
         identity: None,
     }
@@ -233,6 +234,17 @@ fn time_domain(values: &ParamValues) -> Result<Option<(f64, f64)>> {
     Ok(first
         .zip(last)
         .map(|(a, b)| (a as f64 - offset, b as f64 - offset)))
+}
+
+/// The shot's pixel aspect (`pixel_aspect_x / pixel_aspect_y`) when the camera at `time` is
+/// perspective; panoramas (from the shot or the camera model) have square pixels.
+fn pixel_aspect(values: &ParamValues, time: f64) -> Result<f64> {
+    let shot = cached_shot(file(values, "shot")?)?;
+    let (_, camera) = camera(values, time, 1.0)?;
+    Ok(match camera.projection() {
+        Projection::Perspective(_) => shot.pixel_aspect_x / shot.pixel_aspect_y,
+        _ => 1.0,
+    })
 }
 
 /// The shot frame for `time` and its camera at render scale `scale`.

@@ -82,6 +82,9 @@ pub type RodFn = fn(&ParamValues, f64) -> Result<(u32, u32)>;
 /// The frames a node can produce, `(first, last)` in the host's time, or `None` when that
 /// is not known with these values.
 pub type TimeDomainFn = fn(&ParamValues) -> Result<Option<(f64, f64)>>;
+/// The width of a node's pixels over their height at a time (2 for an anamorphic plate
+/// squeezed 2:1).
+pub type PixelAspectFn = fn(&ParamValues, f64) -> Result<f64>;
 
 /// The image format of a node that makes its own images (a generator) rather than taking its
 /// inputs' (the compositing nodes).
@@ -91,6 +94,8 @@ pub struct Format {
     pub size: RodFn,
     /// The frames it can produce (a shot's range); `None`: any frame.
     pub time_domain: Option<TimeDomainFn>,
+    /// Its pixel aspect ratio; `None`: square pixels.
+    pub pixel_aspect: Option<PixelAspectFn>,
 }
 /// The input clip a node passes through unchanged with these values (e.g. `mix` = 0).
 pub type IdentityFn = fn(&ParamValues) -> Result<Option<&'static str>>;
@@ -187,6 +192,34 @@ impl Node {
             .map(|format| (format.size)(values, time))
             .transpose()
             .map_err(|e| self.in_context(e))
+    }
+
+    /// Whether the node makes its own images (its own region of definition, pixel aspect and
+    /// frame range) rather than taking its inputs'.
+    pub fn has_own_format(&self) -> bool {
+        self.rod.is_some()
+    }
+
+    /// The pixel aspect ratio (pixel width over height) of the node's images with `values` at
+    /// `time`: 1 for a node making its own images without saying otherwise, `None` for a node
+    /// sized by its inputs (theirs). The region of definition stays in pixels; an OpenFX
+    /// host's canonical coordinates stretch `x` by this ratio.
+    pub fn pixel_aspect(&self, values: &ParamValues, time: f64) -> Result<Option<f64>> {
+        self.own(values)?;
+        let Some(format) = self.rod else {
+            return Ok(None);
+        };
+        let par = match format.pixel_aspect {
+            Some(f) => f(values, time).map_err(|e| self.in_context(e))?,
+            None => 1.0,
+        };
+        if !(par.is_finite() && par > 0.0) {
+            return Err(Error::invalid(
+                format!("{}: pixel aspect", self.desc.id),
+                format!("expected a number > 0, got {par}"),
+            ));
+        }
+        Ok(Some(par))
     }
 
     /// The frames `(first, last)` the node can produce with `values` (host time, inclusive),

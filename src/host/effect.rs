@@ -515,18 +515,32 @@ fn floor(v: f64) -> i64 {
 }
 
 /// `v` rounded up, forgiving float noise.
-fn ceil(v: f64) -> i64 {
+pub(crate) fn ceil(v: f64) -> i64 {
     (v - 1e-6).ceil() as i64
 }
 
-/// The pixel rectangle covering canonical `r` at scale `s`.
-fn to_pixels(r: [f64; 4], s: f64) -> [i64; 4] {
+/// The pixel rectangle covering canonical `r` at scale `s` for pixels of aspect ratio `par`
+/// (canonical `x` is pixel `x` times `par / s`, canonical `y` pixel `y` over `s`).
+fn to_pixels(r: [f64; 4], s: f64, par: f64) -> [i64; 4] {
     [
-        floor(r[0] * s),
+        floor(r[0] * s / par),
         floor(r[1] * s),
-        ceil(r[2] * s),
+        ceil(r[2] * s / par),
         ceil(r[3] * s),
     ]
+}
+
+/// A clip's pixel aspect ratio (`kOfxImagePropPixelAspectRatio`, set from the clip
+/// preferences; 1 by default).
+pub(crate) fn clip_par(c: &Clip) -> f64 {
+    match c
+        .props
+        .doubles(ofx::kOfxImagePropPixelAspectRatio)
+        .as_slice()
+    {
+        [p] if p.is_finite() && *p > 0.0 => *p,
+        _ => 1.0,
+    }
 }
 
 /// The pixel size of a `(w, h)` image at render scale `s`: `(⌈w·s⌉, ⌈h·s⌉)`.
@@ -619,6 +633,7 @@ fn image_props(
         cstr(ofx::kOfxImagePreMultiplied),
     );
     p.set_doubles(ofx::kOfxImageEffectPropRenderScale, &[scale, scale]);
+    p.set_doubles(ofx::kOfxImagePropPixelAspectRatio, &[clip_par(c)]);
     p.put(
         cstr(ofx::kOfxImagePropData),
         props::PropValue::Pointer(vec![layout.ptr]),
@@ -676,7 +691,13 @@ fn input_image(
     };
     let scale = ctx.map_or(1.0, |r| r.scale);
     let (ws, hs) = scaled(source.rod, scale);
-    let full = [0.0, 0.0, f64::from(source.rod.0), f64::from(source.rod.1)];
+    let par = clip_par(c);
+    let full = [
+        0.0,
+        0.0,
+        f64::from(source.rod.0) * par,
+        f64::from(source.rod.1),
+    ];
     let roi = ctx.map(|r| r.rois.get(&c.name).copied().unwrap_or(full));
     let wanted = region.or(roi).unwrap_or(full);
     if wanted.iter().any(|v| !v.is_finite()) {
@@ -685,9 +706,9 @@ fn input_image(
             Some(format!("region {wanted:?} is not finite")),
         ));
     }
-    let px = to_pixels(wanted, scale);
+    let px = to_pixels(wanted, scale, par);
     if let Some(roi) = roi {
-        let allowed = to_pixels(roi, scale);
+        let allowed = to_pixels(roi, scale, par);
         let inside = px[0] >= allowed[0]
             && px[1] >= allowed[1]
             && px[2] <= allowed[2]
@@ -825,7 +846,14 @@ unsafe extern "C" fn clip_get_rod(
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
             .as_ref()
-            .map(|s| [0.0, 0.0, f64::from(s.rod.0), f64::from(s.rod.1)])
+            .map(|s| {
+                [
+                    0.0,
+                    0.0,
+                    f64::from(s.rod.0) * clip_par(c),
+                    f64::from(s.rod.1),
+                ]
+            })
     };
     match rod {
         Some(r) => {

@@ -57,6 +57,8 @@ fn globals() -> &'static Globals {
             &[b"kOfxImageEffectHostPropNativeOriginBottomLeft\0"],
         );
         p.set_ints(ofx::kOfxParamHostPropPageRowColumnCount, &[0, 0]);
+        // Clip preferences may set clips' pixel aspect ratios (a generator's shot).
+        p.set_ints(ofx::kOfxImageEffectPropSupportsMultipleClipPARs, &[1]);
         let host = OfxHost {
             host: p.handle(),
             fetchSuite: Some(fetch_suite),

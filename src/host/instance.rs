@@ -278,7 +278,7 @@ impl Instance {
     /// getClipPreferences: the plugin's choices are checked (components it declared for the
     /// clip) and applied to the clip properties.
     fn clip_preferences(&self) -> Result<()> {
-        let clips: Vec<(String, String)> = self
+        let clips: Vec<(String, String, f64)> = self
             .effect
             .lock_clips()
             .iter()
@@ -286,11 +286,12 @@ impl Instance {
                 (
                     c.name.clone(),
                     c.props.string(ofx::kOfxImageEffectPropComponents),
+                    effect::clip_par(c),
                 )
             })
             .collect();
         let mut names = Vec::new();
-        for (c, components) in &clips {
+        for (c, components, par) in &clips {
             names.push((
                 format!("OfxImageClipPropComponents_{c}"),
                 PropValue::String(vec![components.clone()]),
@@ -301,7 +302,7 @@ impl Instance {
             ));
             names.push((
                 format!("OfxImageClipPropPAR_{c}"),
-                PropValue::Double(vec![1.0]),
+                PropValue::Double(vec![*par]),
             ));
         }
         let fixed: [(&[u8], PropValue); 6] = [
@@ -343,6 +344,11 @@ impl Instance {
             )?;
         }
         let log = &self.bundle.log;
+        let may_set_par = self
+            .effect
+            .props
+            .int(ofx::kOfxImageEffectPropSupportsMultipleClipPARs)
+            != 0;
         for c in self.effect.lock_clips().iter() {
             let chosen = out.string(format!("OfxImageClipPropComponents_{}", c.name).as_bytes());
             let supported = c.props.strings(ofx::kOfxImageEffectPropSupportedComponents);
@@ -351,6 +357,20 @@ impl Instance {
                 continue;
             }
             c.props.set_str(ofx::kOfxImageEffectPropComponents, &chosen);
+            let par = out.doubles(format!("OfxImageClipPropPAR_{}", c.name).as_bytes());
+            match par.as_slice() {
+                [p] if p.is_finite() && *p > 0.0 => {
+                    if *p != 1.0 && !may_set_par {
+                        log.violation(format!("{}: getClipPreferences set the pixel aspect ratio {p} on clip {} without declaring kOfxImageEffectPropSupportsMultipleClipPARs", self.effect.id, c.name));
+                    } else {
+                        c.props.set_doubles(ofx::kOfxImagePropPixelAspectRatio, &[*p]);
+                    }
+                }
+                other => log.violation(format!(
+                    "{}: getClipPreferences set the pixel aspect ratio {other:?} on clip {}, not a number > 0",
+                    self.effect.id, c.name
+                )),
+            }
             if c.name == "Output" {
                 let premult = out.string(ofx::kOfxImageEffectPropPreMultiplication);
                 c.props
@@ -360,8 +380,10 @@ impl Instance {
         Ok(())
     }
 
-    /// The region of definition at `time`: `(width, height)` in full-resolution pixels.
-    /// A region not starting at the origin is refused (the core's images start there).
+    /// The region of definition at `time`: `(width, height)` in full-resolution pixels (the
+    /// plugin's canonical region, whose `x` is stretched by the output's pixel aspect ratio,
+    /// brought back to pixels). A region not starting at the origin is refused (the core's
+    /// images start there).
     pub fn region_of_definition(&self, time: f64) -> Result<(u32, u32)> {
         let default = match self.context {
             Context::Generator => [0.0, 0.0, 1920.0, 1080.0],
@@ -374,7 +396,7 @@ impl Instance {
                         .unwrap_or_else(PoisonError::into_inner)
                         .as_ref()
                     {
-                        r[2] = r[2].max(f64::from(s.rod.0));
+                        r[2] = r[2].max(f64::from(s.rod.0) * effect::clip_par(c));
                         r[3] = r[3].max(f64::from(s.rod.1));
                     }
                 }
@@ -427,7 +449,22 @@ impl Instance {
             .output_rod
             .lock()
             .unwrap_or_else(PoisonError::into_inner) = Some([r[0], r[1], r[2], r[3]]);
-        Ok((r[2].ceil() as u32, r[3].ceil() as u32))
+        // Canonical x is pixels times the output's pixel aspect ratio.
+        let par = self.output_par();
+        Ok((effect::ceil(r[2] / par) as u32, effect::ceil(r[3]) as u32))
+    }
+
+    /// The pixel aspect ratio (pixel width over height) of the output, as the plugin's clip
+    /// preferences last set it (1 unless it said otherwise): what a writer records with the
+    /// image.
+    pub fn pixel_aspect(&self) -> f64 {
+        self.output_par()
+    }
+
+    fn output_par(&self) -> f64 {
+        self.effect
+            .with_clip("Output", |c| effect::clip_par(c))
+            .unwrap_or(1.0)
     }
 
     /// The frames the effect can produce, `(first, last)`, by getTimeDomain; `None` when it
@@ -622,7 +659,13 @@ impl Instance {
         let rod = self.region_of_definition(time)?;
         let (ws, hs) = effect::scaled(rod, s);
         let bounds = Self::ofx_window(window, hs);
-        let canonical = bounds.map(|v| f64::from(v) / s);
+        let par = self.output_par();
+        let canonical = [
+            f64::from(bounds[0]) * par / s,
+            f64::from(bounds[1]) / s,
+            f64::from(bounds[2]) * par / s,
+            f64::from(bounds[3]) / s,
+        ];
         let (w, h) = (window.width() as usize, window.height() as usize);
         let (bw, bh) = (w + 2 * GUARD, h + 2 * GUARD);
         let mut buffer = vec![f32::from_bits(SENTINEL_BITS); bw * bh * 4];

@@ -463,7 +463,7 @@ impl Instance {
 
     fn output_par(&self) -> f64 {
         self.effect
-            .with_clip("Output", |c| effect::clip_par(c))
+            .with_clip("Output", effect::clip_par)
             .unwrap_or(1.0)
     }
 

@@ -223,3 +223,21 @@ fn an_anamorphic_shot_has_non_square_pixels_through_the_host() {
     assert_eq!(merge.pixel_aspect(&merge.defaults(), 1.0).unwrap(), None);
     assert_eq!(bundle().violations(), Vec::<String>::new());
 }
+
+#[test]
+fn a_sub_frame_renders_the_shot_between_its_frames() {
+    let n = node("org.nerfx.NeRFRender").unwrap();
+    let (instance, values) = nerf_instance(Context::Generator, &demo_dir().join("demo_shot.json"));
+    let full = Window::new(0, 0, 45, 27);
+    let core = |t: f64| {
+        n.render(&values, &RenderRequest::new(t, full, 1.0))
+            .unwrap()
+    };
+    let half = instance.render(1005.5, full, 1.0, false).unwrap();
+    assert_eq!(differing(&half, &core(1005.5)), 0);
+    // Neither neighbouring frame: the camera moved.
+    assert!(differing(&half, &instance.render(1005.0, full, 1.0, false).unwrap()) > 0);
+    assert!(differing(&half, &instance.render(1006.0, full, 1.0, false).unwrap()) > 0);
+    // Past the last frame is an error, as a missing whole frame is.
+    assert!(instance.render(1024.5, full, 1.0, false).is_err());
+}

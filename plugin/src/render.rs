@@ -13,8 +13,8 @@
 //! renders its first connected RGBA input unchanged, or transparent black, and no error.
 //! When the host renders one field of fielded footage into a full-frame image
 //! (`kOfxImageEffectPropFieldToRender` lower or upper), only that field's rows are written;
-//! the render time may then be a half frame, which the core maps to a shot frame as it does
-//! any sub-frame time.
+//! the render time may then be a half frame, at which the core interpolates the shot as at any
+//! sub-frame time.
 
 use nerfx::graph::{ClipKind, RenderRequest};
 use nerfx::image::{Plane, Planes, Window};

@@ -11,6 +11,7 @@
 
 mod dataparser;
 mod equirect;
+mod interpolate;
 mod json;
 mod nerfstudio;
 mod perspective;

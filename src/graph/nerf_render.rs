@@ -1,6 +1,7 @@
 //! The NeRF Render node: a scene (field) file seen through a shot file's camera.
 //!
-//! The shot's frame is the host's time, rounded, plus the frame offset. Render scale `s`
+//! The shot's time is the host's time plus the frame offset; between two frames the camera
+//! and objects are interpolated ([`Shot::frame_at`]). Render scale `s`
 //! renders the shot at `ceil(s·width) × ceil(s·height)` pixels (the same camera, fewer
 //! pixels), so no parameter of this node is spatial. Outputs, as RGBA:
 //! - `rgba`: the render (premultiplied, times `2^exposure`) over the background colour, which
@@ -256,8 +257,8 @@ fn camera(values: &ParamValues, time: f64, scale: f64) -> Result<(ShotFrame, Cam
             format!("expected a frame, got {time}"),
         ));
     }
-    let frame = (time.round() as i64).saturating_add(values.int("frameOffset")?);
-    let mut at = shot.frame(frame)?.clone();
+    // A sub-frame time (motion blur, a field at t + 0.5) falls between two shot frames.
+    let mut at = shot.frame_at(time + values.int("frameOffset")? as f64)?;
     let c = &mut at.camera;
     let mode = match values.choice("cameraModel")? {
         "ods" => Some(StereoMode::Ods),

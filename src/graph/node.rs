@@ -10,7 +10,7 @@ use crate::image::{Plane, Planes, Window};
 /// What one render call asks for.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RenderRequest {
-    /// The host's time (frame number; rounded to a whole frame where a shot is read).
+    /// The host's time (frame number; between two frames a shot is interpolated).
     pub time: f64,
     /// The pixels to produce, in raster space at `render_scale` (top-left origin, `y` down).
     pub window: Window,

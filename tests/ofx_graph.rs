@@ -117,3 +117,40 @@ fn the_command_line_renders_a_subset_of_frames_with_layers() {
         "{err}"
     );
 }
+
+#[test]
+fn an_anamorphic_shot_keeps_its_pixel_aspect_to_the_exr() {
+    let dir = scratch_dir("anamorphic");
+    let comp = demo::write_graph(&dir, 30, 20).unwrap();
+    let shot = dir.join("demo_shot.json");
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&shot).unwrap()).unwrap();
+    json["pixel_aspect_x"] = 2.0.into();
+    std::fs::write(&shot, json.to_string()).unwrap();
+
+    let bundle = Bundle::load(&common_ofx::bundle()).unwrap();
+    let graph = Graph::read(&comp).unwrap();
+    let mut ofx = OfxGraph::new(graph.clone(), &bundle).unwrap();
+    let through = ofx.render(1004.0, 1.0, false, &|_| {}).unwrap();
+    let direct = evaluate(&graph, 1004.0, 1.0, false, &mut render_direct, &|_| {}).unwrap();
+    assert!(through["comp"] == rgba(&direct["comp"]));
+    // The merges take the pixel aspect of their inputs, the renders that of the shot.
+    assert_eq!(ofx.pixel_aspect("comp"), 2.0);
+    assert_eq!(ofx.pixel_aspect("env"), 2.0);
+
+    let out = dir.join("a.exr");
+    let run = Command::new(env!("CARGO_BIN_EXE_nerfx"))
+        .args(["render", &comp.to_string_lossy(), "--frames", "1004"])
+        .args(["-o", &out.to_string_lossy()])
+        .args(["--bundle", &common_ofx::bundle().to_string_lossy()])
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let meta = exr::meta::MetaData::read_from_file(&out, false).unwrap();
+    assert_eq!(meta.headers[0].shared_attributes.pixel_aspect, 2.0);
+    assert_eq!(bundle.violations(), Vec::<String>::new());
+}

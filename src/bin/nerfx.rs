@@ -11,7 +11,7 @@ use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use nerfx::frames::{frame_path, parse_frames, read_shot, render_frame};
-use nerfx::image::{write_exr, write_png_preview, Planes};
+use nerfx::image::{write_exr, write_exr_layers, write_png_preview};
 use nerfx::render::{render_with_progress, Outputs, Quality, RenderSettings};
 use nerfx::scene::SceneDesc;
 use nerfx::{bench, demo, Error, Result};
@@ -132,7 +132,8 @@ fn run(cli: Cli) -> Result<()> {
                     bar.inc(n)
                 })?;
             bar.finish_and_clear();
-            write_outputs(&out.join("demo.exr"), &planes, true)?;
+            write_exr(&out.join("demo.exr"), &planes)?;
+            write_png_preview(&out.join("demo.png"), &planes)?;
             println!(
                 "demo: {width}×{height} {quality:?} in {:.2} s, {:.1} density samples/pixel → {}",
                 started.elapsed().as_secs_f64(),
@@ -166,7 +167,11 @@ fn run(cli: Cli) -> Result<()> {
                     create_dir(dir)?;
                 }
                 let (planes, _) = render_frame(&scene, &shot, frame, &settings, &|_| {})?;
-                write_outputs(&path, &planes, png)?;
+                let pixel_aspect = shot.pixel_aspect_for(&shot.frame(frame)?.camera(&shot)?);
+                write_exr_layers(&path, &planes, &[], pixel_aspect)?;
+                if png {
+                    write_png_preview(&path.with_extension("png"), &planes)?;
+                }
                 bar.inc(1);
                 bar.suspend(|| println!("frame {frame} → {}", path.display()));
             }
@@ -199,7 +204,6 @@ mod graph {
     use super::*;
     use nerfx::graph::{Graph, OfxGraph};
     use nerfx::host::Bundle;
-    use nerfx::image::write_exr_layers;
 
     /// Where the bundle is looked for, in order.
     fn bundle_candidates(given: Option<PathBuf>) -> Vec<PathBuf> {
@@ -283,7 +287,8 @@ mod graph {
                 .iter()
                 .map(|(layer, node)| Ok((layer.as_str(), image(node)?)))
                 .collect::<Result<Vec<_>>>()?;
-            write_exr_layers(&target, main, &layers)?;
+            let pixel_aspect = graph.pixel_aspect(&graph.graph().output);
+            write_exr_layers(&target, main, &layers, pixel_aspect)?;
             if png {
                 write_png_preview(&target.with_extension("png"), main)?;
             }
@@ -313,14 +318,6 @@ mod graph {
             path.display()
         )))
     }
-}
-
-fn write_outputs(exr: &Path, planes: &Planes, png: bool) -> Result<()> {
-    write_exr(exr, planes)?;
-    if png {
-        write_png_preview(&exr.with_extension("png"), planes)?;
-    }
-    Ok(())
 }
 
 fn create_dir(dir: &Path) -> Result<()> {

@@ -142,6 +142,16 @@ pub enum StereoMode {
 }
 
 impl Shot {
+    /// The pixel aspect (pixel width over height) of images `camera` renders of this shot:
+    /// `pixel_aspect_x / pixel_aspect_y` for a perspective camera; panoramas have square
+    /// pixels (their projection ignores Blender's pixel aspect).
+    pub fn pixel_aspect_for(&self, camera: &Camera) -> f64 {
+        match camera.projection() {
+            Projection::Perspective(_) => self.pixel_aspect_x / self.pixel_aspect_y,
+            _ => 1.0,
+        }
+    }
+
     /// Reads and validates a shot file.
     pub fn read(path: impl AsRef<Path>) -> Result<Shot> {
         let path = path.as_ref();

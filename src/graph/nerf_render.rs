@@ -19,7 +19,7 @@ use super::desc::{ClipDesc, ClipKind, Context, NodeDesc, ParamDesc, ParamKind, R
 use super::node::{Format, Node, RenderRequest};
 use super::values::ParamValues;
 use crate::camera::{
-    Camera, Eye, Projection, Shot, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, DEFAULT_IPD,
+    Camera, Eye, Shot, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, DEFAULT_IPD,
 };
 use crate::composite::{over, rgba_pixels, rgba_planes};
 use crate::error::{Error, Result};
@@ -242,10 +242,7 @@ fn time_domain(values: &ParamValues) -> Result<Option<(f64, f64)>> {
 fn pixel_aspect(values: &ParamValues, time: f64) -> Result<f64> {
     let shot = cached_shot(file(values, "shot")?)?;
     let (_, camera) = camera(values, time, 1.0)?;
-    Ok(match camera.projection() {
-        Projection::Perspective(_) => shot.pixel_aspect_x / shot.pixel_aspect_y,
-        _ => 1.0,
-    })
+    Ok(shot.pixel_aspect_for(&camera))
 }
 
 /// The shot frame for `time` and its camera at render scale `scale`.

@@ -65,6 +65,26 @@ impl OfxGraph {
         &self.graph
     }
 
+    /// The pixel aspect of node `name`'s image: its own when it makes its images (a NeRF
+    /// Render of an anamorphic shot), else that of its first input.
+    pub fn pixel_aspect(&self, name: &str) -> f64 {
+        let mut name = name;
+        // Each step goes upstream, so the walk ends within the graph's size.
+        for _ in 0..=self.graph.nodes.len() {
+            let Some(node) = self.graph.node(name) else {
+                break;
+            };
+            if node.node.has_own_format() {
+                return self.instances.get(name).map_or(1.0, Instance::pixel_aspect);
+            }
+            match node.inputs.values().next() {
+                Some(up) => name = up,
+                None => break,
+            }
+        }
+        1.0
+    }
+
     /// Tells every instance a sequence of frames `first..=last` is about to render (plugins
     /// may load what the whole range needs once).
     pub fn begin_sequence(&self, first: f64, last: f64, render_scale: f64) -> Result<()> {

@@ -41,13 +41,25 @@ pub const BACKGROUND_DEPTH: f32 = 1.0e10;
 /// Errors: [`Error::Invalid`] when no plane is present, the image is empty, or a plane's size
 /// disagrees with `planes`; [`Error::Io`] naming `path` when the file cannot be written.
 pub fn write_exr(path: &Path, planes: &Planes) -> Result<()> {
-    write_exr_layers(path, planes, &[])
+    write_exr_layers(path, planes, &[], 1.0)
 }
 
 /// Writes `main` as [`write_exr`] does plus each of `layers` under its name, as channels
 /// `name.R`, `name.G`, `name.B`, `name.A` (`name.Z`, … for depths): one file a compositor
-/// splits into layers. Every layer must have `main`'s size.
-pub fn write_exr_layers(path: &Path, main: &Planes, layers: &[(&str, &Planes)]) -> Result<()> {
+/// splits into layers. Every layer must have `main`'s size. `pixel_aspect` (width over height
+/// of a pixel, e.g. 2 for an anamorphic shot) goes into the header, where compositors read it.
+pub fn write_exr_layers(
+    path: &Path,
+    main: &Planes,
+    layers: &[(&str, &Planes)],
+    pixel_aspect: f64,
+) -> Result<()> {
+    if !(pixel_aspect.is_finite() && pixel_aspect > 0.0) {
+        return Err(Error::invalid(
+            format!("EXR {}: pixel aspect", path.display()),
+            format!("expected a positive number, got {pixel_aspect}"),
+        ));
+    }
     let mut channels = channels_of(main, "")?;
     for (name, planes) in layers {
         if (planes.width, planes.height) != (main.width, main.height) {
@@ -70,13 +82,12 @@ pub fn write_exr_layers(path: &Path, main: &Planes, layers: &[(&str, &Planes)]) 
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(channels),
     );
-    Image::from_layer(layer)
-        .write()
-        .to_file(path)
-        .map_err(|e| match e {
-            exr::error::Error::Io(source) => Error::io(path, source),
-            other => Error::invalid(format!("EXR {}", path.display()), other.to_string()),
-        })
+    let mut image = Image::from_layer(layer);
+    image.attributes.pixel_aspect = pixel_aspect as f32;
+    image.write().to_file(path).map_err(|e| match e {
+        exr::error::Error::Io(source) => Error::io(path, source),
+        other => Error::invalid(format!("EXR {}", path.display()), other.to_string()),
+    })
 }
 
 /// Reads every channel of every layer of the EXR at `path` as f32 planes (f16 and u32 samples
@@ -300,7 +311,9 @@ mod tests {
         };
         let (main, env) = (rgba(0.1), rgba(0.5));
         let file = TempFile::new("layers");
-        write_exr_layers(&file.0, &main, &[("env", &env)]).unwrap();
+        write_exr_layers(&file.0, &main, &[("env", &env)], 2.0).unwrap();
+        let meta = exr::meta::MetaData::read_from_file(&file.0, false).unwrap();
+        assert_eq!(meta.headers[0].shared_attributes.pixel_aspect, 2.0);
         let channels = read_exr_channels(&file.0).unwrap();
         let mut names: Vec<&str> = channels.iter().map(|(n, _)| n.as_str()).collect();
         names.sort_unstable();
@@ -315,7 +328,7 @@ mod tests {
         assert_eq!(find(&channels, "A").data, main.alpha.as_ref().unwrap().data);
         let small = rgba(0.2);
         let small = Planes { width: 4, ..small };
-        let e = write_exr_layers(&file.0, &main, &[("x", &small)]).unwrap_err();
+        let e = write_exr_layers(&file.0, &main, &[("x", &small)], 1.0).unwrap_err();
         assert!(e.to_string().contains("layer x"), "{e}");
     }
 

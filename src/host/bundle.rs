@@ -9,9 +9,10 @@ use openfx_sys as ofx;
 use openfx_sys::OfxPlugin;
 
 use super::effect::Effect;
-use super::globals as host;
+use super::globals::{self as host, HostEntry};
 use super::instance::Instance;
 use super::log::{self, ActionScope, Log, Message};
+use super::options::HostOptions;
 use super::props::{args, PropSet, PropValue};
 use super::spec::{cstr, ParamType};
 use super::status::{self, status_name, Status};
@@ -25,10 +26,14 @@ type Main = unsafe extern "C" fn(
     ofx::OfxPropertySetHandle,
 ) -> Status;
 
+type SetHost = unsafe extern "C" fn(*mut ofx::OfxHost) -> Status;
+type PluginSetHost = unsafe extern "C" fn(*mut ofx::OfxHost);
+
 /// One plugin of a binary.
 pub(crate) struct Plugin {
     pub(crate) id: String,
     main: Main,
+    set_host: Option<PluginSetHost>,
 }
 
 /// A dlopen'd binary, shared by every [`Bundle`] of the same file in the process.
@@ -39,6 +44,10 @@ pub(crate) struct Binary {
     pub(crate) main_lock: Mutex<()>,
     /// Serialises renders of plugins that declare themselves unsafe.
     pub(crate) render_lock: Mutex<()>,
+    /// `OfxSetHost`, if the binary exports it.
+    set_host: Option<SetHost>,
+    /// The host struct the binary holds now.
+    host: Mutex<&'static HostEntry>,
     _library: libloading::Library,
 }
 
@@ -57,6 +66,10 @@ impl Drop for Binary {
             };
         }
         drop(scope);
+        self.host
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .release(false);
     }
 }
 
@@ -70,6 +83,8 @@ fn binaries() -> &'static Mutex<HashMap<PathBuf, Weak<Binary>>> {
 pub struct Bundle {
     pub(crate) binary: Arc<Binary>,
     pub(crate) log: Arc<Log>,
+    pub(crate) options: HostOptions,
+    host: &'static HostEntry,
 }
 
 /// What a plugin declared for one context.
@@ -194,18 +209,28 @@ pub(crate) fn failure(id: &str, what: &str, s: Status, messages: &[String]) -> E
 }
 
 impl Binary {
-    fn load(file: &Path) -> Result<Arc<Binary>> {
+    fn load(file: &Path, host: &'static HostEntry) -> Result<Arc<Binary>> {
         let key = file.canonicalize().map_err(|e| Error::io(file, e))?;
         let mut map = binaries().lock().unwrap_or_else(PoisonError::into_inner);
         if let Some(b) = map.get(&key).and_then(Weak::upgrade) {
             return Ok(b);
         }
-        let b = Arc::new(Binary::open(&key)?);
+        let b = Arc::new(Binary::open(&key, host)?);
         map.insert(key, Arc::downgrade(&b));
         Ok(b)
     }
 
-    fn open(file: &Path) -> Result<Binary> {
+    fn open(file: &Path, host: &'static HostEntry) -> Result<Binary> {
+        // Held from before OfxSetHost: the load actions fetch suites through it.
+        host.hold();
+        let opened = Binary::open_held(file, host);
+        if opened.is_err() {
+            host.release(false);
+        }
+        opened
+    }
+
+    fn open_held(file: &Path, host: &'static HostEntry) -> Result<Binary> {
         let where_ = file.display().to_string();
         // SAFETY: loading a plugin runs its initialisers; that is what a host does.
         let library = unsafe { libloading::Library::new(file) }
@@ -225,15 +250,15 @@ impl Binary {
             (*count, *get)
         };
         let scope = ActionScope::enter(log::orphans().clone());
-        // SAFETY: the optional entry point of OFX 1.4, called once before anything else.
-        unsafe {
-            if let Ok(set_host) =
-                library.get::<unsafe extern "C" fn(*mut ofx::OfxHost) -> Status>(b"OfxSetHost\0")
-            {
-                let s = set_host(host::host());
-                if s != status::OK && s != status::REPLY_DEFAULT {
-                    return Err(failure(&where_, "OfxSetHost", s, &scope.messages()));
-                }
+        // SAFETY: the optional entry point of OFX 1.4, called before anything else.
+        let set_host = unsafe { library.get::<SetHost>(b"OfxSetHost\0") }
+            .ok()
+            .map(|f| *f);
+        if let Some(set_host) = set_host {
+            // SAFETY: the host struct is leaked: it outlives the binary.
+            let s = unsafe { set_host(host.host()) };
+            if s != status::OK && s != status::REPLY_DEFAULT {
+                return Err(failure(&where_, "OfxSetHost", s, &scope.messages()));
             }
         }
         let mut plugins = Vec::new();
@@ -262,7 +287,7 @@ impl Binary {
                 .mainEntry
                 .ok_or_else(|| Error::invalid(format!("{where_}: {id}"), "no main entry point"))?;
             if let Some(set_host) = p.setHost {
-                unsafe { set_host(host::host()) };
+                unsafe { set_host(host.host()) };
             }
             let s = unsafe {
                 main(
@@ -275,7 +300,11 @@ impl Binary {
             if s != status::OK && s != status::REPLY_DEFAULT {
                 return Err(failure(&id, "load", s, &scope.messages()));
             }
-            plugins.push(Plugin { id, main });
+            plugins.push(Plugin {
+                id,
+                main,
+                set_host: p.setHost,
+            });
         }
         drop(scope);
         Ok(Binary {
@@ -283,8 +312,45 @@ impl Binary {
             path: file.to_path_buf(),
             main_lock: Mutex::new(()),
             render_lock: Mutex::new(()),
+            set_host,
+            host: Mutex::new(host),
             _library: library,
         })
+    }
+
+    /// Gives the binary `host` if it holds another: `OfxSetHost`, then every plugin's
+    /// `setHost`, as a host does that hands a plugin a second host struct. A failure of
+    /// `OfxSetHost` is a violation in `log` (the plugin keeps whatever it had).
+    fn give_host(&self, host: &'static HostEntry, log: &Arc<Log>) {
+        let mut held = self.host.lock().unwrap_or_else(PoisonError::into_inner);
+        if std::ptr::eq(*held, host) {
+            return;
+        }
+        let scope = ActionScope::enter(log.clone());
+        host.hold();
+        held.release(true);
+        *held = host;
+        if let Some(set_host) = self.set_host {
+            // SAFETY: the entry point with a host struct that outlives the binary.
+            let s = unsafe { set_host(host.host()) };
+            if s != status::OK && s != status::REPLY_DEFAULT {
+                log.violation(
+                    failure(
+                        &self.path.display().to_string(),
+                        "OfxSetHost (a second host)",
+                        s,
+                        &scope.messages(),
+                    )
+                    .to_string(),
+                );
+            }
+        }
+        for p in &self.plugins {
+            if let Some(set_host) = p.set_host {
+                // SAFETY: as above.
+                unsafe { set_host(host.host()) };
+            }
+        }
     }
 
     pub(crate) fn plugin(&self, id: &str) -> Result<&Plugin> {
@@ -303,17 +369,19 @@ impl Binary {
 }
 
 impl Plugin {
-    /// Runs `action` on `handle` with the calling thread's log set to `log`; returns the
+    /// Runs `action` on `handle` with the calling thread's log set to the bundle's, after
+    /// giving the binary the bundle's host if another bundle gave it another; returns the
     /// status and the messages the plugin posted meanwhile.
     pub(crate) fn call(
         &self,
-        log: &Arc<Log>,
+        bundle: &Bundle,
         action: &[u8],
         handle: *const c_void,
         in_args: Option<&PropSet>,
         out_args: Option<&PropSet>,
     ) -> (Status, Vec<String>) {
-        let scope = ActionScope::enter(log.clone());
+        bundle.binary.give_host(bundle.host, &bundle.log);
+        let scope = ActionScope::enter(bundle.log.clone());
         let h = |p: Option<&PropSet>| p.map_or(std::ptr::null_mut(), PropSet::handle);
         // SAFETY: the plugin's entry point with handles the host owns for the whole call.
         let s = unsafe { (self.main)(action.as_ptr().cast(), handle, h(in_args), h(out_args)) };
@@ -323,14 +391,14 @@ impl Plugin {
     /// [`Plugin::call`], with a status other than OK or "default" as an error.
     pub(crate) fn run(
         &self,
-        log: &Arc<Log>,
+        bundle: &Bundle,
         what: &str,
         action: &[u8],
         handle: *const c_void,
         in_args: Option<&PropSet>,
         out_args: Option<&PropSet>,
     ) -> Result<Status> {
-        let (s, said) = self.call(log, action, handle, in_args, out_args);
+        let (s, said) = self.call(bundle, action, handle, in_args, out_args);
         if s == status::OK || s == status::REPLY_DEFAULT {
             Ok(s)
         } else {
@@ -343,8 +411,20 @@ impl Bundle {
     /// Loads a `.ofx.bundle` directory (its `Contents/Linux-x86-64/<name>.ofx`) or an `.ofx`
     /// file: dlopen, `OfxSetHost`, `OfxGetNumberOfPlugins`/`OfxGetPlugin`, and the load
     /// action of every image-effect plugin. A binary already loaded in this process is
-    /// shared (it was loaded and given the host once).
+    /// shared (it was loaded once; see [`Bundle::load_with`] for bundles of one binary
+    /// with different hosts). The strict host's default behaviour.
     pub fn load(path: &Path) -> Result<Bundle> {
+        Bundle::load_with(path, HostOptions::default())
+    }
+
+    /// [`Bundle::load`], the host behaving as `options` says (see [`HostOptions`]).
+    ///
+    /// The message suite offered is a property of the host struct the binary was given, and
+    /// a binary holds one host at a time: a bundle whose host differs from the one its
+    /// binary holds gives it its own again (`OfxSetHost`) before each action. Bundles of one
+    /// binary with different message suites or a second host therefore take turns; they
+    /// must not run actions at the same time.
+    pub fn load_with(path: &Path, options: HostOptions) -> Result<Bundle> {
         let file = binary_path(path)?;
         if !file.is_file() {
             return Err(Error::io(
@@ -352,9 +432,23 @@ impl Bundle {
                 std::io::Error::from(std::io::ErrorKind::NotFound),
             ));
         }
+        let first = host::standard(options.message_suite);
+        let log: Arc<Log> = Arc::default();
+        let binary = Binary::load(&file, first)?;
+        binary.give_host(first, &log);
+        let host = match options.second_host {
+            Some(offer) => {
+                let second = host::fresh(offer);
+                binary.give_host(second, &log);
+                second
+            }
+            None => first,
+        };
         Ok(Bundle {
-            binary: Binary::load(&file)?,
-            log: Arc::default(),
+            binary,
+            log,
+            options,
+            host,
         })
     }
 
@@ -371,6 +465,7 @@ impl Bundle {
             id,
             &self.binary.path.display().to_string(),
             self.log.clone(),
+            self.options,
         );
         let _main = self
             .binary
@@ -379,7 +474,7 @@ impl Bundle {
             .unwrap_or_else(PoisonError::into_inner);
         let handle = d.handle() as *const c_void;
         plugin.run(
-            &self.log,
+            self,
             "describe",
             ofx::kOfxActionDescribe,
             handle,
@@ -407,7 +502,7 @@ impl Bundle {
             self.log.clone(),
         );
         plugin.run(
-            &self.log,
+            self,
             "describeInContext",
             ofx::kOfxImageEffectActionDescribeInContext,
             handle,

@@ -20,7 +20,8 @@ use openfx_sys::{
 
 use super::handles::{self, Kind};
 use super::instance::ClipSource;
-use super::log::Log;
+use super::log::{Log, Message};
+use super::options::{Field, HostOptions, PADDING, ROW_SLACK};
 use super::params::{put, ParamSet};
 use super::props::{self, PropSet};
 use super::spec::{cstr, SetKind};
@@ -53,6 +54,10 @@ pub(crate) struct Effect {
     renders: Mutex<Vec<RenderCtx>>,
     /// The last region of definition the plugin gave (canonical), for the output clip.
     pub(crate) output_rod: Mutex<Option<[f64; 4]>>,
+    /// How the host behaves (image layout, components).
+    pub(crate) options: HostOptions,
+    /// The persistent message set on the instance and not cleared since.
+    pub(crate) persistent: Mutex<Option<Message>>,
 }
 
 /// A clip. Boxed and registered while alive.
@@ -66,17 +71,17 @@ pub(crate) struct Clip {
     pub(crate) source: Mutex<Option<ClipSource>>,
 }
 
-/// Where an image's pixels are: for the output of a render, `ptr` is the bottom-left pixel
-/// of the render window in a buffer with a [`GUARD`] border.
+/// Where an image's pixels are: `ptr` is the bottom-left pixel of `bounds`; rows are
+/// `row_bytes` apart (negative: stored top-down).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Layout {
-    /// Address of the render window's bottom-left pixel.
+    /// Address of the bottom-left pixel of `bounds`.
     pub(crate) ptr: usize,
-    /// OFX bounds of the render window.
+    /// OFX bounds of the image (for the output, the render window or more).
     pub(crate) bounds: [i32; 4],
     /// OFX region of definition at the render scale.
     pub(crate) rod: [i32; 4],
-    /// Bytes per row of the whole buffer.
+    /// Bytes from a row to the one above (negative when stored top-down).
     pub(crate) row_bytes: i32,
 }
 
@@ -93,6 +98,8 @@ pub(crate) struct RenderCtx {
     pub(crate) rois: HashMap<String, [f64; 4]>,
     /// The output buffer.
     pub(crate) output: Layout,
+    /// The field rendered into the full-frame output, if one.
+    pub(crate) field: Option<Field>,
 }
 
 /// An image the plugin holds.
@@ -141,7 +148,12 @@ static NEXT_ID: AtomicU64 = AtomicU64::new(1);
 
 impl Effect {
     /// A new descriptor of plugin `id`.
-    pub(crate) fn descriptor(id: &str, path: &str, log: Arc<Log>) -> Box<Effect> {
+    pub(crate) fn descriptor(
+        id: &str,
+        path: &str,
+        log: Arc<Log>,
+        options: HostOptions,
+    ) -> Box<Effect> {
         let props = props::new_set(
             SetKind::EffectDesc,
             id,
@@ -150,7 +162,8 @@ impl Effect {
         );
         props.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeImageEffect));
         props.set_str(ofx::kOfxPluginPropFilePath, path);
-        Effect::boxed(id, props, ParamSet::new(id, false, log.clone()), false, log)
+        let params = ParamSet::new(id, false, log.clone());
+        Effect::boxed(id, props, params, false, log, options)
     }
 
     fn boxed(
@@ -159,6 +172,7 @@ impl Effect {
         params: Box<ParamSet>,
         instance: bool,
         log: Arc<Log>,
+        options: HostOptions,
     ) -> Box<Effect> {
         let e = Box::new(Effect {
             id: id.to_string(),
@@ -169,6 +183,8 @@ impl Effect {
             log,
             renders: Mutex::new(Vec::new()),
             output_rod: Mutex::new(None),
+            options,
+            persistent: Mutex::new(None),
         });
         handles::register(&*e as *const Effect, Kind::Effect);
         e
@@ -192,7 +208,7 @@ impl Effect {
         let params = self
             .params
             .instantiate(&format!("{id} instance"), log.clone());
-        let e = Effect::boxed(id, props, params, true, log.clone());
+        let e = Effect::boxed(id, props, params, true, log.clone(), self.options);
         let addr = &*e as *const Effect as usize;
         let clips = self
             .lock_clips()
@@ -270,6 +286,7 @@ impl Effect {
         scale: f64,
         rois: HashMap<String, [f64; 4]>,
         output: Layout,
+        field: Option<Field>,
     ) -> u64 {
         let id = NEXT_ID.fetch_add(1, Ordering::Relaxed);
         self.renders
@@ -281,6 +298,7 @@ impl Effect {
                 scale,
                 rois,
                 output,
+                field,
             });
         id
     }
@@ -618,6 +636,7 @@ fn image_props(
     scale: f64,
     components: &str,
     layout: Layout,
+    fielded: bool,
 ) -> Box<PropSet> {
     static SERIAL: AtomicU64 = AtomicU64::new(1);
     let what = format!("{} clip {} image at {time}", e.id, c.name);
@@ -641,6 +660,16 @@ fn image_props(
     p.set_ints(ofx::kOfxImagePropBounds, &layout.bounds);
     p.set_ints(ofx::kOfxImagePropRegionOfDefinition, &layout.rod);
     p.set_ints(ofx::kOfxImagePropRowBytes, &[layout.row_bytes]);
+    // A field render hands over full interlaced frames (both fields), as the plugin's
+    // field extraction asks.
+    p.set_str(
+        ofx::kOfxImagePropField,
+        cstr(if fielded {
+            ofx::kOfxImageFieldBoth
+        } else {
+            ofx::kOfxImageFieldNone
+        }),
+    );
     let serial = SERIAL.fetch_add(1, Ordering::Relaxed);
     p.set_str(
         ofx::kOfxImagePropUniqueIdentifier,
@@ -663,6 +692,7 @@ fn output_image(e: &Effect, c: &Clip, ctx: Option<&RenderCtx>, time: f64) -> Mad
         ctx.scale,
         cstr(ofx::kOfxImageComponentRGBA),
         ctx.output,
+        ctx.field.is_some(),
     );
     Ok(LiveImage {
         what: format!("{} clip {} image at {time}", e.id, c.name),
@@ -719,10 +749,18 @@ fn input_image(
             ))));
         }
     }
-    let b = [px[0].max(0), px[1].max(0), px[2].min(ws), px[3].min(hs)];
-    if b[0] >= b[2] || b[1] >= b[3] {
+    let asked = [px[0].max(0), px[1].max(0), px[2].min(ws), px[3].min(hs)];
+    if asked[0] >= asked[2] || asked[1] >= asked[3] {
         return Err((status::FAILED, None));
     }
+    // A padding host hands over more than asked, within the input's region of definition.
+    let pad = if e.options.padded_images { PADDING } else { 0 };
+    let b = [
+        (asked[0] - pad).max(0),
+        (asked[1] - pad).max(0),
+        (asked[2] + pad).min(ws),
+        (asked[3] + pad).min(hs),
+    ];
     let window = Window::new(
         b[0] as u32,
         (hs - b[3]) as u32,
@@ -750,24 +788,32 @@ fn input_image(
             )),
         ));
     }
-    let components = c.props.string(ofx::kOfxImageEffectPropComponents);
-    let alpha_only = components == cstr(ofx::kOfxImageComponentAlpha);
-    let data = to_ofx(&planes, alpha_only);
-    let n = if alpha_only { 1 } else { 4 };
-    let row_bytes = (window.width() as usize * n * 4) as i32;
+    let declared = c.props.string(ofx::kOfxImageEffectPropComponents);
+    // A host ignoring components hands an RGBA clip RGB images.
+    let rgb = e.options.rgb_inputs && declared == cstr(ofx::kOfxImageComponentRGBA);
+    let (components, n) = if declared == cstr(ofx::kOfxImageComponentAlpha) {
+        (declared.as_str(), 1)
+    } else if rgb {
+        (cstr(ofx::kOfxImageComponentRGB), 3)
+    } else {
+        (declared.as_str(), 4)
+    };
+    let (w, h) = (window.width() as usize, window.height() as usize);
+    let (data, offset, row_bytes) = store(&to_ofx(&planes, n), w * n, h, e.options.padded_images);
     let bounds = [b[0] as i32, b[1] as i32, b[2] as i32, b[3] as i32];
     let props = image_props(
         e,
         c,
         time,
         scale,
-        &components,
+        components,
         Layout {
-            ptr: data.as_ptr() as usize,
+            ptr: data[offset..].as_ptr() as usize,
             bounds,
             rod: [0, 0, ws as i32, hs as i32],
             row_bytes,
         },
+        ctx.is_some_and(|r| r.field.is_some()),
     );
     Ok(LiveImage {
         what: format!("{} clip {} image at {time}", e.id, c.name),
@@ -780,16 +826,33 @@ fn input_image(
     })
 }
 
-/// Interleaved OFX pixels (rows bottom up) from raster planes: RGBA (missing colour black,
-/// depth standing in for colour when only depth is present, missing alpha opaque where
-/// there is colour) or alpha alone (alpha, else red).
-fn to_ofx(p: &Planes, alpha_only: bool) -> Vec<f32> {
+/// Stores `rows` (`h` rows bottom up, `row` floats each) as the host lays images out:
+/// as they are, or (`padded`) top-down with [`ROW_SLACK`] quiet NaNs after each row.
+/// Returns the store, the index of the bottom row's first float and the row bytes.
+fn store(rows: &[f32], row: usize, h: usize, padded: bool) -> (Vec<f32>, usize, i32) {
+    if !padded {
+        return (rows.to_vec(), 0, (row * 4) as i32);
+    }
+    let stride = row + ROW_SLACK;
+    let mut out = vec![f32::from_bits(SENTINEL_BITS); stride * h];
+    for (y, src) in rows.chunks_exact(row.max(1)).enumerate().take(h) {
+        let at = (h - 1 - y) * stride;
+        out[at..at + row].copy_from_slice(src);
+    }
+    (out, h.saturating_sub(1) * stride, -((stride * 4) as i32))
+}
+
+/// Interleaved OFX pixels (rows bottom up) from raster planes, `n` floats a pixel: RGBA
+/// (4) or RGB (3) (missing colour black, depth standing in for colour when only depth is
+/// present, missing alpha opaque where there is colour), or alpha alone (1: alpha, else
+/// red).
+fn to_ofx(p: &Planes, n: usize) -> Vec<f32> {
+    let alpha_only = n == 1;
     let (w, h) = (p.width as usize, p.height as usize);
     let rgb = p.rgb.as_ref().map(|c| [&c[0].data, &c[1].data, &c[2].data]);
     let depth = p.depth_z.as_ref().map(|d| [&d.data, &d.data, &d.data]);
     let colour = rgb.or(depth);
     let opaque = if colour.is_some() { 1.0 } else { 0.0 };
-    let n = if alpha_only { 1 } else { 4 };
     let mut out = vec![0.0f32; w * h * n];
     for j in 0..h {
         let src = (h - 1 - j) * w;
@@ -810,7 +873,9 @@ fn to_ofx(p: &Planes, alpha_only: bool) -> Vec<f32> {
                     out[o + 1] = c[1][i];
                     out[o + 2] = c[2][i];
                 }
-                out[o + 3] = a;
+                if n == 4 {
+                    out[o + 3] = a;
+                }
             }
         }
     }

@@ -8,6 +8,8 @@ use openfx_sys as ofx;
 
 use super::bundle::{context_name, failure, Bundle, Plugin};
 use super::effect::{self, Effect, Layout, RenderScope, GUARD, SENTINEL_BITS};
+use super::log::Message;
+use super::options::{ChangeReason, Field, PADDING, ROW_SLACK};
 use super::props::{args, PropSet, PropValue};
 use super::spec::{cstr, ParamType};
 use super::status;
@@ -175,7 +177,7 @@ impl Instance {
     ) -> Result<status::Status> {
         let handle = self.effect.handle() as *const c_void;
         self.plugin()
-            .run(&self.bundle.log, what, action, handle, in_args, out_args)
+            .run(&self.bundle, what, action, handle, in_args, out_args)
     }
 
     fn args(&self, out: bool, what: &str, values: &[(&[u8], PropValue)]) -> Box<PropSet> {
@@ -653,6 +655,34 @@ impl Instance {
         render_scale: f64,
         draft: bool,
     ) -> Result<Planes> {
+        self.render_impl(time, window, render_scale, draft, None)
+    }
+
+    /// Renders one field of interlaced footage as a host does that renders fields separately:
+    /// `kOfxImageEffectPropFieldToRender` is `field`, the output image is a full frame holding
+    /// both fields (`kOfxImagePropField` both, as are the input images), and the plugin must
+    /// write exactly the rows of `field` in the window (OFX rows counted from the bottom of
+    /// the image, [`Field::has_row`]): a row of the other field written, or one of this field
+    /// left unwritten, is a violation and an error. The other field's rows come back
+    /// transparent black.
+    pub fn render_field(
+        &self,
+        time: f64,
+        window: Window,
+        render_scale: f64,
+        field: Field,
+    ) -> Result<Planes> {
+        self.render_impl(time, window, render_scale, false, Some(field))
+    }
+
+    fn render_impl(
+        &self,
+        time: f64,
+        window: Window,
+        render_scale: f64,
+        draft: bool,
+        field: Option<Field>,
+    ) -> Result<Planes> {
         let s = render_scale;
         self.check_scale(s)?;
         let id = self.effect.id.clone();
@@ -667,15 +697,14 @@ impl Instance {
             f64::from(bounds[3]) / s,
         ];
         let (w, h) = (window.width() as usize, window.height() as usize);
-        let (bw, bh) = (w + 2 * GUARD, h + 2 * GUARD);
-        let mut buffer = vec![f32::from_bits(SENTINEL_BITS); bw * bh * 4];
-        let origin = (GUARD * bw + GUARD) * 4;
-        let output = Layout {
-            ptr: buffer[origin..].as_mut_ptr() as usize,
-            bounds,
-            rod: [0, 0, ws as i32, hs as i32],
-            row_bytes: (bw * 16) as i32,
-        };
+        let padded = self.bundle.options.padded_images;
+        let mut buffer = OutputBuffer::new(w, h, padded);
+        let output = buffer.layout(bounds, [0, 0, ws as i32, hs as i32]);
+        let field_name = cstr(match field {
+            None => ofx::kOfxImageFieldNone,
+            Some(Field::Lower) => ofx::kOfxImageFieldLower,
+            Some(Field::Upper) => ofx::kOfxImageFieldUpper,
+        });
         let in_args = self.args(
             false,
             "render",
@@ -683,7 +712,7 @@ impl Instance {
                 (ofx::kOfxPropTime, PropValue::Double(vec![time])),
                 (
                     ofx::kOfxImageEffectPropFieldToRender,
-                    PropValue::String(vec![cstr(ofx::kOfxImageFieldNone).to_string()]),
+                    PropValue::String(vec![field_name.to_string()]),
                 ),
                 (
                     ofx::kOfxImageEffectPropRenderWindow,
@@ -710,12 +739,12 @@ impl Instance {
         let (result, leaked) = {
             let _g = self.render_guard();
             let rois = self.regions_of_interest(time, canonical, s)?;
-            let render_id = self.effect.begin_render(time, s, rois, output);
+            let render_id = self.effect.begin_render(time, s, rois, output, field);
             let scope =
                 RenderScope::enter(Some((&*self.effect as *const Effect as usize, render_id)));
             let handle = self.effect.handle() as *const c_void;
             let (st, said) = self.plugin().call(
-                &self.bundle.log,
+                &self.bundle,
                 ofx::kOfxImageEffectActionRender,
                 handle,
                 Some(&in_args),
@@ -742,11 +771,13 @@ impl Instance {
             log.violation(format!("{id}: {m}"));
             return Err(Error::invalid(&id, m));
         }
-        check_guard(&buffer, bw, bh, w, h).map_err(|m| {
+        // Rows of the window that are the plugin's to write.
+        let mine = |oy: i64| field.is_none_or(|f| f.has_row(i64::from(bounds[1]) + oy));
+        buffer.check(&mine).map_err(|m| {
             log.violation(format!("{id}: render at {time} of {window:?}: {m}"));
             Error::invalid(&id, format!("render at {time}: {m}"))
         })?;
-        Ok(to_planes(&buffer, bw, w, h))
+        Ok(buffer.to_planes(&mine))
     }
 
     fn sequence(&self, what: &str, action: &[u8], first: f64, last: f64, s: f64) -> Result<()> {
@@ -811,13 +842,25 @@ impl Instance {
     /// Tells the plugin the user edited `param` (beginInstanceChanged, instanceChanged,
     /// endInstanceChanged, at time 0 and render scale 1).
     pub fn instance_changed(&self, param: &str) -> Result<()> {
+        self.instance_changed_with_reason(param, ChangeReason::UserEdited)
+    }
+
+    /// Tells the plugin `param` changed for `reason` (`kOfxPropChangeReason` in the in-args
+    /// of beginInstanceChanged, instanceChanged and endInstanceChanged), at time 0 and
+    /// render scale 1.
+    pub fn instance_changed_with_reason(&self, param: &str, reason: ChangeReason) -> Result<()> {
         if self.effect.params.with(param, |_| ()).is_none() {
             return Err(Error::invalid(
                 format!("{}: parameter {param}", self.effect.id),
                 "no such parameter",
             ));
         }
-        let reason = PropValue::String(vec![cstr(ofx::kOfxChangeUserEdited).to_string()]);
+        let reason = cstr(match reason {
+            ChangeReason::UserEdited => ofx::kOfxChangeUserEdited,
+            ChangeReason::PluginEdited => ofx::kOfxChangePluginEdited,
+            ChangeReason::Time => ofx::kOfxChangeTime,
+        });
+        let reason = PropValue::String(vec![reason.to_string()]);
         let begin = self.args(
             false,
             "beginInstanceChanged",
@@ -865,6 +908,16 @@ impl Instance {
         Ok(())
     }
 
+    /// The persistent message the plugin set on this instance (message suite V2) and has
+    /// not cleared since.
+    pub fn persistent_message(&self) -> Option<Message> {
+        self.effect
+            .persistent
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+
     /// purgeCaches.
     pub fn purge_caches(&self) -> Result<()> {
         let _main = self.main();
@@ -878,7 +931,7 @@ impl Drop for Instance {
         let _main = self.main();
         let handle = self.effect.handle() as *const c_void;
         let (s, said) = self.plugin().call(
-            &self.bundle.log,
+            &self.bundle,
             ofx::kOfxActionDestroyInstance,
             handle,
             None,
@@ -892,67 +945,125 @@ impl Drop for Instance {
     }
 }
 
-/// Checks that the guard border still holds the sentinel and that no pixel of the window
-/// does.
-fn check_guard(
-    buffer: &[f32],
-    bw: usize,
-    bh: usize,
+/// The output buffer of a render: the window with a [`GUARD`] border of sentinels, rows
+/// stored bottom-up, or top-down with [`ROW_SLACK`] spare floats each for a host with
+/// [`HostOptions::padded_images`](super::HostOptions), whose image bounds then reach
+/// [`PADDING`] pixels past the window.
+struct OutputBuffer {
+    data: Vec<f32>,
     w: usize,
     h: usize,
-) -> std::result::Result<(), String> {
-    for y in 0..bh {
-        for x in 0..bw {
-            let inside = (GUARD..GUARD + w).contains(&x) && (GUARD..GUARD + h).contains(&y);
-            let i = (y * bw + x) * 4;
-            let untouched = buffer[i..i + 4]
-                .iter()
-                .all(|v| v.to_bits() == SENTINEL_BITS);
-            let written = buffer[i..i + 4]
-                .iter()
-                .all(|v| v.to_bits() != SENTINEL_BITS);
-            let (ox, oy) = (x as i64 - GUARD as i64, y as i64 - GUARD as i64);
-            if !inside && !untouched {
-                return Err(format!(
-                    "wrote outside the render window at window pixel ({ox}, {oy}) (y up)"
-                ));
-            }
-            if inside && !written {
-                return Err(format!("left window pixel ({ox}, {oy}) (y up) unwritten"));
-            }
-        }
-    }
-    Ok(())
+    /// Floats per stored row.
+    stride: usize,
+    padded: bool,
 }
 
-/// Raster RGBA planes from the window of the guarded buffer (rows bottom up).
-fn to_planes(buffer: &[f32], bw: usize, w: usize, h: usize) -> Planes {
-    let mut ch: [Vec<f32>; 4] = Default::default();
-    for c in &mut ch {
-        c.reserve(w * h);
-    }
-    for r in 0..h {
-        let y = GUARD + (h - 1 - r);
-        for x in 0..w {
-            let i = (y * bw + GUARD + x) * 4;
-            for (k, c) in ch.iter_mut().enumerate() {
-                c.push(buffer[i + k]);
-            }
+impl OutputBuffer {
+    fn new(w: usize, h: usize, padded: bool) -> Self {
+        let stride = (w + 2 * GUARD) * 4 + if padded { ROW_SLACK } else { 0 };
+        OutputBuffer {
+            data: vec![f32::from_bits(SENTINEL_BITS); stride * (h + 2 * GUARD)],
+            w,
+            h,
+            stride,
+            padded,
         }
     }
-    let [r, g, b, a] = ch;
-    let p = |data| Plane {
-        width: w as u32,
-        height: h as u32,
-        data,
-    };
-    Planes {
-        width: w as u32,
-        height: h as u32,
-        rgb: Some([p(r), p(g), p(b)]),
-        alpha: Some(p(a)),
-        depth_z: None,
-        depth_ray: None,
-        depth_median: None,
+
+    /// The stored row of window row `oy` (`y` up, from −[`GUARD`]).
+    fn row(&self, oy: i64) -> usize {
+        let r = (oy + GUARD as i64) as usize;
+        if self.padded {
+            self.h + 2 * GUARD - 1 - r
+        } else {
+            r
+        }
+    }
+
+    /// The index of window pixel `(ox, oy)` (`y` up, both from −[`GUARD`]).
+    fn index(&self, ox: i64, oy: i64) -> usize {
+        self.row(oy) * self.stride + (ox + GUARD as i64) as usize * 4
+    }
+
+    /// The output image's layout for a render window of OFX bounds `window`.
+    fn layout(&mut self, window: [i32; 4], rod: [i32; 4]) -> Layout {
+        let pad = if self.padded { PADDING } else { 0 };
+        let at = self.index(-pad, -pad);
+        let bytes = (self.stride * 4) as i32;
+        let p = pad as i32;
+        Layout {
+            ptr: self.data[at..].as_mut_ptr() as usize,
+            bounds: [window[0] - p, window[1] - p, window[2] + p, window[3] + p],
+            rod,
+            row_bytes: if self.padded { -bytes } else { bytes },
+        }
+    }
+
+    /// Checks that every pixel of the window in a row that is `mine` was written and that
+    /// nothing else was (the guard border, the spare floats, the other field's rows).
+    fn check(&self, mine: &dyn Fn(i64) -> bool) -> std::result::Result<(), String> {
+        let (w, h, g) = (self.w as i64, self.h as i64, GUARD as i64);
+        for oy in -g..h + g {
+            for ox in -g..w + g {
+                let i = self.index(ox, oy);
+                let px = &self.data[i..i + 4];
+                let untouched = px.iter().all(|v| v.to_bits() == SENTINEL_BITS);
+                let written = px.iter().all(|v| v.to_bits() != SENTINEL_BITS);
+                let inside = (0..w).contains(&ox) && (0..h).contains(&oy);
+                if inside && mine(oy) {
+                    if !written {
+                        return Err(format!("left window pixel ({ox}, {oy}) (y up) unwritten"));
+                    }
+                } else if !untouched {
+                    let what = if inside {
+                        "a row of the other field"
+                    } else {
+                        "outside the render window"
+                    };
+                    return Err(format!("wrote {what} at window pixel ({ox}, {oy}) (y up)"));
+                }
+            }
+            let r = self.row(oy) * self.stride;
+            let spare = &self.data[r + (self.w + 2 * GUARD) * 4..r + self.stride];
+            if spare.iter().any(|v| v.to_bits() != SENTINEL_BITS) {
+                return Err(format!(
+                    "wrote the spare floats after window row {oy} (y up)"
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Raster RGBA planes of the window; rows not `mine` are transparent black.
+    fn to_planes(&self, mine: &dyn Fn(i64) -> bool) -> Planes {
+        let (w, h) = (self.w, self.h);
+        let mut ch: [Vec<f32>; 4] = Default::default();
+        for c in &mut ch {
+            c.reserve(w * h);
+        }
+        for r in 0..h {
+            let oy = (h - 1 - r) as i64;
+            for x in 0..w {
+                let i = self.index(x as i64, oy);
+                for (k, c) in ch.iter_mut().enumerate() {
+                    c.push(if mine(oy) { self.data[i + k] } else { 0.0 });
+                }
+            }
+        }
+        let [r, g, b, a] = ch;
+        let p = |data| Plane {
+            width: w as u32,
+            height: h as u32,
+            data,
+        };
+        Planes {
+            width: w as u32,
+            height: h as u32,
+            rgb: Some([p(r), p(g), p(b)]),
+            alpha: Some(p(a)),
+            depth_z: None,
+            depth_ray: None,
+            depth_median: None,
+        }
     }
 }

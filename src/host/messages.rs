@@ -1,8 +1,10 @@
 //! The message suite (V1 and V2; the formatting is done by `param_shim.c`) and the progress
 //! suite (V1 and V2). Messages go to the log of the effect they name, or of the running
-//! action when the handle is NULL.
+//! action when the handle is NULL; an instance remembers its persistent message until the
+//! plugin clears it ([`super::Instance::persistent_message`]).
 
 use std::ffi::{c_char, c_void};
+use std::sync::PoisonError;
 
 use openfx_sys as ofx;
 use openfx_sys::OfxStatus;
@@ -66,11 +68,11 @@ pub(crate) fn post(handle: *mut c_void, message: Message) -> OfxStatus {
     } else {
         "message"
     };
-    let log = match effect(handle, function) {
-        Ok(Some(e)) => e.log.clone(),
-        Ok(None) => log::current(),
+    let target = match effect(handle, function) {
+        Ok(t) => t,
         Err(s) => return s,
     };
+    let log = target.map_or_else(log::current, |e| e.log.clone());
     if !KINDS.iter().any(|k| cstr(k) == message.kind) {
         log.violation(format!(
             "{function}: unknown message type \"{}\"",
@@ -79,6 +81,9 @@ pub(crate) fn post(handle: *mut c_void, message: Message) -> OfxStatus {
         return status::ERR_UNKNOWN;
     }
     let question = message.kind == cstr(ofx::kOfxMessageQuestion);
+    if let Some(e) = target.filter(|e| e.instance && message.persistent) {
+        *e.persistent.lock().unwrap_or_else(PoisonError::into_inner) = Some(message.clone());
+    }
     log.message(message);
     if question {
         // A headless host answers no.
@@ -89,7 +94,15 @@ pub(crate) fn post(handle: *mut c_void, message: Message) -> OfxStatus {
 }
 
 unsafe extern "C" fn clear_persistent(handle: *mut c_void) -> OfxStatus {
-    effect(handle, "clearPersistentMessage").map_or_else(|s| s, |_| status::OK)
+    match effect(handle, "clearPersistentMessage") {
+        Err(s) => s,
+        Ok(e) => {
+            if let Some(e) = e {
+                *e.persistent.lock().unwrap_or_else(PoisonError::into_inner) = None;
+            }
+            status::OK
+        }
+    }
 }
 
 unsafe extern "C" fn progress_start_v1(handle: *mut c_void, _label: *const c_char) -> OfxStatus {

@@ -6,6 +6,10 @@
 //! ([`EffectDescription`]); [`Bundle::instance`] creates an [`Instance`], whose parameters
 //! are set with the core's [`crate::graph::Value`]s and whose input clips are fed by
 //! [`ClipSource`]s; [`Instance::render`] returns the core's [`crate::image::Planes`].
+//! [`Bundle::load_with`] makes the host behave as hosts in production differ
+//! ([`HostOptions`]: message suite V1 or none, RGB images, top-down padded images, a second
+//! host struct); [`Instance::render_field`] renders one field of interlaced footage and
+//! [`Instance::instance_changed_with_reason`] says why a parameter changed.
 //!
 //! **Strict**: every property access is checked against a table of the spec's properties
 //! (name, type, dimension, which sets hold it, whether the plugin may write it); every handle
@@ -16,7 +20,8 @@
 //! [`Bundle::violations`] is empty when the plugin behaved.
 //!
 //! The suites: property, image effect, parameter (values constant over time), memory,
-//! multithread (real threads, recursive mutexes), message V1/V2 and progress V1/V2. The
+//! multithread (real threads, recursive mutexes), message V1/V2 (as [`HostOptions`] offers)
+//! and progress V1/V2. The
 //! C-variadic functions are in `param_shim.c`, forwarding to typed Rust callbacks.
 //!
 //! ```no_run
@@ -38,6 +43,7 @@ mod handles;
 mod instance;
 mod log;
 mod messages;
+mod options;
 mod params;
 mod prop_suite;
 mod props;
@@ -49,6 +55,7 @@ mod threads;
 pub use bundle::{Bundle, ClipDescription, EffectDescription, ParamDescription};
 pub use instance::{ClipSource, Instance, SourceFn};
 pub use log::Message;
+pub use options::{ChangeReason, Field, HostOptions, MessageSuiteOffer, PADDING};
 pub use props::PropValue;
 pub use spec::PropType;
 pub use status::{status_name, Status};

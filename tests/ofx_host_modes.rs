@@ -1,0 +1,560 @@
+//! The built bundle through the host behaving as hosts in production differ
+//! ([`HostOptions`]): message suite V1 only or none, RGB input images, top-down images with
+//! padded bounds and rows, fields rendered one at a time, change reasons, and a second host
+//! struct. In each, the plugin must render the very pixels the core renders, report errors
+//! as the message suite allows, and break no rule of the strict host.
+//!
+//! The tests take turns ([`turn`]): the message suite is a property of the host struct the
+//! binary holds, one at a time, so bundles with different hosts must not act at once.
+
+mod common_ofx;
+
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard, OnceLock, PoisonError};
+
+use nerfx::demo;
+use nerfx::graph::{node, Context, ParamValues, RenderRequest, Value};
+use nerfx::host::{
+    Bundle, ChangeReason, ClipSource, Field, HostOptions, Instance, MessageSuiteOffer,
+};
+use nerfx::image::{Plane, Planes, Window};
+
+/// The demo image size.
+const W: u32 = 32;
+const H: u32 = 20;
+/// A frame of the demo shot.
+const FRAME: f64 = 1003.0;
+
+fn turn() -> MutexGuard<'static, ()> {
+    static TURN: Mutex<()> = Mutex::new(());
+    TURN.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+fn load(options: HostOptions) -> Bundle {
+    Bundle::load_with(&common_ofx::bundle(), options).expect("the built bundle loads")
+}
+
+fn demo_dir() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("nerfx-ofx-modes-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        demo::write_graph(&dir, W, H).unwrap();
+        dir
+    })
+}
+
+fn text(s: impl AsRef<Path>) -> Value {
+    Value::Text(s.as_ref().to_string_lossy().into_owned())
+}
+
+/// A NeRF Render of the demo environment at draft quality, and its values for the core.
+fn nerf(bundle: &Bundle, field_file: &Path) -> (Instance, ParamValues) {
+    let dir = demo_dir();
+    let n = node("org.nerfx.NeRFRender").unwrap();
+    let mut values = n.defaults();
+    let mut instance = bundle.instance(n.desc.id, Context::Generator).unwrap();
+    for (name, value) in [
+        ("file", text(field_file)),
+        ("shot", text(dir.join("demo_shot.json"))),
+        ("quality", Value::Choice(0)),
+        ("exposure", Value::Double(0.5)),
+    ] {
+        values.set(name, value.clone()).unwrap();
+        instance.set_param(name, &value).unwrap();
+    }
+    (instance, values)
+}
+
+/// The core's NeRF Render of the whole image at `scale`.
+fn core_nerf(values: &ParamValues, scale: f64) -> Planes {
+    let (w, h) = (side(W, scale), side(H, scale));
+    let p = node("org.nerfx.NeRFRender")
+        .unwrap()
+        .render(
+            values,
+            &RenderRequest::new(FRAME, Window::new(0, 0, w, h), scale),
+        )
+        .unwrap();
+    rgba_of(&p)
+}
+
+fn side(n: u32, scale: f64) -> u32 {
+    ((f64::from(n) * scale).ceil() as u32).max(1)
+}
+
+fn rgba(w: u32, h: u32, f: impl Fn(u32, u32, usize) -> f32) -> Planes {
+    let plane = |c: usize| Plane {
+        width: w,
+        height: h,
+        data: (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .map(|(x, y)| f(x, y, c))
+            .collect(),
+    };
+    Planes {
+        width: w,
+        height: h,
+        rgb: Some([plane(0), plane(1), plane(2)]),
+        alpha: Some(plane(3)),
+        depth_z: None,
+        depth_ray: None,
+        depth_median: None,
+    }
+}
+
+/// Channel `c` (0–2 colour, 3 alpha) of raster pixel `(x, y)`.
+fn at(p: &Planes, x: u32, y: u32, c: usize) -> f32 {
+    if c == 3 {
+        p.alpha.as_ref().unwrap().get(x, y)
+    } else {
+        p.rgb.as_ref().unwrap()[c].get(x, y)
+    }
+}
+
+fn rgba_of(p: &Planes) -> Planes {
+    rgba(p.width, p.height, |x, y, c| at(p, x, y, c))
+}
+
+/// Odd-sized tiles (7×5) covering `w × h`.
+fn tiles(w: u32, h: u32) -> Vec<Window> {
+    let mut out = Vec::new();
+    for y in (0..h).step_by(5) {
+        for x in (0..w).step_by(7) {
+            out.push(Window::new(x, y, (x + 7).min(w), (y + 5).min(h)));
+        }
+    }
+    out
+}
+
+/// Every tile rendered by `render` and pasted into one image.
+fn tiled(w: u32, h: u32, render: impl Fn(Window) -> Planes) -> Planes {
+    let tiles: Vec<(Window, Planes)> = tiles(w, h).into_iter().map(|t| (t, render(t))).collect();
+    rgba(w, h, |x, y, c| {
+        let (t, p) = tiles
+            .iter()
+            .find(|(t, _)| x >= t.x0 && x < t.x1 && y >= t.y0 && y < t.y1)
+            .unwrap();
+        assert_eq!((p.width, p.height), (t.width(), t.height()));
+        at(p, x - t.x0, y - t.y0, c)
+    })
+}
+
+fn assert_same(got: &Planes, want: &Planes, what: &str) {
+    assert_eq!((got.width, got.height), (want.width, want.height), "{what}");
+    for c in 0..4 {
+        let mut differ = 0;
+        for y in 0..got.height {
+            for x in 0..got.width {
+                if at(got, x, y, c).to_bits() != at(want, x, y, c).to_bits() {
+                    differ += 1;
+                }
+            }
+        }
+        assert_eq!(differ, 0, "{what}: {differ} samples of channel {c} differ");
+    }
+}
+
+/// A deterministic premultiplied image, different per clip and per render scale.
+fn pattern(seed: u32, window: Window, scale: f64) -> Planes {
+    let s = (scale * 8.0) as u32;
+    rgba(window.width(), window.height(), |x, y, c| {
+        let (x, y) = (x + window.x0, y + window.y0);
+        let h = (x.wrapping_mul(73_856_093)
+            ^ y.wrapping_mul(19_349_663)
+            ^ (seed + s + c as u32).wrapping_mul(83_492_791))
+            % 1000;
+        let v = h as f32 / 1000.0;
+        if c == 3 {
+            v
+        } else {
+            v * (0.2 + 0.8 * v) + seed as f32 * 0.5
+        }
+    })
+}
+
+/// A compositing node to test: identifier, context, connected clips, parameter values.
+type Case = (
+    &'static str,
+    Context,
+    &'static [&'static str],
+    Vec<(&'static str, Value)>,
+);
+
+fn cases() -> Vec<Case> {
+    vec![
+        (
+            "org.nerfx.AccumulationMatte",
+            Context::General,
+            &["Source", "Matte"],
+            vec![
+                ("blackPoint", Value::Double(0.2)),
+                ("mix", Value::Double(0.6)),
+            ],
+        ),
+        (
+            "org.nerfx.ShadowCatcherMerge",
+            Context::General,
+            &["A", "Shadow", "B"],
+            vec![
+                ("opacity", Value::Double(0.7)),
+                ("tint", Value::Doubles(vec![0.1, 0.2, 0.3])),
+            ],
+        ),
+        (
+            "org.nerfx.DepthMerge",
+            Context::General,
+            &["A", "ADepth", "B", "BDepth"],
+            vec![("softness", Value::Double(0.3))],
+        ),
+    ]
+}
+
+/// Size of the compositing nodes' inputs.
+const CW: u32 = 23;
+const CH: u32 = 17;
+
+/// An instance of `case` with its inputs connected to [`pattern`]s, and its values.
+fn compositing(bundle: &Bundle, case: &Case) -> (Instance, ParamValues) {
+    let (id, context, clips, params) = case;
+    let mut values = node(id).unwrap().defaults();
+    let mut instance = bundle.instance(id, *context).unwrap();
+    for (name, value) in params {
+        values.set(name, value.clone()).unwrap();
+        instance.set_param(name, value).unwrap();
+    }
+    for (seed, clip) in clips.iter().enumerate() {
+        let source = ClipSource::new((CW, CH), move |_, w, s| Ok(pattern(seed as u32, w, s)));
+        instance.connect(clip, source).unwrap();
+    }
+    (instance, values)
+}
+
+/// The core's render of `case` over the whole image at `scale`, each input made by
+/// `input` from its pattern.
+fn core_compositing(
+    case: &Case,
+    values: &ParamValues,
+    scale: f64,
+    input: impl Fn(Planes) -> Planes,
+) -> Planes {
+    let full = Window::new(0, 0, side(CW, scale), side(CH, scale));
+    let mut request = RenderRequest::new(3.0, full, scale);
+    for (seed, clip) in case.2.iter().enumerate() {
+        request = request.with_input(clip, input(pattern(seed as u32, full, scale)));
+    }
+    rgba_of(&node(case.0).unwrap().render(values, &request).unwrap())
+}
+
+fn no_violations(bundle: &Bundle) {
+    assert_eq!(bundle.violations(), Vec::<String>::new());
+}
+
+/// The messages `bundle` recorded whose text names `needle`: (persistent, kind).
+fn said(bundle: &Bundle, needle: &str) -> Vec<(bool, String)> {
+    bundle
+        .messages()
+        .into_iter()
+        .filter(|m| m.text.contains(needle))
+        .map(|m| (m.persistent, m.kind))
+        .collect()
+}
+
+/// A render of an 8×8 window that must fail; its error text.
+fn failing_render(instance: &Instance) -> String {
+    instance
+        .render(FRAME, Window::new(0, 0, 8, 8), 1.0, false)
+        .expect_err("the render fails")
+        .to_string()
+}
+
+#[test]
+fn v2_a_persistent_error_cleared_by_edits_and_renders_but_not_by_time() {
+    let _turn = turn();
+    let b = load(HostOptions::default());
+    let missing = demo_dir().join("missing_v2.json");
+    let (mut i, _) = nerf(&b, &missing);
+    let e = failing_render(&i);
+    assert!(e.contains("missing_v2.json"), "{e}");
+    let m = i.persistent_message().expect("a persistent message is set");
+    assert_eq!(m.kind, "OfxMessageError");
+    assert!(m.text.contains("missing_v2.json"), "{}", m.text);
+    // The time moving is no edit: the error stays.
+    i.instance_changed_with_reason("exposure", ChangeReason::Time)
+        .unwrap();
+    assert!(i.persistent_message().is_some());
+    // Edits by the plugin and by the artist clear it; the next failure sets it again.
+    for reason in [ChangeReason::PluginEdited, ChangeReason::UserEdited] {
+        i.instance_changed_with_reason("file", reason).unwrap();
+        assert_eq!(i.persistent_message(), None, "{reason:?}");
+        failing_render(&i);
+        assert!(i.persistent_message().is_some(), "{reason:?}");
+    }
+    // Never a transient message: every one posted is persistent.
+    let posted = said(&b, "missing_v2.json");
+    assert!(
+        posted.len() >= 3 && posted.iter().all(|(p, _)| *p),
+        "{posted:?}"
+    );
+    // A successful render clears it.
+    i.set_param("file", &text(demo_dir().join("demo_environment.json")))
+        .unwrap();
+    i.render(FRAME, Window::new(0, 0, 8, 8), 1.0, false)
+        .unwrap();
+    assert_eq!(i.persistent_message(), None);
+    no_violations(&b);
+}
+
+#[test]
+fn v1_one_transient_message_per_instance_until_an_edit() {
+    let _turn = turn();
+    let b = load(HostOptions {
+        message_suite: MessageSuiteOffer::V1Only,
+        ..HostOptions::default()
+    });
+    let missing = demo_dir().join("missing_v1.json");
+    let (i, _) = nerf(&b, &missing);
+    let count = || said(&b, "missing_v1.json");
+    let first = failing_render(&i);
+    assert!(first.contains("missing_v1.json"), "{first}");
+    assert_eq!(count(), [(false, "OfxMessageError".to_string())]);
+    // Later failures of the same instance go to standard error, not to another dialog.
+    for _ in 0..3 {
+        let e = failing_render(&i);
+        assert!(e.contains("posted no message"), "{e}");
+    }
+    assert_eq!(count().len(), 1);
+    assert_eq!(i.persistent_message(), None);
+    // The time moving is no edit.
+    i.instance_changed_with_reason("exposure", ChangeReason::Time)
+        .unwrap();
+    failing_render(&i);
+    assert_eq!(count().len(), 1);
+    // An edit (by the artist or by the plugin) lets one more through.
+    i.instance_changed_with_reason("file", ChangeReason::UserEdited)
+        .unwrap();
+    failing_render(&i);
+    failing_render(&i);
+    assert_eq!(count().len(), 2);
+    i.instance_changed_with_reason("file", ChangeReason::PluginEdited)
+        .unwrap();
+    failing_render(&i);
+    assert_eq!(count().len(), 3);
+    // Another instance has its own.
+    let (other, _) = nerf(&b, &missing);
+    failing_render(&other);
+    failing_render(&other);
+    let all = count();
+    assert_eq!(all.len(), 4);
+    assert!(
+        all.iter().all(|(p, k)| !p && k == "OfxMessageError"),
+        "{all:?}"
+    );
+    no_violations(&b);
+}
+
+#[test]
+fn without_a_message_suite_errors_are_statuses_and_renders_still_work() {
+    let _turn = turn();
+    let b = load(HostOptions {
+        message_suite: MessageSuiteOffer::Absent,
+        ..HostOptions::default()
+    });
+    let missing = demo_dir().join("missing_none.json");
+    let (i, _) = nerf(&b, &missing);
+    for _ in 0..2 {
+        let e = failing_render(&i);
+        assert!(e.contains("kOfxStatFailed"), "{e}");
+        assert!(e.contains("posted no message"), "{e}");
+    }
+    assert!(said(&b, "missing_none.json").is_empty());
+    assert_eq!(i.persistent_message(), None);
+    // Edits and good renders go on as usual.
+    i.instance_changed_with_reason("file", ChangeReason::UserEdited)
+        .unwrap();
+    let (good, values) = nerf(&b, &demo_dir().join("demo_environment.json"));
+    let got = tiled(W, H, |t| good.render(FRAME, t, 1.0, false).unwrap());
+    assert_same(&got, &core_nerf(&values, 1.0), "no message suite");
+    no_violations(&b);
+}
+
+#[test]
+fn rgb_input_images_read_as_opaque_rgba() {
+    let _turn = turn();
+    let b = load(HostOptions {
+        rgb_inputs: true,
+        ..HostOptions::default()
+    });
+    // The plugin sees each input's colour with alpha 1.
+    let opaque = |p: Planes| {
+        rgba(p.width, p.height, |x, y, c| {
+            if c == 3 {
+                1.0
+            } else {
+                at(&p, x, y, c)
+            }
+        })
+    };
+    for case in cases() {
+        let (instance, values) = compositing(&b, &case);
+        for scale in [1.0, 0.5] {
+            let (w, h) = (side(CW, scale), side(CH, scale));
+            let got = tiled(w, h, |t| instance.render(3.0, t, scale, false).unwrap());
+            let want = core_compositing(&case, &values, scale, opaque);
+            assert_same(&got, &want, &format!("{} RGB inputs at {scale}", case.0));
+        }
+    }
+    no_violations(&b);
+}
+
+#[test]
+fn top_down_padded_images_give_the_same_pixels() {
+    let _turn = turn();
+    let b = load(HostOptions {
+        padded_images: true,
+        ..HostOptions::default()
+    });
+    let (nerf_instance, values) = nerf(&b, &demo_dir().join("demo_environment.json"));
+    for scale in [1.0, 0.5] {
+        let (w, h) = (side(W, scale), side(H, scale));
+        let got = tiled(w, h, |t| {
+            nerf_instance.render(FRAME, t, scale, false).unwrap()
+        });
+        assert_same(
+            &got,
+            &core_nerf(&values, scale),
+            &format!("NeRF Render at {scale}"),
+        );
+    }
+    for case in cases() {
+        let (instance, values) = compositing(&b, &case);
+        for scale in [1.0, 0.5] {
+            let (w, h) = (side(CW, scale), side(CH, scale));
+            let got = tiled(w, h, |t| instance.render(3.0, t, scale, false).unwrap());
+            let want = core_compositing(&case, &values, scale, |p| p);
+            assert_same(&got, &want, &format!("{} padded at {scale}", case.0));
+        }
+    }
+    no_violations(&b);
+}
+
+#[test]
+fn padded_rgb_images_together() {
+    let _turn = turn();
+    let b = load(HostOptions {
+        padded_images: true,
+        rgb_inputs: true,
+        ..HostOptions::default()
+    });
+    let opaque = |p: Planes| {
+        rgba(p.width, p.height, |x, y, c| {
+            if c == 3 {
+                1.0
+            } else {
+                at(&p, x, y, c)
+            }
+        })
+    };
+    let case = &cases()[2];
+    let (instance, values) = compositing(&b, case);
+    let got = tiled(CW, CH, |t| instance.render(3.0, t, 1.0, false).unwrap());
+    assert_same(
+        &got,
+        &core_compositing(case, &values, 1.0, opaque),
+        "padded RGB",
+    );
+    no_violations(&b);
+}
+
+/// `full` with the rows of the other field than `field` transparent black; raster row `y`
+/// of an image `h` rows high is OFX row `h − 1 − y` (the lower field: even OFX rows).
+fn only_field(full: &Planes, field: Field) -> Planes {
+    let h = full.height;
+    rgba(full.width, h, |x, y, c| {
+        let ofx_row = h - 1 - y;
+        let lower = ofx_row % 2 == 0;
+        if lower == (field == Field::Lower) {
+            at(full, x, y, c)
+        } else {
+            0.0
+        }
+    })
+}
+
+#[test]
+fn a_field_render_writes_that_field_rows_only() {
+    let _turn = turn();
+    let b = load(HostOptions::default());
+    let (nerf_instance, values) = nerf(&b, &demo_dir().join("demo_environment.json"));
+    let (comp, comp_values) = compositing(&b, &cases()[1]);
+    for field in [Field::Lower, Field::Upper] {
+        for scale in [1.0, 0.5] {
+            let (w, h) = (side(W, scale), side(H, scale));
+            let got = tiled(w, h, |t| {
+                nerf_instance.render_field(FRAME, t, scale, field).unwrap()
+            });
+            let want = only_field(&core_nerf(&values, scale), field);
+            assert_same(&got, &want, &format!("NeRF Render {field:?} at {scale}"));
+        }
+        let got = tiled(CW, CH, |t| comp.render_field(3.0, t, 1.0, field).unwrap());
+        let want = only_field(
+            &core_compositing(&cases()[1], &comp_values, 1.0, |p| p),
+            field,
+        );
+        assert_same(&got, &want, &format!("ShadowCatcherMerge {field:?}"));
+    }
+    // The same, padded and top-down (the field is counted from the image's bottom, not the
+    // buffer's).
+    let padded = load(HostOptions {
+        padded_images: true,
+        ..HostOptions::default()
+    });
+    let (i, values) = nerf(&padded, &demo_dir().join("demo_environment.json"));
+    let got = tiled(W, H, |t| {
+        i.render_field(FRAME, t, 1.0, Field::Upper).unwrap()
+    });
+    assert_same(
+        &got,
+        &only_field(&core_nerf(&values, 1.0), Field::Upper),
+        "padded upper field",
+    );
+    no_violations(&b);
+    no_violations(&padded);
+}
+
+#[test]
+fn a_second_host_makes_the_plugin_fetch_its_suites_again() {
+    let _turn = turn();
+    // First a host without a message suite, then one with V2: the error is persistent only
+    // if the plugin fetched the second host's suites.
+    let b = load(HostOptions {
+        message_suite: MessageSuiteOffer::Absent,
+        second_host: Some(MessageSuiteOffer::V2),
+        ..HostOptions::default()
+    });
+    let (i, _) = nerf(&b, &demo_dir().join("missing_second.json"));
+    failing_render(&i);
+    let m = i
+        .persistent_message()
+        .expect("the second host's message suite is used");
+    assert!(m.text.contains("missing_second.json"), "{}", m.text);
+    // The other way round: suites of a host with V2 forgotten for one without.
+    let quiet = load(HostOptions {
+        second_host: Some(MessageSuiteOffer::Absent),
+        ..HostOptions::default()
+    });
+    let (q, _) = nerf(&quiet, &demo_dir().join("missing_quiet.json"));
+    let e = failing_render(&q);
+    assert!(e.contains("posted no message"), "{e}");
+    assert_eq!(q.persistent_message(), None);
+    assert!(said(&quiet, "missing_quiet.json").is_empty());
+    // Bundles with different hosts take turns: the first one's instance is given its host
+    // back and speaks persistently again.
+    i.instance_changed_with_reason("file", ChangeReason::UserEdited)
+        .unwrap();
+    assert_eq!(i.persistent_message(), None);
+    failing_render(&i);
+    assert!(i.persistent_message().is_some());
+    no_violations(&b);
+    no_violations(&quiet);
+}

@@ -306,27 +306,20 @@ fn nerfx_info_describes_a_snapshot_and_names_a_corrupt_one() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// A 1920×1080 `Quality::Final` RGBA render of a surface-like snapshot (8×4 levels, fp16,
-/// 2^19-entry tables; three overlapping balls occupied, σ's output row scaled so rays
-/// terminate inside them): `cargo test --release --test ingp_snapshot -- --ignored
-/// --nocapture bench_render`. Timing is printed, never asserted.
-#[test]
-#[ignore]
-fn bench_render_1080p_final() {
+/// The synthetic benchmark scene: a 8×4 fp16 2^19 snapshot whose occupied cells are three
+/// overlapping balls and whose σ row is scaled so rays terminate inside them (instant-ngp
+/// coordinates: the unit cube is cascade 0; s = 0.33, o = 0.5). Prints what it is.
+fn blob_bench_scene(dir: &std::path::Path) -> nerfx::scene::Scene {
     use common_ingp::{write_blob_snapshot, Ball};
-    use glam::{DMat4, DVec3};
-    use nerfx::camera::{Camera, Perspective, Projection};
-    use nerfx::render::{render_with_progress, Outputs, Quality, RenderSettings};
+    use glam::DMat4;
+    use nerfx::render::Quality;
     use nerfx::scene::{FieldHandle, Instance, Scene};
     use std::sync::Arc;
-    use std::time::Instant;
 
-    let dir = scratch("bench-render");
     let spec = Spec {
         log2_table_size: 19,
         ..Spec::small_8x4()
     };
-    // instant-ngp coordinates (the unit cube is cascade 0; s = 0.33, o = 0.5).
     let balls = [
         Ball {
             centre: [0.5, 0.5, 0.5],
@@ -342,7 +335,7 @@ fn bench_render_1080p_final() {
         },
     ];
     let gain = 4.0;
-    let (path, cascade0) = write_blob_snapshot(&dir, "blob", &spec, &balls, gain);
+    let (path, cascade0) = write_blob_snapshot(dir, "blob", &spec, &balls, gain);
     let field = IngpField::load(&path).unwrap();
     let fill = field
         .describe()
@@ -379,17 +372,38 @@ fn bench_render_1080p_final() {
     assert!(pct(0.05) > 0.0, "the blob's interior must be occupied");
 
     let handle = FieldHandle::new(Arc::new(field));
-    let scene = Scene::new(vec![
+    Scene::new(vec![
         Instance::new("blob", handle, DMat4::IDENTITY, None).unwrap()
-    ]);
-    let (w, h) = (1920, 1080);
+    ])
+}
+
+/// The benchmark's camera at `w × h` (40° vertical field of view, looking at the blob).
+fn blob_bench_camera(w: u32, h: u32) -> nerfx::camera::Camera {
+    use glam::DVec3;
+    use nerfx::camera::{Camera, Perspective, Projection};
     let p = Perspective::from_vertical_fov(w, h, 40.0).unwrap();
     let eye = DVec3::new(2.2, -1.6, 0.8);
-    let camera = Camera::new(
+    Camera::new(
         nerfx::demo::look_at(eye, DVec3::ZERO),
         Projection::Perspective(p),
     )
-    .unwrap();
+    .unwrap()
+}
+
+/// A 1920×1080 `Quality::Final` RGBA render of a surface-like snapshot (8×4 levels, fp16,
+/// 2^19-entry tables; three overlapping balls occupied, σ's output row scaled so rays
+/// terminate inside them): `cargo test --release --test ingp_snapshot -- --ignored
+/// --nocapture bench_render`. Timing is printed, never asserted.
+#[test]
+#[ignore]
+fn bench_render_1080p_final() {
+    use nerfx::render::{render_with_progress, Outputs, Quality, RenderSettings};
+    use std::time::Instant;
+
+    let dir = scratch("bench-render");
+    let scene = blob_bench_scene(&dir);
+    let (w, h) = (1920, 1080);
+    let camera = blob_bench_camera(w, h);
     let settings = RenderSettings::new(Quality::Final.params(), Outputs::rgba());
     let run = || {
         let (t, cpu) = (Instant::now(), process_cpu_seconds());
@@ -435,6 +449,61 @@ fn bench_render_1080p_final() {
         "per opaque pixel: {:.1} density, {:.1} colour samples",
         stats.density_samples as f64 / opaque as f64,
         stats.color_samples as f64 / opaque as f64
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The accuracy of that render: the same scene and view at 160×90, `Quality::Final` against
+/// `render_naive` at a quarter of Final's base step (no skipping, no early stop, no
+/// refinement): PSNR of the premultiplied RGB (peak 1) and the largest alpha error, with
+/// Final's samples per pixel. `cargo test --release --test ingp_snapshot -- --ignored
+/// --nocapture bench_render_final_accuracy`. Printed, never asserted.
+#[test]
+#[ignore]
+fn bench_render_final_accuracy() {
+    use nerfx::render::{render_naive, render_with_progress, Outputs, Quality, RenderSettings};
+
+    let dir = scratch("bench-accuracy");
+    let scene = blob_bench_scene(&dir);
+    let (w, h) = (160, 90);
+    let camera = blob_bench_camera(w, h);
+    let final_params = Quality::Final.params();
+    let field_step = scene.instances[0].field().feature_size() / final_params.steps_per_feature;
+    let settings = RenderSettings::new(final_params, Outputs::rgba());
+    let (got, stats) =
+        render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {}).unwrap();
+    // The instance's frame is the world's (identity): field units are world units.
+    let (want, _) = render_naive(
+        &scene,
+        &camera,
+        camera.full_window(),
+        field_step as f64 / 4.0,
+        &Outputs::rgba(),
+    )
+    .unwrap();
+    let n = (w * h) as usize;
+    let (ga, wa) = (got.alpha.unwrap(), want.alpha.unwrap());
+    let (gc, wc) = (got.rgb.unwrap(), want.rgb.unwrap());
+    let mut sq = 0.0f64;
+    for c in 0..3 {
+        for i in 0..n {
+            sq += f64::from(gc[c].data[i] - wc[c].data[i]).powi(2);
+        }
+    }
+    let psnr = -10.0 * (sq / (3 * n) as f64).log10();
+    let mut alpha_errs: Vec<f32> = (0..n).map(|i| (ga.data[i] - wa.data[i]).abs()).collect();
+    alpha_errs.sort_by(f32::total_cmp);
+    let alpha_err = alpha_errs[n - 1];
+    let over = |e: f32| alpha_errs.iter().filter(|&&x| x > e).count();
+    let mean_alpha = (0..n).map(|i| f64::from(wa.data[i])).sum::<f64>() / n as f64;
+    println!(
+        "{w}x{h} Final vs naive at step/4 (mean alpha {mean_alpha:.3}): PSNR {psnr:.1} dB, \
+         max |alpha error| {alpha_err:.2e} (pixels over 1e-2: {}, over 1e-3: {}); Final per \
+         pixel: {:.2} density, {:.2} colour samples",
+        over(1e-2),
+        over(1e-3),
+        stats.density_samples as f64 / n as f64,
+        stats.color_samples as f64 / n as f64
     );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -134,6 +134,12 @@ impl HashGridConfig {
             .collect()
     }
 
+    /// The finest level's scale `s_{L−1}` (cells per unit of the unit cube: a point maps
+    /// to `s·x + 0.5`), so its cells are `1/s` wide.
+    pub fn finest_scale(&self) -> f32 {
+        self.levels().last().map_or(1.0, |l| l.scale)
+    }
+
     /// Table entries over all levels (`Σ T_l`); the parameter count is this times `F`.
     pub fn n_entries(&self) -> usize {
         self.levels().iter().map(|l| l.entries as usize).sum()

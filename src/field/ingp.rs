@@ -700,6 +700,12 @@ impl Field for IngpField {
         3f32.sqrt() / 1024.0 / self.scale
     }
 
+    /// The finest hash-grid cell, `1/s_{L−1}` of the training box's side (instant-ngp
+    /// units), in field units (`/ scale`). The training box is a cube, so the cell is too.
+    fn smooth_length(&self) -> f32 {
+        self.aabb_size.min_element() / self.grid.config().finest_scale().max(1.0) / self.scale
+    }
+
     fn may_be_occupied(&self, region: &Aabb) -> bool {
         if region.is_empty() {
             return false;

@@ -85,6 +85,23 @@ pub trait Field: Send + Sync {
         self.bounds().diagonal() / 256.0
     }
 
+    /// The length (field units) below which the density, where it is non-zero, has no detail
+    /// of its own: between two points closer than this that both have density it is a
+    /// smooth interpolant. A trained field's is its finest hash-grid cell: the encoding is
+    /// trilinear inside a cell, and the networks after it are continuous, so nothing but
+    /// curvature lies between two samples of the same or neighbouring cells. Its only edges
+    /// are where an occupancy mask sets the density to zero.
+    ///
+    /// The marcher bisects a step whose ends disagree to find an edge inside it; a step
+    /// shorter than this whose ends both have density holds no edge, and bisecting it
+    /// would only refine the quadrature of a smooth curve, which the base step (a preset's
+    /// fraction of [`Field::feature_size`]) already sets. So such steps are not bisected for
+    /// their jump (steps with an empty end still are). 0 (the default): the density may
+    /// jump anywhere (analytic surfaces), every step is judged by its jump.
+    fn smooth_length(&self) -> f32 {
+        0.0
+    }
+
     /// Upper bounds of the density over each region (`bounds.len() == regions.len()`),
     /// where the field can give them cheaply; `false` (the default) when it cannot. The
     /// marcher uses them to find features thinner than a step between two samples (a dense

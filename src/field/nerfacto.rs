@@ -731,6 +731,17 @@ impl Field for NerfactoField {
         4.0 / 1024.0
     }
 
+    /// The finest hash-grid cell inside the unit ball, where the contraction is the identity
+    /// and the grid's unit side spans 4 field units: `4/s_{L−1}`. Outside it the contraction
+    /// stretches cells, so this is their shortest extent anywhere.
+    fn smooth_length(&self) -> f32 {
+        let finest = match &self.net {
+            Net::Tcnn { grid, .. } => grid.config().finest_scale(),
+            Net::Torch { grid, .. } => grid.finest_scale(),
+        };
+        4.0 / finest.max(1.0)
+    }
+
     fn may_be_occupied(&self, region: &Aabb) -> bool {
         if region.is_empty() {
             return false;

@@ -30,6 +30,11 @@ pub(crate) struct TorchHashGrid {
 }
 
 impl TorchHashGrid {
+    /// The finest level's scale (cells per unit of the unit cube).
+    pub(crate) fn finest_scale(&self) -> f32 {
+        self.scales.last().copied().unwrap_or(1.0)
+    }
+
     /// A grid of `n_levels` levels of `n_features` features, `2^log2_table_size` rows each,
     /// resolutions from `min_res` to `max_res`; `None` when `table` has the wrong length.
     pub(crate) fn new(

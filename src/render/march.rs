@@ -44,6 +44,8 @@ pub(super) struct InstancePlan {
     /// and where they start among a node's features (the instances' side by side).
     features: usize,
     feature_offset: usize,
+    /// The field's [`smooth_length`](crate::field::Field::smooth_length), field units.
+    smooth: f64,
 }
 
 impl InstancePlan {
@@ -61,6 +63,7 @@ impl InstancePlan {
                         / params.steps_per_feature.max(1e-3) as f64,
                     features,
                     feature_offset: feature_offset - features,
+                    smooth: inst.field().smooth_length().max(0.0) as f64,
                 }
             })
             .collect()
@@ -410,9 +413,9 @@ fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
 /// Bisects the steps whose two ends disagree (`|σ_b − σ_a|·δ` above the tolerance) or
 /// between whose ends the fields' density bound rises well above both (a sheet thinner than
 /// a step), level by level, each level one batch across the tile. After the first level only
-/// the pairs next to the nodes just added can need it, so only those are looked at.
+/// the pairs next to the nodes just added can need it, so only those are looked at. Steps
+/// that cannot hold an edge of a smooth field are not bisected for their jump.
 fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
-    let n_inst = plans.len();
     s.candidates.clear();
     for &r in &s.active {
         for i in 0..s.nodes[r as usize].len().saturating_sub(1) {
@@ -433,7 +436,7 @@ fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut S
                 }
             }
         }
-        split_candidates(scene, n_inst, params, s);
+        split_candidates(scene, plans, params, s);
         if s.pending.is_empty() {
             break;
         }
@@ -447,8 +450,10 @@ fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut S
 /// ray's transmittance (not by what lies behind: the piece's own weight and colour depend on
 /// what the step holds). Pairs that pass the cheap jump test ask the fields for a density
 /// bound over the step's box, one batch per instance.
-fn split_candidates(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut Scratch) {
+fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
+    let n_inst = plans.len();
     let tolerance = params.refine_tolerance as f64;
+    let any_smooth = plans.iter().any(|p| p.smooth > 0.0);
     s.pending.clear();
     s.unsure.clear();
     for &(r, i) in &s.candidates {
@@ -458,7 +463,8 @@ fn split_candidates(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut 
             continue;
         }
         let weight = (b.t - a.t) * s.rays[r as usize].pieces.transmittance();
-        if step_change(nodes, i as usize) * weight > tolerance {
+        let smooth = any_smooth && smooth_step(r as usize, a, b, plans, s);
+        if !smooth && step_change(nodes, i as usize) * weight > tolerance {
             s.pending.push(Pending {
                 ray: r,
                 t: 0.5 * (a.t + b.t),
@@ -515,6 +521,26 @@ fn split_candidates(scene: &Scene, n_inst: usize, params: &MarchParams, s: &mut 
             });
         }
     }
+}
+
+/// Whether the step from `a` to `b` on ray `r` can hold no edge: every instance with density
+/// at either end has it at both and is smooth over the step's length (see
+/// [`Field::smooth_length`](crate::field::Field::smooth_length)).
+fn smooth_step(r: usize, a: &Node, b: &Node, plans: &[InstancePlan], s: &Scratch) -> bool {
+    let n_inst = plans.len();
+    plans.iter().enumerate().all(|(i, plan)| {
+        let (sa, sb) = (
+            s.inst_sigma[a.slot as usize + i],
+            s.inst_sigma[b.slot as usize + i],
+        );
+        if sa == 0.0 && sb == 0.0 {
+            return true;
+        }
+        let Some(lr) = &s.local[r * n_inst + i] else {
+            return true;
+        };
+        sa > 0.0 && sb > 0.0 && (b.t - a.t) * lr.units_per_world as f64 <= plan.smooth
+    })
 }
 
 /// How much the density changes across the step from node `i` to `i + 1` in a way the

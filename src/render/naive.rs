@@ -1,5 +1,5 @@
 //! The baseline: a uniform-step marcher with no empty-space skipping, no early termination,
-//! no refinement, colour at every sample. The benchmark measures the real marcher against it.
+//! no refinement, colour at every sample with density. The benchmark measures the real marcher against it.
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -25,22 +25,21 @@ pub fn render_naive(
         return Err(Error::invalid("naive step", format!("{step} is not > 0")));
     }
     let window = camera.clamp_window(window)?;
-    let rows: Vec<(Window, Vec<PixelResult>, u64)> = (window.y0..window.y1)
+    let rows: Vec<(Window, Vec<PixelResult>, [u64; 2])> = (window.y0..window.y1)
         .into_par_iter()
         .map(|y| {
             let row = Window::new(window.x0, y, window.x1, y + 1);
-            let mut samples = 0;
+            let mut counts = [0; 2];
             let pixels = (row.x0..row.x1)
-                .map(|x| naive_pixel(scene, camera, x, y, step, outputs, &mut samples))
+                .map(|x| naive_pixel(scene, camera, x, y, step, outputs, &mut counts))
                 .collect();
-            (row, pixels, samples)
+            (row, pixels, counts)
         })
         .collect();
-    let samples: u64 = rows.iter().map(|r| r.2).sum();
     let stats = RenderStats {
         pixels: window.area() as u64,
-        density_samples: samples,
-        color_samples: if outputs.rgb { samples } else { 0 },
+        density_samples: rows.iter().map(|r| r.2[0]).sum(),
+        color_samples: rows.iter().map(|r| r.2[1]).sum(),
     };
     let rows: Vec<_> = rows.into_iter().map(|(w, px, _)| (w, px)).collect();
     Ok((assemble(window, &rows, outputs), stats))
@@ -53,8 +52,9 @@ fn naive_pixel(
     y: u32,
     step: f64,
     outputs: &Outputs,
-    samples: &mut u64,
+    counts: &mut [u64; 2],
 ) -> PixelResult {
+    let [samples, colours] = counts;
     let mut result = PixelResult {
         depth_ray: f32::INFINITY,
         depth_z: f32::INFINITY,
@@ -84,6 +84,7 @@ fn naive_pixel(
     let mut rgb = vec![DVec3::ZERO; n];
     let (mut points, mut dirs, mut idx) = (Vec::new(), Vec::new(), Vec::new());
     let (mut dens, mut cols) = (Vec::new(), Vec::new());
+    let (mut lit, mut lit_points) = (Vec::new(), Vec::new());
     for (inst, local) in scene.instances.iter().zip(&locals) {
         let Some(lr) = local else { continue };
         points.clear();
@@ -98,21 +99,28 @@ fn naive_pixel(
         dens.resize(points.len(), 0.0f32);
         inst.field().density(&points, &mut dens);
         *samples += points.len() as u64;
-        dirs.clear();
-        dirs.resize(points.len(), lr.dir);
-        cols.clear();
-        cols.resize(points.len(), Vec3::ZERO);
-        if outputs.rgb {
-            inst.field().radiance(&points, &dirs, &mut cols);
+        // Colour only where there is density: elsewhere it is weighed by zero.
+        lit.clear();
+        lit_points.clear();
+        for (k, (&j, &d)) in idx.iter().zip(&dens).enumerate() {
+            if d > 0.0 {
+                sigma[j] += d as f64 * lr.units_per_world as f64;
+                lit.push(k);
+                lit_points.push(points[k]);
+            }
         }
-        for ((&j, &d), c) in idx.iter().zip(&dens).zip(&cols) {
-            let s = if d > 0.0 {
-                d as f64 * lr.units_per_world as f64
-            } else {
-                0.0
-            };
-            sigma[j] += s;
-            rgb[j] += c.as_dvec3() * s;
+        if !outputs.rgb || lit.is_empty() {
+            continue;
+        }
+        dirs.clear();
+        dirs.resize(lit.len(), lr.dir);
+        cols.clear();
+        cols.resize(lit.len(), Vec3::ZERO);
+        inst.field().radiance(&lit_points, &dirs, &mut cols);
+        *colours += lit.len() as u64;
+        for (&k, c) in lit.iter().zip(&cols) {
+            let s = dens[k] as f64 * lr.units_per_world as f64;
+            rgb[idx[k]] += c.as_dvec3() * s;
         }
     }
     let mut pieces = Pieces::new();

@@ -154,3 +154,38 @@ fn an_anamorphic_shot_keeps_its_pixel_aspect_to_the_exr() {
     assert_eq!(meta.headers[0].shared_attributes.pixel_aspect, 2.0);
     assert_eq!(bundle.violations(), Vec::<String>::new());
 }
+
+/// The host's cost: the demo graph at 1280×720 through the release bundle against the same
+/// graph in process (`cargo test --release --test ofx_graph -- --ignored --nocapture`).
+#[test]
+#[ignore = "benchmark"]
+fn bench_graph_through_the_bundle() {
+    let dir = scratch_dir("bench");
+    let graph = Graph::read(&demo::write_graph(&dir, 1280, 720).unwrap()).unwrap();
+    let bundle = Bundle::load(&common_ofx::release_bundle()).unwrap();
+    let mut ofx = OfxGraph::new(graph.clone(), &bundle).unwrap();
+    let time = |f: &mut dyn FnMut()| {
+        (0..3)
+            .map(|_| {
+                let start = std::time::Instant::now();
+                f();
+                start.elapsed().as_secs_f64()
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    // Warm both caches (files are read once per process image: the plugin's and the test's).
+    ofx.render(1001.0, 1.0, false, &|_| {}).unwrap();
+    evaluate(&graph, 1001.0, 1.0, false, &mut render_direct, &|_| {}).unwrap();
+    let through = time(&mut || {
+        ofx.render(1001.0, 1.0, false, &|_| {}).unwrap();
+    });
+    let direct = time(&mut || {
+        evaluate(&graph, 1001.0, 1.0, false, &mut render_direct, &|_| {}).unwrap();
+    });
+    println!(
+        "demo graph 1280×720, 7 nodes, best of 3: through the bundle {:.3} s, in process {:.3} s ({:+.1} %)",
+        through,
+        direct,
+        100.0 * (through / direct - 1.0)
+    );
+}

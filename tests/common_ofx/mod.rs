@@ -8,21 +8,29 @@ use std::sync::OnceLock;
 /// README's build command, at the test profile) and returns its path.
 pub fn bundle() -> PathBuf {
     static BUNDLE: OnceLock<PathBuf> = OnceLock::new();
-    BUNDLE
-        .get_or_init(|| {
-            let root = env!("CARGO_MANIFEST_DIR");
-            let out = Command::new("bash")
-                .args([&format!("{root}/bundle/build.sh"), "--profile", "test"])
-                .env("CARGO", env!("CARGO"))
-                .current_dir(root)
-                .output()
-                .unwrap_or_else(|e| panic!("bundle/build.sh did not start: {e}"));
-            assert!(
-                out.status.success(),
-                "bundle/build.sh failed:\n{}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-            PathBuf::from(String::from_utf8_lossy(&out.stdout).trim())
-        })
-        .clone()
+    BUNDLE.get_or_init(|| build("test")).clone()
+}
+
+/// The bundle as shipped (release profile), for benchmarks; test binaries without one do not
+/// use it.
+#[allow(dead_code)]
+pub fn release_bundle() -> PathBuf {
+    build("release")
+}
+
+/// Runs `bundle/build.sh --profile <profile>` and returns the bundle's path.
+fn build(profile: &str) -> PathBuf {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let out = Command::new("bash")
+        .args([&format!("{root}/bundle/build.sh"), "--profile", profile])
+        .env("CARGO", env!("CARGO"))
+        .current_dir(root)
+        .output()
+        .unwrap_or_else(|e| panic!("bundle/build.sh did not start: {e}"));
+    assert!(
+        out.status.success(),
+        "bundle/build.sh failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    PathBuf::from(String::from_utf8_lossy(&out.stdout).trim())
 }

@@ -8,7 +8,9 @@
 //! y, then z); a cell is occupied where its value exceeds `min(0.01, mean of cascade 0)`.
 //! Instant-ngp marches only occupied cells, so the field's density is zero elsewhere.
 //!
-//! For region queries each cascade also keeps an OR pyramid (128³, 64³, …, 1³).
+//! For region queries each cascade also keeps an OR pyramid (128³, 64³, …, 1³). Cells are
+//! stored as bits (64 to a word): five cascades take 1.5 MB instead of 12 MB of `bool`s,
+//! so the marcher's per-sample occupancy test stays within the CPU's second-level cache.
 
 use glam::Vec3;
 
@@ -21,8 +23,28 @@ const MIN_THICKNESS: f32 = 0.01;
 #[derive(Clone, Debug)]
 pub(crate) struct Cascades {
     /// Per cascade, per pyramid level `m` (`GRID >> m` cells per axis, x fastest).
-    mips: Vec<Vec<Vec<bool>>>,
+    mips: Vec<Vec<Bits>>,
     occupied: u64,
+}
+
+/// A fixed-size set of cells: bit `i % 64` of word `i / 64`.
+#[derive(Clone, Debug)]
+struct Bits(Vec<u64>);
+
+impl Bits {
+    fn new(len: usize) -> Self {
+        Bits(vec![0; len.div_ceil(64)])
+    }
+
+    #[inline]
+    fn get(&self, i: usize) -> bool {
+        (self.0[i >> 6] >> (i & 63)) & 1 != 0
+    }
+
+    #[inline]
+    fn set(&mut self, i: usize) {
+        self.0[i >> 6] |= 1 << (i & 63);
+    }
 }
 
 /// Morton index (x in the lowest bit) of a cell of a 128³ grid.
@@ -44,13 +66,14 @@ impl Cascades {
         let mips = values
             .chunks_exact(n3)
             .map(|cascade| {
-                let mut base = vec![false; n3];
+                let mut base = Bits::new(n3);
                 for z in 0..GRID {
                     for y in 0..GRID {
                         for x in 0..GRID {
-                            let on = cascade[morton(x, y, z)] > threshold;
-                            base[(z * GRID + y) * GRID + x] = on;
-                            occupied += u64::from(on);
+                            if cascade[morton(x, y, z)] > threshold {
+                                base.set((z * GRID + y) * GRID + x);
+                                occupied += 1;
+                            }
                         }
                     }
                 }
@@ -92,7 +115,7 @@ impl Cascades {
     #[inline]
     pub(crate) fn occupied_at(&self, q: Vec3) -> bool {
         self.cell(q)
-            .is_some_and(|(c, [x, y, z])| self.mips[c][0][(z * GRID + y) * GRID + x])
+            .is_some_and(|(c, [x, y, z])| self.mips[c][0].get((z * GRID + y) * GRID + x))
     }
 
     /// Whether any point of the box `[lo, hi]` may lie in an occupied cell (conservative).
@@ -132,7 +155,7 @@ impl Cascades {
         for z in i0[2] >> m..=i1[2] >> m {
             for y in i0[1] >> m..=i1[1] >> m {
                 for x in i0[0] >> m..=i1[0] >> m {
-                    if level[(z * n + y) * n + x] {
+                    if level.get((z * n + y) * n + x) {
                         return true;
                     }
                 }
@@ -144,17 +167,17 @@ impl Cascades {
 
 /// The OR pyramid of a cubic grid of side `GRID`: level `m + 1` cell is occupied where any
 /// of its 8 children is.
-fn pyramid(base: Vec<bool>) -> Vec<Vec<bool>> {
+fn pyramid(base: Bits) -> Vec<Bits> {
     let mut levels = vec![base];
     let mut n = GRID;
     while n > 1 {
         let (prev, h) = (&levels[levels.len() - 1], n / 2);
-        let mut next = vec![false; h * h * h];
+        let mut next = Bits::new(h * h * h);
         for z in 0..n {
             for y in 0..n {
                 for x in 0..n {
-                    if prev[(z * n + y) * n + x] {
-                        next[((z / 2) * h + y / 2) * h + x / 2] = true;
+                    if prev.get((z * n + y) * n + x) {
+                        next.set(((z / 2) * h + y / 2) * h + x / 2);
                     }
                 }
             }
@@ -228,6 +251,17 @@ mod tests {
         assert!(!c.may_be_occupied(Vec3::splat(0.5), Vec3::splat(0.9)));
         // The cascade-1 cell is found from a box that reaches it.
         assert!(c.may_be_occupied(Vec3::new(1.4, -0.5, 0.4), Vec3::new(1.5, -0.4, 0.6)));
+    }
+
+    #[test]
+    fn bits_set_and_read_across_word_boundaries() {
+        let mut b = Bits::new(200);
+        assert_eq!(b.0.len(), 4);
+        for i in [0, 63, 64, 130, 199] {
+            b.set(i);
+        }
+        let on: Vec<usize> = (0..200).filter(|&i| b.get(i)).collect();
+        assert_eq!(on, [0, 63, 64, 130, 199]);
     }
 
     #[test]

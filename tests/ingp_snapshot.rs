@@ -179,7 +179,7 @@ fn along_rays(field: &IngpField, n_rays: usize, seed: u64) -> (Vec<Vec3>, Vec<Ve
 }
 
 /// Field throughput (2^19-entry tables, 8×4 and 16×2 levels, tables in f16 and in f32, one
-/// and two threads, samples scattered or along rays):
+/// and two threads, samples scattered or along rays; per CPU second where it can be read):
 /// `cargo test --release --test ingp_snapshot -- --ignored --nocapture bench_field`.
 #[test]
 #[ignore]
@@ -205,10 +205,13 @@ fn bench_field_throughput() {
                     let t = nerfx::bench::field::throughput(&f, pts, dirs, threads, 1.0).unwrap();
                     println!(
                         "{name} {storage:?} {what:10} ({:2.0}% occupied), {threads} thread(s): \
-                         density {:5.2} M/s, density + radiance {:5.2} M/s",
+                         density {:5.2}, density + radiance as renders (features) {:5.2}, \
+                         standalone density then radiance {:5.2} M samples per {} second",
                         100.0 * occupied / pts.len() as f64,
                         t.density / 1e6,
-                        t.density_radiance / 1e6
+                        t.shaded / 1e6,
+                        t.density_radiance / 1e6,
+                        if t.per_cpu_second { "CPU" } else { "wall" }
                     );
                 }
             }

@@ -1,9 +1,16 @@
 //! Field throughput: samples per second of a [`Field`]'s batched queries, as the marcher
 //! issues them (batches of [`BATCH`] points, one batch per task, on a pool of a given size).
 //!
-//! Two figures per run: `density` alone (what the marcher asks of every sample) and
-//! `density` followed by `radiance` on the same batch (the worst case: every sample also
-//! shaded). Both count the samples of the whole set, occupied or not.
+//! Three figures per run, each counting the samples of the whole set, occupied or not:
+//! `density` alone (what the marcher asks of every sample); the marcher's route for a
+//! sample that is also shaded, `density_with_features` then `radiance_with_features` (the
+//! colour query reuses the density pass's encoding and network outputs); and `density`
+//! then `radiance` (standalone queries: a trained field encodes each point twice).
+//!
+//! Rates are per second of the process's CPU time (user + system, all threads) where the
+//! system says it (Linux `/proc/self/stat`), else per second of wall time: on a machine
+//! shared with other work the CPU time is the steadier figure, and `threads` times the
+//! rate per CPU second is what that many uncontended cores would give.
 
 use std::time::Instant;
 
@@ -19,8 +26,12 @@ pub const BATCH: usize = 1024;
 /// Samples per second of one configuration.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Throughput {
+    /// Whether the rates are per CPU second (else per wall second).
+    pub per_cpu_second: bool,
     /// `density` alone.
     pub density: f64,
+    /// `density_with_features` then `radiance_with_features` on each batch (as renders).
+    pub shaded: f64,
     /// `density` then `radiance` on each batch.
     pub density_radiance: f64,
 }
@@ -45,36 +56,80 @@ pub fn throughput<F: Field>(
         .num_threads(threads.max(1))
         .build()
         .map_err(|e| Error::invalid("field benchmark threads", e.to_string()))?;
-    let rate = |shade: bool| {
+    let stride = field.feature_count();
+    let rate = |route: Route| {
         let pass = || {
             pool.install(|| {
                 points
                     .par_chunks(BATCH)
                     .zip(dirs.par_chunks(BATCH))
                     .for_each_init(
-                        || (vec![0.0f32; BATCH], vec![Vec3::ZERO; BATCH]),
-                        |(sigma, rgb), (p, d)| {
-                            field.density(p, &mut sigma[..p.len()]);
-                            if shade {
-                                field.radiance(p, d, &mut rgb[..p.len()]);
+                        || {
+                            (
+                                vec![0.0f32; BATCH],
+                                vec![Vec3::ZERO; BATCH],
+                                vec![0.0f32; BATCH * stride],
+                            )
+                        },
+                        |(sigma, rgb, features), (p, d)| {
+                            let (sigma, rgb) = (&mut sigma[..p.len()], &mut rgb[..p.len()]);
+                            match route {
+                                Route::Density => field.density(p, sigma),
+                                Route::Shaded => {
+                                    let f = &mut features[..p.len() * stride];
+                                    field.density_with_features(p, sigma, f);
+                                    field.radiance_with_features(p, d, f, rgb);
+                                }
+                                Route::Twice => {
+                                    field.density(p, sigma);
+                                    field.radiance(p, d, rgb);
+                                }
                             }
                         },
                     )
             })
         };
         pass();
-        let t = Instant::now();
+        let (t, cpu) = (Instant::now(), process_cpu_seconds());
         let mut n = 0usize;
         while n == 0 || t.elapsed().as_secs_f64() < seconds {
             pass();
             n += points.len();
         }
-        n as f64 / t.elapsed().as_secs_f64()
+        let cpu = cpu.zip(process_cpu_seconds()).map(|(a, b)| b - a);
+        match cpu {
+            Some(c) if c > 0.0 => n as f64 / c,
+            _ => n as f64 / t.elapsed().as_secs_f64(),
+        }
     };
+    let per_cpu_second = process_cpu_seconds().is_some();
     Ok(Throughput {
-        density: rate(false),
-        density_radiance: rate(true),
+        per_cpu_second,
+        density: rate(Route::Density),
+        shaded: rate(Route::Shaded),
+        density_radiance: rate(Route::Twice),
     })
+}
+
+/// User + system CPU time of this process so far, all threads (Linux `/proc/self/stat`, in
+/// the kernel's fixed 100 Hz `USER_HZ` ticks); `None` where that file is not there.
+fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // After the command name (which ends at the last ')'), utime and stime are the 12th
+    // and 13th fields (14 and 15 of the whole line).
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let mut fields = rest.split_whitespace().skip(11);
+    let user: u64 = fields.next()?.parse().ok()?;
+    let system: u64 = fields.next()?.parse().ok()?;
+    Some((user + system) as f64 / 100.0)
+}
+
+/// Which queries one benchmark pass makes.
+#[derive(Clone, Copy)]
+enum Route {
+    Density,
+    Shaded,
+    Twice,
 }
 
 #[cfg(test)]
@@ -96,7 +151,7 @@ mod tests {
         };
         let pts = vec![Vec3::ZERO; 3000];
         let t = throughput(&f, &pts, &pts, 1, 0.0).unwrap();
-        assert!(t.density > 0.0 && t.density_radiance > 0.0);
+        assert!(t.density > 0.0 && t.shaded > 0.0 && t.density_radiance > 0.0);
         assert!(throughput(&f, &pts, &pts[..10], 1, 0.0).is_err());
         assert!(throughput(&f, &[], &[], 1, 0.0).is_err());
     }

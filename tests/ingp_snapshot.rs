@@ -92,6 +92,25 @@ fn bounds_follow_the_dataset_transform() {
 }
 
 #[test]
+fn smooth_length_is_the_finest_grid_cell_in_field_units() {
+    // 8 levels from N_min 16 to 2048·aabb_scale (aabb_scale 2): the finest level's scale is
+    // 16·(4096/16)^(7/7) − 1 = 4095 cells across the training box's side of 2 instant-ngp
+    // units, which are 1/0.33 field units each.
+    let spec = Spec::small_8x4();
+    assert_eq!(
+        (spec.n_levels, spec.base_resolution, spec.aabb_scale),
+        (8, 16, 2)
+    );
+    assert_eq!(spec.scale, 0.33);
+    let dir = scratch("smooth-length");
+    let field = IngpField::load(&write_snapshot(&dir, "s", &spec)).unwrap();
+    let want = 2.0 / 4095.0 / 0.33;
+    let got = field.smooth_length();
+    assert!((got / want - 1.0).abs() < 1e-4, "{got} vs {want}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn occupancy_is_conservative_where_the_field_has_density() {
     let dir = scratch("occ");
     let path = write_snapshot(&dir, "o", &Spec::small_8x4());

@@ -225,12 +225,14 @@ fn bench_field_throughput() {
                     println!(
                         "{name} {storage:?} {what:10} ({:2.0}% occupied), {threads} thread(s): \
                          density {:5.2}, density + radiance as renders (features) {:5.2}, \
-                         standalone density then radiance {:5.2} M samples per {} second",
+                         standalone density then radiance {:5.2} M samples per {} second; \
+                         as renders {:5.2} M samples per wall second",
                         100.0 * occupied / pts.len() as f64,
                         t.density / 1e6,
                         t.shaded / 1e6,
                         t.density_radiance / 1e6,
-                        if t.per_cpu_second { "CPU" } else { "wall" }
+                        if t.per_cpu_second { "CPU" } else { "wall" },
+                        t.shaded_wall / 1e6
                     );
                 }
             }

@@ -34,6 +34,9 @@ pub struct Throughput {
     pub shaded: f64,
     /// `density` then `radiance` on each batch.
     pub density_radiance: f64,
+    /// The `shaded` route per second of wall time, all threads together: what the
+    /// machine delivered (on a quiet machine, `threads` cores' worth).
+    pub shaded_wall: f64,
 }
 
 /// Measures `field` on `points` (and `dirs`, one per point) with `threads` workers, running
@@ -96,18 +99,21 @@ pub fn throughput<F: Field>(
             pass();
             n += points.len();
         }
+        let wall = n as f64 / t.elapsed().as_secs_f64();
         let cpu = cpu.zip(process_cpu_seconds()).map(|(a, b)| b - a);
         match cpu {
-            Some(c) if c > 0.0 => n as f64 / c,
-            _ => n as f64 / t.elapsed().as_secs_f64(),
+            Some(c) if c > 0.0 => (n as f64 / c, wall),
+            _ => (wall, wall),
         }
     };
     let per_cpu_second = process_cpu_seconds().is_some();
+    let (shaded, shaded_wall) = rate(Route::Shaded);
     Ok(Throughput {
         per_cpu_second,
-        density: rate(Route::Density),
-        shaded: rate(Route::Shaded),
-        density_radiance: rate(Route::Twice),
+        density: rate(Route::Density).0,
+        shaded,
+        density_radiance: rate(Route::Twice).0,
+        shaded_wall,
     })
 }
 

@@ -29,6 +29,7 @@ use rmpv::Value;
 
 use super::cascades::Cascades;
 use super::hashgrid::correctly_rounded;
+use super::srgb::srgb_to_linear;
 use super::{sh4, Aabb, Field, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage};
 use crate::error::{Error, Result};
 
@@ -571,16 +572,6 @@ fn render_aabb(doc: &Doc, snap: &Value) -> Result<Option<(Vec3, Vec3)>> {
         "snapshot.render_aabb.max",
     )?;
     Ok(Some((lo, hi)))
-}
-
-/// sRGB-encoded value to linear.
-#[inline]
-fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
 }
 
 /// Scratch of [`IngpField::colour`].

@@ -17,6 +17,7 @@ mod nerfacto_torch;
 mod occupancy;
 mod sh;
 mod sh4;
+mod srgb;
 mod torch_ckpt;
 mod zip;
 

@@ -43,6 +43,7 @@ use half::f16;
 
 use super::nerfacto_config::RunSettings;
 use super::nerfacto_torch::{torch_sh4, BiasedMlp, TorchHashGrid};
+use super::srgb::srgb_to_linear;
 use super::torch_ckpt::{Checkpoint, DType};
 use super::{sh4, Aabb, Field, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage};
 use crate::camera::DataparserTransform;
@@ -661,16 +662,6 @@ fn read_linear_layers(
         )
     })?;
     Ok((mlp, count))
-}
-
-/// sRGB-encoded value to linear.
-#[inline]
-fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
 }
 
 impl Field for NerfactoField {

@@ -70,29 +70,63 @@ pub struct HashGrid {
     tables: Tables,
 }
 
+#[cfg(target_arch = "x86_64")]
+use simd::Load as FeatureLoad;
+
+/// What the vector blend needs of a table type (nothing off x86-64).
+#[cfg(not(target_arch = "x86_64"))]
+trait FeatureLoad {}
+#[cfg(not(target_arch = "x86_64"))]
+impl FeatureLoad for f16 {}
+#[cfg(not(target_arch = "x86_64"))]
+impl FeatureLoad for f32 {}
+
 /// A table value that can be widened to f32.
-trait Feature: Copy + Default {
-    /// The `N ≤ 8` values of one entry, widened (exactly); `F16C`: with the x86 F16C
-    /// instructions (only instantiated from code compiled for, and run on, CPUs with them).
-    fn widen<const N: usize, const F16C: bool>(e: &[Self; N]) -> [f32; N];
+trait Feature: Copy + Default + FeatureLoad {
+    /// The `N ≤ 8` values of one entry, widened (exactly).
+    fn widen<const N: usize>(e: &[Self; N]) -> [f32; N];
+
+    /// `out[f] = Σ_k w_k·e_k[f]` over the 8 corners (entries `ix` of `table`, `N` values
+    /// each), left to right from zero, each product rounded then added: the same bits
+    /// whichever way it runs. `AVX`: with one vector of features per corner, loaded and
+    /// (f16) widened by the F16C instructions straight from the table (only instantiated
+    /// from code compiled for, and run on, CPUs with AVX2 and F16C).
+    #[inline(always)]
+    fn blend<const N: usize, const AVX: bool>(
+        table: &[Self],
+        ix: &[u32],
+        w: &[f32],
+        out: &mut [f32],
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: `AVX` is set only under `HashGrid::encode_avx2`, which runs where the
+            // CPU has AVX2 and F16C.
+            return unsafe { simd::blend::<Self, N>(table, ix, w, out) };
+        }
+        let mut acc = [0.0f32; N];
+        for (&wc, &i) in w.iter().zip(ix) {
+            let e: &[Self; N] = table[i as usize * N..][..N]
+                .try_into()
+                .expect("a slice of N values");
+            for (a, f) in acc.iter_mut().zip(Self::widen::<N>(e)) {
+                *a += wc * f;
+            }
+        }
+        out[..N].copy_from_slice(&acc);
+    }
 }
 
 impl Feature for f16 {
     #[inline(always)]
-    fn widen<const N: usize, const F16C: bool>(e: &[Self; N]) -> [f32; N] {
-        #[cfg(target_arch = "x86_64")]
-        if F16C {
-            // SAFETY: `F16C` is set only under `HashGrid::encode_avx2`, which runs where
-            // the CPU has AVX2 and F16C.
-            return unsafe { simd::widen_f16c(e) };
-        }
+    fn widen<const N: usize>(e: &[Self; N]) -> [f32; N] {
         e.map(f16::to_f32)
     }
 }
 
 impl Feature for f32 {
     #[inline(always)]
-    fn widen<const N: usize, const F16C: bool>(e: &[Self; N]) -> [f32; N] {
+    fn widen<const N: usize>(e: &[Self; N]) -> [f32; N] {
         *e
     }
 }
@@ -239,10 +273,13 @@ impl HashGrid {
         }
     }
 
-    /// Level by level over the whole batch: the 8 corners' indices and weights first, each
-    /// entry prefetched as soon as its index is known (x86-64) so the cache misses overlap,
-    /// then per point the blend of the 8 entries, corner after corner (the same sums as one
-    /// point at a time: `f = Σ_k w_k·e_k` left to right, each product rounded).
+    /// Level by level over the whole batch, in blocks of [`BLOCK`] points: a block's 8
+    /// corners' indices and weights, each entry prefetched as soon as its index is known
+    /// (x86-64) so the cache misses overlap, [`AHEAD`] blocks before that block's blend of
+    /// the 8 entries, corner after corner (the same sums as one point at a time:
+    /// `f = Σ_k w_k·e_k` left to right, each product rounded). Prefetching a whole level of
+    /// the batch first (4096 lines for 512 points) overflowed the 32 KiB first-level cache
+    /// before the blend came to them.
     #[inline(always)]
     fn encode_with<T: Feature, const NF: usize, const F16C: bool>(
         &self,
@@ -255,39 +292,49 @@ impl HashGrid {
         let n = xs.len();
         let mut index = vec![0u32; n * 8];
         let mut weight = vec![0.0f32; n * 8];
+        let blocks = n.div_ceil(BLOCK);
         for (l, level) in self.levels.iter().enumerate() {
             let t = &table[level.offset * NF..(level.offset + level.entries as usize) * NF];
-            let corners = index.chunks_exact_mut(8).zip(weight.chunks_exact_mut(8));
-            if level.dense {
-                for (x, (ix, wx)) in xs.iter().zip(corners) {
-                    level.corners::<true>(*x, ix, wx);
-                    prefetch(t, NF, ix);
-                }
-            } else {
-                for (x, (ix, wx)) in xs.iter().zip(corners) {
-                    level.corners::<false>(*x, ix, wx);
-                    prefetch(t, NF, ix);
-                }
-            }
-            for ((row, w), ix) in out
-                .chunks_exact_mut(width)
-                .zip(weight.chunks_exact(8))
-                .zip(index.chunks_exact(8))
-            {
-                let mut acc = [0.0f32; NF];
-                for (&wc, &i) in w.iter().zip(ix) {
-                    let e: &[T; NF] = t[i as usize * NF..][..NF]
-                        .try_into()
-                        .expect("a slice of NF values");
-                    for (a, f) in acc.iter_mut().zip(T::widen::<NF, F16C>(e)) {
-                        *a += wc * f;
+            // Block `b`'s corners (and prefetches) are laid `AHEAD` blocks before its blend.
+            for b in 0..blocks + AHEAD {
+                if b < blocks {
+                    let r = b * BLOCK..(n.min((b + 1) * BLOCK));
+                    let corners = index[r.start * 8..r.end * 8]
+                        .chunks_exact_mut(8)
+                        .zip(weight[r.start * 8..r.end * 8].chunks_exact_mut(8));
+                    if level.dense {
+                        for (x, (ix, wx)) in xs[r.clone()].iter().zip(corners) {
+                            level.corners::<true>(*x, ix, wx);
+                            prefetch(t, NF, ix);
+                        }
+                    } else {
+                        for (x, (ix, wx)) in xs[r.clone()].iter().zip(corners) {
+                            level.corners::<false>(*x, ix, wx);
+                            prefetch(t, NF, ix);
+                        }
                     }
                 }
-                row[l * NF..(l + 1) * NF].copy_from_slice(&acc);
+                if b >= AHEAD {
+                    let a = b - AHEAD;
+                    let r = a * BLOCK..(n.min((a + 1) * BLOCK));
+                    for ((row, w), ix) in out[r.start * width..r.end * width]
+                        .chunks_exact_mut(width)
+                        .zip(weight[r.start * 8..r.end * 8].chunks_exact(8))
+                        .zip(index[r.start * 8..r.end * 8].chunks_exact(8))
+                    {
+                        T::blend::<NF, F16C>(t, ix, w, &mut row[l * NF..(l + 1) * NF]);
+                    }
+                }
             }
         }
     }
 }
+
+/// Points whose corners are located (and their entries prefetched) together.
+const BLOCK: usize = 8;
+/// How many blocks ahead of the blend the corners are located: far enough for the entries
+/// to arrive, near enough for them to still be in the first-level cache.
+const AHEAD: usize = 4;
 
 /// The values of `values` in a vector whose memory the kernel is asked, before it is first
 /// touched, to back with 2 MiB pages where it can (Linux transparent huge pages in `madvise`
@@ -406,22 +453,81 @@ mod simd {
         is_x86_feature_detected!("avx2") && is_x86_feature_detected!("f16c")
     }
 
-    /// `N ≤ 8` half-precision values widened by one F16C conversion (exact, as
-    /// [`f16::to_f32`]).
+    /// A table type whose entries the vector blend loads.
+    pub(super) trait Load: Copy {
+        /// The `N ≤ 8` values at `p` as f32 lanes `0..N` of a vector (lanes past `N`
+        /// unspecified, never read back); f16 widened exactly by F16C.
+        ///
+        /// # Safety
+        /// `p` must point at `N` readable values; the CPU must have AVX2 and F16C.
+        unsafe fn load<const N: usize>(p: *const Self) -> __m256;
+    }
+
+    impl Load for f16 {
+        #[inline(always)]
+        unsafe fn load<const N: usize>(p: *const Self) -> __m256 {
+            // SAFETY: the caller's; each load reads exactly `N` values (2·N bytes).
+            unsafe {
+                let bits = match N {
+                    1 => _mm_cvtsi32_si128(i32::from(p.cast::<u16>().read_unaligned())),
+                    2 => _mm_cvtsi32_si128(p.cast::<i32>().read_unaligned()),
+                    4 => _mm_loadl_epi64(p.cast()),
+                    _ => _mm_loadu_si128(p.cast()),
+                };
+                _mm256_cvtph_ps(bits)
+            }
+        }
+    }
+
+    impl Load for f32 {
+        #[inline(always)]
+        unsafe fn load<const N: usize>(p: *const Self) -> __m256 {
+            // SAFETY: the caller's; each load reads exactly `N` values (4·N bytes).
+            unsafe {
+                match N {
+                    1 => _mm256_castps128_ps256(_mm_load_ss(p)),
+                    2 => _mm256_castps128_ps256(_mm_castsi128_ps(_mm_loadl_epi64(p.cast()))),
+                    4 => _mm256_castps128_ps256(_mm_loadu_ps(p)),
+                    _ => _mm256_loadu_ps(p),
+                }
+            }
+        }
+    }
+
+    /// [`super::Feature::blend`] with one vector per corner: lane `f` gets
+    /// `acc + w_k·e_k[f]` (a multiply then an add, never fused), corner after corner, so
+    /// every lane rounds exactly as the scalar sum does.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and F16C.
     #[inline]
     #[target_feature(enable = "avx2,f16c")]
-    pub(super) fn widen_f16c<const N: usize>(e: &[f16; N]) -> [f32; N] {
-        let mut bits = [0u16; 8];
-        for (b, v) in bits.iter_mut().zip(e) {
-            *b = v.to_bits();
+    pub(super) unsafe fn blend<T: Load, const N: usize>(
+        table: &[T],
+        ix: &[u32],
+        w: &[f32],
+        out: &mut [f32],
+    ) {
+        let mut acc = _mm256_setzero_ps();
+        for (&wc, &i) in w.iter().zip(ix) {
+            let e = &table[i as usize * N..][..N];
+            // SAFETY: `e` holds `N` values.
+            let v = unsafe { T::load::<N>(e.as_ptr()) };
+            acc = _mm256_add_ps(acc, _mm256_mul_ps(_mm256_set1_ps(wc), v));
         }
-        let mut wide = [0.0f32; 8];
-        // SAFETY: `bits` holds 16 bytes and `wide` 32.
+        let out = &mut out[..N];
+        // SAFETY: each store writes exactly `N` floats of `out`.
         unsafe {
-            let v = _mm256_cvtph_ps(_mm_loadu_si128(bits.as_ptr().cast()));
-            _mm256_storeu_ps(wide.as_mut_ptr(), v);
+            match N {
+                1 => _mm_store_ss(out.as_mut_ptr(), _mm256_castps256_ps128(acc)),
+                2 => _mm_storel_epi64(
+                    out.as_mut_ptr().cast(),
+                    _mm_castps_si128(_mm256_castps256_ps128(acc)),
+                ),
+                4 => _mm_storeu_ps(out.as_mut_ptr(), _mm256_castps256_ps128(acc)),
+                _ => _mm256_storeu_ps(out.as_mut_ptr(), acc),
+            }
         }
-        std::array::from_fn(|i| wide[i])
     }
 }
 

@@ -47,6 +47,13 @@ impl Bits {
     }
 }
 
+/// `2^e` exactly for `−127 < e < 128` (built from its exponent bits: no `exp2` call per
+/// sample); infinity above, zero below (only a file with over a hundred cascades gets there).
+#[inline]
+fn pow2(e: i32) -> f32 {
+    f32::from_bits(((e.clamp(-127, 128) + 127) as u32) << 23)
+}
+
 /// Morton index (x in the lowest bit) of a cell of a 128³ grid.
 fn morton(x: usize, y: usize, z: usize) -> usize {
     let spread = |v: usize| (0..7).fold(0, |acc, k| acc | ((v >> k) & 1) << (3 * k));
@@ -95,7 +102,7 @@ impl Cascades {
 
     /// Half the width of cascade `c`: `2^(c−1)`.
     fn half_width(c: usize) -> f32 {
-        (c as f32 - 1.0).exp2()
+        pow2(c as i32 - 1)
     }
 
     /// The cascade and cell of `q`, or `None` beyond the largest cascade.
@@ -103,11 +110,11 @@ impl Cascades {
     pub(crate) fn cell(&self, q: Vec3) -> Option<(usize, [usize; 3])> {
         let m = (q - Vec3::splat(0.5)).abs().max_element();
         let c = (0..self.count()).find(|&c| m < Self::half_width(c))?;
-        let inv = (-(c as f32)).exp2();
+        let inv = pow2(-(c as i32));
         let u = ((q - Vec3::splat(0.5)) * inv + Vec3::splat(0.5)) * GRID as f32;
-        let idx = u
-            .to_array()
-            .map(|v| (v.floor().max(0.0) as usize).min(GRID - 1));
+        // `⌊v⌋` clamped to the grid: a float-to-integer cast truncates toward zero and
+        // saturates (NaN and negatives to 0), which for the clamped result is the same.
+        let idx = u.to_array().map(|v| (v as usize).min(GRID - 1));
         Some((c, idx))
     }
 
@@ -262,6 +269,20 @@ mod tests {
         }
         let on: Vec<usize> = (0..200).filter(|&i| b.get(i)).collect();
         assert_eq!(on, [0, 63, 64, 130, 199]);
+    }
+
+    #[test]
+    fn powers_of_two_are_exact() {
+        for (e, v) in [
+            (-5, 0.03125f32),
+            (-1, 0.5),
+            (0, 1.0),
+            (1, 2.0),
+            (4, 16.0),
+            (200, f32::INFINITY),
+        ] {
+            assert_eq!(pow2(e), v);
+        }
     }
 
     #[test]

@@ -189,3 +189,30 @@ fn bench_graph_through_the_bundle() {
         100.0 * (through / direct - 1.0)
     );
 }
+
+#[test]
+fn without_frames_the_graph_renders_its_shot_range() {
+    let dir = scratch_dir("range");
+    let comp = demo::write_graph(&dir, 12, 8).unwrap();
+    let pattern = dir.join("all/c.####.exr");
+    let run = Command::new(env!("CARGO_BIN_EXE_nerfx"))
+        .args(["render", &comp.to_string_lossy()])
+        .args(["-o", &pattern.to_string_lossy()])
+        .args(["--bundle", &common_ofx::bundle().to_string_lossy()])
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let mut written: Vec<String> = std::fs::read_dir(dir.join("all"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    written.sort();
+    let expected: Vec<String> = (demo::FIRST_FRAME..demo::FIRST_FRAME + demo::FRAMES)
+        .map(|f| format!("c.{f}.exr"))
+        .collect();
+    assert_eq!(written, expected);
+}

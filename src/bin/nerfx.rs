@@ -57,9 +57,10 @@ enum Command {
         /// With a nerfstudio camera path: the scene's object the path's frame belongs to.
         #[arg(long, default_value = "NeRF")]
         nerf_object: String,
-        /// Frames: `1001-1010`, `1001-1100x5`, `1,5,9`.
+        /// Frames: `1001-1010`, `1001-1100x5`, `1,5,9`. Default: every frame of the shot (for a
+        /// graph: the frames every NeRF Render it needs can make).
         #[arg(long)]
-        frames: String,
+        frames: Option<String>,
         /// Output EXR pattern; `####` becomes the zero-padded frame number.
         #[arg(short, long, default_value = "out/render.####.exr")]
         output: PathBuf,
@@ -153,12 +154,13 @@ fn run(cli: Cli) -> Result<()> {
             bundle,
             scale,
         } => {
-            let frames = parse_frames(&frames)?;
+            let frames = frames.as_deref().map(parse_frames).transpose()?;
             let Some(shot) = shot else {
-                return graph::render(&scene, &frames, &output, png, bundle, scale);
+                return graph::render(&scene, frames, &output, png, bundle, scale);
             };
             let scene = SceneDesc::read(&scene)?.load()?;
             let shot = read_shot(&shot, &nerf_object)?;
+            let frames = frames.unwrap_or_else(|| shot.frames.iter().map(|f| f.frame).collect());
             let settings = RenderSettings::new(quality.params(), Outputs::all());
             let bar = progress_bar(frames.len() as u64, "frames");
             for &frame in &frames {
@@ -251,7 +253,7 @@ mod graph {
     /// `layer.R …`, through the bundle's plugins.
     pub fn render(
         path: &Path,
-        frames: &[i64],
+        frames: Option<Vec<i64>>,
         output: &Path,
         png: bool,
         bundle: Option<PathBuf>,
@@ -260,6 +262,19 @@ mod graph {
         let graph = Graph::read(path)?;
         let nodes = graph.needed().iter().filter(|&&n| n).count();
         let mut graph = OfxGraph::new(graph, &load_bundle(bundle)?)?;
+        let frames = match frames {
+            Some(frames) => frames,
+            None => match graph.time_domain()? {
+                Some((first, last)) => (first.ceil() as i64..=last.floor() as i64).collect(),
+                None => {
+                    return Err(Error::invalid(
+                        format!("{}", path.display()),
+                        "no node of the graph has a frame range of its own: give --frames",
+                    ))
+                }
+            },
+        };
+        let frames = frames.as_slice();
         let (first, last) = match (frames.iter().min(), frames.iter().max()) {
             (Some(&a), Some(&b)) => (a as f64, b as f64),
             _ => return Ok(()),
@@ -306,7 +321,7 @@ mod graph {
 
     pub fn render(
         path: &Path,
-        _: &[i64],
+        _: Option<Vec<i64>>,
         _: &Path,
         _: bool,
         _: Option<PathBuf>,

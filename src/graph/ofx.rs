@@ -85,6 +85,30 @@ impl OfxGraph {
         1.0
     }
 
+    /// The frames every needed node with a frame range of its own can make (the
+    /// intersection of their time domains), or `None` when no node has one.
+    pub fn time_domain(&self) -> Result<Option<(f64, f64)>> {
+        let mut range: Option<(f64, f64)> = None;
+        for (node, needed) in self.graph.nodes.iter().zip(self.graph.needed()) {
+            let Some(instance) = self.instances.get(&node.name).filter(|_| needed) else {
+                continue;
+            };
+            if let Some((a, b)) = instance.time_domain()? {
+                range = Some(match range {
+                    Some((first, last)) => (first.max(a), last.min(b)),
+                    None => (a, b),
+                });
+            }
+        }
+        match range {
+            Some((first, last)) if first > last => Err(Error::invalid(
+                "graph frame range",
+                format!("the nodes' frame ranges do not overlap ({first}..{last})"),
+            )),
+            other => Ok(other),
+        }
+    }
+
     /// Tells every instance a sequence of frames `first..=last` is about to render (plugins
     /// may load what the whole range needs once).
     pub fn begin_sequence(&self, first: f64, last: f64, render_scale: f64) -> Result<()> {

@@ -21,8 +21,8 @@
 //!
 //! The suites: property, image effect, parameter (values constant over time), memory,
 //! multithread (real threads, recursive mutexes), message V1/V2 (as [`HostOptions`] offers)
-//! and progress V1/V2. The
-//! C-variadic functions are in `param_shim.c`, forwarding to typed Rust callbacks.
+//! and progress V1/V2. The C-variadic functions are in `param_shim.c`, forwarding to typed
+//! Rust callbacks.
 //!
 //! ```no_run
 //! use nerfx::graph::{Context, Value};
@@ -30,7 +30,8 @@
 //! use nerfx::image::Window;
 //! let bundle = Bundle::load("target/release/nerfx.ofx.bundle".as_ref()).unwrap();
 //! let mut node = bundle.instance("org.nerfx.NeRFRender", Context::Generator).unwrap();
-//! node.set_param("fieldFile", &Value::Text("scene.json".into())).unwrap();
+//! node.set_param("file", &Value::Text("scene.json".into())).unwrap();
+//! node.set_param("shot", &Value::Text("shot.json".into())).unwrap();
 //! let planes = node.render(1001.0, Window::new(0, 0, 64, 64), 1.0, false).unwrap();
 //! assert!(bundle.violations().is_empty());
 //! # let _ = planes;

@@ -281,36 +281,51 @@ mod graph {
         };
         graph.begin_sequence(first, last, scale)?;
         let bar = progress_bar((frames.len() * nodes) as u64, "nodes");
-        for &frame in frames {
-            let target = frame_path(output, frame, frames.len() > 1);
-            if let Some(dir) = target.parent() {
-                create_dir(dir)?;
-            }
-            let images = graph.render(frame as f64, scale, false, &|node| {
-                bar.set_message(format!("frame {frame} {node}"));
-                bar.inc(1);
-            })?;
-            let image = |name: &str| {
-                images
-                    .get(name)
-                    .ok_or_else(|| Error::invalid(format!("graph node {name}"), "was not rendered"))
-            };
-            let main = image(&graph.graph().output)?;
-            let layers = graph
-                .graph()
-                .layers
-                .iter()
-                .map(|(layer, node)| Ok((layer.as_str(), image(node)?)))
-                .collect::<Result<Vec<_>>>()?;
-            let pixel_aspect = graph.pixel_aspect(&graph.graph().output);
-            write_exr_layers(&target, main, &layers, pixel_aspect)?;
-            if png {
-                write_png_preview(&target.with_extension("png"), main)?;
-            }
-            bar.suspend(|| println!("frame {frame} → {}", target.display()));
-        }
+        // The sequence is ended on every path, a failed frame included.
+        let target = |frame| frame_path(output, frame, frames.len() > 1);
+        let rendered = frames.iter().try_for_each(|&frame| {
+            render_frame(&mut graph, frame, &target(frame), png, scale, &bar)
+        });
         bar.finish_and_clear();
-        graph.end_sequence(first, last, scale)
+        let ended = graph.end_sequence(first, last, scale);
+        rendered.and(ended)
+    }
+
+    /// One frame of the graph written to `target`.
+    fn render_frame(
+        graph: &mut OfxGraph,
+        frame: i64,
+        target: &Path,
+        png: bool,
+        scale: f64,
+        bar: &ProgressBar,
+    ) -> Result<()> {
+        if let Some(dir) = target.parent() {
+            create_dir(dir)?;
+        }
+        let images = graph.render(frame as f64, scale, false, &|node| {
+            bar.set_message(format!("frame {frame} {node}"));
+            bar.inc(1);
+        })?;
+        let image = |name: &str| {
+            images
+                .get(name)
+                .ok_or_else(|| Error::invalid(format!("graph node {name}"), "was not rendered"))
+        };
+        let main = image(&graph.graph().output)?;
+        let layers = graph
+            .graph()
+            .layers
+            .iter()
+            .map(|(layer, node)| Ok((layer.as_str(), image(node)?)))
+            .collect::<Result<Vec<_>>>()?;
+        let pixel_aspect = graph.pixel_aspect(&graph.graph().output);
+        write_exr_layers(target, main, &layers, pixel_aspect)?;
+        if png {
+            write_png_preview(&target.with_extension("png"), main)?;
+        }
+        bar.suspend(|| println!("frame {frame} → {}", target.display()));
+        Ok(())
     }
 }
 

@@ -71,6 +71,14 @@ impl Graph {
                 e.to_string(),
             )
         })?;
+        if let Some(map) = json.as_object() {
+            if let Some(key) = map
+                .keys()
+                .find(|k| !["nodes", "output", "layers"].contains(&k.as_str()))
+            {
+                return Err(bad(key, "unknown key (keys: nodes, output, layers)".into()));
+            }
+        }
         let base = path.parent().unwrap_or(Path::new(""));
         let list = json
             .get("nodes")
@@ -152,6 +160,18 @@ impl Graph {
 
 /// One entry of `nodes`; errors are [`Error::Invalid`] naming the field within the entry.
 fn read_node(entry: &Json, base: &Path) -> Result<GraphNode> {
+    let keys = ["name", "node", "params", "inputs"];
+    match entry.as_object() {
+        None => return Err(Error::invalid("", "expected an object")),
+        Some(map) => {
+            if let Some(key) = map.keys().find(|k| !keys.contains(&k.as_str())) {
+                return Err(Error::invalid(
+                    key.as_str(),
+                    format!("unknown key (keys: {})", keys.join(", ")),
+                ));
+            }
+        }
+    }
     let text = |key: &str| {
         entry
             .get(key)
@@ -253,7 +273,11 @@ fn to_value(kind: &ParamKind, json: &Json, base: &Path) -> Option<Value> {
             if rows.iter().all(Json::is_array) {
                 let mut flat = Vec::with_capacity(16);
                 for row in rows {
-                    flat.extend(numbers(row)?);
+                    let row = numbers(row)?;
+                    if row.len() != 4 {
+                        return None;
+                    }
+                    flat.extend(row);
                 }
                 Value::Doubles(flat)
             } else {

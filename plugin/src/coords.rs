@@ -9,7 +9,7 @@
 //! rectangle maps to the raster window `[x1 − x0, x2 − x0) × [top − y2, top − y1)` with
 //! `top = y0 + height`.
 
-use nerfx::image::Window;
+use nerfx::image::{scaled_size, Window};
 
 /// A rectangle in OpenFX pixel coordinates (`kOfxImagePropBounds`, render windows).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -69,12 +69,11 @@ impl Frame {
     /// The image of a node with its own region of definition: `ceil(w·s) × ceil(h·s)` pixels
     /// (at least one) from the origin, as the core sizes an image at render scale `s`.
     pub fn of_rod(width: u32, height: u32, scale: f64) -> Self {
-        let side = |n: u32| ((f64::from(n) * scale).ceil() as u32).max(1);
         Frame {
             x0: 0,
             y0: 0,
-            width: side(width),
-            height: side(height),
+            width: scaled_size(width, scale),
+            height: scaled_size(height, scale),
         }
     }
 

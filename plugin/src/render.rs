@@ -16,7 +16,7 @@
 //! the render time may then be a half frame, at which the core interpolates the shot as at any
 //! sub-frame time.
 
-use nerfx::graph::{ClipKind, RenderRequest};
+use nerfx::graph::{check_render_scale, ClipKind, RenderRequest};
 use nerfx::image::{Plane, Planes, Window};
 use openfx_sys::*;
 
@@ -43,8 +43,12 @@ fn clear(window: Window) -> Planes {
     }
 }
 
-/// The render scale, one number: the core scales both axes alike.
+/// The render scale, one number: the core scales both axes alike. Each axis must be finite and
+/// in (0, 1] ([`check_render_scale`], checked before anything is sized or divided by it).
 pub fn uniform_scale(scale: [f64; 2]) -> Result<f64> {
+    for s in scale {
+        check_render_scale(s)?;
+    }
     if (scale[0] - scale[1]).abs() > 1e-9 * scale[0].abs().max(1.0) {
         return Err(Failure::failed(format!(
             "render scale {}×{}: different scales in x and y are not supported",
@@ -142,6 +146,20 @@ mod tests {
         assert_eq!(uniform_scale([0.5, 0.5]).unwrap(), 0.5);
         let e = uniform_scale([0.5, 0.25]).unwrap_err();
         assert!(e.message.contains("0.5×0.25"), "{}", e.message);
+        // Outside (0, 1] on either axis, refused before anything uses it (NaN included, which
+        // a mere x == y comparison lets through).
+        for bad in [0.0, -0.5, 1.5, f64::INFINITY, f64::NAN] {
+            for scale in [[bad, bad], [bad, 0.5], [0.5, bad]] {
+                let e = uniform_scale(scale).unwrap_err();
+                assert!(
+                    e.message.contains("render scale"),
+                    "{scale:?}: {}",
+                    e.message
+                );
+            }
+        }
+        assert_eq!(uniform_scale([1.0, 1.0]).unwrap(), 1.0);
+        assert_eq!(uniform_scale([0.25, 0.25]).unwrap(), 0.25);
         assert_eq!(
             clear(Window::new(1, 1, 4, 3)).alpha.unwrap().data,
             vec![0.0; 6]

@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use super::file::{Graph, GraphNode};
 use super::node::RenderRequest;
 use crate::error::{Error, Result};
-use crate::image::{Planes, Window};
+use crate::image::{scaled_size, Planes, Window};
 
 /// Renders one node for `request` (whose inputs are its upstream nodes' whole images).
 pub type RenderNode<'a> = dyn FnMut(&GraphNode, &RenderRequest) -> Result<Planes> + 'a;
@@ -24,9 +24,8 @@ fn image_size(
     render_scale: f64,
     inputs: &BTreeMap<String, Planes>,
 ) -> Result<(u32, u32)> {
-    let side = |n: u32| ((f64::from(n) * render_scale).ceil() as u32).max(1);
     if let Some((w, h)) = node.node.region_of_definition(&node.values, time)? {
-        return Ok((side(w), side(h)));
+        return Ok((scaled_size(w, render_scale), scaled_size(h, render_scale)));
     }
     let mut sizes = inputs.iter().map(|(clip, p)| (clip, (p.width, p.height)));
     let Some((_, size)) = sizes.next() else {

@@ -41,8 +41,8 @@ pub use evaluate::{evaluate, render_direct, RenderNode};
 pub use file::{Graph, GraphNode};
 pub use matrix_text::{matrix_text, parse_matrix};
 pub use node::{
-    single_channel, Format, IdentityFn, Node, PixelAspectFn, RenderFn, RenderRequest, RodFn,
-    TimeDomainFn,
+    check_render_scale, single_channel, Format, IdentityFn, Node, PixelAspectFn, RenderFn,
+    RenderRequest, RodFn, TimeDomainFn,
 };
 #[cfg(feature = "host")]
 pub use ofx::OfxGraph;

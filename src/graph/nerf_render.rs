@@ -23,7 +23,7 @@ use crate::camera::{
 };
 use crate::composite::{over, rgba_pixels, rgba_planes};
 use crate::error::{Error, Result};
-use crate::image::{Plane, Planes, BACKGROUND_DEPTH};
+use crate::image::{scaled_size, Plane, Planes, BACKGROUND_DEPTH};
 use crate::render::{render, Outputs, Quality, RenderSettings};
 use crate::scene::{CropBox, Instance, Scene};
 
@@ -279,13 +279,12 @@ fn camera(values: &ParamValues, time: f64, scale: f64) -> Result<(ShotFrame, Cam
         }
     }
     let (w, h) = c.intrinsics(&shot).effective_resolution()?;
-    let side = |n: u32| ((f64::from(n) * scale).ceil() as u32).max(1);
     // The shot's format at render scale, holding only this frame (cheap to build per call).
     let one = Shot {
         fps: shot.fps,
         fps_base: shot.fps_base,
-        resolution_x: side(w),
-        resolution_y: side(h),
+        resolution_x: scaled_size(w, scale),
+        resolution_y: scaled_size(h, scale),
         resolution_percentage: 100,
         pixel_aspect_x: shot.pixel_aspect_x,
         pixel_aspect_y: shot.pixel_aspect_y,

@@ -57,6 +57,23 @@ impl RenderRequest {
     }
 }
 
+/// Refuses a render scale outside (0, 1] (0, negatives, infinities and NaN included).
+///
+/// A render scale is the fraction of full resolution a host asks for (proxy renders); above 1
+/// or not a finite positive number, every size and coordinate derived from it is meaningless,
+/// so the OpenFX plugin, the OpenFX host and [`Node::render`] all check it here, first.
+pub fn check_render_scale(s: f64) -> Result<()> {
+    // Written so that NaN fails: every comparison with NaN is false.
+    if s.is_finite() && s > 0.0 && s <= 1.0 {
+        Ok(())
+    } else {
+        Err(Error::invalid(
+            "render scale",
+            format!("expected (0, 1], got {s}"),
+        ))
+    }
+}
+
 /// The single channel a clip of `kind` contributes (see [`ClipKind`]); for
 /// [`ClipKind::Rgba`], its alpha (opaque when only RGB is present).
 pub fn single_channel(kind: ClipKind, planes: &Planes) -> Plane {
@@ -144,13 +161,7 @@ impl Node {
     pub fn render(&self, values: &ParamValues, request: &RenderRequest) -> Result<Planes> {
         self.own(values)?;
         let id = self.desc.id;
-        let s = request.render_scale;
-        if !(s.is_finite() && s > 0.0 && s <= 1.0) {
-            return Err(Error::invalid(
-                format!("{id}: render scale"),
-                format!("expected (0, 1], got {s}"),
-            ));
-        }
+        check_render_scale(request.render_scale).map_err(|e| self.in_context(e))?;
         let (w, h) = (request.window.width(), request.window.height());
         for (name, planes) in &request.inputs {
             if self.desc.clip(name).is_none() {
@@ -239,6 +250,31 @@ impl Node {
         match self.identity {
             Some(f) => f(values).map_err(|e| self.in_context(e)),
             None => Ok(None),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn render_scale_must_be_finite_and_in_zero_one() {
+        for s in [1.0, 0.25, 0.5, 1e-6] {
+            assert!(check_render_scale(s).is_ok(), "{s}");
+        }
+        for s in [
+            0.0,
+            -0.0,
+            -0.5,
+            1.0 + 1e-12,
+            2.0,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ] {
+            let e = check_render_scale(s).unwrap_err().to_string();
+            assert!(e.contains("render scale"), "{s}: {e}");
         }
     }
 }

@@ -26,7 +26,7 @@ use super::params::{put, ParamSet};
 use super::props::{self, PropSet};
 use super::spec::{cstr, SetKind};
 use super::{status, threads};
-use crate::image::{Planes, Window};
+use crate::image::{scaled_size, Planes, Window};
 
 /// Guard border around the output image, in pixels.
 pub(crate) const GUARD: usize = 4;
@@ -561,11 +561,12 @@ pub(crate) fn clip_par(c: &Clip) -> f64 {
     }
 }
 
-/// The pixel size of a `(w, h)` image at render scale `s`: `(⌈w·s⌉, ⌈h·s⌉)`.
+/// The pixel size of a `(w, h)` image at render scale `s`: [`scaled_size`] of each side, as
+/// the core sizes it.
 pub(crate) fn scaled(size: (u32, u32), s: f64) -> (i64, i64) {
     (
-        (f64::from(size.0) * s).ceil() as i64,
-        (f64::from(size.1) * s).ceil() as i64,
+        i64::from(scaled_size(size.0, s)),
+        i64::from(scaled_size(size.1, s)),
     )
 }
 

@@ -14,7 +14,7 @@ use super::props::{args, PropSet, PropValue};
 use super::spec::{cstr, ParamType};
 use super::status;
 use crate::error::{Error, Result};
-use crate::graph::{Context, Value};
+use crate::graph::{check_render_scale, Context, Value};
 use crate::image::{Plane, Planes, Window};
 
 /// Renders a window of an input: `(time, window, render_scale)` → planes of the window's
@@ -522,15 +522,14 @@ impl Instance {
         ]
     }
 
+    /// [`check_render_scale`], the error naming this instance's effect.
     fn check_scale(&self, s: f64) -> Result<()> {
-        if s.is_finite() && s > 0.0 && s <= 1.0 {
-            Ok(())
-        } else {
-            Err(Error::invalid(
-                format!("{}: render scale", self.effect.id),
-                format!("expected (0, 1], got {s}"),
-            ))
-        }
+        check_render_scale(s).map_err(|e| match e {
+            Error::Invalid { what, message } => {
+                Error::invalid(format!("{}: {what}", self.effect.id), message)
+            }
+            other => other,
+        })
     }
 
     /// The input clip the plugin passes through unchanged for this render, if any.

@@ -6,5 +6,5 @@ mod plane;
 pub(crate) mod png;
 
 pub use exr_io::{read_exr_channels, write_exr, write_exr_layers, BACKGROUND_DEPTH};
-pub use plane::{Plane, Planes, Window};
+pub use plane::{scaled_size, Plane, Planes, Window};
 pub use png::{encode_png_rgba8, write_png_preview};

@@ -134,9 +134,33 @@ impl Planes {
     }
 }
 
+/// The side of an image of `n` full-resolution pixels at render scale `s`: `max(1, ⌈n·s⌉)`.
+///
+/// One definition for every place that sizes an image at render scale (the camera, the graph
+/// evaluator, the OpenFX host and plugin), so that they agree pixel for pixel. Never zero: a
+/// node's image keeps at least one pixel at any scale (a scale the caller has not checked, 0 or
+/// NaN, also gives 1 rather than an empty image).
+pub fn scaled_size(n: u32, s: f64) -> u32 {
+    ((f64::from(n) * s).ceil() as u32).max(1)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn scaled_size_is_the_ceiling_and_at_least_one() {
+        assert_eq!(scaled_size(1920, 1.0), 1920);
+        assert_eq!(scaled_size(1920, 0.25), 480);
+        // Odd sizes round up: 1081/4 = 270.25, 7/2 = 3.5.
+        assert_eq!(scaled_size(1081, 0.25), 271);
+        assert_eq!(scaled_size(7, 0.5), 4);
+        assert_eq!(scaled_size(3, 0.25), 1);
+        assert_eq!(scaled_size(1, 0.001), 1);
+        assert_eq!(scaled_size(0, 1.0), 1);
+        assert_eq!(scaled_size(100, 0.0), 1);
+        assert_eq!(scaled_size(100, f64::NAN), 1);
+    }
 
     #[test]
     fn crop_takes_the_window_of_every_plane() {

@@ -990,14 +990,17 @@ unsafe fn memory<'a>(
 }
 
 unsafe extern "C" fn image_memory_free(h: OfxImageMemoryHandle) -> OfxStatus {
-    // SAFETY: checked against the registry, then taken back from Box::into_raw.
-    result((|| unsafe {
-        let m = memory(h, "imageMemoryFree")?;
-        threads::free(m.ptr);
-        handles::unregister(h as *const ImageMemory);
-        drop(Box::from_raw(h as *mut ImageMemory));
-        Ok(())
-    })())
+    let p = h as *const ImageMemory;
+    // Taken from the registry in one step: of two threads freeing the same handle, only one
+    // gets it; the other's is a bad handle.
+    if !handles::take(p, Kind::ImageMemory) {
+        handles::report_bad(p, Kind::ImageMemory, "imageMemoryFree");
+        return status::ERR_BAD_HANDLE;
+    }
+    // SAFETY: a live handle came from Box::into_raw, and this caller alone removed it.
+    let m = unsafe { Box::from_raw(p as *mut ImageMemory) };
+    threads::free(m.ptr);
+    status::OK
 }
 
 unsafe extern "C" fn image_memory_lock(

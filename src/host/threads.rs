@@ -148,14 +148,15 @@ unsafe extern "C" fn mutex_create(out: *mut OfxMutexHandle, count: c_int) -> Ofx
 }
 
 unsafe extern "C" fn mutex_destroy(h: OfxMutexHandle) -> OfxStatus {
-    // SAFETY: checked against the registry, then taken back from Box::into_raw.
-    unsafe {
-        if mutex(h, "mutexDestroy").is_none() {
-            return status::ERR_BAD_HANDLE;
-        }
-        handles::unregister(h as *const RecursiveMutex);
-        drop(Box::from_raw(h as *mut RecursiveMutex));
+    let p = h as *const RecursiveMutex;
+    // Taken from the registry in one step: of two threads destroying the same mutex, only one
+    // gets it; the other's is a bad handle.
+    if !handles::take(p, Kind::Mutex) {
+        handles::report_bad(p, Kind::Mutex, "mutexDestroy");
+        return status::ERR_BAD_HANDLE;
     }
+    // SAFETY: a live handle came from Box::into_raw, and this caller alone removed it.
+    drop(unsafe { Box::from_raw(p as *mut RecursiveMutex) });
     status::OK
 }
 

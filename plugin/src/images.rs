@@ -14,17 +14,22 @@ use crate::props::{name, Props};
 use crate::status::{check, Failure, Result, FAILED};
 use crate::suites::suites;
 
-/// An image handle that is released on drop.
-struct Held(OfxPropertySetHandle);
+/// `clipReleaseImage`'s signature.
+type ReleaseFn = unsafe extern "C" fn(OfxPropertySetHandle) -> OfxStatus;
+
+/// An image handle that is released on drop, by the `clipReleaseImage` of the image effect
+/// suite that fetched it, kept from fetch time: looking the suites up again at release time
+/// could fail (or find others) and leak the image.
+struct Held {
+    handle: OfxPropertySetHandle,
+    release: ReleaseFn,
+}
 
 impl Drop for Held {
     fn drop(&mut self) {
-        if let Ok(s) = suites() {
-            if let Some(release) = s.effect.clipReleaseImage {
-                // SAFETY: the handle came from clipGetImage and is released once, here.
-                unsafe { release(self.0) };
-            }
-        }
+        // SAFETY: the handle came from clipGetImage of the suite `release` belongs to, and is
+        // released once, here.
+        unsafe { (self.release)(self.handle) };
     }
 }
 
@@ -67,6 +72,11 @@ impl ClipImage {
             .effect
             .clipGetImage
             .ok_or_else(|| Failure::missing_suite("image effect suite's clipGetImage"))?;
+        // Taken now, before an image exists that it must release.
+        let release = s
+            .effect
+            .clipReleaseImage
+            .ok_or_else(|| Failure::missing_suite("image effect suite's clipReleaseImage"))?;
         let rect = region.map(|r| OfxRectD {
             x1: r[0],
             y1: r[1],
@@ -86,7 +96,7 @@ impl ClipImage {
         if handle.is_null() {
             return Ok(None);
         }
-        let held = Held(handle);
+        let held = Held { handle, release };
         // SAFETY: the image's property set is valid until released (by `held`).
         let props = unsafe { Props::new(handle, s.property) };
         let err = |what: String| Failure::failed(format!("clip {clip_name}: {what}"));
@@ -145,5 +155,23 @@ mod tests {
         assert_eq!(channels("OfxImageComponentRGB"), Some(3));
         assert_eq!(channels("OfxImageComponentRGBAZ"), None);
         assert_eq!(channels(""), None);
+    }
+
+    #[test]
+    fn a_held_image_is_released_by_the_function_kept_at_fetch() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        static RELEASED: AtomicUsize = AtomicUsize::new(0);
+        unsafe extern "C" fn release(h: OfxPropertySetHandle) -> OfxStatus {
+            assert_eq!(h as usize, 0x40);
+            RELEASED.fetch_add(1, Ordering::SeqCst);
+            0
+        }
+        // No host is loaded in this test: the suites cannot be looked up at drop time.
+        assert!(suites().is_err());
+        drop(Held {
+            handle: 0x40 as OfxPropertySetHandle,
+            release,
+        });
+        assert_eq!(RELEASED.load(Ordering::SeqCst), 1);
     }
 }

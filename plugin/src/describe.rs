@@ -156,22 +156,29 @@ pub fn describe_in_context(
     for p in &node.desc.params {
         define_param(set, p)?;
     }
-    // Files decide the region of definition and frame variance: changing one re-asks the
-    // clip preferences.
-    let files: Vec<&str> = node
-        .desc
-        .params
-        .iter()
-        .filter(|p| matches!(p.kind, ParamKind::File))
-        .map(|p| p.name)
-        .collect();
-    if !files.is_empty() {
+    let slaves = clip_preference_slaves(node);
+    if !slaves.is_empty() {
         optional(
             effect_props(effect)?
-                .set_strings(name(kOfxImageEffectPropClipPreferencesSlaveParam), &files),
+                .set_strings(name(kOfxImageEffectPropClipPreferencesSlaveParam), &slaves),
         );
     }
     Ok(())
+}
+
+/// The parameters whose change re-asks the clip preferences
+/// (`kOfxImageEffectPropClipPreferencesSlaveParam`): files (they decide the region of
+/// definition and frame variance) and, of a node with its own format
+/// ([`Node::has_own_format`]), every parameter that does not animate: such a node's format,
+/// frame range or time mapping (a frame offset, say) may depend on any of them, and the plugin
+/// stays generic rather than naming them.
+fn clip_preference_slaves(node: &Node) -> Vec<&'static str> {
+    node.desc
+        .params
+        .iter()
+        .filter(|p| matches!(p.kind, ParamKind::File) || (node.has_own_format() && !p.animates))
+        .map(|p| p.name)
+        .collect()
 }
 
 #[cfg(test)]
@@ -190,5 +197,20 @@ mod tests {
         );
         let e = context_from_name("OfxImageEffectContextPaint").unwrap_err();
         assert_eq!(e.status, ERR_UNSUPPORTED);
+    }
+
+    #[test]
+    fn fixed_parameters_of_a_node_with_its_own_format_are_clip_preference_slaves() {
+        let nerf = nerfx::graph::node("org.nerfx.NeRFRender").unwrap();
+        let slaves = clip_preference_slaves(nerf);
+        // The two files, and the non-animating frame offset that moves the time domain.
+        for p in ["file", "shot", "frameOffset"] {
+            assert!(slaves.contains(&p), "{p} missing from {slaves:?}");
+        }
+        // Animating parameters do not change the format.
+        assert!(!slaves.contains(&"overrideTransform"), "{slaves:?}");
+        // A node sized by its inputs has no file and no format of its own.
+        let merge = nerfx::graph::node("org.nerfx.DepthMerge").unwrap();
+        assert!(clip_preference_slaves(merge).is_empty());
     }
 }

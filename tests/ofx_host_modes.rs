@@ -216,6 +216,16 @@ const CH: u32 = 17;
 
 /// An instance of `case` with its inputs connected to [`pattern`]s, and its values.
 fn compositing(bundle: &Bundle, case: &Case) -> (Instance, ParamValues) {
+    compositing_of(bundle, case, |p| p)
+}
+
+/// An instance of `case` with each input connected to `input` of its [`pattern`], and its
+/// values.
+fn compositing_of(
+    bundle: &Bundle,
+    case: &Case,
+    input: fn(Planes) -> Planes,
+) -> (Instance, ParamValues) {
     let (id, context, clips, params) = case;
     let mut values = node(id).unwrap().defaults();
     let mut instance = bundle.instance(id, *context).unwrap();
@@ -224,7 +234,9 @@ fn compositing(bundle: &Bundle, case: &Case) -> (Instance, ParamValues) {
         instance.set_param(name, value).unwrap();
     }
     for (seed, clip) in clips.iter().enumerate() {
-        let source = ClipSource::new((CW, CH), move |_, w, s| Ok(pattern(seed as u32, w, s)));
+        let source = ClipSource::new((CW, CH), move |_, w, s| {
+            Ok(input(pattern(seed as u32, w, s)))
+        });
         instance.connect(clip, source).unwrap();
     }
     (instance, values)
@@ -402,6 +414,53 @@ fn rgb_input_images_read_as_opaque_rgba() {
             let got = tiled(w, h, |t| instance.render(3.0, t, scale, false).unwrap());
             let want = core_compositing(&case, &values, scale, opaque);
             assert_same(&got, &want, &format!("{} RGB inputs at {scale}", case.0));
+        }
+    }
+    no_violations(&b);
+}
+
+/// `p` as a premultiplied image must be: no colour where alpha is 0 (there, straight colour
+/// cannot hold it).
+fn no_colour_without_alpha(p: Planes) -> Planes {
+    rgba(p.width, p.height, |x, y, c| {
+        if c < 3 && at(&p, x, y, 3) == 0.0 {
+            0.0
+        } else {
+            at(&p, x, y, c)
+        }
+    })
+}
+
+#[test]
+fn unpremultiplied_input_images_are_premultiplied_before_compositing() {
+    let _turn = turn();
+    let b = load(HostOptions {
+        unpremultiplied_inputs: true,
+        ..HostOptions::default()
+    });
+    for case in cases() {
+        let (instance, values) = compositing_of(&b, &case, no_colour_without_alpha);
+        for scale in [1.0, 0.5] {
+            let (w, h) = (side(CW, scale), side(CH, scale));
+            let got = tiled(w, h, |t| instance.render(3.0, t, scale, false).unwrap());
+            // The core on the premultiplied source: the host divided colour by alpha, the
+            // plugin multiplied it back, so only the rounding of (c / a) · a may differ.
+            let want = core_compositing(&case, &values, scale, no_colour_without_alpha);
+            assert_eq!((got.width, got.height), (want.width, want.height));
+            let mut worst = 0.0f32;
+            for c in 0..4 {
+                for y in 0..h {
+                    for x in 0..w {
+                        let (g, v) = (at(&got, x, y, c), at(&want, x, y, c));
+                        worst = worst.max((g - v).abs() / v.abs().max(1.0));
+                    }
+                }
+            }
+            assert!(
+                worst <= 1e-6,
+                "{} at {scale}: relative difference {worst}",
+                case.0
+            );
         }
     }
     no_violations(&b);

@@ -41,6 +41,10 @@ pub struct ClipImage {
     /// The image holds a single field of fielded footage (`kOfxImagePropField` lower or
     /// upper), not a full frame.
     pub single_field: bool,
+    /// The image's colour is not premultiplied by its alpha
+    /// (`kOfxImageEffectPropPreMultiplication` is `kOfxImageUnPreMultiplied`): straight-alpha
+    /// footage, which must be premultiplied before the core composites it.
+    pub straight: bool,
 }
 
 /// Floats per pixel for a components string, if the plugin reads it.
@@ -117,10 +121,15 @@ impl ClipImage {
         let single_field = [kOfxImageFieldLower.as_slice(), kOfxImageFieldUpper]
             .into_iter()
             .any(|f| name(f).to_bytes() == field.as_bytes());
+        // Premultiplied when the host does not say (the spec's default for RGBA).
+        let straight = props
+            .string(name(kOfxImageEffectPropPreMultiplication))
+            .is_ok_and(|p| p.as_bytes() == name(kOfxImageUnPreMultiplied).to_bytes());
         Ok(Some(ClipImage {
             _held: held,
             view,
             single_field,
+            straight,
         }))
     }
 }

@@ -119,7 +119,11 @@ impl Rows {
 /// and alpha from a 4-channel image, RGB and opaque alpha from a 3-channel one (a host that
 /// ignores the declared components), alpha alone from a 1-channel one; pixels outside the
 /// image's bounds are transparent black.
-pub fn read_planes(view: &PixelView, frame: Frame, window: Window) -> Planes {
+///
+/// The core composites premultiplied colour: a 4-channel image whose colour is `straight`
+/// (`kOfxImageUnPreMultiplied`) is premultiplied here, `(r·a, g·a, b·a, a)`; premultiplied and
+/// opaque images are read as they are.
+pub fn read_planes(view: &PixelView, frame: Frame, window: Window, straight: bool) -> Planes {
     let (w, h) = (window.width(), window.height());
     let mut planes = [(); 4].map(|_| Plane::filled(w, h, 0.0));
     let n = view.channels();
@@ -135,6 +139,11 @@ pub fn read_planes(view: &PixelView, frame: Frame, window: Window) -> Planes {
                 }
                 if n == 3 {
                     planes[3].data[i] = 1.0;
+                } else if straight {
+                    let a = px[3];
+                    for plane in &mut planes[..3] {
+                        plane.data[i] *= a;
+                    }
                 }
             } else {
                 planes[3].data[i] = px[0];
@@ -287,7 +296,7 @@ mod tests {
             };
             // Raster window columns 1..8 → x −3..4; rows 3..6 → y 7..5 (y = 10 − ry).
             let window = Window::new(1, 3, 8, 6);
-            let p = read_planes(&view, frame, window);
+            let p = read_planes(&view, frame, window, false);
             assert_eq!((p.width, p.height), (7, 3));
             let rgb = p.rgb.as_ref().unwrap();
             let alpha = p.alpha.as_ref().unwrap();
@@ -309,7 +318,7 @@ mod tests {
     fn an_alpha_image_gives_only_alpha() {
         let mut buf = Buffer::new(PixelRect::from_ints([0, 0, 3, 2]), 1, 0, true);
         let frame = Frame::of_rod(3, 2, 1.0);
-        let p = read_planes(&buf.view(), frame, Window::new(0, 0, 3, 2));
+        let p = read_planes(&buf.view(), frame, Window::new(0, 0, 3, 2), false);
         assert!(p.rgb.is_none());
         // Raster row 0 is the top row, y = 1.
         assert_eq!(p.alpha.as_ref().unwrap().get(2, 0), f(2, 1, 0));
@@ -370,7 +379,12 @@ mod tests {
         assert!(unsafe { PixelView::new(data, bounds, 62, 4) }.is_err());
         assert!(unsafe { PixelView::new(std::ptr::null_mut(), bounds, 64, 4) }.is_err());
         let mut one = unsafe { PixelView::new(data, bounds, 16, 1) }.unwrap();
-        let planes = read_planes(&one, Frame::of_rod(4, 1, 1.0), Window::new(0, 0, 4, 1));
+        let planes = read_planes(
+            &one,
+            Frame::of_rod(4, 1, 1.0),
+            Window::new(0, 0, 4, 1),
+            false,
+        );
         let e = write_planes(
             &mut one,
             Frame::of_rod(4, 1, 1.0),
@@ -393,11 +407,47 @@ mod tests {
     }
 
     #[test]
+    fn straight_colour_is_premultiplied_and_only_rgba_images_change() {
+        let window = Window::new(0, 0, 3, 2);
+        let frame = Frame::of_rod(3, 2, 1.0);
+        let mut rgba = Buffer::new(PixelRect::from_ints([0, 0, 3, 2]), 4, 1, false);
+        let premultiplied = read_planes(&rgba.view(), frame, window, false);
+        let straight = read_planes(&rgba.view(), frame, window, true);
+        for (rx, ry) in [(0, 0), (2, 0), (1, 1)] {
+            // Raster row 0 is y = 1.
+            let (x, y) = (rx as i32, 1 - ry as i32);
+            let a = f(x, y, 3);
+            for c in 0..3 {
+                assert_eq!(
+                    premultiplied.rgb.as_ref().unwrap()[c].get(rx, ry),
+                    f(x, y, c)
+                );
+                assert_eq!(
+                    straight.rgb.as_ref().unwrap()[c].get(rx, ry),
+                    f(x, y, c) * a
+                );
+            }
+            assert_eq!(straight.alpha.as_ref().unwrap().get(rx, ry), a);
+        }
+        // RGB images are opaque and alpha images have no colour: nothing to premultiply.
+        let mut rgb = Buffer::new(PixelRect::from_ints([0, 0, 3, 2]), 3, 0, false);
+        assert_eq!(
+            read_planes(&rgb.view(), frame, window, true),
+            read_planes(&rgb.view(), frame, window, false)
+        );
+        let mut alpha = Buffer::new(PixelRect::from_ints([0, 0, 3, 2]), 1, 0, false);
+        assert_eq!(
+            read_planes(&alpha.view(), frame, window, true),
+            read_planes(&alpha.view(), frame, window, false)
+        );
+    }
+
+    #[test]
     fn an_rgb_image_reads_as_opaque_rgba() {
         let mut buf = Buffer::new(PixelRect::from_ints([0, 0, 2, 2]), 3, 2, false);
         // The frame reaches one column past the image: that column stays transparent.
         let frame = Frame::of_rod(3, 2, 1.0);
-        let p = read_planes(&buf.view(), frame, Window::new(0, 0, 3, 2));
+        let p = read_planes(&buf.view(), frame, Window::new(0, 0, 3, 2), false);
         let rgb = p.rgb.as_ref().unwrap();
         let alpha = p.alpha.as_ref().unwrap();
         // Raster (1, 0) is pixel (1, 1).

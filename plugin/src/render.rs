@@ -111,7 +111,7 @@ pub fn render(instance: &Instance, in_args: Props) -> Result<()> {
         for (clip, handle) in &instance.inputs {
             if clip.kind == ClipKind::Rgba && connected(handle)? {
                 if let Some(image) = ClipImage::fetch(handle, clip.name, time, Some(region))? {
-                    planes = read_planes(&image.view, frame, window);
+                    planes = read_planes(&image.view, frame, window, image.straight);
                 }
                 break;
             }
@@ -126,7 +126,7 @@ pub fn render(instance: &Instance, in_args: Props) -> Result<()> {
                 continue;
             }
             let planes = match ClipImage::fetch(handle, clip.name, time, Some(region))? {
-                Some(image) => read_planes(&image.view, frame, window),
+                Some(image) => read_planes(&image.view, frame, window, image.straight),
                 None => clear(window),
             };
             request = request.with_input(clip.name, planes);

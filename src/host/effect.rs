@@ -249,7 +249,7 @@ impl Effect {
                 p.set_ints(ofx::kOfxImageClipPropConnected, &[i32::from(output)]);
                 p.set_str(
                     ofx::kOfxImageEffectPropPreMultiplication,
-                    cstr(ofx::kOfxImagePreMultiplied),
+                    cstr(premultiplication(&e.options, output)),
                 );
                 Clip::boxed(&d.name, p, addr)
             })
@@ -630,6 +630,29 @@ unsafe extern "C" fn clip_get_image(
 
 type Made = Result<LiveImage, (OfxStatus, Option<String>)>;
 
+/// `kOfxImageEffectPropPreMultiplication` of a clip's images: straight colour for inputs
+/// under [`HostOptions::unpremultiplied_inputs`], else premultiplied.
+fn premultiplication(options: &HostOptions, output: bool) -> &'static [u8] {
+    if options.unpremultiplied_inputs && !output {
+        ofx::kOfxImageUnPreMultiplied
+    } else {
+        ofx::kOfxImagePreMultiplied
+    }
+}
+
+/// Interleaved RGBA `pixels` unpremultiplied in place: colour over alpha where alpha > 0.
+fn unpremultiply(pixels: &mut [f32]) {
+    for px in pixels.chunks_exact_mut(4) {
+        let a = px[3];
+        if a > 0.0 {
+            for c in &mut px[..3] {
+                *c /= a;
+            }
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
 fn image_props(
     e: &Effect,
     c: &Clip,
@@ -638,6 +661,7 @@ fn image_props(
     components: &str,
     layout: Layout,
     fielded: bool,
+    premultiplication: &'static [u8],
 ) -> Box<PropSet> {
     static SERIAL: AtomicU64 = AtomicU64::new(1);
     let what = format!("{} clip {} image at {time}", e.id, c.name);
@@ -650,7 +674,7 @@ fn image_props(
     p.set_str(ofx::kOfxImageEffectPropComponents, components);
     p.set_str(
         ofx::kOfxImageEffectPropPreMultiplication,
-        cstr(ofx::kOfxImagePreMultiplied),
+        cstr(premultiplication),
     );
     p.set_doubles(ofx::kOfxImageEffectPropRenderScale, &[scale, scale]);
     p.set_doubles(ofx::kOfxImagePropPixelAspectRatio, &[clip_par(c)]);
@@ -694,6 +718,7 @@ fn output_image(e: &Effect, c: &Clip, ctx: Option<&RenderCtx>, time: f64) -> Mad
         cstr(ofx::kOfxImageComponentRGBA),
         ctx.output,
         ctx.field.is_some(),
+        ofx::kOfxImagePreMultiplied,
     );
     Ok(LiveImage {
         what: format!("{} clip {} image at {time}", e.id, c.name),
@@ -800,7 +825,12 @@ fn input_image(
         (declared.as_str(), 4)
     };
     let (w, h) = (window.width() as usize, window.height() as usize);
-    let (data, offset, row_bytes) = store(&to_ofx(&planes, n), w * n, h, e.options.padded_images);
+    let mut pixels = to_ofx(&planes, n);
+    // Only RGBA images have colour to unpremultiply (RGB ones are opaque, Alpha ones matte).
+    if e.options.unpremultiplied_inputs && n == 4 {
+        unpremultiply(&mut pixels);
+    }
+    let (data, offset, row_bytes) = store(&pixels, w * n, h, e.options.padded_images);
     let bounds = [b[0] as i32, b[1] as i32, b[2] as i32, b[3] as i32];
     let props = image_props(
         e,
@@ -815,6 +845,7 @@ fn input_image(
             row_bytes,
         },
         ctx.is_some_and(|r| r.field.is_some()),
+        premultiplication(&e.options, false),
     );
     Ok(LiveImage {
         what: format!("{} clip {} image at {time}", e.id, c.name),

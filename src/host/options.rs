@@ -9,6 +9,7 @@
 //! | [`HostOptions::rgb_inputs`] | hands RGBA clips RGB images (a host ignoring components) |
 //! | [`HostOptions::padded_images`] | images stored top-down (negative row bytes), with bounds larger than asked and spare floats at each row's end |
 //! | [`HostOptions::second_host`] | calls `OfxSetHost` again with another host struct |
+//! | [`HostOptions::unpremultiplied_inputs`] | hands over input images with straight (unpremultiplied) colour |
 //!
 //! Per render or per edit rather than per bundle: [`super::Instance::render_field`] renders
 //! one field of interlaced footage into a full-frame image, and
@@ -47,6 +48,11 @@ pub struct HostOptions {
     /// plugin must forget the suites of the first and fetch them again. `fetchSuite`
     /// through the first host afterwards is a violation.
     pub second_host: Option<MessageSuiteOffer>,
+    /// Input clips and their RGBA images are unpremultiplied (straight alpha, as footage often
+    /// is): `kOfxImageEffectPropPreMultiplication` says `kOfxImageUnPreMultiplied` and the
+    /// colour of every pixel with alpha > 0 is divided by its alpha (pixels with alpha 0 keep
+    /// their colour). A plugin must premultiply such images before compositing them.
+    pub unpremultiplied_inputs: bool,
 }
 
 /// Pixels by which [`HostOptions::padded_images`] enlarges image bounds on each side.
@@ -106,5 +112,6 @@ mod tests {
         let d = HostOptions::default();
         assert_eq!(d.message_suite, MessageSuiteOffer::V2);
         assert!(!d.rgb_inputs && !d.padded_images && d.second_host.is_none());
+        assert!(!d.unpremultiplied_inputs);
     }
 }

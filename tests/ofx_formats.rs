@@ -7,48 +7,26 @@
 mod common_ofx;
 
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
 
-use nerfx::demo;
+use common_ofx::fixtures::{instance_with, shared as bundle, text};
+use common_ofx::images::{differing, render_tiled};
 use nerfx::graph::{node, Context, RenderRequest, Value};
-use nerfx::host::{Bundle, Instance};
-use nerfx::image::{Plane, Planes, Window};
-
-fn bundle() -> &'static Bundle {
-    static BUNDLE: OnceLock<Bundle> = OnceLock::new();
-    BUNDLE.get_or_init(|| Bundle::load(&common_ofx::bundle()).expect("the built bundle loads"))
-}
+use nerfx::host::Instance;
+use nerfx::image::{scaled_size, Window};
 
 /// The demo's inputs at 45×27 (frames 1001 to 1024), written once per test binary.
 fn demo_dir() -> &'static Path {
-    static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("nerfx-ofx-formats-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        demo::write_graph(&dir, 45, 27).unwrap();
-        dir
-    })
-}
-
-fn text(s: impl AsRef<Path>) -> Value {
-    Value::Text(s.as_ref().to_string_lossy().into_owned())
+    common_ofx::fixtures::demo_dir(45, 27)
 }
 
 /// A NeRF Render instance in `context` over the demo environment and `shot`, draft quality.
 fn nerf_instance(context: Context, shot: &Path) -> (Instance, nerfx::graph::ParamValues) {
-    let n = node("org.nerfx.NeRFRender").unwrap();
-    let mut values = n.defaults();
-    let mut instance = bundle().instance(n.desc.id, context).unwrap();
     let set = [
         ("file", text(demo_dir().join("demo_environment.json"))),
         ("shot", text(shot)),
         ("quality", Value::Choice(0)),
     ];
-    for (name, value) in set {
-        values.set(name, value.clone()).unwrap();
-        instance.set_param(name, &value).unwrap();
-    }
-    (instance, values)
+    instance_with(bundle(), "org.nerfx.NeRFRender", context, &set)
 }
 
 #[test]
@@ -99,10 +77,6 @@ fn a_generator_tells_the_host_its_shots_frame_range() {
     assert!(e.contains("corrupt_range_shot.json"), "{e}");
 }
 
-fn side(n: u32, scale: f64) -> u32 {
-    ((f64::from(n) * scale).ceil() as u32).max(1)
-}
-
 /// The demo shot with `pixel_aspect_x`, `pixel_aspect_y` changed, written under `name`.
 fn anamorphic_shot(name: &str, pa_x: f64, pa_y: f64) -> PathBuf {
     let dir = demo_dir();
@@ -113,62 +87,6 @@ fn anamorphic_shot(name: &str, pa_x: f64, pa_y: f64) -> PathBuf {
     let path = dir.join(name);
     std::fs::write(&path, json.to_string()).unwrap();
     path
-}
-
-/// Odd-sized tiles (7×5) covering `w × h`, rendered through `instance` and assembled.
-fn render_tiled(instance: &Instance, time: f64, w: u32, h: u32, scale: f64) -> Planes {
-    let mut rgba: [Vec<f32>; 4] = std::array::from_fn(|_| vec![f32::NAN; (w * h) as usize]);
-    for y in (0..h).step_by(5) {
-        for x in (0..w).step_by(7) {
-            let tile = Window::new(x, y, (x + 7).min(w), (y + 5).min(h));
-            let got = instance
-                .render(time, tile, scale, false)
-                .unwrap_or_else(|e| panic!("tile {tile:?} at scale {scale}: {e}"));
-            let [r, g, b] = got.rgb.unwrap();
-            for (c, p) in [r, g, b, got.alpha.unwrap()].iter().enumerate() {
-                for ty in 0..tile.height() {
-                    for tx in 0..tile.width() {
-                        let d = ((tile.y0 + ty) * w + tile.x0 + tx) as usize;
-                        rgba[c][d] = p.data[(ty * tile.width() + tx) as usize];
-                    }
-                }
-            }
-        }
-    }
-    let [r, g, b, a] = rgba.map(|data| Plane {
-        width: w,
-        height: h,
-        data,
-    });
-    Planes {
-        width: w,
-        height: h,
-        rgb: Some([r, g, b]),
-        alpha: Some(a),
-        depth_z: None,
-        depth_ray: None,
-        depth_median: None,
-    }
-}
-
-/// How many samples of the RGBA planes differ bit for bit.
-fn differing(got: &Planes, want: &Planes) -> usize {
-    let planes = |p: &Planes| {
-        let [r, g, b] = p.rgb.clone().unwrap();
-        [r, g, b, p.alpha.clone().unwrap()]
-    };
-    planes(got)
-        .iter()
-        .zip(planes(want).iter())
-        .map(|(g, w)| {
-            assert_eq!(g.data.len(), w.data.len());
-            g.data
-                .iter()
-                .zip(&w.data)
-                .filter(|(a, b)| a.to_bits() != b.to_bits())
-                .count()
-        })
-        .sum()
 }
 
 #[test]
@@ -186,7 +104,7 @@ fn an_anamorphic_shot_has_non_square_pixels_through_the_host() {
         Some((45, 27))
     );
     for scale in [1.0, 0.5] {
-        let (w, h) = (side(45, scale), side(27, scale));
+        let (w, h) = (scaled_size(45, scale), scaled_size(27, scale));
         let want = n
             .render(
                 &values,

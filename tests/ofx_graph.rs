@@ -5,12 +5,14 @@
 mod common_ofx;
 
 use std::path::PathBuf;
-use std::process::Command;
+use std::process::{Command, Output};
 
+use common_ofx::images::rgba_of;
+use common_ofx::load;
 use nerfx::demo;
 use nerfx::graph::{evaluate, render_direct, Graph, OfxGraph};
-use nerfx::host::Bundle;
-use nerfx::image::{read_exr_channels, Planes};
+use nerfx::host::{Bundle, HostOptions};
+use nerfx::image::read_exr_channels;
 
 fn scratch_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("nerfx-ofx-graph-{name}-{}", std::process::id()));
@@ -18,21 +20,30 @@ fn scratch_dir(name: &str) -> PathBuf {
     dir
 }
 
-/// RGBA only: what crosses the OpenFX boundary.
-fn rgba(p: &Planes) -> Planes {
-    Planes {
-        depth_z: None,
-        depth_ray: None,
-        depth_median: None,
-        ..p.clone()
-    }
+/// `nerfx render <args> --bundle <the built bundle>`, run to its end.
+fn render_cli(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_nerfx"))
+        .arg("render")
+        .args(args)
+        .args(["--bundle", &common_ofx::bundle().to_string_lossy()])
+        .output()
+        .unwrap()
+}
+
+/// Asserts that a run succeeded, showing its standard error if not.
+fn assert_succeeded(run: &Output) {
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
 }
 
 #[test]
 fn the_demo_graph_through_the_bundle_equals_the_core() {
     let dir = scratch_dir("equal");
     let graph = Graph::read(&demo::write_graph(&dir, 41, 23).unwrap()).unwrap();
-    let bundle = Bundle::load(&common_ofx::bundle()).unwrap();
+    let bundle = load(HostOptions::default());
     let mut ofx = OfxGraph::new(graph.clone(), &bundle).unwrap();
     for (frame, scale) in [(1001.0, 1.0), (1012.0, 0.5)] {
         let through = ofx.render(frame, scale, false, &|_| {}).unwrap();
@@ -43,7 +54,7 @@ fn the_demo_graph_through_the_bundle_equals_the_core() {
         );
         for (name, image) in &direct {
             assert!(
-                through[name] == rgba(image),
+                through[name] == rgba_of(image),
                 "node {name} differs at frame {frame}, scale {scale}"
             );
         }
@@ -56,18 +67,15 @@ fn the_command_line_renders_a_subset_of_frames_with_layers() {
     let dir = scratch_dir("cli");
     let comp = demo::write_graph(&dir, 33, 19).unwrap();
     let pattern = dir.join("out/comp.####.exr");
-    let bundle = common_ofx::bundle();
-    let run = Command::new(env!("CARGO_BIN_EXE_nerfx"))
-        .args(["render", &comp.to_string_lossy(), "--frames", "1001,1003"])
-        .args(["-o", &pattern.to_string_lossy(), "--png"])
-        .args(["--bundle", &bundle.to_string_lossy()])
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let run = render_cli(&[
+        &comp.to_string_lossy(),
+        "--frames",
+        "1001,1003",
+        "-o",
+        &pattern.to_string_lossy(),
+        "--png",
+    ]);
+    assert_succeeded(&run);
     let out = dir.join("out");
     assert!(out.join("comp.1001.exr").is_file() && out.join("comp.1003.exr").is_file());
     assert!(out.join("comp.1001.png").is_file());
@@ -106,11 +114,7 @@ fn the_command_line_renders_a_subset_of_frames_with_layers() {
         .unwrap()
         .replace("\"B\": \"env\"", "\"B\": \"nope\"");
     std::fs::write(&bad, text).unwrap();
-    let run = Command::new(env!("CARGO_BIN_EXE_nerfx"))
-        .args(["render", &bad.to_string_lossy(), "--frames", "1001"])
-        .args(["--bundle", &bundle.to_string_lossy()])
-        .output()
-        .unwrap();
+    let run = render_cli(&[&bad.to_string_lossy(), "--frames", "1001"]);
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(
         !run.status.success() && err.contains("bad.json") && err.contains("nope"),
@@ -128,28 +132,25 @@ fn an_anamorphic_shot_keeps_its_pixel_aspect_to_the_exr() {
     json["pixel_aspect_x"] = 2.0.into();
     std::fs::write(&shot, json.to_string()).unwrap();
 
-    let bundle = Bundle::load(&common_ofx::bundle()).unwrap();
+    let bundle = load(HostOptions::default());
     let graph = Graph::read(&comp).unwrap();
     let mut ofx = OfxGraph::new(graph.clone(), &bundle).unwrap();
     let through = ofx.render(1004.0, 1.0, false, &|_| {}).unwrap();
     let direct = evaluate(&graph, 1004.0, 1.0, false, &mut render_direct, &|_| {}).unwrap();
-    assert!(through["comp"] == rgba(&direct["comp"]));
+    assert!(through["comp"] == rgba_of(&direct["comp"]));
     // The merges take the pixel aspect of their inputs, the renders that of the shot.
     assert_eq!(ofx.pixel_aspect("comp"), 2.0);
     assert_eq!(ofx.pixel_aspect("env"), 2.0);
 
     let out = dir.join("a.exr");
-    let run = Command::new(env!("CARGO_BIN_EXE_nerfx"))
-        .args(["render", &comp.to_string_lossy(), "--frames", "1004"])
-        .args(["-o", &out.to_string_lossy()])
-        .args(["--bundle", &common_ofx::bundle().to_string_lossy()])
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let run = render_cli(&[
+        &comp.to_string_lossy(),
+        "--frames",
+        "1004",
+        "-o",
+        &out.to_string_lossy(),
+    ]);
+    assert_succeeded(&run);
     let meta = exr::meta::MetaData::read_from_file(&out, false).unwrap();
     assert_eq!(meta.headers[0].shared_attributes.pixel_aspect, 2.0);
     assert_eq!(bundle.violations(), Vec::<String>::new());
@@ -195,17 +196,8 @@ fn without_frames_the_graph_renders_its_shot_range() {
     let dir = scratch_dir("range");
     let comp = demo::write_graph(&dir, 12, 8).unwrap();
     let pattern = dir.join("all/c.####.exr");
-    let run = Command::new(env!("CARGO_BIN_EXE_nerfx"))
-        .args(["render", &comp.to_string_lossy()])
-        .args(["-o", &pattern.to_string_lossy()])
-        .args(["--bundle", &common_ofx::bundle().to_string_lossy()])
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let run = render_cli(&[&comp.to_string_lossy(), "-o", &pattern.to_string_lossy()]);
+    assert_succeeded(&run);
     let mut written: Vec<String> = std::fs::read_dir(dir.join("all"))
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())

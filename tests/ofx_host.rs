@@ -4,7 +4,6 @@
 //! the multithread suite, and concurrent renders. Pixel equality of each node against the
 //! core is `tests/ofx_nodes.rs`.
 
-#[path = "common_ofx/mod.rs"]
 mod common_ofx;
 
 use std::ffi::{c_char, c_int, c_uint, c_void, CStr};
@@ -12,9 +11,10 @@ use std::path::Path;
 use std::ptr;
 use std::sync::atomic::{AtomicU32, Ordering};
 
+use common_ofx::images::tiles;
 use nerfx::graph::{node, nodes, Context, ParamKind, Value};
-use nerfx::host::{testing, Bundle, ClipSource, Instance, PropValue};
-use nerfx::image::{Plane, Planes, Window};
+use nerfx::host::{testing, Bundle, ClipSource, HostOptions, Instance, PropValue};
+use nerfx::image::{scaled_size, Plane, Planes, Window};
 use openfx_sys as ofx;
 
 // OpenFX status codes, written out from the spec.
@@ -26,7 +26,7 @@ const ERR_VALUE: c_int = 11;
 const REPLY_NO: c_int = 13;
 
 fn bundle() -> Bundle {
-    Bundle::load(&common_ofx::bundle()).unwrap()
+    common_ofx::load(HostOptions::default())
 }
 
 fn name(s: &[u8]) -> *const c_char {
@@ -587,20 +587,12 @@ fn concurrent_tile_renders_agree_with_one_full_render() {
     matte.set_param("gamma", &Value::Double(1.7)).unwrap();
     assert_eq!(matte.region_of_definition(1.0).unwrap(), (37, 23));
     for s in [1.0f64, 0.5] {
-        let (w, h) = ((37.0 * s).ceil() as u32, (23.0 * s).ceil() as u32);
+        let (w, h) = (scaled_size(37, s), scaled_size(23, s));
         let full = matte
             .render(1.0, Window::new(0, 0, w, h), s, false)
             .unwrap();
         assert_eq!((full.width, full.height), (w, h));
-        let tiles: Vec<Window> = (0..h)
-            .step_by(5)
-            .flat_map(|y| {
-                (0..w)
-                    .step_by(7)
-                    .map(move |x| Window::new(x, y, x + 7, y + 5))
-            })
-            .map(|t| t.intersect(&Window::new(0, 0, w, h)))
-            .collect();
+        let tiles = tiles(w, h);
         matte.begin_sequence(1.0, 1.0, s).unwrap();
         std::thread::scope(|scope| {
             for chunk in tiles.chunks(tiles.len().div_ceil(6)) {

@@ -9,15 +9,17 @@
 
 mod common_ofx;
 
-use std::path::{Path, PathBuf};
-use std::sync::{Mutex, MutexGuard, OnceLock, PoisonError};
+use std::path::Path;
+use std::sync::{Mutex, MutexGuard, PoisonError};
 
-use nerfx::demo;
+use common_ofx::fixtures::{instance_with, text};
+use common_ofx::images::{assert_same, at, pattern, rgba, rgba_of, tiled};
+use common_ofx::load;
 use nerfx::graph::{node, Context, ParamValues, RenderRequest, Value};
 use nerfx::host::{
     Bundle, ChangeReason, ClipSource, Field, HostOptions, Instance, MessageSuiteOffer,
 };
-use nerfx::image::{Plane, Planes, Window};
+use nerfx::image::{scaled_size, Planes, Window};
 
 /// The demo image size.
 const W: u32 = 32;
@@ -30,45 +32,25 @@ fn turn() -> MutexGuard<'static, ()> {
     TURN.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
-fn load(options: HostOptions) -> Bundle {
-    Bundle::load_with(&common_ofx::bundle(), options).expect("the built bundle loads")
-}
-
+/// The demo's inputs at `W × H`, written once per test binary.
 fn demo_dir() -> &'static Path {
-    static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("nerfx-ofx-modes-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        demo::write_graph(&dir, W, H).unwrap();
-        dir
-    })
-}
-
-fn text(s: impl AsRef<Path>) -> Value {
-    Value::Text(s.as_ref().to_string_lossy().into_owned())
+    common_ofx::fixtures::demo_dir(W, H)
 }
 
 /// A NeRF Render of the demo environment at draft quality, and its values for the core.
 fn nerf(bundle: &Bundle, field_file: &Path) -> (Instance, ParamValues) {
-    let dir = demo_dir();
-    let n = node("org.nerfx.NeRFRender").unwrap();
-    let mut values = n.defaults();
-    let mut instance = bundle.instance(n.desc.id, Context::Generator).unwrap();
-    for (name, value) in [
+    let set = [
         ("file", text(field_file)),
-        ("shot", text(dir.join("demo_shot.json"))),
+        ("shot", text(demo_dir().join("demo_shot.json"))),
         ("quality", Value::Choice(0)),
         ("exposure", Value::Double(0.5)),
-    ] {
-        values.set(name, value.clone()).unwrap();
-        instance.set_param(name, &value).unwrap();
-    }
-    (instance, values)
+    ];
+    instance_with(bundle, "org.nerfx.NeRFRender", Context::Generator, &set)
 }
 
 /// The core's NeRF Render of the whole image at `scale`.
 fn core_nerf(values: &ParamValues, scale: f64) -> Planes {
-    let (w, h) = (side(W, scale), side(H, scale));
+    let (w, h) = (scaled_size(W, scale), scaled_size(H, scale));
     let p = node("org.nerfx.NeRFRender")
         .unwrap()
         .render(
@@ -77,100 +59,6 @@ fn core_nerf(values: &ParamValues, scale: f64) -> Planes {
         )
         .unwrap();
     rgba_of(&p)
-}
-
-fn side(n: u32, scale: f64) -> u32 {
-    ((f64::from(n) * scale).ceil() as u32).max(1)
-}
-
-fn rgba(w: u32, h: u32, f: impl Fn(u32, u32, usize) -> f32) -> Planes {
-    let plane = |c: usize| Plane {
-        width: w,
-        height: h,
-        data: (0..h)
-            .flat_map(|y| (0..w).map(move |x| (x, y)))
-            .map(|(x, y)| f(x, y, c))
-            .collect(),
-    };
-    Planes {
-        width: w,
-        height: h,
-        rgb: Some([plane(0), plane(1), plane(2)]),
-        alpha: Some(plane(3)),
-        depth_z: None,
-        depth_ray: None,
-        depth_median: None,
-    }
-}
-
-/// Channel `c` (0–2 colour, 3 alpha) of raster pixel `(x, y)`.
-fn at(p: &Planes, x: u32, y: u32, c: usize) -> f32 {
-    if c == 3 {
-        p.alpha.as_ref().unwrap().get(x, y)
-    } else {
-        p.rgb.as_ref().unwrap()[c].get(x, y)
-    }
-}
-
-fn rgba_of(p: &Planes) -> Planes {
-    rgba(p.width, p.height, |x, y, c| at(p, x, y, c))
-}
-
-/// Odd-sized tiles (7×5) covering `w × h`.
-fn tiles(w: u32, h: u32) -> Vec<Window> {
-    let mut out = Vec::new();
-    for y in (0..h).step_by(5) {
-        for x in (0..w).step_by(7) {
-            out.push(Window::new(x, y, (x + 7).min(w), (y + 5).min(h)));
-        }
-    }
-    out
-}
-
-/// Every tile rendered by `render` and pasted into one image.
-fn tiled(w: u32, h: u32, render: impl Fn(Window) -> Planes) -> Planes {
-    let tiles: Vec<(Window, Planes)> = tiles(w, h).into_iter().map(|t| (t, render(t))).collect();
-    rgba(w, h, |x, y, c| {
-        let (t, p) = tiles
-            .iter()
-            .find(|(t, _)| x >= t.x0 && x < t.x1 && y >= t.y0 && y < t.y1)
-            .unwrap();
-        assert_eq!((p.width, p.height), (t.width(), t.height()));
-        at(p, x - t.x0, y - t.y0, c)
-    })
-}
-
-fn assert_same(got: &Planes, want: &Planes, what: &str) {
-    assert_eq!((got.width, got.height), (want.width, want.height), "{what}");
-    for c in 0..4 {
-        let mut differ = 0;
-        for y in 0..got.height {
-            for x in 0..got.width {
-                if at(got, x, y, c).to_bits() != at(want, x, y, c).to_bits() {
-                    differ += 1;
-                }
-            }
-        }
-        assert_eq!(differ, 0, "{what}: {differ} samples of channel {c} differ");
-    }
-}
-
-/// A deterministic premultiplied image, different per clip and per render scale.
-fn pattern(seed: u32, window: Window, scale: f64) -> Planes {
-    let s = (scale * 8.0) as u32;
-    rgba(window.width(), window.height(), |x, y, c| {
-        let (x, y) = (x + window.x0, y + window.y0);
-        let h = (x.wrapping_mul(73_856_093)
-            ^ y.wrapping_mul(19_349_663)
-            ^ (seed + s + c as u32).wrapping_mul(83_492_791))
-            % 1000;
-        let v = h as f32 / 1000.0;
-        if c == 3 {
-            v
-        } else {
-            v * (0.2 + 0.8 * v) + seed as f32 * 0.5
-        }
-    })
 }
 
 /// A compositing node to test: identifier, context, connected clips, parameter values.
@@ -227,12 +115,7 @@ fn compositing_of(
     input: fn(Planes) -> Planes,
 ) -> (Instance, ParamValues) {
     let (id, context, clips, params) = case;
-    let mut values = node(id).unwrap().defaults();
-    let mut instance = bundle.instance(id, *context).unwrap();
-    for (name, value) in params {
-        values.set(name, value.clone()).unwrap();
-        instance.set_param(name, value).unwrap();
-    }
+    let (mut instance, values) = instance_with(bundle, id, *context, params);
     for (seed, clip) in clips.iter().enumerate() {
         let source = ClipSource::new((CW, CH), move |_, w, s| {
             Ok(input(pattern(seed as u32, w, s)))
@@ -250,7 +133,7 @@ fn core_compositing(
     scale: f64,
     input: impl Fn(Planes) -> Planes,
 ) -> Planes {
-    let full = Window::new(0, 0, side(CW, scale), side(CH, scale));
+    let full = Window::new(0, 0, scaled_size(CW, scale), scaled_size(CH, scale));
     let mut request = RenderRequest::new(3.0, full, scale);
     for (seed, clip) in case.2.iter().enumerate() {
         request = request.with_input(clip, input(pattern(seed as u32, full, scale)));
@@ -390,6 +273,17 @@ fn without_a_message_suite_errors_are_statuses_and_renders_still_work() {
     no_violations(&b);
 }
 
+/// `p` as the plugin sees an RGB input image: its colour with alpha 1.
+fn opaque(p: Planes) -> Planes {
+    rgba(p.width, p.height, |x, y, c| {
+        if c == 3 {
+            1.0
+        } else {
+            at(&p, x, y, c)
+        }
+    })
+}
+
 #[test]
 fn rgb_input_images_read_as_opaque_rgba() {
     let _turn = turn();
@@ -397,20 +291,10 @@ fn rgb_input_images_read_as_opaque_rgba() {
         rgb_inputs: true,
         ..HostOptions::default()
     });
-    // The plugin sees each input's colour with alpha 1.
-    let opaque = |p: Planes| {
-        rgba(p.width, p.height, |x, y, c| {
-            if c == 3 {
-                1.0
-            } else {
-                at(&p, x, y, c)
-            }
-        })
-    };
     for case in cases() {
         let (instance, values) = compositing(&b, &case);
         for scale in [1.0, 0.5] {
-            let (w, h) = (side(CW, scale), side(CH, scale));
+            let (w, h) = (scaled_size(CW, scale), scaled_size(CH, scale));
             let got = tiled(w, h, |t| instance.render(3.0, t, scale, false).unwrap());
             let want = core_compositing(&case, &values, scale, opaque);
             assert_same(&got, &want, &format!("{} RGB inputs at {scale}", case.0));
@@ -441,7 +325,7 @@ fn unpremultiplied_input_images_are_premultiplied_before_compositing() {
     for case in cases() {
         let (instance, values) = compositing_of(&b, &case, no_colour_without_alpha);
         for scale in [1.0, 0.5] {
-            let (w, h) = (side(CW, scale), side(CH, scale));
+            let (w, h) = (scaled_size(CW, scale), scaled_size(CH, scale));
             let got = tiled(w, h, |t| instance.render(3.0, t, scale, false).unwrap());
             // The core on the premultiplied source: the host divided colour by alpha, the
             // plugin multiplied it back, so only the rounding of (c / a) · a may differ.
@@ -475,7 +359,7 @@ fn top_down_padded_images_give_the_same_pixels() {
     });
     let (nerf_instance, values) = nerf(&b, &demo_dir().join("demo_environment.json"));
     for scale in [1.0, 0.5] {
-        let (w, h) = (side(W, scale), side(H, scale));
+        let (w, h) = (scaled_size(W, scale), scaled_size(H, scale));
         let got = tiled(w, h, |t| {
             nerf_instance.render(FRAME, t, scale, false).unwrap()
         });
@@ -488,7 +372,7 @@ fn top_down_padded_images_give_the_same_pixels() {
     for case in cases() {
         let (instance, values) = compositing(&b, &case);
         for scale in [1.0, 0.5] {
-            let (w, h) = (side(CW, scale), side(CH, scale));
+            let (w, h) = (scaled_size(CW, scale), scaled_size(CH, scale));
             let got = tiled(w, h, |t| instance.render(3.0, t, scale, false).unwrap());
             let want = core_compositing(&case, &values, scale, |p| p);
             assert_same(&got, &want, &format!("{} padded at {scale}", case.0));
@@ -505,15 +389,6 @@ fn padded_rgb_images_together() {
         rgb_inputs: true,
         ..HostOptions::default()
     });
-    let opaque = |p: Planes| {
-        rgba(p.width, p.height, |x, y, c| {
-            if c == 3 {
-                1.0
-            } else {
-                at(&p, x, y, c)
-            }
-        })
-    };
     let case = &cases()[2];
     let (instance, values) = compositing(&b, case);
     let got = tiled(CW, CH, |t| instance.render(3.0, t, 1.0, false).unwrap());
@@ -548,7 +423,7 @@ fn a_field_render_writes_that_field_rows_only() {
     let (comp, comp_values) = compositing(&b, &cases()[1]);
     for field in [Field::Lower, Field::Upper] {
         for scale in [1.0, 0.5] {
-            let (w, h) = (side(W, scale), side(H, scale));
+            let (w, h) = (scaled_size(W, scale), scaled_size(H, scale));
             let got = tiled(w, h, |t| {
                 nerf_instance.render_field(FRAME, t, scale, field).unwrap()
             });

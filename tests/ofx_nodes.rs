@@ -5,126 +5,17 @@
 
 mod common_ofx;
 
-use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+use std::path::Path;
 
-use nerfx::demo;
+use common_ofx::fixtures::{instance_with, shared as bundle, text};
+use common_ofx::images::{assert_same, paste, pattern, render_tiled, rgba, rgba_of, tiles};
 use nerfx::graph::{node, nodes, Context, ParamKind, Range, RenderRequest, Value};
-use nerfx::host::{Bundle, ClipSource, Instance, PropValue};
-use nerfx::image::{Plane, Planes, Window};
-
-fn bundle() -> &'static Bundle {
-    static BUNDLE: OnceLock<Bundle> = OnceLock::new();
-    BUNDLE.get_or_init(|| Bundle::load(&common_ofx::bundle()).expect("the built bundle loads"))
-}
+use nerfx::host::{ClipSource, Instance, PropValue};
+use nerfx::image::{scaled_size, Planes, Window};
 
 /// The demo's inputs (scenes, shot, graph) at 45×27, written once per test binary.
 fn demo_dir() -> &'static Path {
-    static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("nerfx-ofx-nodes-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        demo::write_graph(&dir, 45, 27).unwrap();
-        dir
-    })
-}
-
-fn text(s: impl AsRef<Path>) -> Value {
-    Value::Text(s.as_ref().to_string_lossy().into_owned())
-}
-
-fn side(n: u32, scale: f64) -> u32 {
-    ((f64::from(n) * scale).ceil() as u32).max(1)
-}
-
-/// Odd-sized tiles (7×5) covering `w × h`.
-fn tiles(w: u32, h: u32) -> Vec<Window> {
-    let mut out = Vec::new();
-    for y in (0..h).step_by(5) {
-        for x in (0..w).step_by(7) {
-            out.push(Window::new(x, y, (x + 7).min(w), (y + 5).min(h)));
-        }
-    }
-    out
-}
-
-/// `tile` pasted into `into` (both with RGBA planes).
-fn paste(into: &mut Planes, tile: &Planes, at: Window) {
-    let copy = |dst: &mut Plane, src: &Plane| {
-        for y in 0..at.height() {
-            for x in 0..at.width() {
-                let d = ((at.y0 + y) * dst.width + at.x0 + x) as usize;
-                dst.data[d] = src.data[(y * src.width + x) as usize];
-            }
-        }
-    };
-    for c in 0..3 {
-        copy(
-            &mut into.rgb.as_mut().unwrap()[c],
-            &tile.rgb.as_ref().unwrap()[c],
-        );
-    }
-    copy(into.alpha.as_mut().unwrap(), tile.alpha.as_ref().unwrap());
-}
-
-fn rgba(w: u32, h: u32, f: impl Fn(u32, u32, usize) -> f32) -> Planes {
-    let plane = |c: usize| Plane {
-        width: w,
-        height: h,
-        data: (0..h)
-            .flat_map(|y| (0..w).map(move |x| (x, y)))
-            .map(|(x, y)| f(x, y, c))
-            .collect(),
-    };
-    Planes {
-        width: w,
-        height: h,
-        rgb: Some([plane(0), plane(1), plane(2)]),
-        alpha: Some(plane(3)),
-        depth_z: None,
-        depth_ray: None,
-        depth_median: None,
-    }
-}
-
-/// The RGBA part of `p` (the host carries RGBA only).
-fn rgba_of(p: &Planes) -> Planes {
-    Planes {
-        depth_z: None,
-        depth_ray: None,
-        depth_median: None,
-        ..p.clone()
-    }
-}
-
-/// Renders every tile through `instance` and assembles the image.
-fn render_tiled(instance: &Instance, time: f64, w: u32, h: u32, scale: f64) -> Planes {
-    let mut image = rgba(w, h, |_, _, _| f32::NAN);
-    for tile in tiles(w, h) {
-        let got = instance
-            .render(time, tile, scale, false)
-            .unwrap_or_else(|e| panic!("tile {tile:?} at scale {scale}: {e}"));
-        assert_eq!((got.width, got.height), (tile.width(), tile.height()));
-        paste(&mut image, &got, tile);
-    }
-    image
-}
-
-fn assert_same(got: &Planes, want: &Planes, what: &str) {
-    assert_eq!((got.width, got.height), (want.width, want.height), "{what}");
-    let planes = |p: &Planes| {
-        let [r, g, b] = p.rgb.clone().unwrap();
-        [r, g, b, p.alpha.clone().unwrap()]
-    };
-    for (c, (g, w)) in planes(got).iter().zip(planes(want).iter()).enumerate() {
-        let differ = g
-            .data
-            .iter()
-            .zip(&w.data)
-            .filter(|(a, b)| a.to_bits() != b.to_bits())
-            .count();
-        assert_eq!(differ, 0, "{what}: {differ} samples of channel {c} differ");
-    }
+    common_ofx::fixtures::demo_dir(45, 27)
 }
 
 fn ofx_type(kind: &ParamKind) -> &'static str {
@@ -278,8 +169,6 @@ fn nerf_instance(
     output: usize,
 ) -> (Instance, nerfx::graph::ParamValues) {
     let dir = demo_dir();
-    let n = node("org.nerfx.NeRFRender").unwrap();
-    let mut values = n.defaults();
     let set = [
         ("file", text(dir.join(scene))),
         ("shot", text(dir.join("demo_shot.json"))),
@@ -287,12 +176,7 @@ fn nerf_instance(
         ("quality", Value::Choice(0)),
         ("exposure", Value::Double(0.5)),
     ];
-    let mut instance = bundle().instance(n.desc.id, context).unwrap();
-    for (name, value) in set {
-        values.set(name, value.clone()).unwrap();
-        instance.set_param(name, &value).unwrap();
-    }
-    (instance, values)
+    instance_with(bundle(), "org.nerfx.NeRFRender", context, &set)
 }
 
 #[test]
@@ -306,7 +190,7 @@ fn nerf_render_tiles_at_every_scale_equal_the_core() {
         let (instance, values) = nerf_instance(Context::Generator, scene, output);
         assert_eq!(instance.region_of_definition(1005.0).unwrap(), (45, 27));
         for scale in [1.0, 0.5, 0.25] {
-            let (w, h) = (side(45, scale), side(27, scale));
+            let (w, h) = (scaled_size(45, scale), scaled_size(27, scale));
             let want = n
                 .render(
                     &values,
@@ -322,25 +206,6 @@ fn nerf_render_tiles_at_every_scale_equal_the_core() {
         }
     }
     assert_eq!(bundle().violations(), Vec::<String>::new());
-}
-
-/// A deterministic premultiplied image, different per clip and per render scale (a stand-in
-/// for an upstream node that honours the render scale).
-fn pattern(seed: u32, window: Window, scale: f64) -> Planes {
-    let s = (scale * 8.0) as u32;
-    rgba(window.width(), window.height(), |x, y, c| {
-        let (x, y) = (x + window.x0, y + window.y0);
-        let h = (x.wrapping_mul(73_856_093)
-            ^ y.wrapping_mul(19_349_663)
-            ^ (seed + s + c as u32).wrapping_mul(83_492_791))
-            % 1000;
-        let v = h as f32 / 1000.0;
-        if c == 3 {
-            v
-        } else {
-            v * (0.2 + 0.8 * v) + seed as f32 * 0.5
-        }
-    })
 }
 
 /// A compositing node to test: identifier, context, connected clips, parameter values.
@@ -386,12 +251,7 @@ fn compositing_nodes_through_the_host_equal_the_core() {
     ];
     for (id, context, clips, params) in cases {
         let n = node(id).unwrap();
-        let mut values = n.defaults();
-        let mut instance = bundle().instance(id, context).unwrap();
-        for (name, value) in params {
-            values.set(name, value.clone()).unwrap();
-            instance.set_param(name, value).unwrap();
-        }
+        let (mut instance, values) = instance_with(bundle(), id, context, params);
         for (seed, clip) in clips.iter().enumerate() {
             let source = ClipSource::new((w, h), move |_, window, scale| {
                 Ok(pattern(seed as u32, window, scale))
@@ -399,7 +259,7 @@ fn compositing_nodes_through_the_host_equal_the_core() {
             instance.connect(clip, source).unwrap();
         }
         for scale in [1.0, 0.5, 0.25] {
-            let (sw, sh) = (side(w, scale), side(h, scale));
+            let (sw, sh) = (scaled_size(w, scale), scaled_size(h, scale));
             let full = Window::new(0, 0, sw, sh);
             let mut request = RenderRequest::new(3.0, full, scale);
             for (seed, clip) in clips.iter().enumerate() {

@@ -1,14 +1,30 @@
-//! The built OpenFX bundle, for the tests that drive it through the host.
+//! The built OpenFX bundle, for the tests that drive it through the host, and what those
+//! tests share: the demo files and parameter values ([`fixtures`]), RGBA images built,
+//! tiled and compared ([`images`]).
+
+// Each test binary uses a part of these; the rest is not dead, only unused there.
+#[allow(dead_code)]
+pub mod fixtures;
+#[allow(dead_code)]
+pub mod images;
 
 use std::path::PathBuf;
 use std::process::Command;
 use std::sync::OnceLock;
+
+use nerfx::host::{Bundle, HostOptions};
 
 /// Builds `nerfx.ofx.bundle` once per test binary with `bundle/build.sh --profile test` (the
 /// README's build command, at the test profile) and returns its path.
 pub fn bundle() -> PathBuf {
     static BUNDLE: OnceLock<PathBuf> = OnceLock::new();
     BUNDLE.get_or_init(|| build("test")).clone()
+}
+
+/// The built bundle loaded by a host of its own behaving as `options` say: its violations
+/// and messages are those of the test that loaded it only.
+pub fn load(options: HostOptions) -> Bundle {
+    Bundle::load_with(&bundle(), options).expect("the built bundle loads")
 }
 
 /// The bundle as shipped (release profile), for benchmarks; test binaries without one do not

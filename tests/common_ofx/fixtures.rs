@@ -1,0 +1,55 @@
+//! What the tests that drive the NeRF Render through the host start from: one bundle shared
+//! by a binary's tests, the demo's input files, file parameters as values.
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use nerfx::graph::{node, Context, ParamValues, Value};
+use nerfx::host::{Bundle, HostOptions, Instance};
+
+/// The built bundle, loaded once per test binary by the strict default host and shared by
+/// its tests (their violations and messages go to the same record, so tests that count
+/// their own load one with [`super::load`]).
+pub fn shared() -> &'static Bundle {
+    static BUNDLE: OnceLock<Bundle> = OnceLock::new();
+    BUNDLE.get_or_init(|| super::load(HostOptions::default()))
+}
+
+/// The demo's inputs (scenes, shot, graph: `nerfx::demo::write_graph`) at `w × h`, written
+/// once per test binary into a directory of its own.
+///
+/// Writing them is the slow part, so a binary keeps one size: a call with another size than
+/// the first fails rather than silently handing back images of the wrong size.
+pub fn demo_dir(w: u32, h: u32) -> &'static Path {
+    static DIR: OnceLock<(u32, u32, PathBuf)> = OnceLock::new();
+    let (dw, dh, dir) = DIR.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("nerfx-ofx-demo-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        nerfx::demo::write_graph(&dir, w, h).unwrap();
+        (w, h, dir)
+    });
+    assert_eq!((*dw, *dh), (w, h), "one demo size per test binary");
+    dir
+}
+
+/// A path as a text (file) parameter value.
+pub fn text(s: impl AsRef<Path>) -> Value {
+    Value::Text(s.as_ref().to_string_lossy().into_owned())
+}
+
+/// An instance of node `id` in `context` of `bundle` and the core's values of that node, both
+/// with `params` set: the two sides that a test renders and compares.
+pub fn instance_with(
+    bundle: &Bundle,
+    id: &str,
+    context: Context,
+    params: &[(&str, Value)],
+) -> (Instance, ParamValues) {
+    let mut values = node(id).unwrap().defaults();
+    let mut instance = bundle.instance(id, context).unwrap();
+    for (name, value) in params {
+        values.set(name, value.clone()).unwrap();
+        instance.set_param(name, value).unwrap();
+    }
+    (instance, values)
+}

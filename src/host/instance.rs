@@ -52,36 +52,9 @@ impl ClipSource {
                     "a fixed image at render scale {s}"
                 )));
             }
-            crop(&planes, w)
+            planes.crop(w)
         })
     }
-}
-
-/// The window `w` of `p` (every plane present).
-fn crop(p: &Planes, w: Window) -> Result<Planes> {
-    if w.x1 > p.width || w.y1 > p.height {
-        return Err(Error::invalid(
-            "clip source",
-            format!("window {w:?} outside a {}×{} image", p.width, p.height),
-        ));
-    }
-    let c = |q: &Plane| Plane {
-        width: w.width(),
-        height: w.height(),
-        data: (w.y0..w.y1)
-            .flat_map(|y| (w.x0..w.x1).map(move |x| (x, y)))
-            .map(|(x, y)| q.get(x, y))
-            .collect(),
-    };
-    Ok(Planes {
-        width: w.width(),
-        height: w.height(),
-        rgb: p.rgb.as_ref().map(|[r, g, b]| [c(r), c(g), c(b)]),
-        alpha: p.alpha.as_ref().map(c),
-        depth_z: p.depth_z.as_ref().map(c),
-        depth_ray: p.depth_ray.as_ref().map(c),
-        depth_median: p.depth_median.as_ref().map(c),
-    })
 }
 
 #[derive(Clone, Copy, PartialEq, Eq)]

@@ -18,7 +18,7 @@
 use nerfx::graph::{ClipKind, Context, Node, ParamKind};
 use openfx_sys::*;
 
-use crate::instance::effect_props;
+use crate::instance::{effect_props, param_set};
 use crate::param_defs::define_param;
 use crate::props::{name, optional, Props};
 use crate::status::{check, Failure, Result, ERR_UNSUPPORTED};
@@ -145,14 +145,7 @@ pub fn describe_in_context(
             &name(kOfxImageFieldBoth).to_string_lossy(),
         ));
     }
-    let s = suites()?;
-    let get_set = s
-        .effect
-        .getParamSet
-        .ok_or_else(|| Failure::missing_suite("image effect suite's getParamSet"))?;
-    let mut set: OfxParamSetHandle = std::ptr::null_mut();
-    // SAFETY: the descriptor handle and an out pointer.
-    check("getParamSet", unsafe { get_set(effect, &mut set) })?;
+    let set = param_set(effect)?;
     for p in &node.desc.params {
         define_param(set, p)?;
     }

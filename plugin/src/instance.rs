@@ -61,6 +61,18 @@ pub fn effect_props(effect: OfxImageEffectHandle) -> Result<Props> {
     Ok(unsafe { Props::new(set, s.property) })
 }
 
+/// The effect's parameter set (of a descriptor or an instance).
+pub fn param_set(effect: OfxImageEffectHandle) -> Result<OfxParamSetHandle> {
+    let get = suites()?
+        .effect
+        .getParamSet
+        .ok_or_else(|| Failure::missing_suite("image effect suite's getParamSet"))?;
+    let mut set: OfxParamSetHandle = std::ptr::null_mut();
+    // SAFETY: `effect` is the handle of the current action; `set` receives a handle.
+    check("getParamSet", unsafe { get(effect, &mut set) })?;
+    Ok(set)
+}
+
 fn clip(effect: OfxImageEffectHandle, clip_name: &str) -> Result<ClipRef> {
     let get = suites()?
         .effect
@@ -82,13 +94,7 @@ pub fn create(node: &'static Node, effect: OfxImageEffectHandle) -> Result<()> {
     let s = suites()?;
     let props = effect_props(effect)?;
     let context = context_from_name(&props.string(name(kOfxImageEffectPropContext))?)?;
-    let get_set = s
-        .effect
-        .getParamSet
-        .ok_or_else(|| Failure::missing_suite("image effect suite's getParamSet"))?;
-    let mut set: OfxParamSetHandle = std::ptr::null_mut();
-    // SAFETY: a live instance handle and an out pointer.
-    check("getParamSet", unsafe { get_set(effect, &mut set) })?;
+    let set = param_set(effect)?;
     let get_param = s
         .param
         .paramGetHandle

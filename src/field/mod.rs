@@ -17,6 +17,7 @@ mod nerfacto_torch;
 mod occupancy;
 mod sh;
 mod sh4;
+mod splats;
 mod srgb;
 mod torch_ckpt;
 mod zip;
@@ -30,6 +31,7 @@ pub use nerfacto::NerfactoField;
 pub use occupancy::Occupancy;
 pub use sh::ShColor;
 pub use sh4::sh4;
+pub use splats::{SplatColor, Splats};
 pub use torch_ckpt::{Checkpoint, DType, TensorInfo};
 
 use std::path::Path;

@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# The whole test suite from a fresh Debian machine with Rust: installs what the tests need
+# (idempotent: a few checks and nothing else when everything is present), then runs them.
+#
+#   libclang-dev   openfx-sys generates the OpenFX bindings from the official headers (bindgen)
+#   blender        the reference for camera alignment (Debian's 3.4, run headless)
+#   numpy, msgpack the independent NumPy references of the trained fields and splats
+#
+# Nothing is skipped when a tool is missing: the tests that need one fail. Extra arguments go
+# to `cargo test` (a test name, `-- --nocapture`).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+as_root() {
+    if [ "$(id -u)" = 0 ]; then
+        "$@"
+    elif command -v sudo >/dev/null; then
+        sudo "$@"
+    else
+        echo "scripts/test.sh: '$*' needs root (or sudo)" >&2
+        return 1
+    fi
+}
+
+apt_install() {
+    export DEBIAN_FRONTEND=noninteractive
+    as_root apt-get update -qq
+    as_root apt-get install -y -qq "$@"
+}
+
+need_apt=()
+command -v cc >/dev/null || need_apt+=(build-essential)
+dpkg -s libclang-dev >/dev/null 2>&1 || need_apt+=(libclang-dev)
+command -v blender >/dev/null || need_apt+=(blender)
+command -v python3 >/dev/null || need_apt+=(python3)
+if ((${#need_apt[@]})); then
+    echo "== installing ${need_apt[*]}"
+    apt_install "${need_apt[@]}"
+fi
+
+if ! python3 -c "import numpy, msgpack" 2>/dev/null; then
+    echo "== installing numpy and msgpack for $(command -v python3)"
+    # A pip-managed Python (pyenv, a venv) takes them from PyPI; Debian's own python3 refuses
+    # pip (externally managed) and takes its packages.
+    python3 -m pip install --quiet numpy msgpack 2>/dev/null ||
+        apt_install python3-numpy python3-msgpack
+    python3 -c "import numpy, msgpack"
+fi
+
+echo "== cargo test --workspace"
+cargo test --workspace "$@"

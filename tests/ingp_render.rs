@@ -116,3 +116,77 @@ fn naive_render_agrees_with_a_numpy_march() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The marcher's two colour outputs: linear is the as-trained composite unpremultiplied,
+/// decoded by the sRGB standard's curve (written out here in f64) and premultiplied again;
+/// alpha is the same in both.
+#[test]
+fn linear_output_is_the_as_trained_composite_decoded() {
+    use nerfx::render::{render, ColorOutput, Quality, RenderSettings};
+    let dir = scratch("render-colour");
+    let balls = [Ball {
+        centre: [0.5, 0.5, 0.5],
+        radius: 0.3,
+    }];
+    let (path, _) = write_blob_snapshot(&dir, "blob", &Spec::small_8x4(), &balls, 0.5);
+    let field = Arc::new(IngpField::load(&path).unwrap());
+    let scene = Scene::new(vec![Instance::new(
+        "blob",
+        FieldHandle::new(field),
+        DMat4::IDENTITY,
+        None,
+    )
+    .unwrap()]);
+    let p = Perspective::from_vertical_fov(16, 12, 30.0).unwrap();
+    let camera = Camera::new(
+        nerfx::demo::look_at(DVec3::new(2.0, -2.5, 0.9), DVec3::ZERO),
+        Projection::Perspective(p),
+    )
+    .unwrap();
+    let settings = |color| RenderSettings {
+        color,
+        ..RenderSettings::new(Quality::Preview.params(), Outputs::rgba())
+    };
+    let linear = render(
+        &scene,
+        &camera,
+        camera.full_window(),
+        &settings(ColorOutput::Linear),
+    );
+    let trained = render(
+        &scene,
+        &camera,
+        camera.full_window(),
+        &settings(ColorOutput::AsTrained),
+    );
+    let (linear, trained) = (linear.unwrap(), trained.unwrap());
+    let (la, ta) = (linear.alpha.unwrap(), trained.alpha.unwrap());
+    assert_eq!(la.data, ta.data);
+    let (lc, tc) = (linear.rgb.unwrap(), trained.rgb.unwrap());
+    let mut partly = 0;
+    for i in 0..la.data.len() {
+        let a = f64::from(ta.data[i]);
+        if a > 0.0 && a < 0.99 {
+            partly += 1;
+        }
+        for c in 0..3 {
+            let want = if a > 0.0 {
+                let s = (f64::from(tc[c].data[i]) / a).clamp(0.0, 1.0);
+                let l = if s <= 0.04045 {
+                    s / 12.92
+                } else {
+                    ((s + 0.055) / 1.055).powf(2.4)
+                };
+                l * a
+            } else {
+                0.0
+            };
+            let got = f64::from(lc[c].data[i]);
+            assert!(
+                (got - want).abs() < 1e-4,
+                "pixel {i} channel {c}: {got} vs {want}"
+            );
+        }
+    }
+    assert!(partly > 10, "only {partly} partly covered pixels");
+}

@@ -12,7 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use nerfx::frames::{frame_path, parse_frames, read_shot, render_frame};
 use nerfx::image::{write_exr, write_exr_layers, write_png_preview};
-use nerfx::render::{render_with_progress, Outputs, Quality, RenderSettings};
+use nerfx::render::{render_with_progress, ColorOutput, Outputs, Quality, RenderSettings};
 use nerfx::scene::SceneDesc;
 use nerfx::{bench, demo, Error, Result};
 
@@ -67,6 +67,10 @@ enum Command {
         /// Quality preset.
         #[arg(long, value_enum, default_value_t = Quality::Final)]
         quality: Quality,
+        /// Scenes: scene-linear colour, or the composite as the trainer shows it (display
+        /// referred; graphs set the NeRF Render node's Colour parameter instead).
+        #[arg(long, value_enum, default_value_t = ColorOutput::Linear)]
+        colour: ColorOutput,
         /// Also write a PNG preview beside each EXR.
         #[arg(long)]
         png: bool,
@@ -150,6 +154,7 @@ fn run(cli: Cli) -> Result<()> {
             frames,
             output,
             quality,
+            colour,
             png,
             bundle,
             scale,
@@ -161,7 +166,10 @@ fn run(cli: Cli) -> Result<()> {
             let scene = SceneDesc::read(&scene)?.load()?;
             let shot = read_shot(&shot, &nerf_object)?;
             let frames = frames.unwrap_or_else(|| shot.frames.iter().map(|f| f.frame).collect());
-            let settings = RenderSettings::new(quality.params(), Outputs::all());
+            let settings = RenderSettings {
+                color: colour,
+                ..RenderSettings::new(quality.params(), Outputs::all())
+            };
             let bar = progress_bar(frames.len() as u64, "frames");
             for &frame in &frames {
                 let path = frame_path(&output, frame, frames.len() > 1);

@@ -29,8 +29,7 @@ use rmpv::Value;
 
 use super::cascades::Cascades;
 use super::hashgrid::correctly_rounded;
-use super::srgb::srgb_to_linear;
-use super::{sh4, Aabb, Field, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage};
+use super::{sh4, Aabb, ColorSpace, Field, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage};
 use crate::error::{Error, Result};
 
 /// Points per batch inside one density or radiance call (bounds the scratch memory).
@@ -433,7 +432,7 @@ impl IngpField {
             DENSITY_OUTPUTS,
             r.n_hidden_layers,
             r.width,
-            if self.hdr { "HDR exp" } else { "sigmoid, sRGB to linear" },
+            if self.hdr { "HDR exp, linear" } else { "sigmoid, sRGB-encoded" },
             if s.cutlass { 8 } else { 16 },
             s.aabb_scale,
             self.scale,
@@ -604,7 +603,7 @@ impl IngpField {
                 if self.hdr {
                     x.clamp(-10.0, 10.0).exp()
                 } else {
-                    srgb_to_linear(1.0 / (1.0 + (-x).exp()))
+                    1.0 / (1.0 + (-x).exp())
                 }
             }));
         }
@@ -614,6 +613,14 @@ impl IngpField {
 impl Field for IngpField {
     fn bounds(&self) -> Aabb {
         self.bounds
+    }
+
+    fn color_space(&self) -> ColorSpace {
+        if self.hdr {
+            ColorSpace::Linear
+        } else {
+            ColorSpace::Srgb
+        }
     }
 
     fn density(&self, points: &[Vec3], sigma: &mut [f32]) {

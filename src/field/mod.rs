@@ -32,6 +32,7 @@ pub use occupancy::Occupancy;
 pub use sh::ShColor;
 pub use sh4::sh4;
 pub use splats::{SplatColor, Splats};
+pub(crate) use srgb::{linear_to_srgb, srgb_to_linear};
 pub use torch_ckpt::{Checkpoint, DType, TensorInfo};
 
 use std::path::Path;
@@ -39,6 +40,16 @@ use std::path::Path;
 use glam::Vec3;
 
 use crate::error::{Error, Result};
+
+/// The colour space radiance is trained and composited in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ColorSpace {
+    /// Scene-linear light.
+    Linear,
+    /// sRGB-encoded (IEC 61966-2-1) values in [0, 1], as in the photographs a capture is
+    /// trained on.
+    Srgb,
+}
 
 /// A radiance field in its own frame ("field space").
 ///
@@ -52,9 +63,16 @@ pub trait Field: Send + Sync {
     /// `sigma.len() == points.len()`.
     fn density(&self, points: &[Vec3], sigma: &mut [f32]);
 
-    /// Linear RGB radiance (≥ 0) at each point seen along each unit direction `dirs[i]`.
-    /// `rgb.len() == points.len() == dirs.len()`.
+    /// RGB radiance (≥ 0) in the field's [`Field::color_space`] at each point seen along each
+    /// unit direction `dirs[i]`. `rgb.len() == points.len() == dirs.len()`.
     fn radiance(&self, points: &[Vec3], dirs: &[Vec3], rgb: &mut [Vec3]);
+
+    /// The space [`Field::radiance`] is in: the one the field was trained in. Linear (the
+    /// default) for analytic fields and HDR captures; sRGB-encoded for fields trained on
+    /// photographs, whose trainer composited the encoded values.
+    fn color_space(&self) -> ColorSpace {
+        ColorSpace::Linear
+    }
 
     /// Floats of per-sample state that [`Field::density_with_features`] can leave for
     /// [`Field::radiance_with_features`], so that a colour query need not redo the density

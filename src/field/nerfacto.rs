@@ -43,9 +43,8 @@ use half::f16;
 
 use super::nerfacto_config::RunSettings;
 use super::nerfacto_torch::{torch_sh4, BiasedMlp, TorchHashGrid};
-use super::srgb::srgb_to_linear;
 use super::torch_ckpt::{Checkpoint, DType};
-use super::{sh4, Aabb, Field, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage};
+use super::{sh4, Aabb, ColorSpace, Field, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage};
 use crate::camera::DataparserTransform;
 use crate::error::{Error, Result};
 use occupancy::{cache_key, GridSettings, OccupancyGrid, Source, CACHE_FILE};
@@ -336,9 +335,7 @@ impl NerfactoField {
                 }
             }
             for (c, v) in dst.iter_mut().zip(colour.chunks_exact(3)) {
-                *c = Vec3::from_array(
-                    [v[0], v[1], v[2]].map(|x| srgb_to_linear(1.0 / (1.0 + (-x).exp()))),
-                );
+                *c = Vec3::from_array([v[0], v[1], v[2]].map(|x| 1.0 / (1.0 + (-x).exp())));
             }
         }
     }
@@ -667,6 +664,10 @@ fn read_linear_layers(
 impl Field for NerfactoField {
     fn bounds(&self) -> Aabb {
         Aabb::new(Vec3::splat(-HALF_EXTENT), Vec3::splat(HALF_EXTENT))
+    }
+
+    fn color_space(&self) -> ColorSpace {
+        ColorSpace::Srgb
     }
 
     fn density(&self, points: &[Vec3], sigma: &mut [f32]) {

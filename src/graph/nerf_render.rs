@@ -24,7 +24,7 @@ use crate::camera::{
 use crate::composite::{over, rgba_pixels, rgba_planes};
 use crate::error::{Error, Result};
 use crate::image::{scaled_size, Plane, Planes, BACKGROUND_DEPTH};
-use crate::render::{render, Outputs, Quality, RenderSettings};
+use crate::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
 use crate::scene::{CropBox, Instance, Scene};
 
 const CONTEXTS: &[Context] = &[Context::Generator, Context::Filter, Context::General];
@@ -145,6 +145,14 @@ pub(crate) fn nerf_render_node() -> Node {
                         ("depthZ", "Depth Z"),
                         ("depthRay", "Ray Depth"),
                     ],
+                ),
+                choice(
+                    "colour",
+                    "Colour",
+                    "Linear: a capture trained on photographs is composited as its trainer \
+                     did, in sRGB-encoded space, then converted to scene-linear. As Trained: \
+                     that composite unconverted, as the trainer's viewer shows it.",
+                    &[("linear", "Linear"), ("asTrained", "As Trained (display)")],
                 ),
                 ParamDesc::new(
                     "crop",
@@ -366,12 +374,14 @@ fn render_node(values: &ParamValues, request: &RenderRequest) -> Result<Planes> 
         depth_ray: output == "depthRay",
         depth_median: false,
     };
-    let planes = render(
-        &scene,
-        &camera,
-        window,
-        &RenderSettings::new(quality.params(), outputs),
-    )?;
+    let settings = RenderSettings {
+        color: match values.choice("colour")? {
+            "asTrained" => ColorOutput::AsTrained,
+            _ => ColorOutput::Linear,
+        },
+        ..RenderSettings::new(quality.params(), outputs)
+    };
+    let planes = render(&scene, &camera, window, &settings)?;
     let (w, h) = (planes.width, planes.height);
     let alpha = planes
         .alpha

@@ -53,6 +53,26 @@ pub fn opacity(optical_thickness: f64) -> f64 {
     -(-optical_thickness).exp_m1()
 }
 
+/// A pixel composited in sRGB-encoded space (premultiplied RGB, accumulation `alpha`) as
+/// scene-linear premultiplied RGB: unpremultiply, decode each channel, premultiply. A trainer
+/// composites the encoded colours of the photographs it learned from, so a soft edge or a
+/// haze looks as approved only when composited encoded and converted afterwards.
+///
+/// ```
+/// use nerfx::render::srgb_composite_to_linear;
+/// // Half coverage of encoded grey 0.5 (premultiplied 0.25): linear 0.2140 at alpha 0.5.
+/// let [r, _, _] = srgb_composite_to_linear([0.25; 3], 0.5);
+/// assert!((r - 0.5 * 0.214_041_1).abs() < 1e-5);
+/// // Nothing covered stays nothing.
+/// assert_eq!(srgb_composite_to_linear([0.0; 3], 0.0), [0.0; 3]);
+/// ```
+pub fn srgb_composite_to_linear(rgb: [f32; 3], alpha: f32) -> [f32; 3] {
+    if !(alpha > 0.0) {
+        return [0.0; 3];
+    }
+    rgb.map(|c| crate::field::srgb_to_linear(c / alpha) * alpha)
+}
+
 /// The running composite of one ray: transmittance, accumulation and the depth moment.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pieces {

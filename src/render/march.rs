@@ -17,7 +17,7 @@ use glam::{DVec3, Vec3};
 use super::composite::{crossing_depth, Pieces};
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
-use crate::field::{Aabb, Occupancy};
+use crate::field::{linear_to_srgb, Aabb, ColorSpace, Occupancy};
 use crate::image::Window;
 use crate::scene::{LocalRay, Scene};
 
@@ -46,11 +46,14 @@ pub(super) struct InstancePlan {
     feature_offset: usize,
     /// The field's [`smooth_length`](crate::field::Field::smooth_length), field units.
     smooth: f64,
+    /// A linear field in a scene composited in sRGB-encoded space: its colours are encoded.
+    encode: bool,
 }
 
 impl InstancePlan {
     pub(super) fn for_scene(scene: &Scene, params: &MarchParams) -> Vec<InstancePlan> {
         let mut feature_offset = 0;
+        let space = scene.composite_space();
         scene
             .instances
             .iter()
@@ -64,6 +67,8 @@ impl InstancePlan {
                     features,
                     feature_offset: feature_offset - features,
                     smooth: inst.field().smooth_length().max(0.0) as f64,
+                    encode: space == ColorSpace::Srgb
+                        && inst.field().color_space() == ColorSpace::Linear,
                 }
             })
             .collect()
@@ -646,6 +651,11 @@ fn shade(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Sc
             .radiance_with_features(&s.points, &s.dirs, &s.field_features, &mut s.rgb_out);
         s.stats.color_samples += s.points.len() as u64;
         for (&(r, share), c) in s.owners.iter().zip(&s.rgb_out) {
+            let c = if plan.encode {
+                c.map(linear_to_srgb)
+            } else {
+                *c
+            };
             let c = c.as_dvec3().max(DVec3::ZERO);
             if c.is_finite() {
                 s.rays[r as usize].rgb += c * share;

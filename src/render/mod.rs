@@ -10,7 +10,7 @@ mod march;
 mod naive;
 mod quality;
 
-pub use composite::{crossing_depth, opacity, Pieces};
+pub use composite::{crossing_depth, opacity, srgb_composite_to_linear, Pieces};
 pub use naive::render_naive;
 pub use quality::{MarchParams, Quality};
 
@@ -19,6 +19,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::camera::Camera;
 use crate::error::Result;
+use crate::field::ColorSpace;
 use crate::image::{Plane, Planes, Window};
 use crate::scene::Scene;
 use march::{march_tile, InstancePlan, PixelResult, Scratch};
@@ -63,6 +64,21 @@ impl Outputs {
     }
 }
 
+/// What the colour planes hold when a scene holds fields trained on photographs (composited in
+/// their sRGB-encoded space; see [`srgb_composite_to_linear`]).
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum,
+)]
+pub enum ColorOutput {
+    /// Scene-linear: the composite converted from the trained space (unpremultiply, decode,
+    /// premultiply), for compositing with linear renders and plates.
+    #[default]
+    Linear,
+    /// The composite as trained (display-referred, what the trainer's viewer shows),
+    /// unconverted.
+    AsTrained,
+}
+
 /// Everything a render needs besides the scene and camera.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RenderSettings {
@@ -72,6 +88,8 @@ pub struct RenderSettings {
     pub outputs: Outputs,
     /// Tile side in pixels.
     pub tile_size: u32,
+    /// Linear or as-trained colour.
+    pub color: ColorOutput,
 }
 
 impl RenderSettings {
@@ -81,6 +99,7 @@ impl RenderSettings {
             march,
             outputs,
             tile_size: 16,
+            color: ColorOutput::Linear,
         }
     }
 }
@@ -140,7 +159,9 @@ pub fn render_with_progress(
         .iter()
         .fold(RenderStats::default(), |acc, r| acc.add(r.2));
     let tiles: Vec<_> = results.into_iter().map(|(w, px, _)| (w, px)).collect();
-    Ok((assemble(window, &tiles, &settings.outputs), stats))
+    let decode =
+        scene.composite_space() == ColorSpace::Srgb && settings.color == ColorOutput::Linear;
+    Ok((assemble(window, &tiles, &settings.outputs, decode), stats))
 }
 
 fn tiles(window: Window, size: u32) -> Vec<Window> {
@@ -158,8 +179,14 @@ fn tiles(window: Window, size: u32) -> Vec<Window> {
     tiles
 }
 
-/// Gathers tiles' pixels into the requested planes.
-fn assemble(window: Window, tiles: &[(Window, Vec<PixelResult>)], outputs: &Outputs) -> Planes {
+/// Gathers tiles' pixels into the requested planes; `decode`: the colours were composited in
+/// sRGB-encoded space and are wanted linear.
+fn assemble(
+    window: Window,
+    tiles: &[(Window, Vec<PixelResult>)],
+    outputs: &Outputs,
+    decode: bool,
+) -> Planes {
     let (w, h) = (window.width(), window.height());
     let plane = |on: bool| on.then(|| Plane::filled(w, h, 0.0));
     let mut planes = Planes {
@@ -183,8 +210,13 @@ fn assemble(window: Window, tiles: &[(Window, Vec<PixelResult>)], outputs: &Outp
             let y = tile.y0 - window.y0 + i as u32 / tile.width();
             let at = y as usize * w as usize + x as usize;
             if let Some(rgb) = &mut planes.rgb {
+                let colour = if decode {
+                    srgb_composite_to_linear(px.rgb, px.alpha)
+                } else {
+                    px.rgb
+                };
                 for (c, plane) in rgb.iter_mut().enumerate() {
-                    plane.data[at] = px.rgb[c];
+                    plane.data[at] = colour[c];
                 }
             }
             let set = |p: &mut Option<Plane>, v: f32| {

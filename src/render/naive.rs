@@ -9,6 +9,7 @@ use super::march::PixelResult;
 use super::{assemble, Outputs, RenderStats};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
+use crate::field::{linear_to_srgb, ColorSpace};
 use crate::image::{Planes, Window};
 use crate::scene::Scene;
 
@@ -42,7 +43,8 @@ pub fn render_naive(
         color_samples: rows.iter().map(|r| r.2[1]).sum(),
     };
     let rows: Vec<_> = rows.into_iter().map(|(w, px, _)| (w, px)).collect();
-    Ok((assemble(window, &rows, outputs), stats))
+    let decode = scene.composite_space() == ColorSpace::Srgb;
+    Ok((assemble(window, &rows, outputs, decode), stats))
 }
 
 fn naive_pixel(
@@ -85,6 +87,7 @@ fn naive_pixel(
     let (mut points, mut dirs, mut idx) = (Vec::new(), Vec::new(), Vec::new());
     let (mut dens, mut cols) = (Vec::new(), Vec::new());
     let (mut lit, mut lit_points) = (Vec::new(), Vec::new());
+    let encode = scene.composite_space() == ColorSpace::Srgb;
     for (inst, local) in scene.instances.iter().zip(&locals) {
         let Some(lr) = local else { continue };
         points.clear();
@@ -118,6 +121,9 @@ fn naive_pixel(
         cols.resize(lit.len(), Vec3::ZERO);
         inst.field().radiance(&lit_points, &dirs, &mut cols);
         *colours += lit.len() as u64;
+        if encode && inst.field().color_space() == ColorSpace::Linear {
+            cols.iter_mut().for_each(|c| *c = c.map(linear_to_srgb));
+        }
         for (&k, c) in lit.iter().zip(&cols) {
             let s = dens[k] as f64 * lr.units_per_world as f64;
             rgb[idx[k]] += c.as_dvec3() * s;

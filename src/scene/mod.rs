@@ -20,6 +20,8 @@ pub use crop::CropBox;
 pub use file::{FieldSource, InstanceDesc, LoadedScene, SceneDesc};
 pub use instance::{FieldHandle, Instance, LocalRay};
 
+use crate::field::ColorSpace;
+
 /// The fields to render together.
 #[derive(Clone, Default)]
 pub struct Scene {
@@ -31,5 +33,20 @@ impl Scene {
     /// A scene of the given instances.
     pub fn new(instances: Vec<Instance>) -> Self {
         Scene { instances }
+    }
+
+    /// The space colours are composited in: sRGB-encoded when any instance was trained on
+    /// photographs (its trainer composited encoded colours; linear instances are encoded to
+    /// join it), else linear.
+    pub fn composite_space(&self) -> ColorSpace {
+        if self
+            .instances
+            .iter()
+            .any(|i| i.field().color_space() == ColorSpace::Srgb)
+        {
+            ColorSpace::Srgb
+        } else {
+            ColorSpace::Linear
+        }
     }
 }

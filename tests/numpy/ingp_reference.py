@@ -144,7 +144,8 @@ def occupied(q, grids):
 
 def field(snap_path):
     """The snapshot at `snap_path` as a function (points, directions) -> (sigma, rgb), NeRF
-    world frame, float32."""
+    world frame, float32; rgb in the space the snapshot was trained in (sRGB-encoded sigmoid
+    outputs, or linear for an HDR snapshot: the function's `is_hdr`)."""
     doc = load(snap_path)
     snap = doc["snapshot"]
     enc = doc["encoding"]
@@ -193,6 +194,7 @@ def field(snap_path):
     def evaluate(pts, dirs):
         return evaluate_at(pts, dirs, s, o, aabb_scale, levels, table, n_feat, dmats, rmats, grids, hdr)
 
+    evaluate.is_hdr = hdr
     return evaluate
 
 
@@ -212,8 +214,7 @@ def evaluate_at(pts, dirs, s, o, aabb_scale, levels, table, n_feat, dmats, rmats
     if hdr:
         rgb = np.exp(np.clip(rgb_raw, -10.0, 10.0))
     else:
-        srgb = F32(1.0) / (F32(1.0) + np.exp(-rgb_raw))
-        rgb = np.where(srgb <= 0.04045, srgb / F32(12.92), ((srgb + F32(0.055)) / F32(1.055)) ** F32(2.4))
+        rgb = F32(1.0) / (F32(1.0) + np.exp(-rgb_raw))
     return sigma, rgb.astype(F32)
 
 

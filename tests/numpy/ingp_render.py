@@ -6,7 +6,10 @@ rows of 6, two per ray: (origin xyz, unit direction xyz) in the field's frame (N
 then (step, field units per world unit k, sample count n, 0, 0, 0). Sample j (< n) lies at
 world distance (j + 1/2)·step past the ray's entry, field point origin + dir·((j + 1/2)·step·k).
 With σ_j in world units (σ_field·k), α_j = 1 − exp(−σ_j·step), T_j = Π_{i<j} (1 − α_i):
-colour Σ T_j α_j c_j (premultiplied), alpha 1 − Π (1 − α_j). Output: float32 r g b a per ray.
+colour Σ T_j α_j c_j (premultiplied), alpha 1 − Π (1 − α_j). The colours are composited in
+the space the snapshot was trained in; an sRGB-trained snapshot's composite is then converted
+to linear (unpremultiplied, decoded by the sRGB standard's curve, premultiplied again), as the
+trainer's viewer shows it. Output: float32 r g b a per ray.
 """
 import os
 import sys
@@ -39,7 +42,12 @@ def main():
         transmittance = np.concatenate([[1.0], np.cumprod(1.0 - alpha)[:-1]])
         weight = transmittance * alpha
         colour = (weight[:, None] * rgb.astype(np.float64)).sum(axis=0)
-        out.append([colour[0], colour[1], colour[2], 1.0 - np.prod(1.0 - alpha)])
+        acc = 1.0 - np.prod(1.0 - alpha)
+        if not evaluate.is_hdr and acc > 0.0:
+            straight = np.clip(colour / acc, 0.0, 1.0)
+            colour = acc * np.where(straight <= 0.04045, straight / 12.92,
+                                    ((straight + 0.055) / 1.055) ** 2.4)
+        out.append([colour[0], colour[1], colour[2], acc])
     np.asarray(out, dtype="<f4").tofile(out_path)
 
 

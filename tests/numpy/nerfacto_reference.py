@@ -272,9 +272,7 @@ def main():
         out = torch_mlp(head_in, layers("mlp_head.layers"))
     sigma = (F32(cfg["average_init_density"]) * np.exp(base[:, 0])).astype(F32)
     srgb = (F32(1) / (F32(1) + np.exp(-out))).astype(F32)
-    linear = np.where(srgb <= 0.04045, srgb / F32(12.92),
-                      ((srgb + F32(0.055)) / F32(1.055)) ** F32(2.4)).astype(F32)
-    np.concatenate([sigma[:, None], linear], axis=1).astype(F32).tofile(out_path)
+    np.concatenate([sigma[:, None], srgb], axis=1).astype(F32).tofile(out_path)
 
 
 if __name__ == "__main__":

@@ -67,7 +67,7 @@ pub fn opacity(optical_thickness: f64) -> f64 {
 /// assert_eq!(srgb_composite_to_linear([0.0; 3], 0.0), [0.0; 3]);
 /// ```
 pub fn srgb_composite_to_linear(rgb: [f32; 3], alpha: f32) -> [f32; 3] {
-    if !(alpha > 0.0) {
+    if alpha.is_nan() || alpha <= 0.0 {
         return [0.0; 3];
     }
     rgb.map(|c| crate::field::srgb_to_linear(c / alpha) * alpha)

@@ -14,6 +14,12 @@ called from a script, e.g.
                               nerf_object="NeRF")
     bpy.ops.nerfx.export_camera_path(filepath="/tmp/camera_path.json", nerf_object="NeRF")
     bpy.ops.nerfx.import_camera_path(filepath="/tmp/camera_path.json", nerf_object="NeRF")
+    bpy.ops.nerfx.render_environment(scene_file="/shots/scene.json", at_object="Chair")
+    bpy.ops.nerfx.load_environment(filepath="/tmp/envmap.exr")
+
+Environment maps: `nerfx envmap` renders the field as a 2:1 equirectangular image laid out as
+the World's Environment Texture reads it (image centre +X, top +Z), so loading it as the
+World's colour with no Mapping node lights the Blender scene as the field would.
 """
 
 bl_info = {
@@ -28,6 +34,9 @@ bl_info = {
 
 import json
 import math
+import os
+import subprocess
+import tempfile
 
 import bpy
 from bpy.props import IntProperty, PointerProperty, StringProperty
@@ -378,6 +387,111 @@ class NERFX_OT_import_camera_path(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def load_environment(scene, path):
+    """Makes the image at `path` the World's colour: Environment Texture → Background."""
+    image = bpy.data.images.load(path, check_existing=True)
+    image.reload()
+    world = scene.world
+    if world is None:
+        world = bpy.data.worlds.new("nerfx environment")
+        scene.world = world
+    world.use_nodes = True
+    nodes, links = world.node_tree.nodes, world.node_tree.links
+    background = next((n for n in nodes if n.type == "BACKGROUND"), None)
+    if background is None:
+        background = nodes.new("ShaderNodeBackground")
+    output = next((n for n in nodes if n.type == "OUTPUT_WORLD"), None)
+    if output is None:
+        output = nodes.new("ShaderNodeOutputWorld")
+    texture = nodes.get("nerfx environment")
+    if texture is None:
+        texture = nodes.new("ShaderNodeTexEnvironment")
+        texture.name = "nerfx environment"
+        texture.location = (background.location.x - 300, background.location.y)
+    texture.image = image
+    texture.projection = "EQUIRECTANGULAR"
+    links.new(texture.outputs["Color"], background.inputs["Color"])
+    links.new(background.outputs["Background"], output.inputs["Surface"])
+    return image
+
+
+class NERFX_OT_load_environment(bpy.types.Operator):
+    """Light the scene with a nerfx environment map: set it as the World's colour"""
+
+    bl_idname = "nerfx.load_environment"
+    bl_label = "Load Environment Map"
+
+    filepath: StringProperty(name="File", subtype="FILE_PATH")
+
+    def invoke(self, context, event):
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+    def execute(self, context):
+        path = bpy.path.abspath(self.filepath)
+        try:
+            load_environment(context.scene, path)
+        except RuntimeError as e:
+            self.report({"ERROR"}, "nerfx: cannot load %s: %s" % (path, e))
+            return {"CANCELLED"}
+        self.report({"INFO"}, "nerfx: World lit by %s" % path)
+        return {"FINISHED"}
+
+
+class NERFX_OT_render_environment(bpy.types.Operator):
+    """Render the field around an object with nerfx and light the scene with it"""
+
+    bl_idname = "nerfx.render_environment"
+    bl_label = "Render Environment Map"
+
+    scene_file: StringProperty(name="Scene file", subtype="FILE_PATH")
+    at_object: StringProperty(name="At object", description="Default: the active object")
+    filepath: StringProperty(name="Output", subtype="FILE_PATH")
+    executable: StringProperty(name="nerfx program", description="Default: the panel's")
+    height: IntProperty(name="Height", default=0, min=0, description="Default: the panel's")
+    nerf_object: StringProperty(name="NeRF object")
+
+    def execute(self, context):
+        scene = context.scene
+        cam, nerf, problem = _resolve(self, context)
+        at = scene.objects.get(self.at_object) if self.at_object else context.active_object
+        scene_file = bpy.path.abspath(self.scene_file or scene.nerfx_scene_file)
+        if problem is None and at is None:
+            problem = "pick the object to render the environment around"
+        if problem is None and not os.path.isfile(scene_file):
+            problem = "no nerfx scene file at %r" % scene_file
+        if problem:
+            self.report({"ERROR"}, "nerfx: " + problem)
+            return {"CANCELLED"}
+        out = bpy.path.abspath(
+            self.filepath or os.path.join(scene.nerfx_output_dir or "//", "envmap.exr")
+        )
+        frame = scene.frame_current
+        position = at.matrix_world.translation
+        with tempfile.TemporaryDirectory() as tmp:
+            shot = os.path.join(tmp, "shot.json")
+            with open(shot, "w", encoding="utf8") as f:
+                json.dump(build_shot(scene, cam, nerf, frame, frame), f, allow_nan=False)
+            command = [
+                bpy.path.abspath(self.executable or scene.nerfx_executable),
+                "envmap", scene_file, shot, "--frame", str(frame),
+                "--position", ",".join(repr(float(c)) for c in position),
+                "--height", str(self.height or scene.nerfx_envmap_height),
+                "-o", out,
+            ]
+            try:
+                done = subprocess.run(command, capture_output=True, text=True)
+            except OSError as e:
+                self.report({"ERROR"}, "nerfx: cannot run %s: %s" % (command[0], e))
+                return {"CANCELLED"}
+        if done.returncode != 0:
+            self.report({"ERROR"}, "nerfx envmap failed: %s" % done.stderr.strip())
+            return {"CANCELLED"}
+        load_environment(scene, out)
+        self.report({"INFO"}, "nerfx: World lit by %s" % out)
+        return {"FINISHED"}
+
+
 class NERFX_PT_panel(bpy.types.Panel):
     """nerfx: shot export and nerfstudio camera paths"""
 
@@ -398,12 +512,21 @@ class NERFX_PT_panel(bpy.types.Panel):
         layout.operator(NERFX_OT_export_shot.bl_idname, icon="EXPORT")
         layout.operator(NERFX_OT_export_camera_path.bl_idname, icon="EXPORT")
         layout.operator(NERFX_OT_import_camera_path.bl_idname, icon="IMPORT")
+        box = layout.box()
+        box.label(text="Environment map")
+        box.prop(scene, "nerfx_scene_file")
+        box.prop(scene, "nerfx_executable")
+        box.prop(scene, "nerfx_envmap_height")
+        box.operator(NERFX_OT_render_environment.bl_idname, icon="WORLD")
+        box.operator(NERFX_OT_load_environment.bl_idname, icon="IMAGE_DATA")
 
 
 CLASSES = (
     NERFX_OT_export_shot,
     NERFX_OT_export_camera_path,
     NERFX_OT_import_camera_path,
+    NERFX_OT_load_environment,
+    NERFX_OT_render_environment,
     NERFX_PT_panel,
 )
 
@@ -415,6 +538,15 @@ def register():
     bpy.types.Scene.nerfx_output_dir = StringProperty(
         name="Output folder", subtype="DIR_PATH", default="//"
     )
+    bpy.types.Scene.nerfx_scene_file = StringProperty(
+        name="Scene file", subtype="FILE_PATH", description="The nerfx scene the field is in"
+    )
+    bpy.types.Scene.nerfx_executable = StringProperty(
+        name="nerfx program", subtype="FILE_PATH", default="nerfx"
+    )
+    bpy.types.Scene.nerfx_envmap_height = IntProperty(
+        name="Height", default=1024, min=8, max=32768, description="Pixels; the width is twice"
+    )
     for cls in CLASSES:
         bpy.utils.register_class(cls)
 
@@ -422,6 +554,9 @@ def register():
 def unregister():
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)
+    del bpy.types.Scene.nerfx_envmap_height
+    del bpy.types.Scene.nerfx_executable
+    del bpy.types.Scene.nerfx_scene_file
     del bpy.types.Scene.nerfx_output_dir
     del bpy.types.Scene.nerfx_nerf_object
 

@@ -1,9 +1,11 @@
 //! Farm-side plumbing: frame lists, output name patterns, and rendering one frame of a scene
-//! through a shot.
+//! through a shot, or an environment map of it from a point.
 
 use std::path::{Path, PathBuf};
 
-use crate::camera::{CameraPath, Shot};
+use glam::DVec3;
+
+use crate::camera::{environment_camera, CameraPath, Shot};
 use crate::error::{Error, Result};
 use crate::image::Planes;
 use crate::render::{render_with_progress, RenderSettings, RenderStats};
@@ -120,6 +122,38 @@ pub fn render_frame(
 ) -> Result<(Planes, RenderStats)> {
     let at = shot.frame(frame)?;
     let camera = at.camera(shot)?;
+    let placed = scene.place(&|name| at.object_matrix(name))?;
+    render_with_progress(&placed, &camera, camera.full_window(), settings, on_tile)
+}
+
+/// Where an environment map is rendered from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum EnvironmentOrigin {
+    /// The origin of the shot's object of this name at the frame.
+    Object(String),
+    /// A world position.
+    Position(DVec3),
+}
+
+/// Renders an environment map of the scene at `frame` of `shot` from `origin`: a 2:1
+/// equirectangular image `height` pixels tall, laid out as Blender's World Environment
+/// Texture reads it (see [`environment_camera`]), so that it relights a Blender scene as the
+/// field would. Object-bound instances are placed by the shot at that frame.
+pub fn render_environment(
+    scene: &LoadedScene,
+    shot: &Shot,
+    frame: i64,
+    origin: &EnvironmentOrigin,
+    height: u32,
+    settings: &RenderSettings,
+    on_tile: &(dyn Fn(u64) + Sync),
+) -> Result<(Planes, RenderStats)> {
+    let at = shot.frame(frame)?;
+    let position = match origin {
+        EnvironmentOrigin::Object(name) => at.object_matrix(name)?.w_axis.truncate(),
+        EnvironmentOrigin::Position(p) => *p,
+    };
+    let camera = environment_camera(position, height)?;
     let placed = scene.place(&|name| at.object_matrix(name))?;
     render_with_progress(&placed, &camera, camera.full_window(), settings, on_tile)
 }

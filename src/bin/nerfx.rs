@@ -10,7 +10,10 @@ use std::time::Instant;
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use nerfx::frames::{frame_path, parse_frames, read_shot, render_frame};
+use glam::DVec3;
+use nerfx::frames::{
+    frame_path, parse_frames, read_shot, render_environment, render_frame, EnvironmentOrigin,
+};
 use nerfx::image::{write_exr, write_exr_layers, write_png_preview};
 use nerfx::render::{render_with_progress, ColorOutput, Outputs, Quality, RenderSettings};
 use nerfx::scene::SceneDesc;
@@ -81,6 +84,36 @@ enum Command {
         /// Graphs: render scale in (0, 1] (0.5: half-resolution proxies).
         #[arg(long, default_value_t = 1.0)]
         scale: f64,
+    },
+    /// Render an environment map (2:1 equirectangular EXR, linear HDR) of a scene from a point,
+    /// laid out as Blender's World Environment Texture reads it, to relight a Blender scene as
+    /// the field would.
+    Envmap {
+        /// Scene file (JSON).
+        scene: PathBuf,
+        /// Shot file, or a nerfstudio camera_path.json: places object-bound instances.
+        shot: PathBuf,
+        /// The shot's frame (default: its first).
+        #[arg(long)]
+        frame: Option<i64>,
+        /// Render from this object's origin (an object of the shot, e.g. the NeRF object).
+        #[arg(long, conflicts_with = "position")]
+        at: Option<String>,
+        /// Render from this world position: `x,y,z`.
+        #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+        position: Option<Vec<f64>>,
+        /// With a nerfstudio camera path: the scene's object the path's frame belongs to.
+        #[arg(long, default_value = "NeRF")]
+        nerf_object: String,
+        /// Image height in pixels (the width is twice it).
+        #[arg(long, default_value_t = 1024)]
+        height: u32,
+        /// Quality preset.
+        #[arg(long, value_enum, default_value_t = Quality::Final)]
+        quality: Quality,
+        /// Output EXR.
+        #[arg(short, long, default_value = "out/envmap.exr")]
+        output: PathBuf,
     },
     /// Describe a field file: format, architecture, parameters, bounds, occupancy.
     Info {
@@ -186,6 +219,59 @@ fn run(cli: Cli) -> Result<()> {
                 bar.suspend(|| println!("frame {frame} → {}", path.display()));
             }
             bar.finish_and_clear();
+            Ok(())
+        }
+        Command::Envmap {
+            scene,
+            shot,
+            frame,
+            at,
+            position,
+            nerf_object,
+            height,
+            quality,
+            output,
+        } => {
+            let origin = match (at, position) {
+                (Some(name), _) => EnvironmentOrigin::Object(name),
+                (None, Some(p)) => match p[..] {
+                    [x, y, z] => EnvironmentOrigin::Position(DVec3::new(x, y, z)),
+                    _ => {
+                        return Err(Error::invalid(
+                            "envmap --position",
+                            format!("{} numbers given; expected x,y,z", p.len()),
+                        ))
+                    }
+                },
+                (None, None) => {
+                    return Err(Error::invalid(
+                        "envmap",
+                        "say where to render from: --at OBJECT or --position x,y,z",
+                    ))
+                }
+            };
+            let scene = SceneDesc::read(&scene)?.load()?;
+            let shot = read_shot(&shot, &nerf_object)?;
+            let frame = match frame {
+                Some(f) => f,
+                None => shot
+                    .frames
+                    .first()
+                    .map(|f| f.frame)
+                    .ok_or_else(|| Error::invalid("shot", "has no frames"))?,
+            };
+            if let Some(dir) = output.parent() {
+                create_dir(dir)?;
+            }
+            let settings = RenderSettings::new(quality.params(), Outputs::all());
+            let bar = progress_bar(2 * u64::from(height) * u64::from(height), "envmap");
+            let (planes, _) =
+                render_environment(&scene, &shot, frame, &origin, height, &settings, &|n| {
+                    bar.inc(n)
+                })?;
+            bar.finish_and_clear();
+            write_exr(&output, &planes)?;
+            println!("envmap: frame {frame} → {}", output.display());
             Ok(())
         }
         Command::Info { field } => {

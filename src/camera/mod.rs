@@ -10,6 +10,7 @@
 //! object transforms can be marched jointly.
 
 mod dataparser;
+mod environment;
 mod equirect;
 mod interpolate;
 mod json;
@@ -19,6 +20,7 @@ mod shot;
 mod stereo;
 
 pub use dataparser::DataparserTransform;
+pub use environment::environment_camera;
 pub use equirect::Equirect;
 pub use nerfstudio::{CameraPath, PathCameraType, PathCrop, PathFrame, PathKeyframe};
 pub use perspective::{BlenderIntrinsics, Perspective, SensorFit};

@@ -1,0 +1,102 @@
+//! Environment maps against Blender itself: `nerfx envmap` renders an analytic scene of
+//! coloured spheres around a point; headless Blender presses the add-on's *Render Environment
+//! Map* button (which runs `nerfx envmap` from an empty's position and sets the image as the
+//! World's colour), then Cycles renders one pixel along each sphere's direction from that
+//! point. Each must see its sphere's colour: the map is oriented as Blender reads it.
+//!
+//! Blender is found on `PATH`; without it the test fails, unless `NERFX_SKIP_BLENDER=1`.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use glam::DVec3;
+use serde_json::{json, Value};
+
+fn blender() -> Option<PathBuf> {
+    if std::env::var("NERFX_SKIP_BLENDER").as_deref() == Ok("1") {
+        eprintln!("SKIPPED blender_environment: NERFX_SKIP_BLENDER=1");
+        return None;
+    }
+    let found = std::env::var_os("PATH").and_then(|paths| {
+        std::env::split_paths(&paths)
+            .map(|dir| dir.join("blender"))
+            .find(|p| p.is_file())
+    });
+    assert!(
+        found.is_some(),
+        "`blender` is not on PATH (apt-get install -y blender; NERFX_SKIP_BLENDER=1 skips)"
+    );
+    found
+}
+
+#[test]
+fn blender_sees_each_sphere_where_the_field_has_it() {
+    let Some(exe) = blender() else { return };
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let out = tempfile::tempdir().unwrap();
+    let centre = DVec3::new(1.0, 2.0, 0.5);
+    // Primaries and their mixes: every channel 0 or 1, which no transfer curve changes.
+    let spheres = [
+        (DVec3::new(1.0, 0.0, 0.0), [1.0, 0.0, 0.0]),
+        (DVec3::new(0.0, 1.0, 0.0), [0.0, 1.0, 0.0]),
+        (DVec3::new(0.0, -1.0, 0.0), [0.0, 0.0, 1.0]),
+        (DVec3::new(-1.0, 0.2, 0.3), [1.0, 1.0, 0.0]),
+        (DVec3::new(0.5, -0.4, 0.75), [0.0, 1.0, 1.0]),
+        (DVec3::new(0.3, 0.6, -0.74), [1.0, 0.0, 1.0]),
+    ];
+    let primitives: Vec<Value> = spheres
+        .iter()
+        .map(|(d, rgb)| {
+            let c = centre + d.normalize() * 10.0;
+            json!({"shape": {"sphere": {"center": [c.x, c.y, c.z], "radius": 1.2}},
+                   "density": 200, "color": {"rgb": rgb}})
+        })
+        .collect();
+    let scene = json!({"instances": [{"name": "spheres",
+        "field": {"analytic": {"primitives": primitives}}}]});
+    let scene_path = out.path().join("scene.json");
+    std::fs::write(&scene_path, scene.to_string()).unwrap();
+    let mut directions: Vec<[f64; 3]> = spheres.iter().map(|(d, _)| d.to_array()).collect();
+    // And one direction with nothing in it.
+    directions.push([-0.3, -0.9, -0.3]);
+    let probes = json!({"position": centre.to_array(), "height": 64, "directions": directions});
+
+    let run = Command::new(&exe)
+        .args(["-b", "--factory-startup", "--python"])
+        .arg(root.join("tests/blender/environment_check.py"))
+        .arg("--")
+        .arg(root.join("blender"))
+        .arg(env!("CARGO_BIN_EXE_nerfx"))
+        .arg(&scene_path)
+        .arg(out.path())
+        .arg(probes.to_string())
+        .output()
+        .expect("blender could not be started");
+    let log =
+        String::from_utf8_lossy(&run.stdout).to_string() + &String::from_utf8_lossy(&run.stderr);
+    assert!(
+        run.status.success() && log.contains("nerfx environment: wrote"),
+        "blender script failed:\n{log}"
+    );
+    let text = std::fs::read_to_string(out.path().join("environment.json")).unwrap();
+    let seen: Value = serde_json::from_str(&text).unwrap();
+    let colours = seen["colours"].as_array().unwrap();
+    let mut want: Vec<[f64; 3]> = spheres.iter().map(|(_, c)| *c).collect();
+    want.push([0.0; 3]);
+    for (i, (got, want)) in colours.iter().zip(&want).enumerate() {
+        let got: Vec<f64> = got
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        for c in 0..3 {
+            assert!(
+                (got[c] - want[c]).abs() < 0.02,
+                "direction {:?}: Blender sees {got:?}, the field has {want:?}",
+                directions[i]
+            );
+        }
+    }
+    assert_eq!(colours.len(), want.len());
+}

@@ -142,14 +142,37 @@ def camera_record(cam_obj, scene):
     return rec
 
 
+def motion_blur(scene):
+    """Blender's motion blur as the shot file holds it, or None when it is off."""
+    render = scene.render
+    if not render.use_motion_blur:
+        return None
+    position = getattr(scene.cycles, "motion_blur_position", "CENTER") if hasattr(
+        scene, "cycles") else "CENTER"
+    return {"shutter": render.motion_blur_shutter, "position": position.lower()}
+
+
+def _shot_frames(scene, start, end):
+    """The frames a shot holds: start..end, scene.frame_step apart; with motion blur also
+    every frame the shutter interval of those reaches into (nerfx interpolates between whole
+    frames), so the shot's range grows by that margin at both ends."""
+    step = max(1, scene.frame_step)
+    frames = set(range(start, end + 1, step))
+    blur = motion_blur(scene)
+    if blur:
+        reach = math.ceil(blur["shutter"])
+        for f in list(frames):
+            frames.update(range(f - reach, f + reach + 1))
+    return sorted(frames)
+
+
 def build_shot(scene, cam_obj, nerf_obj, start, end):
     """The shot dictionary for frames start..end (inclusive, scene.frame_step apart)."""
     render = scene.render
     frames = []
     current = scene.frame_current
-    step = max(1, scene.frame_step)
     try:
-        for f in range(start, end + 1, step):
+        for f in _shot_frames(scene, start, end):
             scene.frame_set(f)
             frames.append(
                 {
@@ -171,6 +194,7 @@ def build_shot(scene, cam_obj, nerf_obj, start, end):
         "pixel_aspect_y": render.pixel_aspect_y,
         "nerf_object": nerf_obj.name,
         "frames": frames,
+        **({"motion_blur": motion_blur(scene)} if motion_blur(scene) else {}),
     }
 
 

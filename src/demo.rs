@@ -308,6 +308,7 @@ pub fn shot(width: u32, height: u32) -> Shot {
         pixel_aspect_y: 1.0,
         nerf_object: NERF_OBJECT.into(),
         frames,
+        motion_blur: None,
         source: PathBuf::new(),
     }
 }

@@ -5,7 +5,8 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
-use crate::camera::{environment_camera, CameraPath, Shot};
+use crate::camera::{environment_camera, CameraPath, Shot, ShotFrame};
+use crate::composite::shutter_average;
 use crate::error::{Error, Result};
 use crate::image::Planes;
 use crate::render::{render_with_progress, RenderSettings, RenderStats};
@@ -112,7 +113,11 @@ pub fn read_shot(path: &Path, nerf_object: &str) -> Result<Shot> {
 }
 
 /// Renders `frame` of `shot`: the shot's camera at that frame, object-bound instances placed
-/// by the shot's object matrices at that frame.
+/// by the shot's object matrices at that frame. With the shot's motion blur on, the frame is
+/// the [`shutter_average`] of renders at `settings.shutter_samples` stratified times over the
+/// shutter, camera and objects interpolated between the shot's frames ([`Shot::frame_at`]:
+/// the shot must hold the frames around the shutter interval); a closed shutter or one
+/// sample renders the frame itself.
 pub fn render_frame(
     scene: &LoadedScene,
     shot: &Shot,
@@ -120,10 +125,32 @@ pub fn render_frame(
     settings: &RenderSettings,
     on_tile: &(dyn Fn(u64) + Sync),
 ) -> Result<(Planes, RenderStats)> {
-    let at = shot.frame(frame)?;
-    let camera = at.camera(shot)?;
-    let placed = scene.place(&|name| at.object_matrix(name))?;
-    render_with_progress(&placed, &camera, camera.full_window(), settings, on_tile)
+    let render_at = |at: &ShotFrame| {
+        let camera = at.camera(shot)?;
+        let placed = scene.place(&|name| at.object_matrix(name))?;
+        render_with_progress(&placed, &camera, camera.full_window(), settings, on_tile)
+    };
+    let times = shot.motion_blur.map_or_else(
+        || vec![frame as f64],
+        |blur| blur.times(frame as f64, settings.shutter_samples),
+    );
+    if let [_] = times[..] {
+        return render_at(shot.frame(frame)?);
+    }
+    let mut samples = Vec::with_capacity(times.len());
+    let mut stats = RenderStats::default();
+    for t in times {
+        let at = shot.frame_at(t).map_err(|e| {
+            Error::invalid(
+                format!("frame {frame}: motion blur"),
+                format!("the shutter needs the shot at frame {t}: {e}"),
+            )
+        })?;
+        let (planes, s) = render_at(&at)?;
+        stats = stats + s;
+        samples.push(planes);
+    }
+    Ok((shutter_average(samples)?, stats))
 }
 
 /// Where an environment map is rendered from.
@@ -161,6 +188,51 @@ pub fn render_environment(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::camera::{MotionBlur, ShutterPosition};
+    use crate::render::{Outputs, Quality};
+
+    #[test]
+    fn a_closed_shutter_renders_the_frame_itself_bit_for_bit() {
+        let scene = crate::demo::scene_desc().load().unwrap();
+        let mut shot = crate::demo::shot(32, 18);
+        let settings = RenderSettings {
+            shutter_samples: 16,
+            ..RenderSettings::new(Quality::Draft.params(), Outputs::all())
+        };
+        let frame = crate::demo::FIRST_FRAME + 3;
+        let sharp = render_frame(&scene, &shot, frame, &settings, &|_| {})
+            .unwrap()
+            .0;
+        shot.motion_blur = Some(MotionBlur {
+            shutter: 0.0,
+            position: ShutterPosition::Center,
+        });
+        let closed = render_frame(&scene, &shot, frame, &settings, &|_| {})
+            .unwrap()
+            .0;
+        assert_eq!(sharp, closed);
+        // An open shutter blurs; one sample is the frame again.
+        shot.motion_blur = Some(MotionBlur {
+            shutter: 1.0,
+            position: ShutterPosition::Center,
+        });
+        let blurred = render_frame(&scene, &shot, frame, &settings, &|_| {})
+            .unwrap()
+            .0;
+        assert_ne!(sharp, blurred);
+        let one = RenderSettings {
+            shutter_samples: 1,
+            ..settings
+        };
+        assert_eq!(
+            sharp,
+            render_frame(&scene, &shot, frame, &one, &|_| {}).unwrap().0
+        );
+        // The shutter must stay inside the shot.
+        let first = crate::demo::FIRST_FRAME;
+        let e = render_frame(&scene, &shot, first, &settings, &|_| {}).unwrap_err();
+        assert!(e.to_string().contains("motion blur"), "{e}");
+    }
 
     #[test]
     fn frame_lists() {

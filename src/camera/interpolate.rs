@@ -188,6 +188,7 @@ mod tests {
             pixel_aspect_x: 1.0,
             pixel_aspect_y: 1.0,
             nerf_object: "NeRF".into(),
+            motion_blur: None,
             frames: vec![
                 frame(
                     10,

@@ -17,6 +17,7 @@ mod json;
 mod nerfstudio;
 mod perspective;
 mod shot;
+mod shutter;
 mod stereo;
 
 pub use dataparser::DataparserTransform;
@@ -25,6 +26,7 @@ pub use equirect::Equirect;
 pub use nerfstudio::{CameraPath, PathCameraType, PathCrop, PathFrame, PathKeyframe};
 pub use perspective::{BlenderIntrinsics, Perspective, SensorFit};
 pub use shot::{Shot, ShotCamera, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, SHOT_VERSION};
+pub use shutter::{MotionBlur, ShutterPosition, MAX_SHUTTER};
 pub use stereo::{Eye, Ods, Vr180, DEFAULT_IPD};
 
 use glam::{DMat4, DVec3};

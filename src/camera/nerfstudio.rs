@@ -330,6 +330,7 @@ impl CameraPath {
             pixel_aspect_y: 1.0,
             nerf_object: nerf_object.to_string(),
             frames,
+            motion_blur: None,
             source: self.source.clone(),
         })
     }

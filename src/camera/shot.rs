@@ -39,7 +39,8 @@ use serde_json::Value;
 
 use super::json::{self, short, Describe, Null, Obj, Style};
 use super::{
-    BlenderIntrinsics, Camera, Equirect, Eye, Ods, Perspective, Projection, SensorFit, Vr180,
+    BlenderIntrinsics, Camera, Equirect, Eye, MotionBlur, Ods, Perspective, Projection, SensorFit,
+    ShutterPosition, Vr180,
 };
 use crate::error::{Error, Result};
 
@@ -67,6 +68,9 @@ pub struct Shot {
     pub nerf_object: String,
     /// The frames, in file order; frame numbers are unique.
     pub frames: Vec<ShotFrame>,
+    /// Blender's motion blur, when the scene renders with it (`motion_blur` in the file:
+    /// `{"shutter": frames, "position": "start" | "center" | "end"}`).
+    pub motion_blur: Option<MotionBlur>,
     /// The file the shot was read from, used in messages (empty when built in memory); not
     /// written.
     pub source: PathBuf,
@@ -187,8 +191,25 @@ impl Shot {
             pixel_aspect_y: top.positive_or("pixel_aspect_y", 1.0)?,
             nerf_object: top.get::<String>("nerf_object", "a string")?,
             frames: Vec::new(),
+            motion_blur: None,
             source: path.to_path_buf(),
         };
+        if top.has("motion_blur") {
+            let blur = top.object("motion_blur")?;
+            let position = if blur.has("position") {
+                blur.get::<ShutterPosition>("position", "\"start\", \"center\" or \"end\"")?
+            } else {
+                ShutterPosition::Center
+            };
+            let motion = MotionBlur {
+                shutter: blur.finite("shutter", "a number of frames")?,
+                position,
+            };
+            if let Err(Error::Invalid { message, .. }) = motion.validate("") {
+                return Err(blur.error("shutter", message));
+            }
+            shot.motion_blur = Some(motion);
+        }
         // The output format is shared by all frames: refuse an absurd size once, by field.
         let format = BlenderIntrinsics {
             resolution_x: shot.resolution_x,
@@ -321,6 +342,10 @@ impl Shot {
             pixel_aspect_y: finite("pixel_aspect_y".into(), self.pixel_aspect_y)?,
             nerf_object: &self.nerf_object,
             frames,
+            motion_blur: self.motion_blur.map(|m| RawMotionBlur {
+                shutter: m.shutter,
+                position: m.position,
+            }),
         };
         serde_json::to_string_pretty(&raw)
             .map_err(|e| Error::invalid(what("shot".into()), e.to_string()))
@@ -656,6 +681,14 @@ struct RawShot<'a> {
     pixel_aspect_y: f64,
     nerf_object: &'a str,
     frames: Vec<RawFrame<'a>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    motion_blur: Option<RawMotionBlur>,
+}
+
+#[derive(Serialize)]
+struct RawMotionBlur {
+    shutter: f64,
+    position: ShutterPosition,
 }
 
 #[derive(Serialize)]

@@ -1,7 +1,8 @@
 //! Compositing: small named pure functions on premultiplied float RGBA [`Planes`].
 //!
 //! Every function takes whole planes of one size (top row first) and returns new planes:
-//! [`over`], [`mix`], [`accumulation_matte`], [`shadow_catcher_merge`], [`depth_merge`]. The
+//! [`over`], [`mix`], [`accumulation_matte`], [`shadow_catcher_merge`], [`depth_merge`],
+//! [`shutter_average`]. The
 //! per-pixel formula of each is in its docs with a three-pixel worked example.
 //!
 //! **Reading pixels** ([`rgba_pixels`]): missing RGB reads as black; missing alpha reads as 1
@@ -24,12 +25,14 @@ mod depth_merge;
 mod mix;
 mod over;
 mod shadow_catcher;
+mod shutter;
 
 pub use accumulation_matte::{accumulation_matte, MatteCurve};
 pub use depth_merge::depth_merge;
 pub use mix::mix;
 pub use over::over;
 pub use shadow_catcher::shadow_catcher_merge;
+pub use shutter::shutter_average;
 
 use crate::error::{Error, Result};
 use crate::image::{Plane, Planes, BACKGROUND_DEPTH};

@@ -298,6 +298,7 @@ fn camera(values: &ParamValues, time: f64, scale: f64) -> Result<(ShotFrame, Cam
         pixel_aspect_y: shot.pixel_aspect_y,
         nerf_object: shot.nerf_object.clone(),
         frames: vec![at.clone()],
+        motion_blur: None,
         source: shot.source.clone(),
     };
     let camera = at.camera(&one)?;

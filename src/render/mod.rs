@@ -90,6 +90,9 @@ pub struct RenderSettings {
     pub tile_size: u32,
     /// Linear or as-trained colour.
     pub color: ColorOutput,
+    /// Times per frame a shot with motion blur is rendered at over its shutter (1: none);
+    /// see [`Quality::shutter_samples`].
+    pub shutter_samples: u32,
 }
 
 impl RenderSettings {
@@ -100,6 +103,7 @@ impl RenderSettings {
             outputs,
             tile_size: 16,
             color: ColorOutput::Linear,
+            shutter_samples: 1,
         }
     }
 }
@@ -115,7 +119,10 @@ pub struct RenderStats {
     pub color_samples: u64,
 }
 
-impl RenderStats {
+/// Two renders' counts together.
+impl std::ops::Add for RenderStats {
+    type Output = RenderStats;
+
     fn add(mut self, other: RenderStats) -> RenderStats {
         self.pixels += other.pixels;
         self.density_samples += other.density_samples;
@@ -157,7 +164,7 @@ pub fn render_with_progress(
         .collect();
     let stats = results
         .iter()
-        .fold(RenderStats::default(), |acc, r| acc.add(r.2));
+        .fold(RenderStats::default(), |acc, r| acc + r.2);
     let tiles: Vec<_> = results.into_iter().map(|(w, px, _)| (w, px)).collect();
     let decode =
         scene.composite_space() == ColorSpace::Srgb && settings.color == ColorOutput::Linear;

@@ -75,6 +75,18 @@ impl Quality {
         }
     }
 
+    /// The preset's number of times a motion-blurred frame is rendered at over its shutter:
+    /// the blur of a motion linear over the shutter is exact with any number; curved motion
+    /// and shading changes converge as 1/n², and a fast move shows `n` distinct copies until
+    /// `n` reaches its length in pixels.
+    pub fn shutter_samples(self) -> u32 {
+        match self {
+            Quality::Draft => 4,
+            Quality::Preview => 8,
+            Quality::Final => 16,
+        }
+    }
+
     /// All presets, coarse to fine.
     pub const ALL: [Quality; 3] = [Quality::Draft, Quality::Preview, Quality::Final];
 }

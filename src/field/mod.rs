@@ -15,6 +15,7 @@ mod nerfacto;
 mod nerfacto_config;
 mod nerfacto_torch;
 mod occupancy;
+mod ply;
 mod sh;
 mod sh4;
 mod splats;
@@ -146,9 +147,10 @@ pub fn describe(path: &Path) -> Result<String> {
     }
     match path.extension().and_then(|e| e.to_str()) {
         Some("ingp" | "msgpack") => Ok(IngpField::load(path)?.describe()),
+        Some("ply") => Ok(Splats::load(path)?.describe(path)),
         _ => Err(Error::Unsupported(format!(
-            "{}: unknown field format (expected an instant-ngp .ingp or .msgpack snapshot or \
-             a nerfstudio run directory)",
+            "{}: unknown field format (expected an instant-ngp .ingp or .msgpack snapshot, a \
+             splat .ply or a nerfstudio run directory)",
             path.display()
         ))),
     }

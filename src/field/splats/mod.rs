@@ -5,7 +5,14 @@
 //! the splats in their *activated* form (linear scales, unit quaternions, opacities in
 //! (0, 1)), as every reader delivers them, so the rasteriser never sees a logit or a log.
 
+mod ply;
+
+use std::path::Path;
+
 use glam::{Quat, Vec3};
+
+use super::Aabb;
+use crate::error::{Error, Result};
 
 /// How a splat's colour is computed from its coefficients.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -49,4 +56,86 @@ pub struct Splats {
     /// Colour coefficients, `color.coefficients() · 3` per splat, coefficient-major:
     /// `[k0: r g b][k1: r g b]…` (the DC term first).
     pub coefficients: Vec<f32>,
+    /// Splats the reader dropped because a value was not finite or the rotation was zero.
+    pub dropped: usize,
+}
+
+impl Splats {
+    /// Reads splats from an INRIA-layout `.ply` file.
+    pub fn load(path: &Path) -> Result<Splats> {
+        match path.extension().and_then(|e| e.to_str()) {
+            Some(e) if e.eq_ignore_ascii_case("ply") => ply::read(path),
+            _ => Err(Error::Unsupported(format!(
+                "{}: not a splat file (expected a Gaussian-splat .ply)",
+                path.display()
+            ))),
+        }
+    }
+
+    /// Number of splats.
+    pub fn len(&self) -> usize {
+        self.means.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.means.is_empty()
+    }
+
+    /// Bytes held by the splats' arrays.
+    pub fn memory_bytes(&self) -> usize {
+        use std::mem::size_of;
+        self.means.len() * (2 * size_of::<Vec3>() + size_of::<Quat>() + size_of::<f32>())
+            + self.coefficients.len() * size_of::<f32>()
+    }
+
+    /// The box of the means (empty when there are none).
+    pub fn bounds(&self) -> Aabb {
+        self.means.iter().fold(
+            Aabb::new(Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |b, &m| Aabb::new(b.min.min(m), b.max.max(m)),
+        )
+    }
+
+    /// What `nerfx info` prints: count, colour model, bounds, opacity and scale ranges,
+    /// memory.
+    pub fn describe(&self, path: &Path) -> String {
+        let range = |values: &mut dyn Iterator<Item = f32>| {
+            values.fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| {
+                (lo.min(v), hi.max(v))
+            })
+        };
+        let (o_lo, o_hi) = range(&mut self.opacities.iter().copied());
+        let (s_lo, s_hi) = range(&mut self.scales.iter().flat_map(|s| s.to_array()));
+        let b = self.bounds();
+        let color = match self.color {
+            SplatColor::Sh { degree } => format!("spherical harmonics, degree {degree}"),
+            SplatColor::Sigmoid => "sigmoid of one coefficient per channel".to_string(),
+        };
+        let mut text = format!(
+            "file: {}\n\
+             format: 3D Gaussian splats, {} splats\n\
+             colour: {color}\n\
+             bounds of the means: [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]\n\
+             opacity: {o_lo:.4} .. {o_hi:.4}\n\
+             scale (standard deviation): {s_lo:.3e} .. {s_hi:.3e}\n\
+             memory: {:.1} MiB",
+            path.display(),
+            self.len(),
+            b.min.x,
+            b.min.y,
+            b.min.z,
+            b.max.x,
+            b.max.y,
+            b.max.z,
+            self.memory_bytes() as f64 / (1024.0 * 1024.0),
+        );
+        if self.dropped > 0 {
+            text.push_str(&format!(
+                "\nwarning: {} splats dropped (a value not finite or a zero rotation)",
+                self.dropped
+            ));
+        }
+        text
+    }
 }

@@ -166,6 +166,11 @@ impl Camera {
         self.world_from_camera
     }
 
+    /// Camera-space depths `[clip_start, clip_end]` (Blender's clipping).
+    pub fn clip(&self) -> [f64; 2] {
+        self.clip
+    }
+
     /// The projection.
     pub fn projection(&self) -> &Projection {
         &self.projection

@@ -222,6 +222,11 @@ impl Perspective {
         (self.width, self.height)
     }
 
+    /// `[fx, fy, cx, cy]` in pixels: the pinhole a rasteriser projects with.
+    pub fn intrinsics(&self) -> [f64; 4] {
+        [self.fx, self.fy, self.cx, self.cy]
+    }
+
     /// The camera-space ray through raster (`x`, `y`): origin 0, unit direction through
     /// `((x − cx)/fx, −(y − cy)/fy, −1)`, `z_per_t = −dir.z`. Raster positions outside the
     /// image still have rays (overscan); `None` only for non-finite input.

@@ -32,6 +32,11 @@ pub use nerfacto::NerfactoField;
 pub use occupancy::Occupancy;
 pub use sh::ShColor;
 pub use sh4::sh4;
+pub(crate) use sh4::sh_basis;
+pub(crate) use splats::{
+    Fragment, SplatLayer, View as SplatView, MIN_TRANSMITTANCE as SPLAT_MIN_TRANSMITTANCE,
+    NEAR_PLANE as SPLAT_NEAR_PLANE,
+};
 pub use splats::{SplatColor, Splats};
 pub(crate) use srgb::{linear_to_srgb, srgb_to_linear};
 pub use torch_ckpt::{Checkpoint, DType, TensorInfo};

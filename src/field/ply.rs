@@ -180,7 +180,10 @@ impl<'a> Ply<'a> {
                 }
                 ["element", name, count] => {
                     let count: u64 = count.parse().map_err(|_| {
-                        bad(at(), format!("element '{name}': count '{count}' is not a number"))
+                        bad(
+                            at(),
+                            format!("element '{name}': count '{count}' is not a number"),
+                        )
                     })?;
                     elements.push(Element {
                         name: name.to_string(),
@@ -358,25 +361,32 @@ mod tests {
     #[test]
     fn refuses_what_it_cannot_read_with_the_reason() {
         let p = Path::new("scan.ply");
-        let err = |bytes: &[u8]| match Ply::parse(p, bytes).and_then(|ply| ply.rows("vertex").map(|_| ())) {
+        let err = |bytes: &[u8]| match Ply::parse(p, bytes)
+            .and_then(|ply| ply.rows("vertex").map(|_| ()))
+        {
             Err(e) => e.to_string(),
             Ok(()) => panic!("accepted"),
         };
         assert!(err(b"").contains("not a PLY"));
         assert!(err(b"ply\nformat ascii 1.0\nend_header\n").contains("ASCII"));
-        assert!(err(b"ply\nformat binary_little_endian 1.0\nelement vertex 3\n").contains("end_header"));
+        assert!(
+            err(b"ply\nformat binary_little_endian 1.0\nelement vertex 3\n").contains("end_header")
+        );
         let huge = "ply\nformat binary_little_endian 1.0\nelement vertex 1099511627776\n\
                     property float x\nend_header\n";
         let e = err(huge.as_bytes());
         assert!(e.contains("scan.ply") && e.contains("truncated"), "{e}");
-        let overflow = "ply\nformat binary_little_endian 1.0\nelement vertex 18446744073709551615\n\
+        let overflow =
+            "ply\nformat binary_little_endian 1.0\nelement vertex 18446744073709551615\n\
                         property double x\nend_header\n";
         assert!(err(overflow.as_bytes()).contains("truncated"));
         let list_first = "ply\nformat binary_little_endian 1.0\nelement face 1\n\
                           property list uchar int i\nelement vertex 0\nproperty float x\nend_header\n";
         assert!(err(list_first.as_bytes()).contains("list property"));
-        assert!(err(b"ply\nformat binary_little_endian 1.0\nelement face 0\nend_header\n")
-            .contains("no 'vertex' element"));
+        assert!(
+            err(b"ply\nformat binary_little_endian 1.0\nelement face 0\nend_header\n")
+                .contains("no 'vertex' element")
+        );
         assert!(err(b"ply\nformat binary_little_endian 1.0\nelement vertex 0\nproperty half x\nend_header\n")
             .contains("unknown property type 'half'"));
     }

@@ -33,7 +33,12 @@ const K3E: f32 = 1.445_305_7;
 /// The 16 SH values of the unit direction `d` as tcnn computes them from `(d + 1)/2`.
 pub fn sh4(d: Vec3) -> [f32; 16] {
     let u = (d + Vec3::ONE) * 0.5;
-    let v = u * 2.0 - Vec3::ONE;
+    sh_basis(u * 2.0 - Vec3::ONE)
+}
+
+/// The real SH basis of bands 0–3 at the unit direction `v`, in the order and signs above
+/// (shared with 3D Gaussian splats, whose SH use the same basis).
+pub(crate) fn sh_basis(v: Vec3) -> [f32; 16] {
     let (x, y, z) = (v.x, v.y, v.z);
     let (x2, y2, z2) = (x * x, y * y, z * z);
     [

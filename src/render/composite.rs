@@ -115,6 +115,16 @@ impl Pieces {
         w
     }
 
+    /// Composites a fragment of opacity `alpha` (in [0, 1]) at distance `t` (a splat's, with
+    /// no extent along the ray) and returns its weight `w = T·α`.
+    #[inline]
+    pub fn add_fragment(&mut self, t: f64, alpha: f64) -> f64 {
+        let w = self.transmittance * alpha;
+        self.depth_moment += w * t;
+        self.transmittance = (self.transmittance - w).max(0.0);
+        w
+    }
+
     /// Transmittance `T` after the pieces so far.
     #[inline]
     pub fn transmittance(&self) -> f64 {
@@ -138,18 +148,19 @@ impl Pieces {
     }
 }
 
-/// Where, inside a logged sequence of pieces `(t, δ, σ, T_enter)`, the accumulation first
-/// reaches `target`: the exact position inside the crossing piece
-/// (`T_enter·e^{−σs} = 1 − target`). `inf` when it never does.
+/// Where, inside a logged sequence of pieces `(t, δ, x, T_enter)` with optical thickness
+/// `x = σδ` (a splat fragment is a piece with `δ = 0` and `x = −ln(1 − α)`), the
+/// accumulation first reaches `target`: the exact position inside the crossing piece
+/// (`T_enter·e^{−x·s/δ} = 1 − target`). `inf` when it never does.
 pub fn crossing_depth(pieces: &[[f64; 4]], target: f64) -> f64 {
     let t_star = 1.0 - target;
-    for &[t, delta, sigma, t_enter] in pieces {
-        let t_exit = t_enter * (-(sigma * delta)).exp();
+    for &[t, delta, thickness, t_enter] in pieces {
+        let t_exit = t_enter * (-thickness).exp();
         if t_exit <= t_star && t_enter > 0.0 {
-            if t_enter <= t_star {
+            if t_enter <= t_star || delta == 0.0 {
                 return t;
             }
-            let s = (t_enter / t_star).ln() / sigma;
+            let s = (t_enter / t_star).ln() / thickness * delta;
             return t + s.clamp(0.0, delta);
         }
     }
@@ -237,10 +248,28 @@ mod tests {
     #[test]
     fn median_crossing_inside_a_piece() {
         // σ = 1 from t = 1: accumulation reaches 0.5 at 1 + ln 2.
-        let log = [[1.0, 10.0, 1.0, 1.0]];
+        let log = [[1.0, 10.0, 10.0, 1.0]];
         assert!((crossing_depth(&log, 0.5) - (1.0 + 2f64.ln())).abs() < 1e-12);
         assert!(crossing_depth(&log, 0.9999).is_finite());
         assert!(crossing_depth(&log, 0.99999).is_infinite());
-        assert!(crossing_depth(&[[1.0, 0.1, 1.0, 1.0]], 0.5).is_infinite());
+        assert!(crossing_depth(&[[1.0, 0.1, 0.1, 1.0]], 0.5).is_infinite());
+    }
+
+    #[test]
+    fn fragments_composite_as_alpha_over_and_cross_where_they_are() {
+        // A half-opaque fragment at t = 2, then a piece σ = 1 over [3, 13]: T = 0.5·e^{−10}.
+        let mut p = Pieces::new();
+        assert_eq!(p.add_fragment(2.0, 0.5), 0.5);
+        let w = p.add(3.0, 10.0, 1.0);
+        assert!((w - 0.5 * opacity(10.0)).abs() < 1e-15);
+        assert!((p.transmittance() - 0.5 * (-10f64).exp()).abs() < 1e-15);
+        // Expected depth: half the weight at 2, the other half near 4 (the piece's mean).
+        let piece_mean = 3.0 + 10.0 * first_moment_fraction(10.0, opacity(10.0)) / opacity(10.0);
+        let want = (0.5 * 2.0 + w * piece_mean) / (0.5 + w);
+        assert!((p.expected_depth() - want).abs() < 1e-12);
+        // The median: accumulation reaches 0.3 at the fragment, 0.75 at 3 + ln 2.
+        let log = [[2.0, 0.0, 2f64.ln(), 1.0], [3.0, 10.0, 10.0, 0.5]];
+        assert_eq!(crossing_depth(&log, 0.3), 2.0);
+        assert!((crossing_depth(&log, 0.75) - (3.0 + 2f64.ln())).abs() < 1e-12);
     }
 }

@@ -17,7 +17,9 @@ use glam::{DVec3, Vec3};
 use super::composite::{crossing_depth, Pieces};
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
-use crate::field::{linear_to_srgb, Aabb, ColorSpace, Occupancy};
+use crate::field::{
+    linear_to_srgb, Aabb, ColorSpace, Fragment, Occupancy, SplatLayer, SPLAT_MIN_TRANSMITTANCE,
+};
 use crate::image::Window;
 use crate::scene::{LocalRay, Scene};
 
@@ -114,8 +116,11 @@ struct RayState {
     live: bool,
     /// Weight whose colour was not evaluated.
     skipped_weight: f64,
-    /// The pieces `[t, δ, σ, T_enter]` composited so far, kept only for the median depth.
+    /// The pieces `[t, δ, σδ, T_enter]` composited so far, kept only for the median depth.
     log: Vec<[f64; 4]>,
+    /// The pixel's splat fragments, front to back, and the next one to composite.
+    fragments: Vec<Fragment>,
+    next_fragment: usize,
 }
 
 /// Per-thread scratch reused from tile to tile: no allocation per sample.
@@ -151,9 +156,11 @@ pub(super) struct Scratch {
 }
 
 /// Marches one tile. `out` receives the tile's pixels row by row.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn march_tile(
     scene: &Scene,
     plans: &[InstancePlan],
+    splats: Option<&SplatLayer>,
     camera: &Camera,
     tile: Window,
     settings: &RenderSettings,
@@ -164,7 +171,7 @@ pub(super) fn march_tile(
     let n_inst = scene.instances.len();
     let stride = feature_stride(plans);
     let n_rays = tile.area();
-    setup_rays(scene, plans, camera, tile, s);
+    setup_rays(scene, plans, splats, camera, tile, outputs, s);
 
     while !s.active.is_empty() {
         // Each live ray keeps its last node (the start of its next piece), then lays more.
@@ -215,12 +222,15 @@ pub(super) fn march_tile(
     }
 }
 
-/// Builds each pixel's world ray, its local rays and its occupied segments.
+/// Builds each pixel's world ray, its local rays, its occupied segments and its splat
+/// fragments; a pixel with fragments and no segments is composited here and done.
 fn setup_rays(
     scene: &Scene,
     plans: &[InstancePlan],
+    splats: Option<&SplatLayer>,
     camera: &Camera,
     tile: Window,
+    outputs: &Outputs,
     s: &mut Scratch,
 ) {
     let n_rays = tile.area();
@@ -249,9 +259,17 @@ fn setup_rays(
             s.local.push(local);
         }
         union_in_place(&mut state.segments);
+        state.fragments.clear();
+        state.next_fragment = 0;
+        if let (Some(layer), Some(ray)) = (splats, &ray) {
+            layer.fragments(x, y, ray.z_per_t, &mut state.fragments);
+            s.stats.splat_fragments += state.fragments.len() as u64;
+        }
         state.live = !state.segments.is_empty();
         if state.live {
             s.active.push(r as u32);
+        } else {
+            composite_fragments(state, f64::INFINITY, outputs);
         }
     }
 }
@@ -579,17 +597,37 @@ fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, out
             continue;
         }
         let sum = a.sigma + b.sigma;
-        let delta = b.t - a.t;
-        let t_enter = state.pieces.transmittance();
-        let w = state.pieces.add(a.t, delta, 0.5 * sum);
-        if w > 0.0 {
-            if outputs.depth_median {
-                state.log.push([a.t, delta, 0.5 * sum, t_enter]);
+        // The piece, split at the splat fragments inside it (composited in between).
+        let mut t0 = a.t;
+        let mut stopped = false;
+        loop {
+            let fragment = state
+                .fragments
+                .get(state.next_fragment)
+                .map(|f| f.t)
+                .filter(|&t| t < b.t);
+            let t1 = fragment.map_or(b.t, |t| t.max(t0));
+            let t_enter = state.pieces.transmittance();
+            let w = state.pieces.add(t0, t1 - t0, 0.5 * sum);
+            if w > 0.0 {
+                if outputs.depth_median {
+                    state
+                        .log
+                        .push([t0, t1 - t0, 0.5 * sum * (t1 - t0), t_enter]);
+                }
+                nodes[i - 1].weight += w * a.sigma / sum;
+                nodes[i].weight += w * b.sigma / sum;
             }
-            nodes[i - 1].weight += w * a.sigma / sum;
-            nodes[i].weight += w * b.sigma / sum;
+            t0 = t1;
+            if fragment.is_none() {
+                break;
+            }
+            if !composite_fragments(state, t0, outputs) {
+                stopped = true;
+                break;
+            }
         }
-        if state.pieces.transmittance() < min_t {
+        if stopped || state.pieces.transmittance() < min_t {
             state.live = false;
             // Nothing after this node counts.
             for n in &mut nodes[i + 1..] {
@@ -599,8 +637,34 @@ fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, out
         }
     }
     if state.segment >= state.segments.len() {
+        composite_fragments(state, f64::INFINITY, outputs);
         state.live = false;
     }
+}
+
+/// Composites the ray's splat fragments up to `t_end`, in order. `false` when the ray is
+/// done: a fragment would bring its transmittance to the splats' floor (gsplat's rule, which
+/// makes a pixel of splats alone exactly gsplat's).
+fn composite_fragments(state: &mut RayState, t_end: f64, outputs: &Outputs) -> bool {
+    while let Some(f) = state.fragments.get(state.next_fragment) {
+        if f.t > t_end {
+            break;
+        }
+        let alpha = f64::from(f.alpha);
+        let t_enter = state.pieces.transmittance();
+        if t_enter * (1.0 - alpha) <= SPLAT_MIN_TRANSMITTANCE {
+            state.next_fragment = state.fragments.len();
+            state.live = false;
+            return false;
+        }
+        let w = state.pieces.add_fragment(f.t, alpha);
+        state.rgb += Vec3::from_array(f.rgb).as_dvec3() * w;
+        if outputs.depth_median {
+            state.log.push([f.t, 0.0, -(-alpha).ln_1p(), t_enter]);
+        }
+        state.next_fragment += 1;
+    }
+    true
 }
 
 /// Evaluates colour where the weight matters and adds it to the rays' colours. The lightest

@@ -9,6 +9,7 @@ mod composite;
 mod march;
 mod naive;
 mod quality;
+mod splats;
 
 pub use composite::{crossing_depth, opacity, srgb_composite_to_linear, Pieces};
 pub use naive::render_naive;
@@ -117,6 +118,8 @@ pub struct RenderStats {
     pub density_samples: u64,
     /// Radiance queries.
     pub color_samples: u64,
+    /// Splat fragments met by the pixels.
+    pub splat_fragments: u64,
 }
 
 /// Two renders' counts together.
@@ -127,6 +130,7 @@ impl std::ops::Add for RenderStats {
         self.pixels += other.pixels;
         self.density_samples += other.density_samples;
         self.color_samples += other.color_samples;
+        self.splat_fragments += other.splat_fragments;
         self
     }
 }
@@ -152,12 +156,22 @@ pub fn render_with_progress(
 ) -> Result<(Planes, RenderStats)> {
     let window = camera.clamp_window(window)?;
     let plans = InstancePlan::for_scene(scene, &settings.march);
+    let splats = splats::splat_layer(scene, camera, window, &settings.outputs)?;
     let tiles = tiles(window, settings.tile_size.max(1));
     let results: Vec<(Window, Vec<PixelResult>, RenderStats)> = tiles
         .into_par_iter()
         .map_init(Scratch::default, |scratch, tile| {
             let mut out = Vec::with_capacity(tile.area());
-            let stats = march_tile(scene, &plans, camera, tile, settings, scratch, &mut out);
+            let stats = march_tile(
+                scene,
+                &plans,
+                splats.as_ref(),
+                camera,
+                tile,
+                settings,
+                scratch,
+                &mut out,
+            );
             on_tile(tile.area() as u64);
             (tile, out, stats)
         })

@@ -25,6 +25,11 @@ pub fn render_naive(
     if !(step > 0.0 && step.is_finite()) {
         return Err(Error::invalid("naive step", format!("{step} is not > 0")));
     }
+    if !scene.splats.is_empty() {
+        return Err(Error::Unsupported(
+            "the uniform-step baseline marches fields only; this scene holds splats".into(),
+        ));
+    }
     let window = camera.clamp_window(window)?;
     let rows: Vec<(Window, Vec<PixelResult>, [u64; 2])> = (window.y0..window.y1)
         .into_par_iter()
@@ -41,6 +46,7 @@ pub fn render_naive(
         pixels: window.area() as u64,
         density_samples: rows.iter().map(|r| r.2[0]).sum(),
         color_samples: rows.iter().map(|r| r.2[1]).sum(),
+        splat_fragments: 0,
     };
     let rows: Vec<_> = rows.into_iter().map(|(w, px, _)| (w, px)).collect();
     let decode = scene.composite_space() == ColorSpace::Srgb;
@@ -137,7 +143,7 @@ fn naive_pixel(
         let w = pieces.add(ts[j] - 0.5 * step, step, sigma[j]);
         if w > 0.0 {
             color += rgb[j] / sigma[j] * w;
-            log.push([ts[j] - 0.5 * step, step, sigma[j], t_enter]);
+            log.push([ts[j] - 0.5 * step, step, sigma[j] * step, t_enter]);
         }
     }
     let alpha = pieces.accumulation();

@@ -7,7 +7,8 @@
 //!       "object": "NeRF",
 //!       "crop": { "center": [0, 0, 0], "scale": [2, 2, 2], "rotation": [0, 0, 0] } },
 //!     { "name": "garden", "field": { "ingp": { "path": "garden.ingp" } } },
-//!     { "name": "poster", "field": { "nerfacto": { "path": "outputs/poster/nerfacto/run1" } } } ] }
+//!     { "name": "poster", "field": { "nerfacto": { "path": "outputs/poster/nerfacto/run1" } } },
+//!     { "name": "scan", "field": { "splats": { "path": "scan.ply", "antialiased": false } } } ] }
 //! ```
 //! An instance is placed by `world_from_field` (row-major 4×4, default identity) or, when
 //! `object` is given, by that object's `matrix_world` in the shot, read per frame.
@@ -21,9 +22,9 @@ use glam::DMat4;
 use serde::{Deserialize, Serialize};
 
 use super::instance::FieldHandle;
-use super::{CropBox, Instance, Scene};
+use super::{CropBox, Instance, Scene, SplatInstance};
 use crate::error::{Error, Result};
-use crate::field::{Analytic, IngpField, NerfactoField};
+use crate::field::{Analytic, IngpField, NerfactoField, Splats};
 
 /// Where an instance's field comes from.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -42,6 +43,15 @@ pub enum FieldSource {
     Nerfacto {
         /// The run directory (relative paths: from the scene file's folder).
         path: PathBuf,
+    },
+    /// 3D Gaussian splats (an INRIA-layout `.ply`), in the frame of their file.
+    Splats {
+        /// The splat file (relative paths: from the scene file's folder).
+        path: PathBuf,
+        /// Mip-splatting's opacity compensation, for splats trained with it (gsplat's
+        /// `antialiased` mode).
+        #[serde(default)]
+        antialiased: bool,
     },
 }
 
@@ -76,7 +86,14 @@ pub struct SceneDesc {
 #[derive(Clone)]
 pub struct LoadedScene {
     desc: SceneDesc,
-    fields: Vec<FieldHandle>,
+    contents: Vec<Contents>,
+}
+
+/// What an instance holds, loaded.
+#[derive(Clone)]
+enum Contents {
+    Field(FieldHandle),
+    Splats(Arc<Splats>),
 }
 
 /// A row-major nested 4×4 as a matrix.
@@ -121,7 +138,16 @@ impl SceneDesc {
                         "is empty",
                     ))
                 }
-                FieldSource::Ingp { .. } | FieldSource::Nerfacto { .. } => {}
+                FieldSource::Splats { path: file, .. } if file.as_os_str().is_empty() => {
+                    return Err(Error::format(
+                        path,
+                        format!("{at}.field.splats.path"),
+                        "is empty",
+                    ))
+                }
+                FieldSource::Ingp { .. }
+                | FieldSource::Nerfacto { .. }
+                | FieldSource::Splats { .. } => {}
             }
             if inst.world_from_field.is_some() && inst.object.is_some() {
                 return Err(Error::format(
@@ -133,8 +159,9 @@ impl SceneDesc {
         }
         let base = path.parent().unwrap_or(Path::new(""));
         for inst in &mut desc.instances {
-            if let FieldSource::Ingp { path: file } | FieldSource::Nerfacto { path: file } =
-                &mut inst.field
+            if let FieldSource::Ingp { path: file }
+            | FieldSource::Nerfacto { path: file }
+            | FieldSource::Splats { path: file, .. } = &mut inst.field
             {
                 if file.is_relative() {
                     *file = base.join(&*file);
@@ -153,20 +180,25 @@ impl SceneDesc {
 
     /// Loads every field once.
     pub fn load(self) -> Result<LoadedScene> {
-        let fields = self
+        let contents = self
             .instances
             .iter()
-            .map(|inst| match &inst.field {
-                FieldSource::Analytic(a) => Ok(FieldHandle::analytic(a.clone())),
-                FieldSource::Ingp { path } => {
-                    Ok(FieldHandle::new(Arc::new(IngpField::load(path)?)))
-                }
-                FieldSource::Nerfacto { path } => {
-                    Ok(FieldHandle::new(Arc::new(NerfactoField::load(path)?)))
-                }
+            .map(|inst| {
+                let field = |f: Arc<dyn crate::field::Field>| Contents::Field(FieldHandle::new(f));
+                Ok(match &inst.field {
+                    FieldSource::Analytic(a) => Contents::Field(FieldHandle::analytic(a.clone())),
+                    FieldSource::Ingp { path } => field(Arc::new(IngpField::load(path)?)),
+                    FieldSource::Nerfacto { path } => field(Arc::new(NerfactoField::load(path)?)),
+                    FieldSource::Splats { path, .. } => {
+                        Contents::Splats(Arc::new(Splats::load(path)?))
+                    }
+                })
             })
             .collect::<Result<Vec<_>>>()?;
-        Ok(LoadedScene { desc: self, fields })
+        Ok(LoadedScene {
+            desc: self,
+            contents,
+        })
     }
 }
 
@@ -179,20 +211,38 @@ impl LoadedScene {
     /// The scene with every instance placed: fixed placements as given, object-bound ones by
     /// `object_matrix(name)` (the shot's object at the frame being rendered).
     pub fn place(&self, object_matrix: &dyn Fn(&str) -> Result<DMat4>) -> Result<Scene> {
-        let instances = self
-            .desc
-            .instances
-            .iter()
-            .zip(&self.fields)
-            .map(|(inst, field)| {
-                let m = match (&inst.object, &inst.world_from_field) {
-                    (Some(object), _) => object_matrix(object)?,
-                    (None, Some(rows)) => mat4_from_rows(rows),
-                    (None, None) => DMat4::IDENTITY,
-                };
-                Instance::new(inst.name.clone(), field.clone(), m, inst.crop)
-            })
-            .collect::<Result<Vec<_>>>()?;
-        Ok(Scene::new(instances))
+        let mut scene = Scene::default();
+        for (inst, contents) in self.desc.instances.iter().zip(&self.contents) {
+            let m = match (&inst.object, &inst.world_from_field) {
+                (Some(object), _) => object_matrix(object)?,
+                (None, Some(rows)) => mat4_from_rows(rows),
+                (None, None) => DMat4::IDENTITY,
+            };
+            match contents {
+                Contents::Field(field) => scene.instances.push(Instance::new(
+                    inst.name.clone(),
+                    field.clone(),
+                    m,
+                    inst.crop,
+                )?),
+                Contents::Splats(splats) => {
+                    let antialiased = matches!(
+                        inst.field,
+                        FieldSource::Splats {
+                            antialiased: true,
+                            ..
+                        }
+                    );
+                    scene.splats.push(SplatInstance::new(
+                        inst.name.clone(),
+                        splats.clone(),
+                        m,
+                        inst.crop,
+                        antialiased,
+                    )?)
+                }
+            }
+        }
+        Ok(scene)
     }
 }

@@ -103,6 +103,39 @@ impl LocalRay {
     }
 }
 
+/// Checks an instance's placement and crop box; returns the placement's inverse. Refuses
+/// matrices with NaN/inf, a projective row or no inverse.
+pub(super) fn check_placement(
+    name: &str,
+    world_from_field: DMat4,
+    crop: Option<&CropBox>,
+) -> Result<DMat4> {
+    let what = format!("instance '{name}': world_from_field");
+    if !world_from_field.is_finite() {
+        return Err(Error::invalid(what, "contains NaN or infinity"));
+    }
+    if world_from_field.row(3) != DVec4::new(0.0, 0.0, 0.0, 1.0) {
+        return Err(Error::invalid(what, "bottom row must be [0, 0, 0, 1]"));
+    }
+    let m3 = glam::DMat3::from_mat4(world_from_field);
+    let scale = m3
+        .x_axis
+        .length()
+        .max(m3.y_axis.length())
+        .max(m3.z_axis.length());
+    if m3.determinant().abs() <= 1e-15 * scale.powi(3) || scale == 0.0 {
+        return Err(Error::invalid(what, "is singular (a zero scale?)"));
+    }
+    let field_from_world = world_from_field.inverse();
+    if !field_from_world.is_finite() {
+        return Err(Error::invalid(what, "cannot be inverted"));
+    }
+    if let Some(c) = crop {
+        c.validate(&format!("instance '{name}': crop"))?;
+    }
+    Ok(field_from_world)
+}
+
 impl Instance {
     /// Places `field` by `world_from_field` (the NeRF object's `matrix_world`). Refuses
     /// matrices with NaN/inf, a projective row or no inverse.
@@ -113,29 +146,7 @@ impl Instance {
         crop: Option<CropBox>,
     ) -> Result<Self> {
         let name = name.into();
-        let what = format!("instance '{name}': world_from_field");
-        if !world_from_field.is_finite() {
-            return Err(Error::invalid(what, "contains NaN or infinity"));
-        }
-        if world_from_field.row(3) != DVec4::new(0.0, 0.0, 0.0, 1.0) {
-            return Err(Error::invalid(what, "bottom row must be [0, 0, 0, 1]"));
-        }
-        let m3 = glam::DMat3::from_mat4(world_from_field);
-        let scale = m3
-            .x_axis
-            .length()
-            .max(m3.y_axis.length())
-            .max(m3.z_axis.length());
-        if m3.determinant().abs() <= 1e-15 * scale.powi(3) || scale == 0.0 {
-            return Err(Error::invalid(what, "is singular (a zero scale?)"));
-        }
-        let field_from_world = world_from_field.inverse();
-        if !field_from_world.is_finite() {
-            return Err(Error::invalid(what, "cannot be inverted"));
-        }
-        if let Some(c) = &crop {
-            c.validate(&format!("instance '{name}': crop"))?;
-        }
+        let field_from_world = check_placement(&name, world_from_field, crop.as_ref())?;
         Ok(Instance {
             name,
             field,

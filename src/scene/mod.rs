@@ -15,34 +15,48 @@
 mod crop;
 mod file;
 mod instance;
+mod splats;
 
 pub use crop::CropBox;
 pub use file::{FieldSource, InstanceDesc, LoadedScene, SceneDesc};
 pub use instance::{FieldHandle, Instance, LocalRay};
+pub use splats::SplatInstance;
 
 use crate::field::ColorSpace;
 
-/// The fields to render together.
+/// The fields and splats to render together.
 #[derive(Clone, Default)]
 pub struct Scene {
-    /// The instances, marched jointly.
+    /// The field instances, marched jointly.
     pub instances: Vec<Instance>,
+    /// The splat instances, rasterised into fragments merged with the march.
+    pub splats: Vec<SplatInstance>,
 }
 
 impl Scene {
-    /// A scene of the given instances.
+    /// A scene of the given field instances.
     pub fn new(instances: Vec<Instance>) -> Self {
-        Scene { instances }
+        Scene {
+            instances,
+            splats: Vec::new(),
+        }
+    }
+
+    /// The scene with these splat instances too.
+    pub fn with_splats(mut self, splats: Vec<SplatInstance>) -> Self {
+        self.splats = splats;
+        self
     }
 
     /// The space colours are composited in: sRGB-encoded when any instance was trained on
     /// photographs (its trainer composited encoded colours; linear instances are encoded to
-    /// join it), else linear.
+    /// join it), as splats always are, else linear.
     pub fn composite_space(&self) -> ColorSpace {
-        if self
-            .instances
-            .iter()
-            .any(|i| i.field().color_space() == ColorSpace::Srgb)
+        if !self.splats.is_empty()
+            || self
+                .instances
+                .iter()
+                .any(|i| i.field().color_space() == ColorSpace::Srgb)
         {
             ColorSpace::Srgb
         } else {

@@ -6,6 +6,11 @@
 //! (0, 1)), as every reader delivers them, so the rasteriser never sees a logit or a log.
 
 mod ply;
+mod project;
+mod raster;
+
+pub(crate) use project::{View, NEAR_PLANE};
+pub(crate) use raster::{Fragment, SplatLayer, MIN_TRANSMITTANCE};
 
 use std::path::Path;
 

@@ -58,9 +58,7 @@ pub(super) fn parse(path: &Path, bytes: &[u8]) -> Result<Splats> {
             return Err(Error::format(
                 path,
                 "element 'vertex'",
-                format!(
-                    "{n} f_rest_* properties; expected 0, 9, 24 or 45 (SH degree 0 to 3)"
-                ),
+                format!("{n} f_rest_* properties; expected 0, 9, 24 or 45 (SH degree 0 to 3)"),
             ))
         }
     };
@@ -82,7 +80,11 @@ pub(super) fn parse(path: &Path, bytes: &[u8]) -> Result<Splats> {
         dropped: 0,
     };
     let vec3 = |row: usize, p: &[&Property]| {
-        Vec3::new(rows.get(row, p[0]), rows.get(row, p[1]), rows.get(row, p[2]))
+        Vec3::new(
+            rows.get(row, p[0]),
+            rows.get(row, p[1]),
+            rows.get(row, p[2]),
+        )
     };
     let mut coeffs = vec![0.0f32; coefficients * 3];
     for row in 0..n {
@@ -195,7 +197,11 @@ mod tests {
         // Coefficient k of channel c: DC is f_dc_c; k ≥ 1 is f_rest_{c·15 + k − 1}.
         for k in 0..16 {
             for c in 0..3 {
-                let want = if k == 0 { r[6 + c] } else { r[9 + c * 15 + k - 1] };
+                let want = if k == 0 {
+                    r[6 + c]
+                } else {
+                    r[9 + c * 15 + k - 1]
+                };
                 assert_eq!(s.coefficients[k * 3 + c], want, "k {k} c {c}");
             }
         }
@@ -218,14 +224,22 @@ mod tests {
     #[test]
     fn missing_properties_and_odd_rest_counts_are_named() {
         let bytes = inria_ply(&[row(1.0)]);
-        let text = String::from_utf8_lossy(&bytes).replacen("property float opacity", "property float alpha", 1);
+        let text = String::from_utf8_lossy(&bytes).replacen(
+            "property float opacity",
+            "property float alpha",
+            1,
+        );
         let mut broken = text.as_bytes()[..text.find("end_header\n").unwrap() + 11].to_vec();
         broken.extend_from_slice(&bytes[broken.len()..]);
-        let e = parse(Path::new("scan.ply"), &broken).unwrap_err().to_string();
+        let e = parse(Path::new("scan.ply"), &broken)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("scan.ply") && e.contains("'opacity'"), "{e}");
 
         let text = String::from_utf8_lossy(&bytes).replacen("property float f_rest_44\n", "", 1);
-        let e = parse(Path::new("scan.ply"), text.as_bytes()).unwrap_err().to_string();
+        let e = parse(Path::new("scan.ply"), text.as_bytes())
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("44 f_rest_"), "{e}");
     }
 

@@ -53,7 +53,8 @@ enum Command {
     /// Render a scene file through a shot file, or a node graph (`comp.json`) through the
     /// OpenFX bundle, for a list of frames.
     Render {
-        /// Scene file (JSON), or a node graph file when no shot is given.
+        /// Scene file (JSON) or one field or splat file (`.ingp`, `.ply`, a nerfstudio run
+        /// directory), or a node graph file when no shot is given.
         scene: PathBuf,
         /// Shot file (JSON, written by the Blender add-on), or a nerfstudio camera_path.json.
         shot: Option<PathBuf>,
@@ -93,7 +94,7 @@ enum Command {
     /// laid out as Blender's World Environment Texture reads it, to relight a Blender scene as
     /// the field would.
     Envmap {
-        /// Scene file (JSON).
+        /// Scene file (JSON) or one field or splat file (`.ingp`, `.ply`, a nerfstudio run).
         scene: PathBuf,
         /// Shot file, or a nerfstudio camera_path.json: places object-bound instances.
         shot: PathBuf,
@@ -201,7 +202,7 @@ fn run(cli: Cli) -> Result<()> {
             let Some(shot) = shot else {
                 return graph::render(&scene, frames, &output, png, bundle, scale);
             };
-            let scene = SceneDesc::read(&scene)?.load()?;
+            let scene = SceneDesc::for_path(&scene)?.load()?;
             let shot = read_shot(&shot, &nerf_object)?;
             let frames = frames.unwrap_or_else(|| shot.frames.iter().map(|f| f.frame).collect());
             let shutter_samples = match shutter_samples {
@@ -266,7 +267,7 @@ fn run(cli: Cli) -> Result<()> {
                     ))
                 }
             };
-            let scene = SceneDesc::read(&scene)?.load()?;
+            let scene = SceneDesc::for_path(&scene)?.load()?;
             let shot = read_shot(&shot, &nerf_object)?;
             let frame = match frame {
                 Some(f) => f,

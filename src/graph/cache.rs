@@ -93,9 +93,10 @@ impl<T> FileCache<T> {
 static SCENES: FileCache<LoadedScene> = FileCache::new();
 static SHOTS: FileCache<Shot> = FileCache::new();
 
-/// The scene (field) file at `path`, loaded once while it is unchanged.
+/// The scene at `path` (a scene file, or one field or splat file: see
+/// [`SceneDesc::for_path`]), loaded once while it is unchanged.
 pub fn cached_scene(path: &Path) -> Result<Arc<LoadedScene>> {
-    SCENES.get(path, |p| SceneDesc::read(p)?.load())
+    SCENES.get(path, |p| SceneDesc::for_path(p)?.load())
 }
 
 /// The shot file (or nerfstudio camera path, objects bound to [`CAMERA_PATH_OBJECT`]) at

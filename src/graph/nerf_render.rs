@@ -80,7 +80,8 @@ pub(crate) fn nerf_render_node() -> Node {
                 ParamDesc::new(
                     "file",
                     "Field File",
-                    "Scene file (JSON): the fields and where they sit.",
+                    "Scene file (JSON): the fields and splats and where they sit; or one \
+                     instant-ngp snapshot, splat .ply or nerfstudio run, in its own frame.",
                     ParamKind::File,
                 )
                 .fixed(),

@@ -108,6 +108,41 @@ impl SceneDesc {
         Self::from_json_str(&text, path)
     }
 
+    /// The scene a path names: a scene file, or one field or splat file on its own (an
+    /// instant-ngp `.ingp`/`.msgpack` snapshot, a splat `.ply`, a nerfstudio run directory),
+    /// rendered in its own frame (`world_from_field` the identity).
+    pub fn for_path(path: &Path) -> Result<Self> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        let file = path.to_path_buf();
+        let field = if path.is_dir() {
+            FieldSource::Nerfacto { path: file }
+        } else {
+            match ext.as_deref() {
+                Some("ingp" | "msgpack") => FieldSource::Ingp { path: file },
+                Some("ply") => FieldSource::Splats {
+                    path: file,
+                    antialiased: false,
+                },
+                _ => return Self::read(path),
+            }
+        };
+        let name = path
+            .file_stem()
+            .map_or_else(|| "field".into(), |s| s.to_string_lossy().into_owned());
+        Ok(SceneDesc {
+            instances: vec![InstanceDesc {
+                name,
+                field,
+                world_from_field: None,
+                object: None,
+                crop: None,
+            }],
+        })
+    }
+
     /// Parses scene JSON; `path` is used in messages, and relative field paths are made
     /// relative to its folder.
     pub fn from_json_str(text: &str, path: &Path) -> Result<Self> {

@@ -1,0 +1,303 @@
+//! Splats in scenes: merged per pixel with fields, and through the command line.
+//!
+//! The joint check: a translucent plane of splats cuts an analytic sphere in half. Every pixel
+//! is computed independently of the merge: the sphere by its closed form (constant density, so
+//! `α = 1 − e^{−σ·length}` for each part of its chord), the splats from a render of the splats
+//! alone (itself checked against NumPy in `splat_numpy.rs`), composited by hand in depth
+//! order: the sphere's part in front of the plane, the plane, the sphere's part behind it.
+
+use std::path::Path;
+use std::process::Command;
+use std::sync::Arc;
+
+use glam::{DMat4, DVec3, Vec3};
+use nerfx::camera::{Camera, Perspective, Projection};
+use nerfx::field::{Analytic, Primitive, ShColor, Shape, SplatColor, Splats};
+use nerfx::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
+use nerfx::scene::{CropBox, FieldHandle, Instance, Scene, SplatInstance};
+
+/// The SH DC coefficient that gives colour `c` (`c = 0.5 + Y₀·k`).
+fn dc(c: f32) -> f32 {
+    (c - 0.5) / 0.282_094_8
+}
+
+/// A square grid of small round blue splats in the plane z = 0, opacity 0.35.
+fn splat_plane(half: f32, spacing: f32) -> Splats {
+    let n = (2.0 * half / spacing) as i32;
+    let mut s = Splats {
+        means: Vec::new(),
+        scales: Vec::new(),
+        rotations: Vec::new(),
+        opacities: Vec::new(),
+        color: SplatColor::Sh { degree: 0 },
+        coefficients: Vec::new(),
+        dropped: 0,
+    };
+    for i in 0..=n {
+        for j in 0..=n {
+            s.means.push(Vec3::new(
+                -half + i as f32 * spacing,
+                -half + j as f32 * spacing,
+                0.0,
+            ));
+            s.scales.push(Vec3::new(spacing, spacing, 0.002));
+            s.rotations.push(glam::Quat::IDENTITY);
+            s.opacities.push(0.35);
+            s.coefficients.extend([dc(0.0), dc(0.0), dc(1.0)]);
+        }
+    }
+    s
+}
+
+const SIGMA: f32 = 3.0;
+const RADIUS: f64 = 0.5;
+
+fn red_sphere() -> Instance {
+    let field = Analytic {
+        primitives: vec![Primitive {
+            shape: Shape::Sphere {
+                center: Vec3::ZERO,
+                radius: RADIUS as f32,
+            },
+            density: SIGMA,
+            color: ShColor::constant(Vec3::new(1.0, 0.0, 0.0)),
+        }],
+    };
+    Instance::new(
+        "sphere",
+        FieldHandle::analytic(field),
+        DMat4::IDENTITY,
+        None,
+    )
+    .unwrap()
+}
+
+fn camera() -> Camera {
+    // Looking straight down −Z at the plane z = 0 from z = 3, off the sphere's axis: every
+    // splat mean is at camera depth 3, so its fragments lie where the rays cross the plane.
+    let eye = DVec3::new(0.3, -0.2, 3.0);
+    Camera::new(
+        nerfx::demo::look_at(eye, DVec3::new(0.3, -0.2, 0.0)),
+        Projection::Perspective(Perspective::from_vertical_fov(48, 40, 30.0).unwrap()),
+    )
+    .unwrap()
+}
+
+fn settings() -> RenderSettings {
+    let mut s = RenderSettings::new(Quality::Final.params(), Outputs::all());
+    // Colours 0 and 1 encode to themselves: compare as composited.
+    s.color = ColorOutput::AsTrained;
+    s
+}
+
+/// The sphere's chord `[t0, t1]` along a world ray, if any.
+fn chord(o: DVec3, d: DVec3) -> Option<(f64, f64)> {
+    let b = o.dot(d);
+    let disc = b * b - (o.length_squared() - RADIUS * RADIUS);
+    (disc > 0.0).then(|| (-b - disc.sqrt(), -b + disc.sqrt()))
+}
+
+#[test]
+fn splats_and_fields_occlude_each_other_per_pixel() {
+    let camera = camera();
+    let plane = Arc::new(splat_plane(0.8, 0.04));
+    let splats_alone = Scene::default().with_splats(vec![SplatInstance::new(
+        "plane",
+        plane.clone(),
+        DMat4::IDENTITY,
+        None,
+        false,
+    )
+    .unwrap()]);
+    let alone = render(&splats_alone, &camera, camera.full_window(), &settings()).unwrap();
+    let joint_scene = Scene::new(vec![red_sphere()]).with_splats(splats_alone.splats.clone());
+    let joint = render(&joint_scene, &camera, camera.full_window(), &settings()).unwrap();
+
+    let (mut max_err, mut both) = (0.0f64, 0);
+    for y in 0..joint.height {
+        for x in 0..joint.width {
+            let ray = camera.ray(x as f64 + 0.5, y as f64 + 0.5).unwrap();
+            let (cs, a_s) = (
+                [0, 1, 2].map(|c| f64::from(alone.rgb.as_ref().unwrap()[c].get(x, y))),
+                f64::from(alone.alpha.as_ref().unwrap().get(x, y)),
+            );
+            // The plane's depth along this ray (z = 0).
+            let t_plane = -ray.origin.z / ray.dir.z;
+            let (mut rgb, mut trans) = ([0.0f64; 3], 1.0f64);
+            let mut sphere_part = |t0: f64, t1: f64, rgb: &mut [f64; 3], trans: &mut f64| {
+                if t1 > t0 {
+                    let a = 1.0 - (-(f64::from(SIGMA)) * (t1 - t0)).exp();
+                    rgb[0] += *trans * a;
+                    *trans *= 1.0 - a;
+                }
+            };
+            let splats = |rgb: &mut [f64; 3], trans: &mut f64| {
+                for c in 0..3 {
+                    rgb[c] += *trans * cs[c];
+                }
+                *trans *= 1.0 - a_s;
+            };
+            match chord(ray.origin, ray.dir) {
+                Some((t0, t1)) => {
+                    sphere_part(t0, t1.min(t_plane), &mut rgb, &mut trans);
+                    splats(&mut rgb, &mut trans);
+                    sphere_part(t0.max(t_plane), t1, &mut rgb, &mut trans);
+                    both += usize::from(a_s > 0.1);
+                }
+                None => splats(&mut rgb, &mut trans),
+            }
+            let got = [0, 1, 2].map(|c| f64::from(joint.rgb.as_ref().unwrap()[c].get(x, y)));
+            let got_a = f64::from(joint.alpha.as_ref().unwrap().get(x, y));
+            for c in 0..3 {
+                max_err = max_err.max((got[c] - rgb[c]).abs());
+            }
+            max_err = max_err.max((got_a - (1.0 - trans)).abs());
+            assert!(
+                max_err <= 2e-3,
+                "pixel ({x}, {y}): joint {got:?} α {got_a}, by hand {rgb:?} α {}",
+                1.0 - trans
+            );
+        }
+    }
+    assert!(
+        both > 200,
+        "{both} pixels see both the sphere and the splats"
+    );
+    println!("{both} pixels see both: max |joint − by hand| {max_err:.2e}");
+}
+
+#[test]
+fn a_crop_box_cuts_splats_by_their_means_and_fields_by_their_rays() {
+    let camera = camera();
+    let plane = Arc::new(splat_plane(0.8, 0.04));
+    // Keep x ≥ 0 only, in both.
+    let crop = CropBox {
+        center: [1.0, 0.0, 0.0],
+        scale: [2.0, 4.0, 4.0],
+        rotation: [0.0; 3],
+    };
+    let field = FieldHandle::analytic(Analytic {
+        primitives: vec![Primitive {
+            shape: Shape::Sphere {
+                center: Vec3::ZERO,
+                radius: RADIUS as f32,
+            },
+            density: SIGMA,
+            color: ShColor::constant(Vec3::new(1.0, 0.0, 0.0)),
+        }],
+    });
+    let scene = Scene::new(vec![Instance::new(
+        "sphere",
+        field,
+        DMat4::IDENTITY,
+        Some(crop),
+    )
+    .unwrap()])
+    .with_splats(vec![SplatInstance::new(
+        "plane",
+        plane.clone(),
+        DMat4::IDENTITY,
+        Some(crop),
+        false,
+    )
+    .unwrap()]);
+    let planes = render(&scene, &camera, camera.full_window(), &settings()).unwrap();
+    let alpha = planes.alpha.unwrap();
+    let (mut left, mut right) = (0.0f32, 0.0f32);
+    for y in 0..planes.height {
+        for x in 0..planes.width {
+            let ray = camera.ray(x as f64 + 0.5, y as f64 + 0.5).unwrap();
+            let hit = ray.origin - ray.dir * (ray.origin.z / ray.dir.z);
+            // Away from the cut (splats reach ~3 standard deviations past their mean).
+            if hit.x < -0.15 {
+                left = left.max(alpha.get(x, y));
+            } else if hit.x > 0.15 && hit.x.abs() < 0.75 && hit.y.abs() < 0.75 {
+                right = right.max(alpha.get(x, y));
+            }
+        }
+    }
+    assert!(
+        left < 1e-6,
+        "alpha {left} where the crop removes everything"
+    );
+    assert!(right > 0.3, "alpha {right} where the crop keeps both");
+}
+
+#[test]
+fn the_command_line_renders_and_describes_a_splat_file() {
+    let exe = env!("CARGO_BIN_EXE_nerfx");
+    let ply = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/splat_plane_sh3.ply");
+    let info = Command::new(exe).arg("info").arg(&ply).output().unwrap();
+    let text = String::from_utf8_lossy(&info.stdout);
+    assert!(
+        info.status.success(),
+        "{}",
+        String::from_utf8_lossy(&info.stderr)
+    );
+    assert!(
+        text.contains("13982 splats") && text.contains("degree 3"),
+        "{text}"
+    );
+
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.ply");
+    std::fs::write(
+        &bad,
+        b"ply\nformat ascii 1.0\nelement vertex 1\nend_header\n",
+    )
+    .unwrap();
+    let run = Command::new(exe).arg("info").arg(&bad).output().unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        !run.status.success() && err.contains("bad.ply") && err.contains("ASCII"),
+        "{err}"
+    );
+
+    // A scene file holding the splats, rendered from a shot looking at them.
+    let scene = dir.path().join("scene.json");
+    std::fs::write(
+        &scene,
+        serde_json::json!({ "instances": [
+            { "name": "plane", "field": { "splats": { "path": ply } } } ] })
+        .to_string(),
+    )
+    .unwrap();
+    let eye = DVec3::new(0.42 - 0.79 * 1.6, 2.33 + 0.61 * 1.6, 3.13 - 0.07 * 1.6);
+    let m = nerfx::demo::look_at(eye, DVec3::new(0.42, 2.33, 3.13)).transpose();
+    let shot = dir.path().join("shot.json");
+    std::fs::write(
+        &shot,
+        serde_json::json!({
+            "version": 1, "fps": 24.0, "frame_start": 1, "frame_end": 1,
+            "resolution_x": 64, "resolution_y": 48, "resolution_percentage": 100,
+            "pixel_aspect_x": 1.0, "pixel_aspect_y": 1.0, "nerf_object": "NeRF",
+            "frames": [{ "frame": 1, "camera": {
+                "type": "PERSP", "lens": 35.0, "sensor_width": 36.0, "sensor_height": 24.0,
+                "sensor_fit": "AUTO", "shift_x": 0.0, "shift_y": 0.0,
+                "clip_start": 0.1, "clip_end": 100.0,
+                "matrix_world": m.to_cols_array_2d() },
+                "objects": { "NeRF": DMat4::IDENTITY.to_cols_array_2d() } }]
+        })
+        .to_string(),
+    )
+    .unwrap();
+    for input in [&scene, &ply] {
+        let out = dir.path().join("splats.exr");
+        let run = Command::new(exe)
+            .args(["render"])
+            .arg(input)
+            .arg(&shot)
+            .arg("-o")
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(
+            run.status.success(),
+            "{}: {}",
+            input.display(),
+            String::from_utf8_lossy(&run.stderr)
+        );
+        assert!(std::fs::metadata(&out).unwrap().len() > 1000);
+        std::fs::remove_file(&out).unwrap();
+    }
+}

@@ -124,7 +124,7 @@ fn splats_and_fields_occlude_each_other_per_pixel() {
             // The plane's depth along this ray (z = 0).
             let t_plane = -ray.origin.z / ray.dir.z;
             let (mut rgb, mut trans) = ([0.0f64; 3], 1.0f64);
-            let mut sphere_part = |t0: f64, t1: f64, rgb: &mut [f64; 3], trans: &mut f64| {
+            let sphere_part = |t0: f64, t1: f64, rgb: &mut [f64; 3], trans: &mut f64| {
                 if t1 > t0 {
                     let a = 1.0 - (-(f64::from(SIGMA)) * (t1 - t0)).exp();
                     rgb[0] += *trans * a;

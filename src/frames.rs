@@ -251,7 +251,7 @@ mod tests {
 
     #[test]
     fn camera_paths_read_as_shots() {
-        let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+        let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
         let path = data.join("viewer_camera_path_b.json");
         let shot = read_shot(&path, "NeRF").unwrap();
         assert_eq!(shot.frames.len(), 42);

@@ -1,4 +1,4 @@
-//! The real nerfstudio viewer camera paths in `../shared/data/` load, their values match the
+//! The real nerfstudio viewer camera paths in `tests/data/` load, their values match the
 //! file read by hand, and a frame of an analytic sphere renders from them where a closed-form
 //! silhouette and depth say it must.
 
@@ -11,9 +11,9 @@ use nerfx::field::{Analytic, Primitive, ShColor, Shape};
 use nerfx::render::{render, Outputs, Quality, RenderSettings};
 use nerfx::scene::{FieldHandle, Instance, Scene};
 
-/// `../shared/data`, which CI provides; its absence is a failure, not a skip.
+/// `tests/data`: copies of real viewer exports (see `tests/data/README.md`).
 fn data(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data");
     assert!(
         dir.is_dir(),
         "test data directory {} is missing: the real nerfstudio camera paths must be there",

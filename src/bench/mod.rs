@@ -7,6 +7,7 @@
 
 pub mod field;
 pub mod plot;
+pub mod splats;
 
 use std::path::Path;
 use std::time::Instant;

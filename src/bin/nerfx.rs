@@ -139,6 +139,13 @@ enum Command {
         /// Timed repetitions per configuration (the median is reported).
         #[arg(long, default_value_t = 3)]
         repeats: u32,
+        /// Time splat rasterisation instead: a generated scene of this many splats (SH degree
+        /// 3), and each `--ply` file, one RGBA frame each (best of `repeats`).
+        #[arg(long)]
+        splats: Option<usize>,
+        /// Splat files to time with `--splats`.
+        #[arg(long)]
+        ply: Vec<PathBuf>,
     },
 }
 
@@ -296,10 +303,41 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Bench {
+            splats: Some(n),
+            ply,
+            width,
+            height,
+            repeats,
+            ..
+        } => {
+            use nerfx::bench::splats::{generated_splats, time_splats};
+            let mut sets = vec![(format!("generated, {n} splats"), generated_splats(n))];
+            for path in ply {
+                sets.push((
+                    path.display().to_string(),
+                    nerfx::field::Splats::load(&path)?,
+                ));
+            }
+            println!("| splats | frame (ms) | fragments / pixel | memory (MiB) |");
+            println!("|---|---:|---:|---:|");
+            for (name, splats) in sets {
+                let t = time_splats(std::sync::Arc::new(splats), width, height, repeats)?;
+                println!(
+                    "| {name} ({}) at {width}×{height} | {:.0} | {:.1} | {:.1} |",
+                    t.splats,
+                    t.frame_ms,
+                    t.fragments_per_pixel,
+                    t.memory_bytes as f64 / (1 << 20) as f64
+                );
+            }
+            Ok(())
+        }
+        Command::Bench {
             out,
             width,
             height,
             repeats,
+            ..
         } => {
             create_dir(&out)?;
             let report = bench::run(width, height, repeats.max(1), &|line| eprintln!("{line}"))?;

@@ -31,12 +31,26 @@ pub(crate) struct Fragment {
     pub rgb: [f32; 3],
 }
 
+/// What a pixel loop reads of a splat, stored per tile entry so the loop walks memory in
+/// order.
+#[derive(Clone, Copy, Debug, Default)]
+struct Entry {
+    xy: [f32; 2],
+    conic: [f32; 3],
+    opacity: f32,
+    /// `ln(255·opacity)` plus a margin: beyond this σ the fragment is below 1/255, so the
+    /// exponential need not be taken.
+    sigma_cut: f32,
+    /// Index into the projected splats (depth and colour).
+    splat: u32,
+}
+
 /// The splats of a frame, projected, sorted and binned.
 pub(crate) struct SplatLayer {
     projected: Vec<Projected>,
     /// Per tile of `tiles`: where its entries start in `entries` (one more at the end).
     starts: Vec<u32>,
-    entries: Vec<u32>,
+    entries: Vec<Entry>,
     /// Tile coordinates covered: `[x0, y0, x1, y1)`.
     tiles: [u32; 4],
 }
@@ -90,14 +104,21 @@ impl SplatLayer {
             counts[i] += counts[i - 1];
         }
         let starts = counts.clone();
-        let mut entries = vec![0u32; counts[n_tiles] as usize];
+        let mut entries = vec![Entry::default(); counts[n_tiles] as usize];
         for (i, p) in projected.iter().enumerate() {
+            let entry = Entry {
+                xy: p.xy,
+                conic: p.conic,
+                opacity: p.opacity,
+                sigma_cut: (255.0 * p.opacity).ln() + 1e-3,
+                splat: i as u32,
+            };
             let [x0, y0, x1, y1] = range(p);
             for ty in y0..y1 {
                 let row = (ty - tiles[1]) as usize * tiles_x;
                 for tx in x0..x1 {
                     let slot = &mut counts[row + (tx - tiles[0]) as usize];
-                    entries[*slot as usize] = i as u32;
+                    entries[*slot as usize] = entry;
                     *slot += 1;
                 }
             }
@@ -122,18 +143,18 @@ impl SplatLayer {
             + (tx - self.tiles[0]) as usize;
         let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
         let mut transmittance = 1.0f64;
-        for &i in &self.entries[self.starts[tile] as usize..self.starts[tile + 1] as usize] {
-            let p = &self.projected[i as usize];
-            let (dx, dy) = (p.xy[0] - px, p.xy[1] - py);
-            let [a, b, c] = p.conic;
+        for e in &self.entries[self.starts[tile] as usize..self.starts[tile + 1] as usize] {
+            let (dx, dy) = (e.xy[0] - px, e.xy[1] - py);
+            let [a, b, c] = e.conic;
             let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
-            if sigma < 0.0 {
+            if sigma < 0.0 || sigma > e.sigma_cut {
                 continue;
             }
-            let alpha = (p.opacity * (-sigma).exp()).min(MAX_ALPHA);
+            let alpha = (e.opacity * (-sigma).exp()).min(MAX_ALPHA);
             if alpha.is_nan() || alpha < MIN_ALPHA {
                 continue;
             }
+            let p = &self.projected[e.splat as usize];
             out.push(Fragment {
                 t: f64::from(p.z) / z_per_t,
                 alpha,

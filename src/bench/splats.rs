@@ -1,0 +1,127 @@
+//! Splat rasterisation speed: a frame of a generated capture-like scene (splats on the
+//! surfaces of nested spheres, SH degree 3, opacities and sizes spread as in trained scenes),
+//! timed as a whole and with the projection, sort and binning alone.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use glam::{DVec3, Quat, Vec3};
+
+use crate::camera::{BlenderIntrinsics, Camera, Perspective, Projection};
+use crate::demo::look_at;
+use crate::error::Result;
+use crate::field::{SplatColor, Splats};
+use crate::render::{render_with_progress, Outputs, Quality, RenderSettings};
+use crate::scene::{Scene, SplatInstance};
+
+/// What one splat frame cost.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SplatTiming {
+    /// Splats in the scene.
+    pub splats: usize,
+    /// Best wall time of a whole RGBA frame, milliseconds.
+    pub frame_ms: f64,
+    /// Fragments blended per pixel.
+    pub fragments_per_pixel: f64,
+    /// Bytes the splats hold.
+    pub memory_bytes: usize,
+}
+
+/// `n` splats on three nested spheres around the origin (radii 0.6, 0.8, 1.0), seeded.
+pub fn generated_splats(n: usize) -> Splats {
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut uniform = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut s = Splats {
+        means: Vec::with_capacity(n),
+        scales: Vec::with_capacity(n),
+        rotations: Vec::with_capacity(n),
+        opacities: Vec::with_capacity(n),
+        color: SplatColor::Sh { degree: 3 },
+        coefficients: Vec::with_capacity(n * 48),
+        dropped: 0,
+    };
+    for i in 0..n {
+        let radius = [0.6, 0.8, 1.0][i % 3];
+        let z = 2.0 * uniform() - 1.0;
+        let phi = std::f32::consts::TAU * uniform();
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        s.means
+            .push(Vec3::new(r * phi.cos(), r * phi.sin(), z) * radius);
+        // Flat discs, 2–8 mm across, as trained surfaces hold.
+        let size = 0.002 + 0.006 * uniform();
+        s.scales
+            .push(Vec3::new(size, size * (0.5 + uniform()), 0.0005));
+        let axis = Vec3::new(uniform() - 0.5, uniform() - 0.5, uniform() - 0.5);
+        s.rotations.push(Quat::from_axis_angle(
+            axis.normalize_or(Vec3::Z),
+            6.0 * uniform(),
+        ));
+        s.opacities.push(0.1 + 0.9 * uniform());
+        for k in 0..16 {
+            let spread = if k == 0 { 1.5 } else { 0.2 };
+            s.coefficients
+                .extend([0; 3].map(|_| spread * (uniform() - 0.5)));
+        }
+    }
+    s
+}
+
+/// Renders `splats` at `width × height` from a camera at distance 3, `repeats` times, and
+/// reports the best.
+pub fn time_splats(
+    splats: Arc<Splats>,
+    width: u32,
+    height: u32,
+    repeats: u32,
+) -> Result<SplatTiming> {
+    // Framed on the middle half of the splats (trained scenes carry far outliers).
+    let quantile = |axis: usize, q: f64| {
+        let mut v: Vec<f32> = splats.means.iter().map(|m| m[axis]).collect();
+        let k = ((v.len().max(1) - 1) as f64 * q) as usize;
+        v.select_nth_unstable_by(k, f32::total_cmp);
+        f64::from(v.get(k).copied().unwrap_or(0.0))
+    };
+    let centre = DVec3::new(quantile(0, 0.5), quantile(1, 0.5), quantile(2, 0.5));
+    let extent = (0..3)
+        .map(|a| quantile(a, 0.75) - quantile(a, 0.25))
+        .fold(1e-3, f64::max);
+    let eye = centre + DVec3::new(0.0, -3.0, 0.4) * extent;
+    let camera = Camera::new(
+        look_at(eye, centre),
+        Projection::Perspective(Perspective::from_blender(&BlenderIntrinsics {
+            resolution_x: width,
+            resolution_y: height,
+            ..BlenderIntrinsics::default()
+        })?),
+    )?;
+    let memory_bytes = splats.memory_bytes();
+    let count = splats.len();
+    let scene = Scene::default().with_splats(vec![SplatInstance::new(
+        "splats",
+        splats,
+        glam::DMat4::IDENTITY,
+        None,
+        false,
+    )?]);
+    let settings = RenderSettings::new(Quality::Final.params(), Outputs::rgba());
+    let mut best = f64::INFINITY;
+    let mut fragments = 0;
+    for _ in 0..repeats.max(1) {
+        let start = Instant::now();
+        let (_, stats) =
+            render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {})?;
+        best = best.min(start.elapsed().as_secs_f64() * 1e3);
+        fragments = stats.splat_fragments;
+    }
+    Ok(SplatTiming {
+        splats: count,
+        frame_ms: best,
+        fragments_per_pixel: fragments as f64 / f64::from(width * height),
+        memory_bytes,
+    })
+}

@@ -301,3 +301,55 @@ fn the_command_line_renders_and_describes_a_splat_file() {
         std::fs::remove_file(&out).unwrap();
     }
 }
+
+#[test]
+fn a_window_or_another_tile_size_gives_the_same_pixels() {
+    let ply = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/splat_plane_sh3.ply");
+    let splats = Arc::new(Splats::load(&ply).unwrap());
+    let scene = Scene::default().with_splats(vec![SplatInstance::new(
+        "plane",
+        splats,
+        DMat4::IDENTITY,
+        None,
+        false,
+    )
+    .unwrap()]);
+    let centre = DVec3::new(0.42, 2.33, 3.13);
+    let camera = Camera::new(
+        nerfx::demo::look_at(centre + DVec3::new(-1.2, 1.0, 0.2), centre),
+        Projection::Perspective(Perspective::from_vertical_fov(70, 50, 40.0).unwrap()),
+    )
+    .unwrap();
+    let full = render(&scene, &camera, camera.full_window(), &settings()).unwrap();
+    let window = nerfx::image::Window::new(13, 7, 61, 41);
+    for tile_size in [16, 7, 64] {
+        let mut s = settings();
+        s.tile_size = tile_size;
+        let part = render(&scene, &camera, window, &s).unwrap();
+        for y in window.y0..window.y1 {
+            for x in window.x0..window.x1 {
+                let (px, py) = (x - window.x0, y - window.y0);
+                for c in 0..3 {
+                    assert_eq!(
+                        part.rgb.as_ref().unwrap()[c].get(px, py).to_bits(),
+                        full.rgb.as_ref().unwrap()[c].get(x, y).to_bits(),
+                        "tile {tile_size}, pixel ({x}, {y})"
+                    );
+                }
+                assert_eq!(
+                    part.depth_median.as_ref().unwrap().get(px, py).to_bits(),
+                    full.depth_median.as_ref().unwrap().get(x, y).to_bits()
+                );
+            }
+        }
+    }
+    assert!(
+        full.alpha
+            .unwrap()
+            .data
+            .iter()
+            .filter(|&&a| a > 0.5)
+            .count()
+            > 500
+    );
+}

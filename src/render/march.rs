@@ -152,6 +152,9 @@ pub(super) struct Scratch {
     owners: Vec<(u32, f64)>,
     field_out: Vec<f32>,
     rgb_out: Vec<Vec3>,
+    /// Per pixel of the tile: camera z per unit ray distance, and the splat fragments.
+    z_per_t: Vec<f64>,
+    fragments: Vec<Vec<Fragment>>,
     stats: RenderStats,
 }
 
@@ -261,15 +264,29 @@ fn setup_rays(
         union_in_place(&mut state.segments);
         state.fragments.clear();
         state.next_fragment = 0;
-        if let (Some(layer), Some(ray)) = (splats, &ray) {
-            layer.fragments(x, y, ray.z_per_t, &mut state.fragments);
-            s.stats.splat_fragments += state.fragments.len() as u64;
-        }
         state.live = !state.segments.is_empty();
         if state.live {
             s.active.push(r as u32);
-        } else {
-            composite_fragments(state, f64::INFINITY, outputs);
+        }
+    }
+    if let Some(layer) = splats {
+        s.z_per_t.clear();
+        s.z_per_t.extend(
+            s.rays[..n_rays]
+                .iter()
+                .map(|st| st.ray.map_or(f64::NAN, |ray| ray.z_per_t)),
+        );
+        s.fragments.resize_with(n_rays, Vec::new);
+        for f in &mut s.fragments[..n_rays] {
+            f.clear();
+        }
+        layer.fill(tile, &s.z_per_t, &mut s.fragments[..n_rays]);
+        for (state, fragments) in s.rays[..n_rays].iter_mut().zip(&mut s.fragments) {
+            std::mem::swap(&mut state.fragments, fragments);
+            s.stats.splat_fragments += state.fragments.len() as u64;
+            if !state.live {
+                composite_fragments(state, f64::INFINITY, outputs);
+            }
         }
     }
 }

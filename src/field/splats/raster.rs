@@ -41,18 +41,21 @@ struct Entry {
     /// `ln(255·opacity)` plus a margin: beyond this σ the fragment is below 1/255, so the
     /// exponential need not be taken.
     sigma_cut: f32,
-    /// Index into the projected splats (depth and colour).
-    splat: u32,
+    /// Camera z of the mean.
+    z: f32,
+    /// Colour.
+    rgb: [f32; 3],
 }
 
 /// The splats of a frame, projected, sorted and binned.
 pub(crate) struct SplatLayer {
-    projected: Vec<Projected>,
     /// Per tile of `tiles`: where its entries start in `entries` (one more at the end).
     starts: Vec<u32>,
     entries: Vec<Entry>,
     /// Tile coordinates covered: `[x0, y0, x1, y1)`.
     tiles: [u32; 4],
+    /// The CPU has AVX2 and FMA: the pixel loop runs eight lanes wide.
+    avx2: bool,
 }
 
 impl SplatLayer {
@@ -105,13 +108,14 @@ impl SplatLayer {
         }
         let starts = counts.clone();
         let mut entries = vec![Entry::default(); counts[n_tiles] as usize];
-        for (i, p) in projected.iter().enumerate() {
+        for p in &projected {
             let entry = Entry {
                 xy: p.xy,
                 conic: p.conic,
                 opacity: p.opacity,
                 sigma_cut: (255.0 * p.opacity).ln() + 1e-3,
-                splat: i as u32,
+                z: p.z,
+                rgb: p.rgb,
             };
             let [x0, y0, x1, y1] = range(p);
             for ty in y0..y1 {
@@ -123,45 +127,154 @@ impl SplatLayer {
                 }
             }
         }
+        #[cfg(target_arch = "x86_64")]
+        let avx2 = is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma");
+        #[cfg(not(target_arch = "x86_64"))]
+        let avx2 = false;
         SplatLayer {
-            projected,
             starts,
             entries,
             tiles,
+            avx2,
         }
     }
 
-    /// Appends the fragments of pixel (`x`, `y`) front to back, `z_per_t` converting camera z
-    /// to ray distance, up to the one that brings the pixel's transmittance (from splats
+    /// Fills each pixel's fragments for the pixels of `window` (row-major, `out[i]` and
+    /// `z_per_t[i]` for its `i`-th pixel; a non-finite `z_per_t` marks a pixel without a
+    /// ray), front to back, up to the one that brings the pixel's transmittance (from splats
     /// alone) to [`MIN_TRANSMITTANCE`] or below.
-    pub fn fragments(&self, x: u32, y: u32, z_per_t: f64, out: &mut Vec<Fragment>) {
-        let (tx, ty) = (x / TILE, y / TILE);
-        if tx < self.tiles[0] || tx >= self.tiles[2] || ty < self.tiles[1] || ty >= self.tiles[3] {
-            return;
+    ///
+    /// Per image tile, the splats are walked once for all its pixels of the window, sixteen
+    /// pixels at a time: the quadratic form is evaluated for the sixteen together (a loop the
+    /// compiler vectorises), and only the pixels it reaches go on to the exponential.
+    pub fn fill(&self, window: Window, z_per_t: &[f64], out: &mut [Vec<Fragment>]) {
+        for ty in window.y0 / TILE..window.y1.div_ceil(TILE) {
+            for tx in window.x0 / TILE..window.x1.div_ceil(TILE) {
+                if tx < self.tiles[0]
+                    || tx >= self.tiles[2]
+                    || ty < self.tiles[1]
+                    || ty >= self.tiles[3]
+                {
+                    continue;
+                }
+                let part = window.intersect(&Window::new(
+                    tx * TILE,
+                    ty * TILE,
+                    (tx + 1) * TILE,
+                    (ty + 1) * TILE,
+                ));
+                let tile = (ty - self.tiles[1]) as usize * (self.tiles[2] - self.tiles[0]) as usize
+                    + (tx - self.tiles[0]) as usize;
+                self.fill_part(tile, window, part, z_per_t, out);
+            }
         }
-        let tile = (ty - self.tiles[1]) as usize * (self.tiles[2] - self.tiles[0]) as usize
-            + (tx - self.tiles[0]) as usize;
-        let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
-        let mut transmittance = 1.0f64;
+    }
+
+    fn fill_part(
+        &self,
+        tile: usize,
+        window: Window,
+        part: Window,
+        z_per_t: &[f64],
+        out: &mut [Vec<Fragment>],
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: `build` found AVX2 and FMA on this CPU.
+            return unsafe { self.fill_part_avx2(tile, window, part, z_per_t, out) };
+        }
+        self.fill_part_lanes(tile, window, part, z_per_t, out);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn fill_part_avx2(
+        &self,
+        tile: usize,
+        window: Window,
+        part: Window,
+        z_per_t: &[f64],
+        out: &mut [Vec<Fragment>],
+    ) {
+        self.fill_part_lanes(tile, window, part, z_per_t, out);
+    }
+
+    /// The pixels of `part` (inside `window`) against the entries of image tile `tile`.
+    #[inline(always)]
+    fn fill_part_lanes(
+        &self,
+        tile: usize,
+        window: Window,
+        part: Window,
+        z_per_t: &[f64],
+        out: &mut [Vec<Fragment>],
+    ) {
+        const LANES: usize = 16;
+        const MAX: usize = (TILE * TILE) as usize;
+        let mut px = [0f32; MAX];
+        let mut py = [0f32; MAX];
+        let mut index = [0usize; MAX];
+        let mut n = 0;
+        for y in part.y0..part.y1 {
+            for x in part.x0..part.x1 {
+                let i = ((y - window.y0) * window.width() + (x - window.x0)) as usize;
+                if z_per_t[i].is_finite() {
+                    (px[n], py[n], index[n]) = (x as f32 + 0.5, y as f32 + 0.5, i);
+                    n += 1;
+                }
+            }
+        }
+        let chunks = n.div_ceil(LANES);
+        let mut live = [0u16; MAX / LANES];
+        for (c, l) in live.iter_mut().enumerate().take(chunks) {
+            let lanes = (n - c * LANES).min(LANES);
+            *l = if lanes == LANES {
+                u16::MAX
+            } else {
+                (1u16 << lanes) - 1
+            };
+        }
+        let mut transmittance = [1f64; MAX];
+        let mut remaining = n;
         for e in &self.entries[self.starts[tile] as usize..self.starts[tile + 1] as usize] {
-            let (dx, dy) = (e.xy[0] - px, e.xy[1] - py);
             let [a, b, c] = e.conic;
-            let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
-            if sigma < 0.0 || sigma > e.sigma_cut {
-                continue;
+            for (chunk, live) in live.iter_mut().enumerate().take(chunks) {
+                if *live == 0 {
+                    continue;
+                }
+                let at = chunk * LANES;
+                let mut sigma = [0f32; LANES];
+                for l in 0..LANES {
+                    let dx = e.xy[0] - px[at + l];
+                    let dy = e.xy[1] - py[at + l];
+                    sigma[l] = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
+                }
+                let mut reached = 0u16;
+                for (l, &v) in sigma.iter().enumerate() {
+                    reached |= u16::from(v >= 0.0 && v <= e.sigma_cut) << l;
+                }
+                let mut hits = reached & *live;
+                while hits != 0 {
+                    let l = hits.trailing_zeros() as usize;
+                    hits &= hits - 1;
+                    let alpha = (e.opacity * (-sigma[l]).exp()).min(MAX_ALPHA);
+                    if alpha.is_nan() || alpha < MIN_ALPHA {
+                        continue;
+                    }
+                    let k = at + l;
+                    out[index[k]].push(Fragment {
+                        t: f64::from(e.z) / z_per_t[index[k]],
+                        alpha,
+                        rgb: e.rgb,
+                    });
+                    transmittance[k] *= 1.0 - f64::from(alpha);
+                    if transmittance[k] <= MIN_TRANSMITTANCE {
+                        *live &= !(1 << l);
+                        remaining -= 1;
+                    }
+                }
             }
-            let alpha = (e.opacity * (-sigma).exp()).min(MAX_ALPHA);
-            if alpha.is_nan() || alpha < MIN_ALPHA {
-                continue;
-            }
-            let p = &self.projected[e.splat as usize];
-            out.push(Fragment {
-                t: f64::from(p.z) / z_per_t,
-                alpha,
-                rgb: p.rgb,
-            });
-            transmittance *= 1.0 - f64::from(alpha);
-            if transmittance <= MIN_TRANSMITTANCE {
+            if remaining == 0 {
                 return;
             }
         }

@@ -28,14 +28,15 @@ pub use analytic::{Analytic, Primitive, Shape};
 pub use hashgrid::{HashGrid, HashGridConfig, TableStorage};
 pub use ingp::IngpField;
 pub use mlp::{Mlp, MlpConfig};
+pub(crate) use nerfacto::latest_checkpoint;
 pub use nerfacto::NerfactoField;
 pub use occupancy::Occupancy;
 pub use sh::ShColor;
 pub use sh4::sh4;
 pub(crate) use sh4::sh_basis;
 pub(crate) use splats::{
-    Fragment, SplatLayer, View as SplatView, MIN_TRANSMITTANCE as SPLAT_MIN_TRANSMITTANCE,
-    NEAR_PLANE as SPLAT_NEAR_PLANE,
+    is_splatfacto_run, Fragment, SplatLayer, View as SplatView,
+    MIN_TRANSMITTANCE as SPLAT_MIN_TRANSMITTANCE, NEAR_PLANE as SPLAT_NEAR_PLANE,
 };
 pub use splats::{SplatColor, Splats};
 pub(crate) use srgb::{linear_to_srgb, srgb_to_linear};
@@ -147,6 +148,9 @@ pub trait Field: Send + Sync {
 /// `.msgpack`) and nerfstudio nerfacto run directories (holding `config.yml`). Unreadable or
 /// corrupt files give an error naming the file.
 pub fn describe(path: &Path) -> Result<String> {
+    if is_splatfacto_run(path) {
+        return Ok(Splats::load(path)?.describe(path));
+    }
     if path.is_dir() {
         return Ok(NerfactoField::load(path)?.describe());
     }

@@ -101,6 +101,13 @@ impl NerfactoField {
     /// Loads the run directory `run` (the checkpoint with the highest step).
     pub fn load(run: &Path) -> Result<Self> {
         let settings = RunSettings::read(&run.join("config.yml"))?;
+        if settings.method_name.starts_with("splatfacto") {
+            return Err(Error::Unsupported(format!(
+                "{}: a splatfacto run holds splats, not a nerfacto field: name it as \
+                 {{\"splats\": {{\"path\": …}}}} in the scene file",
+                run.display()
+            )));
+        }
         if settings.disable_scene_contraction {
             return Err(Error::Unsupported(format!(
                 "{}: nerfacto without scene contraction (disable_scene_contraction: true)",
@@ -359,7 +366,7 @@ impl NerfactoField {
 }
 
 /// `nerfstudio_models/step-<n>.ckpt` with the highest `n`.
-fn latest_checkpoint(dir: &Path) -> Result<(PathBuf, u64)> {
+pub(crate) fn latest_checkpoint(dir: &Path) -> Result<(PathBuf, u64)> {
     let entries = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
     let mut best: Option<(u64, PathBuf)> = None;
     for entry in entries {

@@ -32,7 +32,7 @@ pub(crate) struct RunSettings {
 }
 
 /// The scalar value at the dotted `path`, if present.
-fn scan(text: &str, path: &str, file: &Path) -> Result<Option<String>> {
+pub(crate) fn scan(text: &str, path: &str, file: &Path) -> Result<Option<String>> {
     let mut stack: Vec<(usize, &str)> = Vec::new();
     let mut found = None;
     for (n, line) in text.lines().enumerate() {

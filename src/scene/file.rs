@@ -117,7 +117,12 @@ impl SceneDesc {
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase);
         let file = path.to_path_buf();
-        let field = if path.is_dir() {
+        let field = if crate::field::is_splatfacto_run(path) {
+            FieldSource::Splats {
+                path: file,
+                antialiased: false,
+            }
+        } else if path.is_dir() {
             FieldSource::Nerfacto { path: file }
         } else {
             match ext.as_deref() {

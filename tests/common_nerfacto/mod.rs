@@ -448,9 +448,21 @@ pub fn zip(files: &[(String, Vec<u8>)]) -> Vec<u8> {
 
 /// The checkpoint file's bytes.
 pub fn checkpoint_bytes(s: &Spec) -> Vec<u8> {
-    let sd = state_dict(s);
+    checkpoint_of_state(&state_dict(s))
+}
+
+/// A checkpoint holding these float32 tensors `(name, shape, values)` under `pipeline`.
+pub fn checkpoint_of(tensors: &[(&str, Vec<usize>, Vec<f32>)]) -> Vec<u8> {
+    let mut sd = StateDict::default();
+    for (name, shape, values) in tensors {
+        sd.add(name, shape, values, false);
+    }
+    checkpoint_of_state(&sd)
+}
+
+fn checkpoint_of_state(sd: &StateDict) -> Vec<u8> {
     let stem = format!("step-{STEP:09}");
-    let mut files = vec![(format!("{stem}/data.pkl"), pickle(&sd))];
+    let mut files = vec![(format!("{stem}/data.pkl"), pickle(sd))];
     files.push((format!("{stem}/byteorder"), b"little".to_vec()));
     for (i, st) in sd.storages.iter().enumerate() {
         files.push((format!("{stem}/data/{i}"), st.bytes.clone()));

@@ -8,9 +8,11 @@
 mod ply;
 mod project;
 mod raster;
+mod splatfacto;
 
 pub(crate) use project::{View, NEAR_PLANE};
 pub(crate) use raster::{Fragment, SplatLayer, MIN_TRANSMITTANCE};
+pub(crate) use splatfacto::is_splatfacto_run;
 
 use std::path::Path;
 
@@ -66,12 +68,17 @@ pub struct Splats {
 }
 
 impl Splats {
-    /// Reads splats from an INRIA-layout `.ply` file.
+    /// Reads splats from an INRIA-layout `.ply` file or a nerfstudio splatfacto run (its
+    /// directory or its `config.yml`).
     pub fn load(path: &Path) -> Result<Splats> {
+        if path.is_dir() {
+            return splatfacto::read(path);
+        }
         match path.extension().and_then(|e| e.to_str()) {
             Some(e) if e.eq_ignore_ascii_case("ply") => ply::read(path),
+            Some("yml") => splatfacto::read(path.parent().unwrap_or(Path::new("."))),
             _ => Err(Error::Unsupported(format!(
-                "{}: not a splat file (expected a Gaussian-splat .ply)",
+                "{}: not a splat file (expected a Gaussian-splat .ply or a splatfacto run)",
                 path.display()
             ))),
         }

@@ -16,10 +16,15 @@ called from a script, e.g.
     bpy.ops.nerfx.import_camera_path(filepath="/tmp/camera_path.json", nerf_object="NeRF")
     bpy.ops.nerfx.render_environment(scene_file="/shots/scene.json", at_object="Chair")
     bpy.ops.nerfx.load_environment(filepath="/tmp/envmap.exr")
+    bpy.ops.nerfx.import_splats(filepath="/captures/scan.ply")
 
 Environment maps: `nerfx envmap` renders the field as a 2:1 equirectangular image laid out as
 the World's Environment Texture reads it (image centre +X, top +Z), so loading it as the
 World's colour with no Mapping node lights the Blender scene as the field would.
+
+Splat stand-ins: a Gaussian-splat PLY (INRIA layout) imports as a point cloud, one vertex per
+splat mean with its DC colour (`0.5 + 0.2821·f_dc`, clamped), in the splats' own frame (the
+frame nerfx renders them in), so it can serve as the NeRF object the artist places.
 """
 
 bl_info = {
@@ -411,6 +416,109 @@ class NERFX_OT_import_camera_path(bpy.types.Operator):
         return {"FINISHED"}
 
 
+SH_C0 = 0.28209479177387814
+PLY_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
+    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
+    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}
+
+
+def read_splat_means(path):
+    """Means (N, 3) and DC colours (N, 3) of a binary Gaussian-splat PLY, with NumPy."""
+    import numpy as np
+
+    with open(path, "rb") as f:
+        data = f.read()
+    end = data.find(b"end_header\n")
+    if not data.startswith(b"ply") or end < 0:
+        raise ValueError("not a PLY file (no 'ply' / 'end_header')")
+    order, count, fields, vertex = "<", None, [], False
+    for line in data[:end].decode("ascii", "replace").splitlines()[1:]:
+        words = line.split()
+        if words[:1] == ["format"]:
+            if words[1] == "ascii":
+                raise ValueError("ASCII PLY is not read; save the splats as binary PLY")
+            order = ">" if words[1] == "binary_big_endian" else "<"
+        elif words[:1] == ["element"]:
+            if count is not None and vertex:
+                break
+            vertex = words[1] == "vertex"
+            if vertex:
+                count = int(words[2])
+            elif count is None:
+                raise ValueError("an element '%s' comes before 'vertex'" % words[1])
+        elif words[:1] == ["property"] and vertex:
+            if words[1] == "list" or words[1] not in PLY_TYPES:
+                raise ValueError("vertex property '%s' is not a scalar" % words[-1])
+            fields.append((words[2], order + PLY_TYPES[words[1]]))
+    names = [n for n, _ in fields]
+    for need in ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2"):
+        if need not in names:
+            raise ValueError("no vertex property '%s': not a Gaussian-splat PLY" % need)
+    dtype = np.dtype(fields)
+    body = data[end + len(b"end_header\n"):]
+    if count is None or len(body) < count * dtype.itemsize:
+        raise ValueError("truncated: the header declares more splats than the file holds")
+    table = np.frombuffer(body, dtype=dtype, count=count)
+    means = np.stack([table[a].astype(np.float64) for a in "xyz"], axis=1)
+    dc = np.stack([table["f_dc_%d" % c].astype(np.float64) for c in range(3)], axis=1)
+    finite = np.isfinite(means).all(axis=1) & np.isfinite(dc).all(axis=1)
+    return means[finite], np.clip(0.5 + SH_C0 * dc[finite], 0.0, 1.0)
+
+
+def import_splats(context, path, name=None):
+    """Creates a point-cloud object of the splats at `path` (their means, DC colour in a
+    "Col" point attribute), in the splats' own frame, and returns it."""
+    import numpy as np
+
+    means, colours = read_splat_means(path)
+    name = name or os.path.splitext(os.path.basename(path))[0]
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(len(means))
+    mesh.vertices.foreach_set("co", means.astype(np.float32).ravel())
+    attribute = mesh.attributes.new("Col", "FLOAT_COLOR", "POINT")
+    rgba = np.ones((len(means), 4), dtype=np.float32)
+    rgba[:, :3] = colours
+    attribute.data.foreach_set("color", rgba.ravel())
+    mesh.update()
+    obj = bpy.data.objects.new(name, mesh)
+    context.collection.objects.link(obj)
+    return obj
+
+
+class NERFX_OT_import_splats(bpy.types.Operator):
+    """Import a Gaussian-splat PLY as a point cloud (one vertex per splat) to place it"""
+
+    bl_idname = "nerfx.import_splats"
+    bl_label = "Import Splats (.ply)"
+    bl_options = {"REGISTER", "UNDO"}
+
+    filepath: StringProperty(name="File", subtype="FILE_PATH")
+    filter_glob: StringProperty(default="*.ply", options={"HIDDEN"})
+
+    def invoke(self, context, event):
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+    def execute(self, context):
+        path = bpy.path.abspath(self.filepath)
+        try:
+            obj = import_splats(context, path)
+        except (OSError, ValueError) as e:
+            self.report({"ERROR"}, "nerfx: cannot import %s: %s" % (path, e))
+            return {"CANCELLED"}
+        if context.scene.nerfx_nerf_object is None:
+            context.scene.nerfx_nerf_object = obj
+        self.report({"INFO"}, "nerfx: %d splats from %s" % (len(obj.data.vertices), path))
+        return {"FINISHED"}
+
+
+def _menu_import(self, context):
+    self.layout.operator(NERFX_OT_import_splats.bl_idname, text="Gaussian Splats (.ply) as nerfx stand-in")
+
+
 def load_environment(scene, path):
     """Makes the image at `path` the World's colour: Environment Texture → Background."""
     image = bpy.data.images.load(path, check_existing=True)
@@ -536,6 +644,7 @@ class NERFX_PT_panel(bpy.types.Panel):
         layout.operator(NERFX_OT_export_shot.bl_idname, icon="EXPORT")
         layout.operator(NERFX_OT_export_camera_path.bl_idname, icon="EXPORT")
         layout.operator(NERFX_OT_import_camera_path.bl_idname, icon="IMPORT")
+        layout.operator(NERFX_OT_import_splats.bl_idname, icon="POINTCLOUD_DATA")
         box = layout.box()
         box.label(text="Environment map")
         box.prop(scene, "nerfx_scene_file")
@@ -551,6 +660,7 @@ CLASSES = (
     NERFX_OT_import_camera_path,
     NERFX_OT_load_environment,
     NERFX_OT_render_environment,
+    NERFX_OT_import_splats,
     NERFX_PT_panel,
 )
 
@@ -573,9 +683,11 @@ def register():
     )
     for cls in CLASSES:
         bpy.utils.register_class(cls)
+    bpy.types.TOPBAR_MT_file_import.append(_menu_import)
 
 
 def unregister():
+    bpy.types.TOPBAR_MT_file_import.remove(_menu_import)
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)
     del bpy.types.Scene.nerfx_envmap_height

@@ -5,6 +5,8 @@
 #   libclang-dev   openfx-sys generates the OpenFX bindings from the official headers (bindgen)
 #   blender        the reference for camera alignment (Debian's 3.4, run headless)
 #   numpy, msgpack the independent NumPy references of the trained fields and splats
+#   python3-numpy  Blender's own Python (Debian's build uses the system's) for the add-on's
+#                  splat import
 #
 # Nothing is skipped when a tool is missing: the tests that need one fail. Extra arguments go
 # to `cargo test` (a test name, `-- --nocapture`).
@@ -45,6 +47,12 @@ if ! python3 -c "import numpy, msgpack" 2>/dev/null; then
     python3 -m pip install --quiet numpy msgpack 2>/dev/null ||
         apt_install python3-numpy python3-msgpack
     python3 -c "import numpy, msgpack"
+fi
+
+if ! blender -b --factory-startup --python-exit-code 1 --python-expr "import numpy" \
+    >/dev/null 2>&1; then
+    echo "== installing numpy for Blender's Python"
+    apt_install python3-numpy
 fi
 
 echo "== cargo test --workspace"

@@ -1,0 +1,30 @@
+"""Imports a Gaussian-splat PLY through the add-on's operator and says what Blender made of it.
+
+Usage: blender -b --factory-startup --python splat_import_check.py -- ADDON_DIR PLY OUT_JSON.
+Writes {"vertices": N, "nerf_object": name, "points": [[x, y, z, r, g, b], ...]} for every
+vertex, world coordinates (the object's matrix_world applied), colours from the "Col" point
+attribute.
+"""
+import json
+import sys
+
+import bpy
+
+ADDON_DIR, PLY, OUT = sys.argv[sys.argv.index("--") + 1 :][:3]
+sys.path.insert(0, ADDON_DIR)
+import nerfx_addon  # noqa: E402
+
+nerfx_addon.register()
+for obj in list(bpy.data.objects):
+    bpy.data.objects.remove(obj)
+result = bpy.ops.nerfx.import_splats(filepath=PLY)
+assert result == {"FINISHED"}, result
+obj = bpy.context.scene.nerfx_nerf_object
+mesh = obj.data
+colours = mesh.attributes["Col"].data
+points = []
+for v, c in zip(mesh.vertices, colours):
+    p = obj.matrix_world @ v.co
+    points.append([p.x, p.y, p.z, c.color[0], c.color[1], c.color[2]])
+with open(OUT, "w") as f:
+    json.dump({"vertices": len(mesh.vertices), "nerf_object": obj.name, "points": points}, f)

@@ -12,6 +12,9 @@ use crate::image::Planes;
 use crate::render::{render_with_progress, RenderSettings, RenderStats};
 use crate::scene::LoadedScene;
 
+/// Most frames one `--frames` may name (a farm splits longer ranges over commands).
+pub const MAX_FRAMES: usize = 1_000_000;
+
 /// Parses a frame list: `1001`, `1001-1010`, `1001-1100x5` (every 5th), or several of those
 /// separated by commas (`1,5,10-12`). Frames come out in the order given, without repeats.
 ///
@@ -22,6 +25,7 @@ use crate::scene::LoadedScene;
 pub fn parse_frames(spec: &str) -> Result<Vec<i64>> {
     let bad = |why: &str| Error::invalid(format!("frames '{spec}'"), why.to_string());
     let mut frames = Vec::new();
+    let mut seen = std::collections::HashSet::new();
     for part in spec.split(',').map(str::trim) {
         let (range, step) = match part.split_once('x') {
             Some((r, s)) => (
@@ -48,15 +52,19 @@ pub fn parse_frames(spec: &str) -> Result<Vec<i64>> {
         if last < first {
             return Err(bad("a range must not run backwards"));
         }
-        if (last - first) / step > 1_000_000 {
-            return Err(bad("more than a million frames"));
+        // In i128: no range of i64 frames overflows it.
+        let count = (i128::from(last) - i128::from(first)) / i128::from(step) + 1;
+        if count > (MAX_FRAMES - frames.len()) as i128 {
+            return Err(bad(&format!(
+                "more than {MAX_FRAMES} frames in one command; split the range"
+            )));
         }
-        let mut f = first;
-        while f <= last {
-            if !frames.contains(&f) {
+        for k in 0..count {
+            // first + k·step ≤ last, so it fits in i64.
+            let f = (i128::from(first) + k * i128::from(step)) as i64;
+            if seen.insert(f) {
                 frames.push(f);
             }
-            f += step;
         }
     }
     Ok(frames)
@@ -190,6 +198,32 @@ mod tests {
     use super::*;
     use crate::camera::{MotionBlur, ShutterPosition};
     use crate::render::{Outputs, Quality};
+
+    #[test]
+    fn frame_lists_at_the_ends_of_i64_end_or_are_refused() {
+        let max = i64::MAX;
+        assert_eq!(parse_frames(&max.to_string()).unwrap(), vec![max]);
+        assert_eq!(
+            parse_frames(&format!("{}-{max}", max - 2)).unwrap(),
+            vec![max - 2, max - 1, max]
+        );
+        assert_eq!(
+            parse_frames(&format!("{}", i64::MIN)).unwrap(),
+            vec![i64::MIN]
+        );
+        // A step past the end of the range adds nothing.
+        assert_eq!(
+            parse_frames(&format!("1001-1003x{max}")).unwrap(),
+            vec![1001]
+        );
+        let e = parse_frames(&format!("{}-{max}", i64::MIN))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("more than 1000000 frames"), "{e}");
+        // The limit counts every part together, and repeats are dropped in linear time.
+        assert_eq!(parse_frames("1-600000,1-300000").unwrap().len(), 600_000);
+        assert!(parse_frames("1-600000,700000-1300000").is_err());
+    }
 
     #[test]
     fn a_closed_shutter_renders_the_frame_itself_bit_for_bit() {

@@ -84,9 +84,11 @@ pub fn write_exr_layers(
     );
     let mut image = Image::from_layer(layer);
     image.attributes.pixel_aspect = pixel_aspect as f32;
-    image.write().to_file(path).map_err(|e| match e {
-        exr::error::Error::Io(source) => Error::io(path, source),
-        other => Error::invalid(format!("EXR {}", path.display()), other.to_string()),
+    super::replace::replace_file(path, |temp| {
+        image.write().to_file(temp).map_err(|e| match e {
+            exr::error::Error::Io(source) => Error::io(path, source),
+            other => Error::invalid(format!("EXR {}", path.display()), other.to_string()),
+        })
     })
 }
 
@@ -168,6 +170,21 @@ fn channels_of(planes: &Planes, prefix: &str) -> Result<SmallVec<[AnyChannel<Fla
                         plane.data.len(),
                         planes.width,
                         planes.height
+                    ),
+                ));
+            }
+            // Colour and alpha must be finite; depth may be +inf (nothing hit).
+            let bad = plane.data.iter().position(|&v| {
+                v.is_nan() || (!is_depth && v.is_infinite()) || v == f32::NEG_INFINITY
+            });
+            if let Some(i) = bad {
+                return Err(Error::invalid(
+                    format!("EXR output: channel {prefix}{name}"),
+                    format!(
+                        "pixel ({}, {}) is {}: not written",
+                        i % planes.width as usize,
+                        i / planes.width as usize,
+                        plane.data[i]
                     ),
                 ));
             }
@@ -391,5 +408,27 @@ mod tests {
             write_exr(&file.0, &planes),
             Err(Error::Invalid { .. })
         ));
+    }
+
+    #[test]
+    fn a_non_finite_pixel_is_refused_and_the_previous_frame_kept() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("frame.exr");
+        let mut planes = Planes {
+            width: 3,
+            height: 2,
+            rgb: None,
+            alpha: Some(Plane::filled(3, 2, 0.5)),
+            depth_z: Some(Plane::filled(3, 2, f32::INFINITY)),
+            depth_ray: None,
+            depth_median: None,
+        };
+        write_exr(&path, &planes).unwrap();
+        let before = std::fs::read(&path).unwrap();
+        planes.alpha.as_mut().unwrap().data[4] = f32::NAN;
+        let e = write_exr(&path, &planes).unwrap_err().to_string();
+        assert!(e.contains("channel A") && e.contains("pixel (1, 1)"), "{e}");
+        assert_eq!(std::fs::read(&path).unwrap(), before);
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
     }
 }

@@ -2,6 +2,7 @@
 
 mod exr_io;
 mod plane;
+mod replace;
 // Crate-visible so that other modules' tests can use its test PNG decoder.
 pub(crate) mod png;
 

@@ -36,7 +36,9 @@ const MAX_SIDE: u32 = i32::MAX as u32;
 pub fn write_png_preview(path: &Path, planes: &Planes) -> Result<()> {
     let rgba = preview_rgba8(planes)?;
     let bytes = encode_png_rgba8(planes.width, planes.height, &rgba)?;
-    std::fs::write(path, bytes).map_err(|e| Error::io(path, e))
+    super::replace::replace_file(path, |temp| {
+        std::fs::write(temp, bytes).map_err(|e| Error::io(path, e))
+    })
 }
 
 /// Encodes `rgba` (`width × height` pixels, 4 bytes each, rows top first, non-premultiplied

@@ -147,3 +147,69 @@ fn a_frame_of_an_analytic_sphere_renders_from_each_real_path() {
     render_sphere_from("viewer_camera_path_keyframes.json");
     render_sphere_from("viewer_camera_path_b.json");
 }
+
+/// What the nerfstudio Blender add-on writes for a scaled, turned and moved NeRF object `N`:
+/// every camera as `N⁻¹·C` (its columns 0.735 long). A sphere bound to the NeRF object, placed
+/// in the field's frame where the Blender camera sees a point 1.2 units ahead, must render
+/// centred with its Blender-unit size and depth.
+#[test]
+fn a_path_written_for_a_scaled_object_renders_the_bound_field_in_blender_units() {
+    let mut p = CameraPath::read(data("viewer_camera_path_b.json")).unwrap();
+    let scale = 0.735;
+    let field_from_world = DMat4::from_scale_rotation_translation(
+        DVec3::splat(scale),
+        glam::DQuat::from_euler(glam::EulerRot::ZYX, 0.7, -0.3, 0.2),
+        DVec3::new(0.4, -1.1, 0.25),
+    );
+    let blender_c0 = p.frames[0].camera_to_world;
+    for f in &mut p.frames {
+        f.camera_to_world = field_from_world * f.camera_to_world;
+    }
+    let (w, h) = (48u32, 48u32);
+    (p.render_width, p.render_height) = (w, h);
+    let dir = tempfile::tempdir().unwrap();
+    let path_file = dir.path().join("camera_path.json");
+    p.write(&path_file).unwrap();
+
+    // In Blender's world: a sphere of radius 0.2 at distance 1.2 on frame 0's view axis.
+    let (d, r) = (1.2, 0.2);
+    let centre_world = blender_c0.w_axis.truncate() - d * blender_c0.z_axis.truncate().normalize();
+    let centre_field = field_from_world.transform_point3(centre_world);
+    let scene_file = dir.path().join("scene.json");
+    std::fs::write(
+        &scene_file,
+        serde_json::json!({"instances": [{"name": "sphere", "object": "NeRF",
+            "field": {"analytic": {"primitives": [{
+                "shape": {"sphere": {"center": centre_field.to_array(), "radius": r * scale}},
+                "density": 1e4, "color": {"rgb": [1, 1, 1]}}]}}}]})
+        .to_string(),
+    )
+    .unwrap();
+    let shot = nerfx::frames::read_shot(&path_file, "NeRF").unwrap();
+    let scene = nerfx::scene::SceneDesc::read(&scene_file)
+        .unwrap()
+        .load()
+        .unwrap();
+    let settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
+    let first = shot.frames[0].frame;
+    let (planes, _) =
+        nerfx::frames::render_frame(&scene, &shot, first, &settings, &|_| {}).unwrap();
+    let (alpha, z) = (planes.alpha.unwrap(), planes.depth_z.unwrap());
+    let f = (f64::from(h) / 2.0) / (p.frames[0].fov.to_radians() / 2.0).tan();
+    let radius_px = f * (r / d).asin().tan();
+    for x in 0..w {
+        let dx = (f64::from(x) + 0.5 - f64::from(w) / 2.0).abs();
+        let a = alpha.get(x, h / 2);
+        if dx < radius_px - 1.0 {
+            assert!(a > 0.99, "pixel {x} inside the silhouette: alpha {a}");
+        } else if dx > radius_px + 1.0 {
+            assert!(a < 0.01, "pixel {x} outside the silhouette: alpha {a}");
+        }
+    }
+    let zc = f64::from(z.get(w / 2, h / 2));
+    assert!(
+        (zc - (d - r)).abs() < 0.01,
+        "depth Z {zc}, expected about {} Blender units",
+        d - r
+    );
+}

@@ -299,8 +299,15 @@ impl CameraPath {
         };
         let mut frames = Vec::with_capacity(self.frames.len());
         for (i, f) in self.frames.iter().enumerate() {
+            // The field sees the path's camera as written (scale included): the NeRF object
+            // is placed so that `object⁻¹ · rigid` is that camera. Affine by construction, so
+            // the bottom row is set exactly rather than left to the inverse's rounding.
             let rigid = self.camera(i, Eye::Both)?.world_from_camera();
-            let object = rigid * f.camera_to_world.inverse();
+            let mut object = rigid * f.camera_to_world.inverse();
+            object.x_axis.w = 0.0;
+            object.y_axis.w = 0.0;
+            object.z_axis.w = 0.0;
+            object.w_axis.w = 1.0;
             frames.push(ShotFrame {
                 frame: first_frame + i as i64,
                 camera: ShotCamera {

@@ -49,7 +49,8 @@ fn blender() -> Option<PathBuf> {
 /// Runs the scene script; returns the reference JSON and the output folder.
 fn run_blender(exe: &Path) -> (Value, PathBuf) {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let out = std::env::temp_dir().join(format!("nerfx-blender-{}", std::process::id()));
+    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("nerfx-blender-{}", std::process::id()));
     std::fs::create_dir_all(&out).unwrap();
     let status = Command::new(exe)
         .args(["-b", "--factory-startup", "--python"])

@@ -146,7 +146,8 @@ fn shot_file_on_disk_gives_the_same_camera() {
         rows(m),
         rows(DMat4::from_scale(DVec3::splat(2.0)))
     );
-    let dir = std::env::temp_dir().join(format!("nerfx-conventions-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("nerfx-conventions-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("shot.json");
     std::fs::write(&path, text).unwrap();
@@ -166,8 +167,8 @@ fn shot_file_on_disk_gives_the_same_camera() {
     let ray = cam.ray(x, y).unwrap();
     assert!(((p_world - ray.origin).normalize() - ray.dir).length() < 1e-12);
     // Written and read again, the camera is the same to rounding.
-    let again_dir =
-        std::env::temp_dir().join(format!("nerfx-conventions-w-{}", std::process::id()));
+    let again_dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("nerfx-conventions-w-{}", std::process::id()));
     std::fs::create_dir_all(&again_dir).unwrap();
     let again_path = again_dir.join("again.json");
     shot.write(&again_path).unwrap();

@@ -10,7 +10,8 @@ use nerfx::graph::{evaluate, node, render_direct, Graph, ParamValues, RenderRequ
 use nerfx::image::{Plane, Planes, Window};
 
 fn scratch_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("nerfx-graph-{name}-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("nerfx-graph-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     dir
 }

@@ -56,7 +56,8 @@ impl Rng {
 
 /// A scene file and a shot file of the demo, in a fresh directory.
 fn demo_files(tag: &str, width: u32, height: u32) -> (PathBuf, PathBuf, PathBuf) {
-    let dir = std::env::temp_dir().join(format!("nerfx-graph-{tag}-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("nerfx-graph-{tag}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let scene = dir.join("scene.json");
     let shot = dir.join("shot.json");

@@ -15,7 +15,8 @@ use nerfx::host::{Bundle, HostOptions};
 use nerfx::image::read_exr_channels;
 
 fn scratch_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("nerfx-ofx-graph-{name}-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("nerfx-ofx-graph-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }

@@ -23,7 +23,8 @@ pub fn shared() -> &'static Bundle {
 pub fn demo_dir(w: u32, h: u32) -> &'static Path {
     static DIR: OnceLock<(u32, u32, PathBuf)> = OnceLock::new();
     let (dw, dh, dir) = DIR.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("nerfx-ofx-demo-{}", std::process::id()));
+        let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+            .join(format!("nerfx-ofx-demo-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         nerfx::demo::write_graph(&dir, w, h).unwrap();
         (w, h, dir)

@@ -492,3 +492,45 @@ fn a_second_host_makes_the_plugin_fetch_its_suites_again() {
     no_violations(&b);
     no_violations(&quiet);
 }
+
+#[test]
+fn a_nerf_render_without_a_field_file_says_so_without_a_dialog() {
+    let _turn = turn();
+    for offer in [MessageSuiteOffer::V2, MessageSuiteOffer::V1Only] {
+        let b = load(HostOptions {
+            message_suite: offer,
+            ..HostOptions::default()
+        });
+        let shot = text(demo_dir().join("demo_shot.json"));
+        let (mut i, _) = instance_with(
+            &b,
+            "org.nerfx.NeRFRender",
+            Context::Generator,
+            &[("shot", shot)],
+        );
+        // The render succeeds (transparent), and the node says why.
+        i.render(FRAME, Window::new(0, 0, 8, 8), 1.0, false)
+            .unwrap();
+        let posted = said(&b, "no Field File chosen");
+        match offer {
+            MessageSuiteOffer::V2 => {
+                let m = i.persistent_message().expect("a persistent warning");
+                assert_eq!(m.kind, "OfxMessageWarning");
+                assert!(
+                    m.text.contains("NeRF Render: no Field File chosen"),
+                    "{}",
+                    m.text
+                );
+                assert!(posted.iter().all(|(p, _)| *p), "{posted:?}");
+                // Choosing the file and rendering clears it.
+                i.set_param("file", &text(demo_dir().join("demo_environment.json")))
+                    .unwrap();
+                i.render(FRAME, Window::new(0, 0, 8, 8), 1.0, false)
+                    .unwrap();
+                assert_eq!(i.persistent_message(), None);
+            }
+            _ => assert!(posted.is_empty(), "no dialog for an empty file: {posted:?}"),
+        }
+        no_violations(&b);
+    }
+}

@@ -10,7 +10,9 @@
 //!   its files) is *not ready*: where its region of definition needs the file it replies
 //!   default, it renders transparent black or passes its first connected RGBA input through,
 //!   and it never posts an error — hosts ask for the region at once, and a dialog before the
-//!   artist could pick a file is noise. A file that is set but unreadable is an error.
+//!   artist could pick a file is noise. Its render marks the node with a persistent warning
+//!   naming the missing file ([`message::warn_not_ready`]), so a node left empty does not
+//!   render black without a word. A file that is set but unreadable is an error.
 //! - getRegionsOfInterest: each connected input needs exactly the region asked for (every
 //!   node works pixel by pixel).
 //! - getClipPreferences: float everywhere, RGBA output premultiplied, Alpha or RGBA inputs
@@ -163,8 +165,17 @@ pub fn run(
     } else if is(kOfxImageEffectActionGetTimeDomain) {
         time_domain(inst, props(out_args, "outArgs")?)
     } else {
-        render::render(inst, props(in_args, "inArgs")?)?;
-        message::succeeded(effect.cast(), &inst.shown);
+        match render::render(inst, props(in_args, "inArgs")?)? {
+            None => message::succeeded(effect.cast(), &inst.shown),
+            Some(param) => {
+                let label = inst.node.desc.param(param).map_or(param, |p| p.label);
+                let text = format!(
+                    "{}: no {label} chosen; it renders nothing of its own until one is",
+                    inst.node.desc.label
+                );
+                message::warn_not_ready(effect.cast(), &inst.shown, &text);
+            }
+        }
         Ok(OK)
     }
 }

@@ -18,7 +18,7 @@
 use std::ffi::c_void;
 use std::sync::{Mutex, PoisonError};
 
-use openfx_sys::kOfxMessageError;
+use openfx_sys::{kOfxMessageError, kOfxMessageWarning};
 
 use crate::instance;
 use crate::props::{c_string, name};
@@ -124,6 +124,38 @@ pub fn post_error(target: Target, text: &str) {
             }
             _ => eprintln!("nerfx.ofx: {text}"),
         }
+    }
+}
+
+/// Marks an instance that rendered without all its files (`text` says which is missing) with
+/// a persistent *warning*: the node says why it renders nothing, without a dialog. Hosts
+/// without persistent messages get it once per edit on standard error. Cleared like an
+/// error: by the artist's next edit or a successful render.
+pub fn warn_not_ready(instance: *mut c_void, shown: &Mutex<Shown>, text: &str) {
+    let mut shown = shown.lock().unwrap_or_else(PoisonError::into_inner);
+    match suites().ok().and_then(|s| s.message) {
+        Some(MessageSuite::V2(m)) => {
+            if let Some(f) = m.setPersistentMessage {
+                shown.persistent = true;
+                let c_text = c_string(text);
+                // SAFETY: the host's function on the current action's instance; "%s" takes
+                // exactly one C string argument.
+                unsafe {
+                    f(
+                        instance,
+                        name(kOfxMessageWarning).as_ptr(),
+                        c"".as_ptr(),
+                        c"%s".as_ptr(),
+                        c_text.as_ptr(),
+                    )
+                };
+            }
+        }
+        _ if !shown.transient => {
+            shown.transient = true;
+            eprintln!("nerfx.ofx: {text}");
+        }
+        _ => {}
     }
 }
 

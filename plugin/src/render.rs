@@ -10,7 +10,8 @@
 //!    window outside the node's image become transparent black).
 //!
 //! A node that is not ready (a file parameter still empty, [`crate::actions::unset_file`])
-//! renders its first connected RGBA input unchanged, or transparent black, and no error.
+//! renders its first connected RGBA input unchanged, or transparent black, and no error: the
+//! render reports which file is missing, and the action marks the node with a warning.
 //! When the host renders one field of fielded footage into a full-frame image
 //! (`kOfxImageEffectPropFieldToRender` lower or upper), only that field's rows are written;
 //! the render time may then be a half frame, at which the core interpolates the shot as at any
@@ -73,8 +74,9 @@ pub fn field_rows(field: &str, single_field: bool) -> Rows {
     }
 }
 
-/// Renders one window of `instance`.
-pub fn render(instance: &Instance, in_args: Props) -> Result<()> {
+/// Renders one window of `instance`; `Some(parameter)` when the node was not ready (that file
+/// parameter is empty) and rendered its input or nothing.
+pub fn render(instance: &Instance, in_args: Props) -> Result<Option<&'static str>> {
     let node = instance.node;
     let time = in_args.double(name(kOfxPropTime))?;
     let render = PixelRect::from_ints(in_args.ints::<4>(name(kOfxImageEffectPropRenderWindow))?);
@@ -87,7 +89,8 @@ pub fn render(instance: &Instance, in_args: Props) -> Result<()> {
         .string(name(kOfxImageEffectPropFieldToRender))
         .unwrap_or_default();
     let values = values_at(instance, time)?;
-    let ready = unset_file(node, &values).is_none();
+    let unset = unset_file(node, &values);
+    let ready = unset.is_none();
     let rod = if ready {
         node.region_of_definition(&values, time)?
     } else {
@@ -134,7 +137,8 @@ pub fn render(instance: &Instance, in_args: Props) -> Result<()> {
         node.render(&values, &request)?
     };
     write_planes(&mut output.view, frame, window, render, rows, &planes)
-        .map_err(|e| Failure::failed(format!("{}: Output: {e}", node.desc.id)))
+        .map_err(|e| Failure::failed(format!("{}: Output: {e}", node.desc.id)))?;
+    Ok(unset)
 }
 
 #[cfg(test)]

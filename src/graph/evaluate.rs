@@ -62,18 +62,23 @@ pub fn evaluate(
             .iter()
             .filter_map(|(clip, up)| images.get(up).map(|p| (clip.clone(), p.clone())))
             .collect();
-        let (w, h) = image_size(node, time, render_scale, &inputs)?;
+        // Every failure names the node it happened in.
+        let named = |e: Error| match e {
+            Error::Invalid { what, message } => {
+                Error::invalid(format!("graph node {}: {what}", node.name), message)
+            }
+            other => Error::invalid(
+                format!("graph node {} ({})", node.name, node.node.desc.id),
+                other.to_string(),
+            ),
+        };
+        let (w, h) = image_size(node, time, render_scale, &inputs).map_err(named)?;
         let request = RenderRequest {
             draft,
             inputs,
             ..RenderRequest::new(time, Window::new(0, 0, w, h), render_scale)
         };
-        let planes = render_node(node, &request).map_err(|e| match e {
-            Error::Invalid { what, message } => {
-                Error::invalid(format!("graph node {}: {what}", node.name), message)
-            }
-            other => other,
-        })?;
+        let planes = render_node(node, &request).map_err(named)?;
         on_node(&node.name);
         images.insert(node.name.clone(), planes);
     }
@@ -92,10 +97,11 @@ mod tests {
 
     fn graph() -> Graph {
         let text = r#"{"nodes": [
-            {"name": "a", "node": "org.nerfx.NeRFRender"},
-            {"name": "unused", "node": "org.nerfx.NeRFRender"},
+            {"name": "a", "node": "org.nerfx.NeRFRender", "params": {"file": "s", "shot": "t"}},
+            {"name": "unused", "node": "org.nerfx.NeRFRender",
+             "params": {"file": "s", "shot": "t"}},
             {"name": "m", "node": "org.nerfx.AccumulationMatte", "inputs": {"Source": "a"}},
-            {"name": "b", "node": "org.nerfx.NeRFRender"}],
+            {"name": "b", "node": "org.nerfx.NeRFRender", "params": {"file": "s", "shot": "t"}}],
           "output": "m", "layers": {"extra": "b"}}"#;
         Graph::from_json_str(text, Path::new("comp.json")).unwrap()
     }

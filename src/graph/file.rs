@@ -196,6 +196,20 @@ fn read_node(entry: &Json, base: &Path) -> Result<GraphNode> {
             other => other,
         })?;
     }
+    // A graph renders unattended: a file left empty would render nothing without a word.
+    if let Some(p) =
+        node.desc.params.iter().find(|p| {
+            matches!(p.kind, ParamKind::File) && values.text(p.name).is_ok_and(str::is_empty)
+        })
+    {
+        return Err(Error::invalid(
+            format!("params.{}", p.name),
+            format!(
+                "{}: no file given ({} must name one)",
+                node.desc.label, p.label
+            ),
+        ));
+    }
     let mut inputs = BTreeMap::new();
     for (clip, upstream) in object(entry, "inputs")? {
         if node.desc.clip(clip).is_none() {
@@ -348,9 +362,12 @@ mod tests {
         {"name": "env", "node": "org.nerfx.NeRFRender",
          "params": {"file": "env.json", "shot": "/abs/shot.json", "quality": "draft",
                     "objectTransform": [[2,0,0,1],[0,2,0,0],[0,0,2,0],[0,0,0,1]]}},
-        {"name": "envZ", "node": "org.nerfx.NeRFRender", "params": {"output": 2}},
-        {"name": "obj", "node": "org.nerfx.NeRFRender", "params": {"background": [0,0,0,0]}},
-        {"name": "objZ", "node": "org.nerfx.NeRFRender"}],
+        {"name": "envZ", "node": "org.nerfx.NeRFRender",
+         "params": {"file": "env.json", "shot": "s.json", "output": 2}},
+        {"name": "obj", "node": "org.nerfx.NeRFRender",
+         "params": {"file": "obj.json", "shot": "s.json", "background": [0,0,0,0]}},
+        {"name": "objZ", "node": "org.nerfx.NeRFRender",
+         "params": {"file": "obj.json", "shot": "s.json"}}],
       "output": "comp", "layers": {"env": "env"}}"#;
 
     #[test]
@@ -401,7 +418,7 @@ mod tests {
                 "final",
             ),
             (
-                GOOD.replace("{\"output\": 2}", "{\"output\": 2, \"size\": 1}"),
+                GOOD.replace("\"output\": 2}", "\"output\": 2, \"size\": 1}"),
                 "params.size",
             ),
             (GOOD.replace("[0,0,0,0]", "[0,0,0]"), "expected 4 values"),
@@ -412,6 +429,10 @@ mod tests {
             (
                 GOOD.replace("\"comp\", \"node\"", "\"comp\" \"node\""),
                 "line 2",
+            ),
+            (
+                GOOD.replace("\"file\": \"env.json\", ", ""),
+                "no file given",
             ),
         ];
         for (text, needle) in cases {

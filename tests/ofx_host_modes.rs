@@ -157,10 +157,7 @@ fn said(bundle: &Bundle, needle: &str) -> Vec<(bool, String)> {
 
 /// A render of an 8×8 window that must fail; its error text.
 fn failing_render(instance: &Instance) -> String {
-    instance
-        .render(FRAME, Window::new(0, 0, 8, 8), 1.0, false)
-        .expect_err("the render fails")
-        .to_string()
+    failing_render_at(instance, FRAME)
 }
 
 #[test]
@@ -533,4 +530,27 @@ fn a_nerf_render_without_a_field_file_says_so_without_a_dialog() {
         }
         no_violations(&b);
     }
+}
+
+#[test]
+fn a_frame_outside_the_shot_has_the_shots_format_and_fails_to_render_saying_why() {
+    let _turn = turn();
+    let b = load(HostOptions::default());
+    let (i, _) = nerf(&b, &demo_dir().join("demo_environment.json"));
+    // The demo shot holds frames 1001 onwards.
+    assert_eq!(i.region_of_definition(990.0).unwrap(), (W, H));
+    let e = failing_render_at(&i, 990.0);
+    assert!(
+        e.contains("frame 990 is not in the shot") && e.contains("1001"),
+        "{e}"
+    );
+    no_violations(&b);
+}
+
+/// A render of an 8×8 window at `time` that must fail; its error text.
+fn failing_render_at(instance: &Instance, time: f64) -> String {
+    instance
+        .render(time, Window::new(0, 0, 8, 8), 1.0, false)
+        .expect_err("the render fails")
+        .to_string()
 }

@@ -218,7 +218,10 @@ pub(crate) fn nerf_render_node() -> Node {
         },
         render: render_node,
         rod: Some(Format {
-            size: |values, time| Ok(camera(values, time, 1.0)?.1.resolution()),
+            size: |values, time| {
+                let time = within_shot(values, time)?;
+                Ok(camera(values, time, 1.0)?.1.resolution())
+            },
             time_domain: Some(time_domain),
             pixel_aspect: Some(pixel_aspect),
         }),
@@ -246,11 +249,21 @@ fn time_domain(values: &ParamValues) -> Result<Option<(f64, f64)>> {
         .map(|(a, b)| (a as f64 - offset, b as f64 - offset)))
 }
 
+/// `time` moved into the host frames the shot covers. A node's format is the shot's whatever
+/// the frame: a host asking for it at a frame outside the shot gets it, and the render of that
+/// frame is the one to fail, saying which frames the shot holds.
+fn within_shot(values: &ParamValues, time: f64) -> Result<f64> {
+    Ok(match time_domain(values)? {
+        Some((first, last)) if time.is_finite() => time.clamp(first, last),
+        _ => time,
+    })
+}
+
 /// The shot's pixel aspect (`pixel_aspect_x / pixel_aspect_y`) when the camera at `time` is
 /// perspective; panoramas (from the shot or the camera model) have square pixels.
 fn pixel_aspect(values: &ParamValues, time: f64) -> Result<f64> {
     let shot = cached_shot(file(values, "shot")?)?;
-    let (_, camera) = camera(values, time, 1.0)?;
+    let (_, camera) = camera(values, within_shot(values, time)?, 1.0)?;
     Ok(shot.pixel_aspect_for(&camera))
 }
 

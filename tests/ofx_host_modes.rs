@@ -554,3 +554,47 @@ fn failing_render_at(instance: &Instance, time: f64) -> String {
         .expect_err("the render fails")
         .to_string()
 }
+
+/// An Accumulation Matte whose optional Matte is left unconnected takes the Source's alpha,
+/// however the host presents the absent clip: unconnected, "connected" with no image, or an
+/// image without pixels. Each must give the core's render without a Matte input.
+#[test]
+fn an_absent_matte_falls_back_to_the_sources_alpha_however_the_host_says_it() {
+    use nerfx::host::AbsentClip;
+    let _turn = turn();
+    let values = {
+        let mut v = node("org.nerfx.AccumulationMatte").unwrap().defaults();
+        v.set("gamma", Value::Double(1.6)).unwrap();
+        v
+    };
+    let source = |window: Window| pattern(7, window, 1.0);
+    let full = Window::new(0, 0, 12, 9);
+    let want = rgba_of(
+        &node("org.nerfx.AccumulationMatte")
+            .unwrap()
+            .render(
+                &values,
+                &RenderRequest::new(FRAME, full, 1.0).with_input("Source", source(full)),
+            )
+            .unwrap(),
+    );
+    for absent in [
+        AbsentClip::Unconnected,
+        AbsentClip::NoImage,
+        AbsentClip::EmptyImage,
+    ] {
+        let b = load(HostOptions {
+            absent_clip: absent,
+            ..HostOptions::default()
+        });
+        let mut i = b
+            .instance("org.nerfx.AccumulationMatte", Context::General)
+            .unwrap();
+        i.connect("Source", ClipSource::image(source(full)))
+            .unwrap();
+        i.set_param("gamma", &Value::Double(1.6)).unwrap();
+        let got = rgba_of(&i.render(FRAME, full, 1.0, false).unwrap());
+        assert_same(&got, &want, &format!("{absent:?}"));
+        no_violations(&b);
+    }
+}

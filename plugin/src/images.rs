@@ -114,6 +114,10 @@ impl ClipImage {
         let bounds = PixelRect::from_ints(props.ints::<4>(name(kOfxImagePropBounds))?);
         let row_bytes = props.int(name(kOfxImagePropRowBytes))?;
         let data = props.pointer(name(kOfxImagePropData))?;
+        if data.is_null() {
+            // An image with no pixels: some hosts present an absent input this way.
+            return Ok(None);
+        }
         // SAFETY: the host lays the image out as its bounds and row bytes say, for as long
         // as it is held, which `ClipImage` ensures by holding `held` with the view.
         let view = unsafe { PixelView::new(data, bounds, row_bytes, n) }.map_err(err)?;

@@ -130,6 +130,9 @@ pub fn render(instance: &Instance, in_args: Props) -> Result<Option<&'static str
             }
             let planes = match ClipImage::fetch(handle, clip.name, time, Some(region))? {
                 Some(image) => read_planes(&image.view, frame, window, image.straight),
+                // An optional input the host has no image for is absent (the node then does
+                // what it does without it: Accumulation Matte takes the Source's alpha).
+                None if clip.optional => continue,
                 None => clear(window),
             };
             request = request.with_input(clip.name, planes);

@@ -21,7 +21,7 @@ use openfx_sys::{
 use super::handles::{self, Kind};
 use super::instance::ClipSource;
 use super::log::{Log, Message};
-use super::options::{Field, HostOptions, PADDING, ROW_SLACK};
+use super::options::{AbsentClip, Field, HostOptions, PADDING, ROW_SLACK};
 use super::params::{put, ParamSet};
 use super::props::{self, PropSet};
 use super::spec::{cstr, SetKind};
@@ -246,7 +246,11 @@ impl Effect {
                 ] {
                     p.set_str(name, depth);
                 }
-                p.set_ints(ofx::kOfxImageClipPropConnected, &[i32::from(output)]);
+                let said_connected = output || e.options.absent_clip != AbsentClip::Unconnected;
+                p.set_ints(
+                    ofx::kOfxImageClipPropConnected,
+                    &[i32::from(said_connected)],
+                );
                 p.set_str(
                     ofx::kOfxImageEffectPropPreMultiplication,
                     cstr(premultiplication(&e.options, output)),
@@ -742,7 +746,11 @@ fn input_image(
         .unwrap_or_else(PoisonError::into_inner)
         .clone()
     else {
-        // Fetching an unconnected clip fails, as the spec says; not a plugin bug.
+        // Fetching an unconnected clip fails, as the spec says (not a plugin bug), or, as
+        // some hosts do, gives an image without pixels.
+        if e.options.absent_clip == AbsentClip::EmptyImage {
+            return Ok(empty_image(e, c, time));
+        }
         return Err((status::FAILED, None));
     };
     let scale = ctx.map_or(1.0, |r| r.scale);
@@ -856,6 +864,34 @@ fn input_image(
             .filter(|(m, _)| *m == e as *const Effect as usize)
             .map(|(_, id)| id),
     })
+}
+
+/// An image with NULL data and empty bounds, as some hosts present an absent input.
+fn empty_image(e: &Effect, c: &Clip, time: f64) -> LiveImage {
+    let props = image_props(
+        e,
+        c,
+        time,
+        1.0,
+        cstr(ofx::kOfxImageComponentRGBA),
+        Layout {
+            ptr: 0,
+            bounds: [0; 4],
+            rod: [0; 4],
+            row_bytes: 0,
+        },
+        false,
+        premultiplication(&e.options, false),
+    );
+    LiveImage {
+        what: format!("{} clip {} empty image at {time}", e.id, c.name),
+        props,
+        _data: Vec::new(),
+        effect: e as *const Effect as usize,
+        render: current_render()
+            .filter(|(m, _)| *m == e as *const Effect as usize)
+            .map(|(_, id)| id),
+    }
 }
 
 /// Stores `rows` (`h` rows bottom up, `row` floats each) as the host lays images out:

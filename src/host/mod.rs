@@ -56,7 +56,7 @@ mod threads;
 pub use bundle::{Bundle, ClipDescription, EffectDescription, ParamDescription};
 pub use instance::{ClipSource, Instance, SourceFn};
 pub use log::Message;
-pub use options::{ChangeReason, Field, HostOptions, MessageSuiteOffer, PADDING};
+pub use options::{AbsentClip, ChangeReason, Field, HostOptions, MessageSuiteOffer, PADDING};
 pub use props::PropValue;
 pub use spec::PropType;
 pub use status::{status_name, Status};

@@ -53,6 +53,21 @@ pub struct HostOptions {
     /// colour of every pixel with alpha > 0 is divided by its alpha (pixels with alpha 0 keep
     /// their colour). A plugin must premultiply such images before compositing them.
     pub unpremultiplied_inputs: bool,
+    /// How an input clip with nothing connected is presented.
+    pub absent_clip: AbsentClip,
+}
+
+/// How a host presents an optional input the artist left unconnected (hosts differ).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum AbsentClip {
+    /// `kOfxImageClipPropConnected` 0, and `clipGetImage` fails (the spec's way).
+    #[default]
+    Unconnected,
+    /// Said to be connected, but `clipGetImage` fails.
+    NoImage,
+    /// Said to be connected, and `clipGetImage` hands out an image with no pixels (NULL
+    /// data, empty bounds).
+    EmptyImage,
 }
 
 /// Pixels by which [`HostOptions::padded_images`] enlarges image bounds on each side.

@@ -35,7 +35,7 @@ pub use sh::ShColor;
 pub use sh4::sh4;
 pub(crate) use sh4::sh_basis;
 pub(crate) use splats::{
-    is_splatfacto_run, Fragment, SplatLayer, View as SplatView,
+    is_splatfacto_run, Fragment, RayLayer, RayView as SplatRayView, SplatLayer, View as SplatView,
     MIN_TRANSMITTANCE as SPLAT_MIN_TRANSMITTANCE, NEAR_PLANE as SPLAT_NEAR_PLANE,
 };
 pub use splats::{SplatColor, Splats};

@@ -15,10 +15,11 @@ use std::sync::Arc;
 use glam::{DVec3, Vec3};
 
 use super::composite::{crossing_depth, Pieces};
+use super::splats::Splatting;
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
 use crate::field::{
-    linear_to_srgb, Aabb, ColorSpace, Fragment, Occupancy, SplatLayer, SPLAT_MIN_TRANSMITTANCE,
+    linear_to_srgb, Aabb, ColorSpace, Fragment, Occupancy, SPLAT_MIN_TRANSMITTANCE,
 };
 use crate::image::Window;
 use crate::scene::{LocalRay, Scene};
@@ -163,7 +164,7 @@ pub(super) struct Scratch {
 pub(super) fn march_tile(
     scene: &Scene,
     plans: &[InstancePlan],
-    splats: Option<&SplatLayer>,
+    splats: Option<&Splatting>,
     camera: &Camera,
     tile: Window,
     settings: &RenderSettings,
@@ -230,7 +231,7 @@ pub(super) fn march_tile(
 fn setup_rays(
     scene: &Scene,
     plans: &[InstancePlan],
-    splats: Option<&SplatLayer>,
+    splats: Option<&Splatting>,
     camera: &Camera,
     tile: Window,
     outputs: &Outputs,
@@ -270,17 +271,12 @@ fn setup_rays(
         }
     }
     if let Some(layer) = splats {
-        s.z_per_t.clear();
-        s.z_per_t.extend(
-            s.rays[..n_rays]
-                .iter()
-                .map(|st| st.ray.map_or(f64::NAN, |ray| ray.z_per_t)),
-        );
         s.fragments.resize_with(n_rays, Vec::new);
         for f in &mut s.fragments[..n_rays] {
             f.clear();
         }
-        layer.fill(tile, &s.z_per_t, &mut s.fragments[..n_rays]);
+        let rays = s.rays[..n_rays].iter().map(|st| st.ray);
+        layer.fill(tile, rays, &mut s.z_per_t, &mut s.fragments[..n_rays]);
         for (state, fragments) in s.rays[..n_rays].iter_mut().zip(&mut s.fragments) {
             std::mem::swap(&mut state.fragments, fragments);
             s.stats.splat_fragments += state.fragments.len() as u64;

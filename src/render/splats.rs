@@ -1,12 +1,13 @@
 //! The frame's splat fragments: each splat instance seen through the camera as a pinhole in
-//! gsplat's frame, projected, sorted and binned once per render.
+//! gsplat's frame, projected, sorted and binned once per render; through a panoramic camera,
+//! binned by direction for each pixel's own ray.
 
 use glam::{DMat3, DMat4, DVec4};
 
 use super::Outputs;
-use crate::camera::{Camera, Projection};
+use crate::camera::{Camera, Projection, Ray};
 use crate::error::{Error, Result};
-use crate::field::{SplatLayer, SplatView, SPLAT_NEAR_PLANE};
+use crate::field::{Fragment, RayLayer, SplatLayer, SplatRayView, SplatView, SPLAT_NEAR_PLANE};
 use crate::image::Window;
 use crate::scene::Scene;
 
@@ -18,28 +19,62 @@ const GSPLAT_FROM_BLENDER: DMat4 = DMat4::from_cols(
     DVec4::new(0.0, 0.0, 0.0, 1.0),
 );
 
-/// The splat layer of `scene` seen by `camera` over `window`, or `None` when the scene holds
-/// no splats.
+/// A frame's splats, ready to give each pixel its fragments.
+pub(super) enum Splatting {
+    /// A perspective camera: gsplat's rasteriser.
+    Tiles(SplatLayer),
+    /// A panoramic camera: each pixel's ray meets the splats (see `field::splats::rays`).
+    Rays(RayLayer),
+}
+
+impl Splatting {
+    /// Fills `out[i]` with the fragments of the `i`-th pixel of `window` (row-major), whose
+    /// world ray is `rays[i]`; `z_per_t` is scratch.
+    pub(super) fn fill(
+        &self,
+        window: Window,
+        rays: impl Iterator<Item = Option<Ray>>,
+        z_per_t: &mut Vec<f64>,
+        out: &mut [Vec<Fragment>],
+    ) {
+        match self {
+            Splatting::Tiles(layer) => {
+                z_per_t.clear();
+                z_per_t.extend(rays.map(|r| r.map_or(f64::NAN, |r| r.z_per_t)));
+                layer.fill(window, z_per_t, out);
+            }
+            Splatting::Rays(layer) => {
+                for (ray, out) in rays.zip(out) {
+                    if let Some(r) = ray {
+                        layer.fragments(r.origin, r.dir, out);
+                        // Within the camera's clipping, as the marcher's rays are.
+                        out.retain(|f| f.t >= r.near && f.t <= r.far);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The splats of `scene` seen by `camera` over `window`, or `None` when the scene holds
+/// none.
 pub(super) fn splat_layer(
     scene: &Scene,
     camera: &Camera,
     window: Window,
     outputs: &Outputs,
-) -> Result<Option<SplatLayer>> {
+) -> Result<Option<Splatting>> {
     if scene.splats.is_empty() {
         return Ok(None);
     }
+    let [clip_start, clip_end] = camera.clip();
+    let world_from_camera = camera.world_from_camera();
+    let eye_world = world_from_camera.w_axis;
     let Projection::Perspective(perspective) = camera.projection() else {
-        return Err(Error::Unsupported(
-            "splats render through perspective cameras; this shot's camera is panoramic \
-             (equirectangular, ODS or VR180)"
-                .into(),
-        ));
+        return Ok(Some(Splatting::Rays(ray_layer(scene, camera, outputs)?)));
     };
     let (width, height) = perspective.resolution();
-    let [clip_start, clip_end] = camera.clip();
-    let camera_from_world = GSPLAT_FROM_BLENDER * camera.world_from_camera().inverse();
-    let eye_world = camera.world_from_camera().w_axis;
+    let camera_from_world = GSPLAT_FROM_BLENDER * world_from_camera.inverse();
     let views: Vec<_> = scene
         .splats
         .iter()
@@ -60,5 +95,52 @@ pub(super) fn splat_layer(
             (inst.splats(), view)
         })
         .collect();
-    Ok(Some(SplatLayer::build(&views, window)))
+    Ok(Some(Splatting::Tiles(SplatLayer::build(&views, window))))
+}
+
+/// The per-ray layer for a panoramic camera.
+fn ray_layer(scene: &Scene, camera: &Camera, outputs: &Outputs) -> Result<RayLayer> {
+    let world_from_camera = camera.world_from_camera();
+    let centre = world_from_camera.w_axis.truncate();
+    let (w, h) = camera.resolution();
+    // The pixel angle (vertical neighbours in the first eye's image) and the eyes' largest
+    // offset from the centre, from the camera's own rays.
+    let (x, y) = (f64::from(w) / 4.0, f64::from(h) / 4.0);
+    let (a, b) = (camera.ray(x, y), camera.ray(x, y + 1.0));
+    let (Some(a), Some(b)) = (a, b) else {
+        return Err(Error::invalid(
+            "splats",
+            "the camera has no rays to render them with",
+        ));
+    };
+    let pixel_angle = a.dir.dot(b.dir).clamp(-1.0, 1.0).acos();
+    let eye_offset = [0.0, 0.5, 1.0]
+        .iter()
+        .flat_map(|&u| [0.25, 0.75].map(|v| (u * f64::from(w), v * f64::from(h))))
+        .filter_map(|(x, y)| camera.ray(x.min(f64::from(w) - 0.5), y))
+        .map(|r| (r.origin - centre).length())
+        .fold(0.0, f64::max)
+        * 1.01;
+    let [clip_start, clip_end] = camera.clip();
+    let views: Vec<_> = scene
+        .splats
+        .iter()
+        .map(|inst| {
+            let world_from_splats = inst.world_from_splats();
+            let view = SplatRayView {
+                linear: DMat3::from_mat4(world_from_splats),
+                translation: world_from_splats.w_axis.truncate(),
+                centre,
+                camera_from_world: DMat3::from_mat4(world_from_camera).transpose(),
+                eye_offset,
+                pixel_angle,
+                eye: inst.splats_from_world().transform_point3(centre),
+                depth_range: [clip_start.max(SPLAT_NEAR_PLANE), clip_end],
+                rgb: outputs.rgb,
+                crop: inst.crop().copied(),
+            };
+            (inst.splats(), view)
+        })
+        .collect();
+    Ok(RayLayer::build(&views))
 }

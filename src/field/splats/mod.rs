@@ -8,10 +8,12 @@
 mod ply;
 mod project;
 mod raster;
+mod rays;
 mod splatfacto;
 
 pub(crate) use project::{View, NEAR_PLANE};
 pub(crate) use raster::{Fragment, SplatLayer, MIN_TRANSMITTANCE};
+pub(crate) use rays::{RayLayer, RayView};
 pub(crate) use splatfacto::is_splatfacto_run;
 
 use std::path::Path;

@@ -122,7 +122,7 @@ pub(crate) fn project(splats: &Splats, i: usize, view: &View) -> Option<Projecte
 }
 
 /// Splat `i`'s colour seen along `view_dir` (camera centre to mean, splat frame).
-fn color(splats: &Splats, i: usize, view_dir: Vec3) -> [f32; 3] {
+pub(super) fn color(splats: &Splats, i: usize, view_dir: Vec3) -> [f32; 3] {
     let n = splats.color.coefficients();
     let k = &splats.coefficients[i * n * 3..(i + 1) * n * 3];
     match splats.color {

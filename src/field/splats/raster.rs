@@ -15,9 +15,9 @@ use crate::image::Window;
 /// Side of gsplat's image tiles, in pixels.
 const TILE: u32 = 16;
 /// Fragments fainter than this are skipped (gsplat's `1/255`).
-const MIN_ALPHA: f32 = 1.0 / 255.0;
+pub(super) const MIN_ALPHA: f32 = 1.0 / 255.0;
 /// Largest fragment opacity.
-const MAX_ALPHA: f32 = 0.999;
+pub(super) const MAX_ALPHA: f32 = 0.999;
 /// A pixel stops before its transmittance would fall to this.
 pub(crate) const MIN_TRANSMITTANCE: f64 = 1e-4;
 

@@ -428,3 +428,54 @@ fn panoramic_splats_agree_with_the_rasteriser_where_both_apply() {
             .all(|c| c.data.iter().all(|v| v.is_finite())));
     }
 }
+
+#[test]
+fn dropped_splats_are_reported_by_info_and_render() {
+    let exe = env!("CARGO_BIN_EXE_nerfx");
+    let dir = tempfile::tempdir().unwrap();
+    let good = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/splat_plane_sh3.ply");
+    let mut bytes = std::fs::read(good).unwrap();
+    let body = bytes
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .unwrap()
+        + 11;
+    // Vertex 5's y (62 floats a vertex) becomes NaN, vertex 9's first rotation value +inf.
+    bytes[body + (5 * 62 + 1) * 4..][..4].copy_from_slice(&f32::NAN.to_le_bytes());
+    bytes[body + (9 * 62 + 58) * 4..][..4].copy_from_slice(&f32::INFINITY.to_le_bytes());
+    let ply = dir.path().join("holes.ply");
+    std::fs::write(&ply, bytes).unwrap();
+    let info = Command::new(exe).arg("info").arg(&ply).output().unwrap();
+    let text = String::from_utf8_lossy(&info.stdout);
+    assert!(
+        text.contains("13980 splats") && text.contains("2 splats dropped"),
+        "{text}"
+    );
+    let shot = dir.path().join("shot.json");
+    let m =
+        nerfx::demo::look_at(DVec3::new(-0.8, 3.3, 3.0), DVec3::new(0.42, 2.33, 3.13)).transpose();
+    std::fs::write(
+        &shot,
+        serde_json::json!({
+            "version": 1, "fps": 24.0, "resolution_x": 16, "resolution_y": 12,
+            "nerf_object": "NeRF",
+            "frames": [{ "frame": 1, "camera": {
+                "type": "PERSP", "lens": 35.0, "sensor_width": 36.0, "sensor_height": 24.0,
+                "sensor_fit": "AUTO", "matrix_world": m.to_cols_array_2d() },
+                "objects": { "NeRF": DMat4::IDENTITY.to_cols_array_2d() } }]
+        })
+        .to_string(),
+    )
+    .unwrap();
+    let run = Command::new(exe)
+        .arg("render")
+        .arg(&ply)
+        .arg(&shot)
+        .arg("-o")
+        .arg(dir.path().join("r.exr"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{err}");
+    assert!(err.contains("holes.ply: 2 splats dropped"), "{err}");
+}

@@ -210,6 +210,9 @@ fn run(cli: Cli) -> Result<()> {
                 return graph::render(&scene, frames, &output, png, bundle, scale);
             };
             let scene = SceneDesc::for_path(&scene)?.load()?;
+            for warning in scene.warnings() {
+                eprintln!("nerfx: warning: {warning}");
+            }
             let shot = read_shot(&shot, &nerf_object)?;
             let frames = frames.unwrap_or_else(|| shot.frames.iter().map(|f| f.frame).collect());
             let shutter_samples = match shutter_samples {
@@ -275,6 +278,9 @@ fn run(cli: Cli) -> Result<()> {
                 }
             };
             let scene = SceneDesc::for_path(&scene)?.load()?;
+            for warning in scene.warnings() {
+                eprintln!("nerfx: warning: {warning}");
+            }
             let shot = read_shot(&shot, &nerf_object)?;
             let frame = match frame {
                 Some(f) => f,

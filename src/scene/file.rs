@@ -248,6 +248,26 @@ impl LoadedScene {
         &self.desc
     }
 
+    /// What loading left out that the artist should hear of (splats dropped for non-finite
+    /// values), one line each, naming the file.
+    pub fn warnings(&self) -> Vec<String> {
+        self.desc
+            .instances
+            .iter()
+            .zip(&self.contents)
+            .filter_map(|(inst, contents)| match (contents, &inst.field) {
+                (Contents::Splats(s), FieldSource::Splats { path, .. }) if s.dropped > 0 => {
+                    Some(format!(
+                        "{}: {} splats dropped (a value not finite or a zero rotation)",
+                        path.display(),
+                        s.dropped
+                    ))
+                }
+                _ => None,
+            })
+            .collect()
+    }
+
     /// The scene with every instance placed: fixed placements as given, object-bound ones by
     /// `object_matrix(name)` (the shot's object at the frame being rendered).
     pub fn place(&self, object_matrix: &dyn Fn(&str) -> Result<DMat4>) -> Result<Scene> {

@@ -11,7 +11,7 @@ use crate::camera::{BlenderIntrinsics, Camera, Perspective, Projection};
 use crate::demo::look_at;
 use crate::error::Result;
 use crate::field::{SplatColor, Splats};
-use crate::render::{render_with_progress, Outputs, Quality, RenderSettings};
+use crate::render::{render_with_progress, splat_layer, Outputs, Quality, RenderSettings};
 use crate::scene::{Scene, SplatInstance};
 
 /// What one splat frame cost.
@@ -21,6 +21,10 @@ pub struct SplatTiming {
     pub splats: usize,
     /// Best wall time of a whole RGBA frame, milliseconds.
     pub frame_ms: f64,
+    /// Of which projecting the splats (milliseconds, best of the repeats)…
+    pub projection_ms: f64,
+    /// …and sorting and binning them; the rest is blending.
+    pub binning_ms: f64,
     /// Fragments blended per pixel.
     pub fragments_per_pixel: f64,
     /// Bytes the splats hold.
@@ -71,6 +75,21 @@ pub fn generated_splats(n: usize) -> Splats {
     s
 }
 
+/// Writes `splats` as a PLY into `dir` and reads it back: `(seconds to load, file bytes)`.
+pub fn time_load(splats: &Splats, dir: &std::path::Path) -> Result<(f64, u64)> {
+    let path = dir.join("nerfx-bench-splats.ply");
+    splats.write_ply(&path)?;
+    let bytes = std::fs::metadata(&path)
+        .map_err(|e| crate::error::Error::io(&path, e))?
+        .len();
+    let start = Instant::now();
+    let read = Splats::load(&path);
+    let seconds = start.elapsed().as_secs_f64();
+    let _ = std::fs::remove_file(&path);
+    read?;
+    Ok((seconds, bytes))
+}
+
 /// Renders `splats` at `width × height` from a camera at distance 3, `repeats` times, and
 /// reports the best.
 pub fn time_splats(
@@ -109,7 +128,7 @@ pub fn time_splats(
         false,
     )?]);
     let settings = RenderSettings::new(Quality::Final.params(), Outputs::rgba());
-    let mut best = f64::INFINITY;
+    let (mut best, mut stages) = (f64::INFINITY, [f64::INFINITY; 2]);
     let mut fragments = 0;
     for _ in 0..repeats.max(1) {
         let start = Instant::now();
@@ -117,10 +136,18 @@ pub fn time_splats(
             render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {})?;
         best = best.min(start.elapsed().as_secs_f64() * 1e3);
         fragments = stats.splat_fragments;
+        // The stages alone, as the render runs them.
+        if let Some(layer) = splat_layer(&scene, &camera, camera.full_window(), &settings.outputs)?
+        {
+            let [p, b] = layer.timings();
+            stages = [stages[0].min(p * 1e3), stages[1].min(b * 1e3)];
+        }
     }
     Ok(SplatTiming {
         splats: count,
         frame_ms: best,
+        projection_ms: stages[0],
+        binning_ms: stages[1],
         fragments_per_pixel: fragments as f64 / f64::from(width * height),
         memory_bytes,
     })

@@ -311,27 +311,41 @@ fn run(cli: Cli) -> Result<()> {
         Command::Bench {
             splats: Some(n),
             ply,
+            out,
             width,
             height,
             repeats,
-            ..
         } => {
-            use nerfx::bench::splats::{generated_splats, time_splats};
-            let mut sets = vec![(format!("generated, {n} splats"), generated_splats(n))];
+            use nerfx::bench::splats::{generated_splats, time_load, time_splats};
+            let generated = generated_splats(n);
+            create_dir(&out)?;
+            let (load_s, file_bytes) = time_load(&generated, &out)?;
+            println!(
+                "load: {n} splats, a {:.1} MiB PLY, read in {:.2} s ({:.2} s per million)",
+                file_bytes as f64 / (1 << 20) as f64,
+                load_s,
+                load_s * 1e6 / n.max(1) as f64
+            );
+            let mut sets = vec![(format!("generated, {n} splats"), generated)];
             for path in ply {
-                sets.push((
-                    path.display().to_string(),
-                    nerfx::field::Splats::load(&path)?,
-                ));
+                let splats = nerfx::field::Splats::load(&path)?;
+                sets.push((path.display().to_string(), splats));
             }
-            println!("| splats | frame (ms) | fragments / pixel | memory (MiB) |");
-            println!("|---|---:|---:|---:|");
+            println!(
+                "| splats | frame (ms) | projection (ms) | sort + bin (ms) | blending (ms) | \
+                 fragments / pixel | memory (MiB) |"
+            );
+            println!("|---|---:|---:|---:|---:|---:|---:|");
             for (name, splats) in sets {
                 let t = time_splats(std::sync::Arc::new(splats), width, height, repeats)?;
+                let blending = t.frame_ms - t.projection_ms - t.binning_ms;
                 println!(
-                    "| {name} ({}) at {width}×{height} | {:.0} | {:.1} | {:.1} |",
+                    "| {name} ({}) at {width}×{height} | {:.0} | {:.0} | {:.0} | {blending:.0} | \
+                     {:.1} | {:.1} |",
                     t.splats,
                     t.frame_ms,
+                    t.projection_ms,
+                    t.binning_ms,
                     t.fragments_per_pixel,
                     t.memory_bytes as f64 / (1 << 20) as f64
                 );

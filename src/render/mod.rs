@@ -11,6 +11,8 @@ mod naive;
 mod quality;
 mod splats;
 
+pub(crate) use splats::splat_layer;
+
 pub use composite::{crossing_depth, opacity, srgb_composite_to_linear, Pieces};
 pub use naive::render_naive;
 pub use quality::{MarchParams, Quality};

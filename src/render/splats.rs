@@ -20,7 +20,7 @@ const GSPLAT_FROM_BLENDER: DMat4 = DMat4::from_cols(
 );
 
 /// A frame's splats, ready to give each pixel its fragments.
-pub(super) enum Splatting {
+pub(crate) enum Splatting {
     /// A perspective camera: gsplat's rasteriser.
     Tiles(SplatLayer),
     /// A panoramic camera: each pixel's ray meets the splats (see `field::splats::rays`).
@@ -28,6 +28,14 @@ pub(super) enum Splatting {
 }
 
 impl Splatting {
+    /// Seconds spent projecting, and sorting and binning (0 for the per-ray layer's).
+    pub(crate) fn timings(&self) -> [f64; 2] {
+        match self {
+            Splatting::Tiles(layer) => layer.timings,
+            Splatting::Rays(_) => [0.0; 2],
+        }
+    }
+
     /// Fills `out[i]` with the fragments of the `i`-th pixel of `window` (row-major), whose
     /// world ray is `rays[i]`; `z_per_t` is scratch.
     pub(super) fn fill(
@@ -58,7 +66,7 @@ impl Splatting {
 
 /// The splats of `scene` seen by `camera` over `window`, or `None` when the scene holds
 /// none.
-pub(super) fn splat_layer(
+pub(crate) fn splat_layer(
     scene: &Scene,
     camera: &Camera,
     window: Window,

@@ -106,6 +106,63 @@ pub(super) fn parse(path: &Path, bytes: &[u8]) -> Result<Splats> {
 }
 
 impl Splats {
+    /// Writes the splats as an INRIA-layout binary PLY (`x y z`, `f_dc_*`, `f_rest_*`,
+    /// `opacity` as a logit, `scale_*` as logs, `rot_*` as `w x y z`), what the readers of
+    /// 3DGS tools take. Sigmoid-coloured splats are written as degree 0 with the coefficient
+    /// that gives the same colour.
+    pub fn write_ply(&self, path: &Path) -> Result<()> {
+        let rest = match self.color {
+            SplatColor::Sh { degree } => (usize::from(degree) + 1).pow(2) - 1,
+            SplatColor::Sigmoid => 0,
+        };
+        let mut header = format!(
+            "ply\nformat binary_little_endian 1.0\nelement vertex {}\n",
+            self.len()
+        );
+        let mut names: Vec<String> = ["x", "y", "z"].map(String::from).to_vec();
+        names.extend((0..3).map(|c| format!("f_dc_{c}")));
+        names.extend((0..3 * rest).map(|k| format!("f_rest_{k}")));
+        names.push("opacity".into());
+        names.extend((0..3).map(|c| format!("scale_{c}")));
+        names.extend((0..4).map(|c| format!("rot_{c}")));
+        for n in &names {
+            header.push_str(&format!("property float {n}\n"));
+        }
+        header.push_str("end_header\n");
+        let n = self.color.coefficients() * 3;
+        let mut out = header.into_bytes();
+        out.reserve(self.len() * names.len() * 4);
+        let mut put = |v: f32| out.extend_from_slice(&v.to_le_bytes());
+        for i in 0..self.len() {
+            for v in self.means[i].to_array() {
+                put(v);
+            }
+            let k = &self.coefficients[i * n..(i + 1) * n];
+            for &dc in &k[..3] {
+                put(match self.color {
+                    // sigmoid(c) = 0.5 + Y₀·k: the SH coefficient of the same colour.
+                    SplatColor::Sigmoid => (1.0 / (1.0 + (-dc).exp()) - 0.5) / 0.282_094_8,
+                    SplatColor::Sh { .. } => dc,
+                });
+            }
+            for c in 0..3 {
+                for j in 0..rest {
+                    put(k[(j + 1) * 3 + c]);
+                }
+            }
+            let o = self.opacities[i];
+            put((o / (1.0 - o)).ln());
+            for v in self.scales[i].to_array() {
+                put(v.ln());
+            }
+            let q = self.rotations[i];
+            for v in [q.w, q.x, q.y, q.z] {
+                put(v);
+            }
+        }
+        std::fs::write(path, out).map_err(|e| Error::io(path, e))
+    }
+
     /// Activates and appends one splat as stored (log scales, `w x y z` quaternion, opacity
     /// logit, coefficient-major colour); `false` (nothing appended) when a value is not finite
     /// or the quaternion is zero.
@@ -205,6 +262,30 @@ mod tests {
                 assert_eq!(s.coefficients[k * 3 + c], want, "k {k} c {c}");
             }
         }
+    }
+
+    #[test]
+    fn written_splats_read_back_the_same() {
+        let bytes = inria_ply(&[row(1.0), row(2.5)]);
+        let s = parse(Path::new("t.ply"), &bytes).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("back.ply");
+        s.write_ply(&path).unwrap();
+        let back = read(&path).unwrap();
+        assert_eq!(back.color, s.color);
+        assert_eq!(back.means, s.means);
+        assert_eq!(back.coefficients, s.coefficients);
+        for (a, b) in back.scales.iter().zip(&s.scales) {
+            assert!((*a - *b).abs().max_element() <= 1e-6 * b.max_element());
+        }
+        for (a, b) in back.opacities.iter().zip(&s.opacities) {
+            assert!((a - b).abs() <= 1e-6);
+        }
+        assert!(back
+            .rotations
+            .iter()
+            .zip(&s.rotations)
+            .all(|(a, b)| a.abs_diff_eq(*b, 1e-6)));
     }
 
     #[test]

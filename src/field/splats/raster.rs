@@ -49,18 +49,21 @@ struct Entry {
 
 /// The splats of a frame, projected, sorted and binned.
 pub(crate) struct SplatLayer {
-    /// Per tile of `tiles`: where its entries start in `entries` (one more at the end).
-    starts: Vec<u32>,
-    entries: Vec<Entry>,
+    /// Per row of tiles: where each tile's entries start (one more at the end), and the
+    /// entries.
+    rows: Vec<(Vec<u32>, Vec<Entry>)>,
     /// Tile coordinates covered: `[x0, y0, x1, y1)`.
     tiles: [u32; 4],
     /// The CPU has AVX2 and FMA: the pixel loop runs eight lanes wide.
     avx2: bool,
+    /// Seconds spent projecting, and sorting and binning (for benchmarks).
+    pub timings: [f64; 2],
 }
 
 impl SplatLayer {
     /// Projects every set of splats with its view and bins them to the tiles `window` touches.
     pub fn build(sets: &[(&Splats, View)], window: Window) -> SplatLayer {
+        let start = std::time::Instant::now();
         let mut projected: Vec<Projected> = Vec::new();
         for (splats, view) in sets {
             projected.par_extend(
@@ -69,6 +72,7 @@ impl SplatLayer {
                     .filter_map(|i| project(splats, i, view)),
             );
         }
+        let projecting = start.elapsed().as_secs_f64();
         projected.par_sort_by(|a, b| a.z.total_cmp(&b.z));
 
         let tiles = [
@@ -78,7 +82,6 @@ impl SplatLayer {
             window.y1.div_ceil(TILE),
         ];
         let tiles_x = (tiles[2] - tiles[0]) as usize;
-        let n_tiles = tiles_x * (tiles[3] - tiles[1]) as usize;
         let range = |p: &Projected| {
             let (x, y, r) = (
                 p.xy[0] / TILE as f32,
@@ -93,49 +96,53 @@ impl SplatLayer {
                 clamp((y + r).ceil(), tiles[1], tiles[3]),
             ]
         };
-        let mut counts = vec![0u32; n_tiles + 1];
-        for p in &projected {
-            let [x0, y0, x1, y1] = range(p);
-            for ty in y0..y1 {
-                let row = (ty - tiles[1]) as usize * tiles_x;
-                for tx in x0..x1 {
-                    counts[row + (tx - tiles[0]) as usize + 1] += 1;
+        // Each row of tiles is binned on its own (in parallel), walking the splats in depth
+        // order, so every tile's list comes out sorted.
+        let ranges: Vec<[u32; 4]> = projected.par_iter().map(range).collect();
+        let rows: Vec<(Vec<u32>, Vec<Entry>)> = (tiles[1]..tiles[3])
+            .into_par_iter()
+            .map(|ty| {
+                let mut counts = vec![0u32; tiles_x + 1];
+                for r in ranges.iter().filter(|r| r[1] <= ty && ty < r[3]) {
+                    for tx in r[0]..r[2] {
+                        counts[(tx - tiles[0]) as usize + 1] += 1;
+                    }
                 }
-            }
-        }
-        for i in 1..counts.len() {
-            counts[i] += counts[i - 1];
-        }
-        let starts = counts.clone();
-        let mut entries = vec![Entry::default(); counts[n_tiles] as usize];
-        for p in &projected {
-            let entry = Entry {
-                xy: p.xy,
-                conic: p.conic,
-                opacity: p.opacity,
-                sigma_cut: (255.0 * p.opacity).ln() + 1e-3,
-                z: p.z,
-                rgb: p.rgb,
-            };
-            let [x0, y0, x1, y1] = range(p);
-            for ty in y0..y1 {
-                let row = (ty - tiles[1]) as usize * tiles_x;
-                for tx in x0..x1 {
-                    let slot = &mut counts[row + (tx - tiles[0]) as usize];
-                    entries[*slot as usize] = entry;
-                    *slot += 1;
+                for i in 1..counts.len() {
+                    counts[i] += counts[i - 1];
                 }
-            }
-        }
+                let starts = counts.clone();
+                let mut entries = vec![Entry::default(); counts[tiles_x] as usize];
+                for (p, r) in projected.iter().zip(&ranges) {
+                    if !(r[1] <= ty && ty < r[3]) {
+                        continue;
+                    }
+                    let entry = Entry {
+                        xy: p.xy,
+                        conic: p.conic,
+                        opacity: p.opacity,
+                        sigma_cut: (255.0 * p.opacity).ln() + 1e-3,
+                        z: p.z,
+                        rgb: p.rgb,
+                    };
+                    for tx in r[0]..r[2] {
+                        let slot = &mut counts[(tx - tiles[0]) as usize];
+                        entries[*slot as usize] = entry;
+                        *slot += 1;
+                    }
+                }
+                (starts, entries)
+            })
+            .collect();
         #[cfg(target_arch = "x86_64")]
         let avx2 = is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma");
         #[cfg(not(target_arch = "x86_64"))]
         let avx2 = false;
         SplatLayer {
-            starts,
-            entries,
+            rows,
             tiles,
             avx2,
+            timings: [projecting, start.elapsed().as_secs_f64() - projecting],
         }
     }
 
@@ -163,8 +170,9 @@ impl SplatLayer {
                     (tx + 1) * TILE,
                     (ty + 1) * TILE,
                 ));
-                let tile = (ty - self.tiles[1]) as usize * (self.tiles[2] - self.tiles[0]) as usize
-                    + (tx - self.tiles[0]) as usize;
+                let (starts, entries) = &self.rows[(ty - self.tiles[1]) as usize];
+                let col = (tx - self.tiles[0]) as usize;
+                let tile = &entries[starts[col] as usize..starts[col + 1] as usize];
                 self.fill_part(tile, window, part, z_per_t, out);
             }
         }
@@ -172,7 +180,7 @@ impl SplatLayer {
 
     fn fill_part(
         &self,
-        tile: usize,
+        tile: &[Entry],
         window: Window,
         part: Window,
         z_per_t: &[f64],
@@ -190,7 +198,7 @@ impl SplatLayer {
     #[target_feature(enable = "avx2,fma")]
     fn fill_part_avx2(
         &self,
-        tile: usize,
+        tile: &[Entry],
         window: Window,
         part: Window,
         z_per_t: &[f64],
@@ -203,7 +211,7 @@ impl SplatLayer {
     #[inline(always)]
     fn fill_part_lanes(
         &self,
-        tile: usize,
+        tile: &[Entry],
         window: Window,
         part: Window,
         z_per_t: &[f64],
@@ -236,7 +244,7 @@ impl SplatLayer {
         }
         let mut transmittance = [1f64; MAX];
         let mut remaining = n;
-        for e in &self.entries[self.starts[tile] as usize..self.starts[tile + 1] as usize] {
+        for e in tile {
             let [a, b, c] = e.conic;
             for (chunk, live) in live.iter_mut().enumerate().take(chunks) {
                 if *live == 0 {

@@ -117,6 +117,31 @@ fn splatfacto_runs_read_as_activated_splats() {
 }
 
 #[test]
+fn older_runs_with_the_parameters_on_the_model_read_the_same() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = stored(3);
+    let run = write_run(dir.path(), "splatfacto", 3, &s);
+    let new = Splats::load(&run).unwrap();
+    let ckpt = run
+        .join("nerfstudio_models")
+        .join(format!("step-{STEP:09}.ckpt"));
+    let g = "_model.";
+    std::fs::write(
+        &ckpt,
+        checkpoint_of(&[
+            (&format!("{g}means"), vec![N, 3], s.means.clone()),
+            (&format!("{g}scales"), vec![N, 3], s.scales.clone()),
+            (&format!("{g}quats"), vec![N, 4], s.quats.clone()),
+            (&format!("{g}features_dc"), vec![N, 3], s.dc.clone()),
+            (&format!("{g}features_rest"), vec![N, 15, 3], s.rest.clone()),
+            (&format!("{g}opacities"), vec![N, 1], s.opacities.clone()),
+        ]),
+    )
+    .unwrap();
+    assert_eq!(Splats::load(&run).unwrap(), new);
+}
+
+#[test]
 fn a_splatfacto_run_is_splats_everywhere_and_never_a_nerfacto_field() {
     let dir = tempfile::tempdir().unwrap();
     let run = write_run(dir.path(), "splatfacto-big", 1, &stored(1));
@@ -148,6 +173,11 @@ fn a_splatfacto_run_is_splats_everywhere_and_never_a_nerfacto_field() {
         .unwrap();
     let placed = scene.place(&|_| unreachable!()).unwrap();
     assert_eq!((placed.instances.len(), placed.splats.len()), (0, 1));
+
+    // Another method is refused by name.
+    let other = write_run(dir.path(), "instant-ngp", 1, &stored(1));
+    let err = NerfactoField::load(&other).err().unwrap().to_string();
+    assert!(err.contains("'instant-ngp' run"), "{err}");
 
     // A wrong degree in the config names the tensor and its shape.
     let bad = write_run(dir.path(), "splatfacto", 1, &stored(1));

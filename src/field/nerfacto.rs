@@ -101,6 +101,13 @@ impl NerfactoField {
     /// Loads the run directory `run` (the checkpoint with the highest step).
     pub fn load(run: &Path) -> Result<Self> {
         let settings = RunSettings::read(&run.join("config.yml"))?;
+        let method = settings.method_name.as_str();
+        if !(method.is_empty() || method.contains("nerfacto") || method.starts_with("splatfacto")) {
+            return Err(Error::Unsupported(format!(
+                "{}: a '{method}' run; nerfx reads nerfacto and splatfacto runs",
+                run.display()
+            )));
+        }
         if settings.method_name.starts_with("splatfacto") {
             return Err(Error::Unsupported(format!(
                 "{}: a splatfacto run holds splats, not a nerfacto field: name it as \

@@ -48,6 +48,12 @@ pub(super) fn read(run: &Path) -> Result<Splats> {
             .tensors()
             .keys()
             .find(|k| k.ends_with(&format!("gauss_params.{name}")))
+            // Older splatfacto versions kept the parameters directly on the model.
+            .or_else(|| {
+                ckpt.tensors()
+                    .keys()
+                    .find(|k| k.ends_with(&format!("_model.{name}")))
+            })
             .ok_or_else(|| {
                 Error::format(
                     &path,

@@ -113,27 +113,26 @@ impl BlenderIntrinsics {
         ))
     }
 
+    /// Refuses values outside the ranges where the camera's maths stays finite and
+    /// meaningful: wider than Blender's own (lens and sensor from 1 mm, pixel aspect 1 to 200,
+    /// shift ±10), so that nerfstudio paths of up to ~180° (lens well under 1 mm on the
+    /// 24 mm sensor they are given) still pass, but never a number that makes rays or depth
+    /// non-finite.
     fn validate(&self) -> Result<()> {
-        let positive = [
-            ("lens", self.lens),
-            ("sensor_width", self.sensor_width),
-            ("sensor_height", self.sensor_height),
-            ("pixel_aspect_x", self.pixel_aspect_x),
-            ("pixel_aspect_y", self.pixel_aspect_y),
+        let ranges = [
+            ("lens", self.lens, 1e-4, 1e7),
+            ("sensor_width", self.sensor_width, 1e-3, 1e5),
+            ("sensor_height", self.sensor_height, 1e-3, 1e5),
+            ("pixel_aspect_x", self.pixel_aspect_x, 1e-3, 1e3),
+            ("pixel_aspect_y", self.pixel_aspect_y, 1e-3, 1e3),
+            ("shift_x", self.shift_x, -1e3, 1e3),
+            ("shift_y", self.shift_y, -1e3, 1e3),
         ];
-        for (name, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
+        for (name, v, lo, hi) in ranges {
+            if !(v >= lo && v <= hi) {
                 return Err(Error::invalid(
                     name,
-                    format!("expected a finite number > 0, got {v}"),
-                ));
-            }
-        }
-        for (name, v) in [("shift_x", self.shift_x), ("shift_y", self.shift_y)] {
-            if !v.is_finite() {
-                return Err(Error::invalid(
-                    name,
-                    format!("expected a finite number, got {v}"),
+                    format!("{v} is outside {lo:e} to {hi:e}"),
                 ));
             }
         }
@@ -397,6 +396,58 @@ mod tests {
         let cam = Perspective::from_blender(&b).unwrap();
         let top = cam.camera_ray(960.0, 0.0).unwrap().dir;
         assert!((top.y / -top.z - 12.0 / 50.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn numbers_that_would_break_the_maths_are_refused_by_name() {
+        for (b, name) in [
+            (
+                BlenderIntrinsics {
+                    lens: 1e-300,
+                    ..Default::default()
+                },
+                "lens",
+            ),
+            (
+                BlenderIntrinsics {
+                    lens: f64::NAN,
+                    ..Default::default()
+                },
+                "lens",
+            ),
+            (
+                BlenderIntrinsics {
+                    sensor_width: 1e300,
+                    ..Default::default()
+                },
+                "sensor_width",
+            ),
+            (
+                BlenderIntrinsics {
+                    pixel_aspect_x: 1e-300,
+                    ..Default::default()
+                },
+                "pixel_aspect_x",
+            ),
+            (
+                BlenderIntrinsics {
+                    shift_y: -1e9,
+                    ..Default::default()
+                },
+                "shift_y",
+            ),
+        ] {
+            let e = Perspective::from_blender(&b).unwrap_err().to_string();
+            assert!(e.contains(name), "{name}: {e}");
+        }
+        // A nerfstudio path's 179° field of view is a lens well under 1 mm: still fine.
+        let wide = BlenderIntrinsics {
+            lens: 12.0 / (89.5f64).to_radians().tan(),
+            sensor_fit: SensorFit::Vertical,
+            ..Default::default()
+        };
+        let cam = Perspective::from_blender(&wide).unwrap();
+        assert!(cam.camera_ray(0.0, 0.0).unwrap().dir.is_finite());
     }
 
     #[test]

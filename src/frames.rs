@@ -110,7 +110,7 @@ pub fn frame_path(pattern: &Path, frame: i64, several: bool) -> PathBuf {
 /// whose NeRF object (the scene instances bound to `nerf_object`) is placed so that the
 /// field sees each frame's `camera_to_world` exactly (see [`CameraPath::to_shot`]).
 pub fn read_shot(path: &Path, nerf_object: &str) -> Result<Shot> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let text = crate::input::read_text(path)?;
     let is_camera_path = serde_json::from_str::<serde_json::Value>(&text)
         .is_ok_and(|v| v.get("camera_path").is_some());
     if is_camera_path {

@@ -25,6 +25,7 @@ pub mod graph;
 #[cfg(feature = "host")]
 pub mod host;
 pub mod image;
+mod input;
 pub mod reference;
 pub mod render;
 pub mod scene;

@@ -32,7 +32,7 @@ impl DataparserTransform {
     /// Reads `dataparser_transforms.json`.
     pub fn read(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = crate::input::read_text(path)?;
         Self::from_json_str(&text, path)
     }
 

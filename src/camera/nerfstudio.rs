@@ -130,7 +130,7 @@ impl CameraPath {
     /// Reads and validates a camera path.
     pub fn read(path: impl AsRef<Path>) -> Result<CameraPath> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = crate::input::read_text(path)?;
         CameraPath::from_json_str(&text, path)
     }
 

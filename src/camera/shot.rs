@@ -159,7 +159,7 @@ impl Shot {
     /// Reads and validates a shot file.
     pub fn read(path: impl AsRef<Path>) -> Result<Shot> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = crate::input::read_text(path)?;
         Shot::from_json_str(&text, path)
     }
 

@@ -137,7 +137,7 @@ impl Doc<'_> {
 
 /// Reads the file and decodes its msgpack (inflating it first when it is gzip-framed).
 fn read_document(path: &Path) -> Result<(Value, bool)> {
-    let raw = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let raw = crate::input::read_bytes(path)?;
     let gzip = raw.starts_with(&[0x1f, 0x8b]);
     let bytes = if gzip {
         let mut out = Vec::new();

@@ -86,7 +86,7 @@ fn parsed<T: std::str::FromStr>(text: &str, key: &str, default: T, file: &Path) 
 impl RunSettings {
     /// Reads `config.yml` at `file`.
     pub(crate) fn read(file: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(file).map_err(|e| Error::io(file, e))?;
+        let text = crate::input::read_text(file)?;
         Self::from_text(&text, file)
     }
 

@@ -99,7 +99,7 @@ const LOCAL: u32 = 0x0403_4b50;
 impl Zip {
     /// Reads the archive `path` and its central directory.
     pub(crate) fn open(path: &Path) -> Result<Self> {
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let bytes = crate::input::read_bytes(path)?;
         Self::from_bytes(path, bytes)
     }
 

@@ -57,7 +57,7 @@ pub struct Graph {
 impl Graph {
     /// Reads and checks the graph file at `path`.
     pub fn read(path: &Path) -> Result<Graph> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = crate::input::read_text(path)?;
         Graph::from_json_str(&text, path)
     }
 

@@ -104,7 +104,7 @@ pub(crate) fn mat4_from_rows(rows: &[[f64; 4]; 4]) -> DMat4 {
 impl SceneDesc {
     /// Reads a scene file.
     pub fn read(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = crate::input::read_text(path)?;
         Self::from_json_str(&text, path)
     }
 

@@ -11,17 +11,9 @@ use super::{SplatColor, Splats};
 use crate::error::{Error, Result};
 use crate::field::ply::{Ply, Property};
 
-/// Reads a splat PLY file whole (its size is what it holds; a non-regular file is refused).
+/// Reads a splat PLY file whole (a regular file, up to its real size).
 pub(super) fn read(path: &Path) -> Result<Splats> {
-    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
-    if !meta.is_file() {
-        return Err(Error::format(
-            path,
-            "",
-            "is not a regular file (expected a splat .ply)",
-        ));
-    }
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::input::read_bytes(path)?;
     parse(path, &bytes)
 }
 

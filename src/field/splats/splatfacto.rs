@@ -18,7 +18,7 @@ use crate::field::{latest_checkpoint, Checkpoint};
 /// The method a run's `config.yml` names (`method_name`), if it can be read.
 fn method_name(run: &Path) -> Option<String> {
     let file = run.join("config.yml");
-    let text = std::fs::read_to_string(&file).ok()?;
+    let text = crate::input::read_text(&file).ok()?;
     scan(&text, "method_name", &file).ok().flatten()
 }
 
@@ -30,7 +30,7 @@ pub(crate) fn is_splatfacto_run(run: &Path) -> bool {
 /// Reads the splats of the splatfacto run at `run`.
 pub(super) fn read(run: &Path) -> Result<Splats> {
     let config = run.join("config.yml");
-    let text = std::fs::read_to_string(&config).map_err(|e| Error::io(&config, e))?;
+    let text = crate::input::read_text(&config)?;
     let sh_degree = match scan(&text, "pipeline.model.sh_degree", &config)? {
         None => 3,
         Some(v) => v.parse::<u8>().ok().filter(|d| *d <= 3).ok_or_else(|| {

@@ -388,3 +388,48 @@ fn scene_cache_reloads_changed_files_and_after_purge() {
     assert!(!Arc::ptr_eq(&second, &cached_scene(&scene).unwrap()));
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// With the shot's motion blur, the node averages renders over the shutter exactly as
+/// `nerfx render` does (its own sample count, or the quality preset's with 0), and a shot
+/// without blur renders the same whatever the sample count.
+#[test]
+fn nerf_render_blurs_over_the_shots_shutter_as_the_command_line_does() {
+    use nerfx::camera::{MotionBlur, ShutterPosition};
+    let (dir, scene, shot_path) = demo_files("blur", 48, 27);
+    let frame = demo::FIRST_FRAME + 3;
+    let n = node("org.nerfx.NeRFRender").unwrap();
+    let mut v = nerf_values(&scene, &shot_path);
+    v.set("shutterSamples", Value::Int(5)).unwrap();
+    let request = RenderRequest::new(frame as f64, Window::new(0, 0, 48, 27), 1.0);
+    let sharp = n.render(&v, &request).unwrap();
+    let shot = read_shot(&shot_path, "NeRF").unwrap();
+    same_rgba("no blur", &sharp, &direct(&scene, &shot, frame));
+
+    let mut blurred_shot = demo::shot(48, 27);
+    blurred_shot.motion_blur = Some(MotionBlur {
+        shutter: 0.8,
+        position: ShutterPosition::Center,
+    });
+    blurred_shot.write(&shot_path).unwrap();
+    let loaded = SceneDesc::read(&scene).unwrap().load().unwrap();
+    let cli = |samples: u32| {
+        let settings = RenderSettings {
+            shutter_samples: samples,
+            ..RenderSettings::new(Quality::Preview.params(), Outputs::rgba())
+        };
+        render_frame(&loaded, &blurred_shot, frame, &settings, &|_| {})
+            .unwrap()
+            .0
+    };
+    let got = n.render(&v, &request).unwrap();
+    same_rgba("5 samples", &got, &cli(5));
+    assert_ne!(got.alpha, sharp.alpha, "the blur changes the image");
+    v.set("shutterSamples", Value::Int(0)).unwrap();
+    let preset = Quality::Preview.shutter_samples();
+    same_rgba(
+        "the preset's samples",
+        &n.render(&v, &request).unwrap(),
+        &cli(preset),
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}

@@ -21,7 +21,7 @@ use super::values::ParamValues;
 use crate::camera::{
     Camera, Eye, Shot, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, DEFAULT_IPD,
 };
-use crate::composite::{over, rgba_pixels, rgba_planes};
+use crate::composite::{over, rgba_pixels, rgba_planes, shutter_average};
 use crate::error::{Error, Result};
 use crate::image::{scaled_size, Plane, Planes, BACKGROUND_DEPTH};
 use crate::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
@@ -196,6 +196,16 @@ pub(crate) fn nerf_render_node() -> Node {
                     },
                 ),
                 ParamDesc::new(
+                    "shutterSamples",
+                    "Shutter Samples",
+                    "Times per frame the render is averaged over the shot's motion-blur \
+                     shutter (0: the quality preset's; 1: no blur).",
+                    ParamKind::Int {
+                        default: 0,
+                        range: Range::display(0.0, 1024.0, 0.0, 32.0),
+                    },
+                ),
+                ParamDesc::new(
                     "background",
                     "Background",
                     "Colour (premultiplied) behind the render.",
@@ -362,19 +372,7 @@ fn placed_scene(values: &ParamValues, at: &ShotFrame) -> Result<Scene> {
 }
 
 fn render_node(values: &ParamValues, request: &RenderRequest) -> Result<Planes> {
-    let (at, camera) = camera(values, request.time, request.render_scale)?;
     let window = request.window;
-    if camera.clamp_window(window)? != window {
-        let (w, h) = camera.resolution();
-        return Err(Error::invalid(
-            "render window",
-            format!(
-                "{window:?} is not inside the {w}×{h} image at render scale {}",
-                request.render_scale
-            ),
-        ));
-    }
-    let scene = placed_scene(values, &at)?;
     let quality = match values.choice("quality")? {
         _ if request.draft => Quality::Draft,
         "draft" => Quality::Draft,
@@ -396,7 +394,41 @@ fn render_node(values: &ParamValues, request: &RenderRequest) -> Result<Planes> 
         },
         ..RenderSettings::new(quality.params(), outputs)
     };
-    let planes = render(&scene, &camera, window, &settings)?;
+    // With the shot's motion blur, the average of renders over the shutter (as nerfx render).
+    let shot = cached_shot(file(values, "shot")?)?;
+    let offset = values.int("frameOffset")? as f64;
+    let samples = match values.int("shutterSamples")? {
+        0 => quality.shutter_samples(),
+        n => n.clamp(1, 1024) as u32,
+    };
+    let times = match shot.motion_blur {
+        Some(blur) if samples > 1 => blur
+            .times(request.time + offset, samples)
+            .into_iter()
+            .map(|t| t - offset)
+            .collect(),
+        _ => vec![request.time],
+    };
+    let mut renders = Vec::with_capacity(times.len());
+    for time in times {
+        let (at, camera) = camera(values, time, request.render_scale)?;
+        if camera.clamp_window(window)? != window {
+            let (w, h) = camera.resolution();
+            return Err(Error::invalid(
+                "render window",
+                format!(
+                    "{window:?} is not inside the {w}×{h} image at render scale {}",
+                    request.render_scale
+                ),
+            ));
+        }
+        let scene = placed_scene(values, &at)?;
+        renders.push(render(&scene, &camera, window, &settings)?);
+    }
+    let planes = match renders.len() {
+        1 => renders.remove(0),
+        _ => shutter_average(renders)?,
+    };
     let (w, h) = (planes.width, planes.height);
     let alpha = planes
         .alpha

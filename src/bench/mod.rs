@@ -6,6 +6,7 @@
 //! and the largest alpha and depth errors, as Markdown and as a plot of time against PSNR.
 
 pub mod field;
+pub mod passes;
 pub mod plot;
 pub mod splats;
 

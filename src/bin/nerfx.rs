@@ -146,6 +146,10 @@ enum Command {
         /// Splat files to time with `--splats`.
         #[arg(long)]
         ply: Vec<PathBuf>,
+        /// Time what extra passes of one field cost instead: NeRF Render nodes asking RGBA
+        /// alone, RGBA and depth Z, and every output of the demo frame, at this preset.
+        #[arg(long, value_enum)]
+        passes: Option<Quality>,
     },
 }
 
@@ -309,12 +313,38 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Bench {
+            passes: Some(quality),
+            out,
+            width,
+            height,
+            repeats,
+            ..
+        } => {
+            create_dir(&out)?;
+            let preset = format!("{quality:?}").to_lowercase();
+            let timings = bench::passes::time_passes(&out, width, height, &preset, repeats)?;
+            println!("| outputs ({preset}, {width}×{height}) | ms | marches | × RGBA |");
+            println!("|---|---:|---:|---:|");
+            let alone = timings.first().map_or(f64::NAN, |t| t.ms);
+            for t in &timings {
+                println!(
+                    "| {} | {:.0} | {} | {:.2} |",
+                    t.outputs.join(" + "),
+                    t.ms,
+                    t.marched,
+                    t.ms / alone
+                );
+            }
+            Ok(())
+        }
+        Command::Bench {
             splats: Some(n),
             ply,
             out,
             width,
             height,
             repeats,
+            ..
         } => {
             use nerfx::bench::splats::{generated_splats, time_load, time_splats};
             let generated = generated_splats(n);

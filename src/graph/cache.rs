@@ -105,10 +105,11 @@ pub fn cached_shot(path: &Path) -> Result<Arc<Shot>> {
     SHOTS.get(path, |p| read_shot(p, CAMERA_PATH_OBJECT))
 }
 
-/// Drops every cached scene and shot.
+/// Drops every cached scene, shot and shared render.
 pub fn purge_caches() {
     SCENES.purge();
     SHOTS.purge();
+    super::shared_renders::purge_shared_renders();
 }
 
 #[cfg(test)]

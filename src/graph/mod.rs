@@ -7,7 +7,9 @@
 //!
 //! Nodes: `org.nerfx.NeRFRender`, `org.nerfx.AccumulationMatte`,
 //! `org.nerfx.ShadowCatcherMerge`, `org.nerfx.DepthMerge`. Files they read are cached
-//! ([`cached_scene`], [`cached_shot`]) and released by [`purge_caches`].
+//! ([`cached_scene`], [`cached_shot`]), NeRF Render nodes that differ only in their output
+//! share one render of every pass ([`shared_render_stats`]), and [`purge_caches`] releases
+//! both.
 //!
 //! ```
 //! use nerfx::graph::{node, RenderRequest, Value};
@@ -31,6 +33,7 @@ mod nerf_render;
 mod node;
 #[cfg(feature = "host")]
 mod ofx;
+mod shared_renders;
 mod values;
 
 use std::sync::OnceLock;
@@ -46,6 +49,7 @@ pub use node::{
 };
 #[cfg(feature = "host")]
 pub use ofx::OfxGraph;
+pub use shared_renders::{shared_render_stats, SharedRenderStats};
 pub use values::{ParamValues, Value};
 
 use crate::error::{Error, Result};

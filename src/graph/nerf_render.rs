@@ -9,14 +9,19 @@
 //! - `accumulation`: the accumulation in all four channels;
 //! - `depthZ` / `depthRay`: depth in Blender units in RGB (10¹⁰ where nothing was hit, as in
 //!   Blender's Z pass), the accumulation in alpha; the depth plane itself rides along.
+//!
+//! Every output is cut from one render of every pass, shared with the node's siblings
+//! (`shared_renders`): asking a field for RGBA and depth costs one march.
 
 use std::path::Path;
+use std::sync::Arc;
 
 use glam::DMat4;
 
 use super::cache::{cached_scene, cached_shot};
 use super::desc::{ClipDesc, ClipKind, Context, NodeDesc, ParamDesc, ParamKind, Range};
 use super::node::{Format, Node, RenderRequest};
+use super::shared_renders::{shared_render, RenderKey};
 use super::values::ParamValues;
 use crate::camera::{
     Camera, Eye, Shot, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, DEFAULT_IPD,
@@ -371,7 +376,27 @@ fn placed_scene(values: &ParamValues, at: &ShotFrame) -> Result<Scene> {
     Ok(Scene::new(instances))
 }
 
+/// Parameters that only pick or grade the output: nodes differing only in these share one
+/// render.
+const LOOK: &[&str] = &["output", "background", "exposure"];
+
 fn render_node(values: &ParamValues, request: &RenderRequest) -> Result<Planes> {
+    let shot = Arc::downgrade(&cached_shot(file(values, "shot")?)?);
+    let key = RenderKey {
+        scene: Arc::downgrade(&cached_scene(file(values, "file")?)?),
+        shot,
+        values: values.with_defaults(LOOK),
+        time: request.time,
+        render_scale: request.render_scale,
+        window: request.window,
+        draft: request.draft,
+    };
+    let planes = shared_render(key, || march(values, request))?;
+    look(values, request, &planes)
+}
+
+/// Every pass of the node's scene for `request`, from one march per shutter time.
+fn march(values: &ParamValues, request: &RenderRequest) -> Result<Planes> {
     let window = request.window;
     let quality = match values.choice("quality")? {
         _ if request.draft => Quality::Draft,
@@ -379,20 +404,12 @@ fn render_node(values: &ParamValues, request: &RenderRequest) -> Result<Planes> 
         "final" => Quality::Final,
         _ => Quality::Preview,
     };
-    let output = values.choice("output")?;
-    let outputs = Outputs {
-        rgb: output == "rgba",
-        alpha: true,
-        depth_z: output == "depthZ",
-        depth_ray: output == "depthRay",
-        depth_median: false,
-    };
     let settings = RenderSettings {
         color: match values.choice("colour")? {
             "asTrained" => ColorOutput::AsTrained,
             _ => ColorOutput::Linear,
         },
-        ..RenderSettings::new(quality.params(), outputs)
+        ..RenderSettings::new(quality.params(), Outputs::all())
     };
     // With the shot's motion blur, the average of renders over the shutter (as nerfx render).
     let shot = cached_shot(file(values, "shot")?)?;
@@ -425,10 +442,15 @@ fn render_node(values: &ParamValues, request: &RenderRequest) -> Result<Planes> 
         let scene = placed_scene(values, &at)?;
         renders.push(render(&scene, &camera, window, &settings)?);
     }
-    let planes = match renders.len() {
-        1 => renders.remove(0),
-        _ => shutter_average(renders)?,
-    };
+    match renders.len() {
+        1 => Ok(renders.remove(0)),
+        _ => shutter_average(renders),
+    }
+}
+
+/// The output the node shows of `planes`: one pass, exposed and over the background.
+fn look(values: &ParamValues, request: &RenderRequest, planes: &Planes) -> Result<Planes> {
+    let output = values.choice("output")?;
     let (w, h) = (planes.width, planes.height);
     let alpha = planes
         .alpha
@@ -464,7 +486,7 @@ fn render_node(values: &ParamValues, request: &RenderRequest) -> Result<Planes> 
         }),
         _ => {
             let gain = values.double("exposure")?.exp2() as f32;
-            let lit: Vec<[f32; 4]> = rgba_pixels(&planes)
+            let lit: Vec<[f32; 4]> = rgba_pixels(planes)
                 .into_iter()
                 .map(|p| [p[0] * gain, p[1] * gain, p[2] * gain, p[3]])
                 .collect();

@@ -152,6 +152,34 @@ impl ParamValues {
         Ok(())
     }
 
+    /// Sets the choice parameter `name` to the option whose identifier is `id`.
+    pub fn set_choice(&mut self, name: &str, id: &str) -> Result<()> {
+        let options = match self.desc.param(name).map(|p| &p.kind) {
+            Some(ParamKind::Choice { options, .. }) => *options,
+            _ => return Err(self.error(name, "not a choice")),
+        };
+        match options.iter().position(|(o, _)| *o == id) {
+            Some(i) => self.set(name, Value::Choice(i)),
+            None => {
+                let ids: Vec<&str> = options.iter().map(|(o, _)| *o).collect();
+                Err(self.error(
+                    name,
+                    format!("no option {id} (options: {})", ids.join(", ")),
+                ))
+            }
+        }
+    }
+
+    /// These values with the parameters `names` at their defaults (unknown names are left
+    /// alone).
+    pub fn with_defaults(&self, names: &[&str]) -> ParamValues {
+        let mut values = self.clone();
+        for p in self.desc.params.iter().filter(|p| names.contains(&p.name)) {
+            values.values.insert(p.name, default_value(&p.kind));
+        }
+        values
+    }
+
     /// Every parameter with its value, in the description's order.
     pub fn iter(&self) -> impl Iterator<Item = (&'static str, &Value)> + '_ {
         self.desc

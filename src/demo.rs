@@ -4,8 +4,10 @@
 //! The world is Blender's (Z up). The environment is a ground slab, two pillars, a back wall
 //! whose colour changes with the view direction, and a wisp of Gaussian haze; the object (bound to
 //! the shot's `NeRF` object, rotated and non-uniformly scaled) is a glossy sphere, a
-//! semi-transparent cube and a glowing blob. Both are marched jointly, so the haze sits in
-//! front of and behind the object correctly.
+//! semi-transparent cube and a glowing blob. As one scene ([`scene_desc`]) both are marched
+//! jointly, so the haze sits in front of and behind the object correctly; `nerfx demo` shows
+//! them as a compositor puts them together ([`render_comp`]): each rendered apart, a shadow
+//! caught on the environment, the object merged in by depth.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -18,6 +20,9 @@ use crate::camera::{
 };
 use crate::error::{Error, Result};
 use crate::field::{Analytic, Primitive, ShColor, Shape};
+use crate::graph::{evaluate, render_direct, Graph};
+use crate::image::Planes;
+use crate::render::Quality;
 use crate::scene::{FieldSource, InstanceDesc, Scene, SceneDesc};
 
 /// The shot object the demo's object instance is bound to.
@@ -226,6 +231,56 @@ pub fn write_graph(dir: &Path, width: u32, height: u32) -> Result<PathBuf> {
         .map_err(|e| Error::invalid("demo graph", e.to_string()))?;
     std::fs::write(&path, text).map_err(|e| Error::io(&path, e))?;
     Ok(path)
+}
+
+/// The demo's composite, its extra layers and the graph it came from.
+#[derive(Clone, Debug)]
+pub struct Comp {
+    /// The graph's output: the object in its environment, premultiplied RGBA.
+    pub image: Planes,
+    /// The graph's extra layers by EXR layer name.
+    pub layers: Vec<(String, Planes)>,
+    /// The graph file.
+    pub graph: PathBuf,
+}
+
+/// Renders the demo's composite at its first frame: writes the demo's files into `dir` (the
+/// joint scene [`scene_desc`], and [`write_graph`]'s graph with everything it reads), then
+/// evaluates the graph in process with the node registry, each NeRF Render at `quality`:
+/// the nodes a compositor runs, without the OpenFX bundle.
+pub fn render_comp(dir: &Path, width: u32, height: u32, quality: Quality) -> Result<Comp> {
+    scene_desc().write(&dir.join("demo_scene.json"))?;
+    let path = write_graph(dir, width, height)?;
+    let mut graph = Graph::read(&path)?;
+    for node in &mut graph.nodes {
+        if node.node.desc.id == "org.nerfx.NeRFRender" {
+            node.values.set_choice("quality", quality.name())?;
+        }
+    }
+    let mut images = evaluate(
+        &graph,
+        FIRST_FRAME as f64,
+        1.0,
+        false,
+        &mut |node, request| render_direct(node, request),
+        &|_| {},
+    )?;
+    let mut take = |node: &str| {
+        images
+            .remove(node)
+            .ok_or_else(|| Error::invalid("demo graph", format!("node {node} was not rendered")))
+    };
+    let image = take(&graph.output)?;
+    let layers = graph
+        .layers
+        .iter()
+        .map(|(layer, node)| Ok((layer.clone(), take(node)?)))
+        .collect::<Result<_>>()?;
+    Ok(Comp {
+        image,
+        layers,
+        graph: path,
+    })
 }
 
 /// The NeRF object's `matrix_world` at `frame`: lifted, turning slowly, non-uniformly scaled.

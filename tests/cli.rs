@@ -44,18 +44,33 @@ fn demo_then_render_a_frame_range_from_its_files() {
         "27",
         "--quality",
         "draft",
-        "--write-inputs",
     ]);
     assert!(
         demo.status.success(),
         "{}",
         String::from_utf8_lossy(&demo.stderr)
     );
-    assert!(dir.join("demo.png").is_file());
     assert_eq!(
         channels(&dir.join("demo.exr")),
-        ["A", "B", "G", "R", "Z", "depth.median", "depth.ray"]
+        [
+            "A", "B", "G", "R", "object.A", "object.B", "object.G", "object.R", "shadow.A",
+            "shadow.B", "shadow.G", "shadow.R"
+        ]
     );
+    // The composite's empty sky is transparent in the PNG, the ground opaque.
+    let png = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(dir.join("demo.png")).unwrap(),
+    ));
+    let mut reader = png.read_info().unwrap();
+    let mut rgba = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut rgba).unwrap();
+    assert_eq!(
+        (info.width, info.height, info.color_type),
+        (48, 27, png::ColorType::Rgba)
+    );
+    let alpha = |x: usize, y: usize| rgba[4 * (y * 48 + x) + 3];
+    assert_eq!(alpha(47, 0), 0, "the sky top right");
+    assert_eq!(alpha(24, 26), 255, "the ground");
 
     let pattern = dir.join("frames/f.####.exr");
     let render = nerfx(&[

@@ -9,6 +9,7 @@ use crate::demo;
 use crate::error::Result;
 use crate::graph::{node, purge_caches, shared_render_stats, RenderRequest, Value};
 use crate::image::Window;
+use crate::render::Quality;
 
 /// One set of outputs asked of the same field.
 #[derive(Clone, Debug, PartialEq)]
@@ -27,14 +28,13 @@ const SETS: [&[&str]; 3] = [
     &["rgba", "accumulation", "depthZ", "depthRay"],
 ];
 
-/// Times each set of outputs of the demo frame at `width × height` and `quality` (a
-/// NeRF Render choice: draft, preview, final), best of `repeats`; the scene and shot files
-/// are written into `dir`.
+/// Times each set of outputs of the demo frame at `width × height` and `quality`, best of
+/// `repeats`; the scene and shot files are written into `dir`.
 pub fn time_passes(
     dir: &Path,
     width: u32,
     height: u32,
-    quality: &str,
+    quality: Quality,
     repeats: u32,
 ) -> Result<Vec<PassTiming>> {
     let (scene, shot) = (dir.join("passes_scene.json"), dir.join("passes_shot.json"));
@@ -45,7 +45,7 @@ pub fn time_passes(
         let mut v = nerf.defaults();
         v.set("file", Value::Text(scene.display().to_string()))?;
         v.set("shot", Value::Text(shot.display().to_string()))?;
-        v.set_choice("quality", quality)?;
+        v.set_choice("quality", quality.name())?;
         v.set_choice("output", output)?;
         Ok(v)
     };

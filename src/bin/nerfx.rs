@@ -15,7 +15,7 @@ use nerfx::frames::{
     frame_path, parse_frames, read_shot, render_environment, render_frame, EnvironmentOrigin,
 };
 use nerfx::image::{write_exr, write_exr_layers, write_png_preview};
-use nerfx::render::{render_with_progress, ColorOutput, Outputs, Quality, RenderSettings};
+use nerfx::render::{ColorOutput, Outputs, Quality, RenderSettings};
 use nerfx::scene::SceneDesc;
 use nerfx::{bench, demo, Error, Result};
 
@@ -32,7 +32,9 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Render the embedded demo scene (analytic fields, no downloads) to EXR and PNG.
+    /// Render the embedded demo (analytic fields, no downloads): an object composited into
+    /// its environment with a caught shadow and a depth merge, to EXR and PNG, with the
+    /// scene, shot and node graph files it came from.
     Demo {
         /// Output folder.
         #[arg(short, long, default_value = "out")]
@@ -46,9 +48,6 @@ enum Command {
         /// Quality preset.
         #[arg(long, value_enum, default_value_t = Quality::Final)]
         quality: Quality,
-        /// Also write the demo's scene and shot files there (for `nerfx render`).
-        #[arg(long)]
-        write_inputs: bool,
     },
     /// Render a scene file through a shot file, or a node graph (`comp.json`) through the
     /// OpenFX bundle, for a list of frames.
@@ -170,29 +169,20 @@ fn run(cli: Cli) -> Result<()> {
             width,
             height,
             quality,
-            write_inputs,
         } => {
             create_dir(&out)?;
-            let (scene, camera) = demo::scene_and_camera(width, height)?;
-            if write_inputs {
-                demo::scene_desc().write(&out.join("demo_scene.json"))?;
-                demo::write_graph(&out, width, height)?;
-            }
-            let settings = RenderSettings::new(quality.params(), Outputs::all());
-            let bar = progress_bar(camera.full_window().area() as u64, "demo");
             let started = Instant::now();
-            let (planes, stats) =
-                render_with_progress(&scene, &camera, camera.full_window(), &settings, &|n| {
-                    bar.inc(n)
-                })?;
-            bar.finish_and_clear();
-            write_exr(&out.join("demo.exr"), &planes)?;
-            write_png_preview(&out.join("demo.png"), &planes)?;
+            let comp = demo::render_comp(&out, width, height, quality)?;
+            let layers: Vec<(&str, &_)> =
+                comp.layers.iter().map(|(n, p)| (n.as_str(), p)).collect();
+            write_exr_layers(&out.join("demo.exr"), &comp.image, &layers, 1.0)?;
+            write_png_preview(&out.join("demo.png"), &comp.image)?;
             println!(
-                "demo: {width}×{height} {quality:?} in {:.2} s, {:.1} density samples/pixel → {}",
+                "demo: {width}×{height} {} in {:.2} s → {} (and demo.png; its graph: {})",
+                quality.name(),
                 started.elapsed().as_secs_f64(),
-                stats.density_samples as f64 / stats.pixels.max(1) as f64,
-                out.join("demo.exr").display()
+                out.join("demo.exr").display(),
+                comp.graph.display()
             );
             Ok(())
         }
@@ -321,8 +311,8 @@ fn run(cli: Cli) -> Result<()> {
             ..
         } => {
             create_dir(&out)?;
-            let preset = format!("{quality:?}").to_lowercase();
-            let timings = bench::passes::time_passes(&out, width, height, &preset, repeats)?;
+            let preset = quality.name();
+            let timings = bench::passes::time_passes(&out, width, height, quality, repeats)?;
             println!("| outputs ({preset}, {width}×{height}) | ms | marches | × RGBA |");
             println!("|---|---:|---:|---:|");
             let alone = timings.first().map_or(f64::NAN, |t| t.ms);

@@ -87,6 +87,15 @@ impl Quality {
         }
     }
 
+    /// The preset's identifier, as the command line and the NeRF Render node name it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Quality::Draft => "draft",
+            Quality::Preview => "preview",
+            Quality::Final => "final",
+        }
+    }
+
     /// All presets, coarse to fine.
     pub const ALL: [Quality; 3] = [Quality::Draft, Quality::Preview, Quality::Final];
 }

@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use glam::{DMat4, DQuat, DVec3, Vec3};
 
 use crate::camera::{
-    BlenderIntrinsics, Camera, Perspective, Projection, SensorFit, Shot, ShotCamera,
+    BlenderIntrinsics, Camera, Perspective, Projection, SceneWorld, SensorFit, Shot, ShotCamera,
     ShotCameraKind, ShotFrame,
 };
 use crate::error::{Error, Result};
@@ -364,6 +364,7 @@ pub fn shot(width: u32, height: u32) -> Shot {
         nerf_object: NERF_OBJECT.into(),
         frames,
         motion_blur: None,
+        scene_world: SceneWorld::Blender,
         source: PathBuf::new(),
     }
 }
@@ -372,7 +373,7 @@ pub fn shot(width: u32, height: u32) -> Shot {
 pub fn scene_and_camera(width: u32, height: u32) -> Result<(Scene, Camera)> {
     let scene = scene_desc()
         .load()?
-        .place(&|_| Ok(object_matrix(FIRST_FRAME)))?;
+        .place(DMat4::IDENTITY, &|_| Ok(object_matrix(FIRST_FRAME)))?;
     let projection =
         Projection::Perspective(Perspective::from_blender(&intrinsics(width, height))?);
     let camera =

@@ -135,7 +135,7 @@ pub fn render_frame(
 ) -> Result<(Planes, RenderStats)> {
     let render_at = |at: &ShotFrame| {
         let camera = at.camera(shot)?;
-        let placed = scene.place(&|name| at.object_matrix(name))?;
+        let placed = scene.place(at.world_from_scene(shot)?, &|name| at.object_matrix(name))?;
         render_with_progress(&placed, &camera, camera.full_window(), settings, on_tile)
     };
     let times = shot.motion_blur.map_or_else(
@@ -189,7 +189,7 @@ pub fn render_environment(
         EnvironmentOrigin::Position(p) => *p,
     };
     let camera = environment_camera(position, height)?;
-    let placed = scene.place(&|name| at.object_matrix(name))?;
+    let placed = scene.place(at.world_from_scene(shot)?, &|name| at.object_matrix(name))?;
     render_with_progress(&placed, &camera, camera.full_window(), settings, on_tile)
 }
 

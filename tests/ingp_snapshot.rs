@@ -258,7 +258,7 @@ fn a_scene_file_renders_a_snapshot_next_to_it() {
         .unwrap()
         .load()
         .unwrap()
-        .place(&|_| Ok(DMat4::IDENTITY))
+        .place(DMat4::IDENTITY, &|_| Ok(DMat4::IDENTITY))
         .unwrap();
     let p = Perspective::from_vertical_fov(24, 16, 50.0).unwrap();
     let eye = DVec3::new(0.0, -9.0, 2.0);

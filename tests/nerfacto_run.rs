@@ -175,7 +175,9 @@ fn scene_files_name_runs_relative_to_themselves() {
         use glam::{DMat4, DVec3};
         use nerfx::camera::{Camera, Perspective, Projection};
         use nerfx::render::{render, Outputs, Quality, RenderSettings};
-        let placed = loaded.place(&|_| Ok(DMat4::IDENTITY)).unwrap();
+        let placed = loaded
+            .place(DMat4::IDENTITY, &|_| Ok(DMat4::IDENTITY))
+            .unwrap();
         let p = Perspective::from_vertical_fov(16, 12, 50.0).unwrap();
         let eye = DVec3::new(0.5, -5.0, 1.0);
         let camera = Camera::new(

@@ -213,3 +213,114 @@ fn a_path_written_for_a_scaled_object_renders_the_bound_field_in_blender_units()
         d - r
     );
 }
+
+/// A fixed placement in a scene rendered from a camera path is in the path's frame (the
+/// field's): it composes with the path's object, so an unbound instance placed by `W` renders
+/// exactly what a bound one holding the same shapes carried through `W` renders — a rotated,
+/// uniformly scaled sphere and a non-uniformly scaled box — with depth in Blender units.
+#[test]
+fn an_unbound_instance_composes_with_a_scaled_camera_path() {
+    let mut p = CameraPath::read(data("viewer_camera_path_b.json")).unwrap();
+    let field_from_world = DMat4::from_scale_rotation_translation(
+        DVec3::splat(0.735),
+        glam::DQuat::from_euler(glam::EulerRot::ZYX, -0.4, 0.25, 0.6),
+        DVec3::new(-0.3, 0.8, 0.1),
+    );
+    let c0 = p.frames[0].camera_to_world;
+    for f in &mut p.frames {
+        f.camera_to_world = field_from_world * f.camera_to_world;
+    }
+    let (w, h) = (40u32, 30u32);
+    (p.render_width, p.render_height) = (w, h);
+    let dir = tempfile::tempdir().unwrap();
+    let path_file = dir.path().join("camera_path.json");
+    p.write(&path_file).unwrap();
+
+    // Points ahead of frame 0's camera, in the path's (field) frame.
+    let ahead = |d: f64, right: f64| {
+        field_from_world.transform_point3(
+            c0.w_axis.truncate() - d * c0.z_axis.truncate().normalize()
+                + right * c0.x_axis.truncate().normalize(),
+        )
+    };
+    let (sphere_at, box_at) = (ahead(1.5, -0.15), ahead(1.8, 0.25));
+    let sphere_w = DMat4::from_scale_rotation_translation(
+        DVec3::splat(2.0),
+        glam::DQuat::from_rotation_y(0.9),
+        DVec3::new(0.2, -0.1, 0.3),
+    );
+    let box_w = DMat4::from_scale_rotation_translation(
+        DVec3::new(2.0, 1.0, 0.5),
+        glam::DQuat::IDENTITY,
+        DVec3::new(-0.2, 0.1, 0.05),
+    );
+    let half = DVec3::new(0.06, 0.09, 0.12);
+    let shapes = |sphere: DMat4, cube: DMat4, radius: f64| {
+        let c = sphere.inverse().transform_point3(sphere_at);
+        let (lo, hi) = (
+            cube.inverse().transform_point3(box_at - half),
+            cube.inverse().transform_point3(box_at + half),
+        );
+        serde_json::json!([
+            {"shape": {"sphere": {"center": c.to_array(), "radius": radius}},
+             "density": 1e4, "color": {"rgb": [1, 0.5, 0.2]}},
+            {"shape": {"box": {"min": lo.to_array(), "max": hi.to_array()}},
+             "density": 1e4, "color": {"rgb": [0.2, 0.5, 1]}}])
+    };
+    let render_scene = |name: &str, instances: serde_json::Value| {
+        let file = dir.path().join(name);
+        std::fs::write(
+            &file,
+            serde_json::json!({ "instances": instances }).to_string(),
+        )
+        .unwrap();
+        let scene = nerfx::scene::SceneDesc::read(&file)
+            .unwrap()
+            .load()
+            .unwrap();
+        let shot = nerfx::frames::read_shot(&path_file, "NeRF").unwrap();
+        let settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
+        let first = shot.frames[0].frame;
+        nerfx::frames::render_frame(&scene, &shot, first, &settings, &|_| {})
+            .unwrap()
+            .0
+    };
+    let rows = |m: DMat4| m.transpose().to_cols_array_2d();
+    let bound = render_scene(
+        "bound.json",
+        serde_json::json!([{"name": "both", "object": "NeRF",
+            "field": {"analytic": {"primitives": shapes(DMat4::IDENTITY, DMat4::IDENTITY, 0.07)}}}]),
+    );
+    let primitives = shapes(sphere_w, box_w, 0.035);
+    let unbound = render_scene(
+        "unbound.json",
+        serde_json::json!([
+            {"name": "sphere", "world_from_field": rows(sphere_w),
+             "field": {"analytic": {"primitives": [primitives[0]]}}},
+            {"name": "box", "world_from_field": rows(box_w),
+             "field": {"analytic": {"primitives": [primitives[1]]}}}]),
+    );
+    let (a, b) = (bound.alpha.unwrap(), unbound.alpha.unwrap());
+    let covered = a.data.iter().filter(|&&v| v > 0.5).count();
+    assert!(covered > 30, "both shapes are in view ({covered} pixels)");
+    let mean = a
+        .data
+        .iter()
+        .zip(&b.data)
+        .map(|(x, y)| (x - y).abs())
+        .sum::<f32>()
+        / a.data.len() as f32;
+    assert!(mean < 2e-3, "alpha differs by {mean} on average");
+    let (za, zb) = (bound.depth_z.unwrap(), unbound.depth_z.unwrap());
+    for i in (0..a.data.len()).filter(|&i| a.data[i] > 0.999 && b.data[i] > 0.999) {
+        let (x, y) = (za.data[i], zb.data[i]);
+        assert!(
+            (x - y).abs() < 1e-3 * x,
+            "pixel {i}: depth Z {x} bound, {y} unbound"
+        );
+        assert!(
+            x > 1.2 && x < 2.2,
+            "depth {x} is in Blender units (1.5 to 1.8 ahead)"
+        );
+    }
+}

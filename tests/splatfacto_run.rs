@@ -171,7 +171,9 @@ fn a_splatfacto_run_is_splats_everywhere_and_never_a_nerfacto_field() {
         .unwrap()
         .load()
         .unwrap();
-    let placed = scene.place(&|_| unreachable!()).unwrap();
+    let placed = scene
+        .place(glam::DMat4::IDENTITY, &|_| unreachable!())
+        .unwrap();
     assert_eq!((placed.instances.len(), placed.splats.len()), (0, 1));
 
     // Another method is refused by name.

@@ -189,6 +189,7 @@ mod tests {
             pixel_aspect_y: 1.0,
             nerf_object: "NeRF".into(),
             motion_blur: None,
+            scene_world: crate::camera::SceneWorld::Blender,
             frames: vec![
                 frame(
                     10,

@@ -25,7 +25,9 @@ pub use environment::environment_camera;
 pub use equirect::Equirect;
 pub use nerfstudio::{CameraPath, PathCameraType, PathCrop, PathFrame, PathKeyframe};
 pub use perspective::{BlenderIntrinsics, Perspective, SensorFit};
-pub use shot::{Shot, ShotCamera, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, SHOT_VERSION};
+pub use shot::{
+    SceneWorld, Shot, ShotCamera, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, SHOT_VERSION,
+};
 pub use shutter::{MotionBlur, ShutterPosition, MAX_SHUTTER};
 pub use stereo::{Eye, Ods, Vr180, DEFAULT_IPD};
 

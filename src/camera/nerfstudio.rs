@@ -37,7 +37,7 @@ use serde_json::Value;
 
 use super::json::{self, numbers, short, Describe, Null, Obj, Style};
 use super::{
-    Camera, Equirect, Eye, Ods, Perspective, Projection, SensorFit, Shot, ShotCamera,
+    Camera, Equirect, Eye, Ods, Perspective, Projection, SceneWorld, SensorFit, Shot, ShotCamera,
     ShotCameraKind, ShotFrame, ShotStereo, StereoMode, Vr180, DEFAULT_IPD,
 };
 use crate::error::{Error, Result};
@@ -338,6 +338,7 @@ impl CameraPath {
             nerf_object: nerf_object.to_string(),
             frames,
             motion_blur: None,
+            scene_world: SceneWorld::NerfObject,
             source: self.source.clone(),
         })
     }

@@ -74,6 +74,21 @@ pub struct Shot {
     /// The file the shot was read from, used in messages (empty when built in memory); not
     /// written.
     pub source: PathBuf,
+    /// Where a scene's fixed placements are given; not written (shot files are in Blender's
+    /// world).
+    pub scene_world: SceneWorld,
+}
+
+/// The frame a scene's fixed placements (`world_from_field` of an instance bound to no
+/// object) are given in.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SceneWorld {
+    /// Blender's world: the shot file's.
+    #[default]
+    Blender,
+    /// The NeRF object's frame: a nerfstudio camera path is written in the field's frame
+    /// (`N⁻¹·C` per camera), so a fixed placement composes with the path's object.
+    NerfObject,
 }
 
 /// One frame of a shot.
@@ -192,6 +207,7 @@ impl Shot {
             nerf_object: top.get::<String>("nerf_object", "a string")?,
             frames: Vec::new(),
             motion_blur: None,
+            scene_world: SceneWorld::Blender,
             source: path.to_path_buf(),
         };
         if top.has("motion_blur") {
@@ -398,6 +414,15 @@ impl ShotFrame {
         Camera::new(c.world_from_camera, projection)
             .and_then(|camera| camera.with_clip(c.clip_start, c.clip_end))
             .map_err(in_context)
+    }
+
+    /// The matrix taking a scene's fixed placements into the shot's world at this frame (see
+    /// [`SceneWorld`]).
+    pub fn world_from_scene(&self, shot: &Shot) -> Result<DMat4> {
+        match shot.scene_world {
+            SceneWorld::Blender => Ok(DMat4::IDENTITY),
+            SceneWorld::NerfObject => self.object_matrix(&shot.nerf_object),
+        }
     }
 
     /// The world matrix of the object `name` at this frame.

@@ -328,6 +328,7 @@ fn camera(values: &ParamValues, time: f64, scale: f64) -> Result<(ShotFrame, Cam
         nerf_object: shot.nerf_object.clone(),
         frames: vec![at.clone()],
         motion_blur: None,
+        scene_world: shot.scene_world,
         source: shot.source.clone(),
     };
     let camera = at.camera(&one)?;
@@ -345,7 +346,8 @@ fn placed_scene(values: &ParamValues, at: &ShotFrame) -> Result<Scene> {
     } else {
         None
     };
-    let scene = loaded.place(&|name| match over_ride {
+    let shot = cached_shot(file(values, "shot")?)?;
+    let scene = loaded.place(at.world_from_scene(&shot)?, &|name| match over_ride {
         Some(m) => Ok(m),
         None => at.object_matrix(name),
     })?;

@@ -268,15 +268,22 @@ impl LoadedScene {
             .collect()
     }
 
-    /// The scene with every instance placed: fixed placements as given, object-bound ones by
-    /// `object_matrix(name)` (the shot's object at the frame being rendered).
-    pub fn place(&self, object_matrix: &dyn Fn(&str) -> Result<DMat4>) -> Result<Scene> {
+    /// The scene with every instance placed: object-bound ones by `object_matrix(name)` (the
+    /// shot's object at the frame being rendered), fixed placements as given, carried into the
+    /// shot's world by `world_from_scene` ([`ShotFrame::world_from_scene`]).
+    ///
+    /// [`ShotFrame::world_from_scene`]: crate::camera::ShotFrame::world_from_scene
+    pub fn place(
+        &self,
+        world_from_scene: DMat4,
+        object_matrix: &dyn Fn(&str) -> Result<DMat4>,
+    ) -> Result<Scene> {
         let mut scene = Scene::default();
         for (inst, contents) in self.desc.instances.iter().zip(&self.contents) {
             let m = match (&inst.object, &inst.world_from_field) {
                 (Some(object), _) => object_matrix(object)?,
-                (None, Some(rows)) => mat4_from_rows(rows),
-                (None, None) => DMat4::IDENTITY,
+                (None, Some(rows)) => world_from_scene * mat4_from_rows(rows),
+                (None, None) => world_from_scene,
             };
             match contents {
                 Contents::Field(field) => scene.instances.push(Instance::new(

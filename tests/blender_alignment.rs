@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Arc;
 
-use glam::{DVec3, Vec3};
+use glam::{DMat4, DVec3, Vec3};
 use nerfx::camera::{CameraPath, Projection, Shot};
 use nerfx::field::{Analytic, Primitive, ShColor, Shape};
 use nerfx::render::{render, Outputs, Quality, RenderSettings};
@@ -100,7 +100,25 @@ fn check_points(case: &Value) -> (f64, usize) {
         // Aligned: the point is in the NeRF object's frame, placed by the shot's `N`.
         let n = frame.object_matrix(&shot.nerf_object).unwrap();
         let local = f64s(&p["local"]);
-        let world = n.transform_point3(DVec3::new(local[0], local[1], local[2]));
+        let local = DVec3::new(local[0], local[1], local[2]);
+        let world = n.transform_point3(local);
+        // An instance bound to no object, placed by `W`, sees the same point at `W⁻¹·p`: in a
+        // shot file `W` is in Blender's world; a camera path is in the NeRF object's frame.
+        let w = DMat4::from_scale_rotation_translation(
+            DVec3::new(1.7, 0.6, 1.1),
+            glam::DQuat::from_rotation_z(0.4),
+            DVec3::new(0.3, -0.2, 0.5),
+        );
+        let fixed = frame.world_from_scene(&shot).unwrap() * w;
+        let local_to_world = match case.get("camera_path") {
+            Some(_) => fixed.transform_point3(w.inverse().transform_point3(local)),
+            None => fixed.transform_point3(w.inverse().transform_point3(world)),
+        };
+        assert!(
+            (local_to_world - world).length() < 1e-9 * (1.0 + world.length()),
+            "{}: a fixed placement lands at {local_to_world}, the bound one at {world}",
+            case["name"]
+        );
         let in_camera = camera.world_from_camera().inverse().transform_point3(world);
         let Projection::Perspective(persp) = camera.projection() else {
             panic!("{}: not perspective", case["name"])

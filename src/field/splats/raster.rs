@@ -45,6 +45,36 @@ struct Entry {
     z: f32,
     /// Colour.
     rgb: [f32; 3],
+    /// Half extents in x and y of the ellipse `σ ≤ sigma_cut`: no pixel centre farther from
+    /// the mean gets a fragment (infinite for a degenerate conic).
+    extent: [f32; 2],
+}
+
+impl Entry {
+    fn new(p: &Projected) -> Entry {
+        let sigma_cut = (255.0 * p.opacity).ln() + 1e-3;
+        // σ = ½ dᵀQd ≤ s reaches |d_x| ≤ √(2s·Σ_xx), |d_y| ≤ √(2s·Σ_yy) with Σ = Q⁻¹.
+        // In f64: the determinant of a thin splat's conic cancels.
+        let [a, b, c] = p.conic.map(f64::from);
+        let det = a * c - b * b;
+        let reach = |q: f64| {
+            let e = (2.0 * f64::from(sigma_cut.max(0.0)) * q / det).sqrt();
+            if det > 0.0 && e.is_finite() {
+                (e * (1.0 + 1e-3) + 1e-3) as f32
+            } else {
+                f32::INFINITY
+            }
+        };
+        Entry {
+            xy: p.xy,
+            conic: p.conic,
+            opacity: p.opacity,
+            sigma_cut,
+            z: p.z,
+            rgb: p.rgb,
+            extent: [reach(c), reach(a)],
+        }
+    }
 }
 
 /// The splats of a frame, projected, sorted and binned.
@@ -96,14 +126,35 @@ impl SplatLayer {
                 clamp((y + r).ceil(), tiles[1], tiles[3]),
             ]
         };
-        // Each row of tiles is binned on its own (in parallel), walking the splats in depth
-        // order, so every tile's list comes out sorted.
+        // Each splat is listed in the rows of tiles it touches (in depth order), then each
+        // row is binned on its own (in parallel), so every tile's list comes out sorted.
         let ranges: Vec<[u32; 4]> = projected.par_iter().map(range).collect();
-        let rows: Vec<(Vec<u32>, Vec<Entry>)> = (tiles[1]..tiles[3])
+        let rows_n = (tiles[3] - tiles[1]) as usize;
+        let mut row_starts = vec![0usize; rows_n + 1];
+        for r in &ranges {
+            for ty in r[1]..r[3] {
+                row_starts[(ty - tiles[1]) as usize + 1] += 1;
+            }
+        }
+        for i in 1..row_starts.len() {
+            row_starts[i] += row_starts[i - 1];
+        }
+        let mut in_rows = vec![0u32; row_starts[rows_n]];
+        let mut next = row_starts.clone();
+        for (i, r) in ranges.iter().enumerate() {
+            for ty in r[1]..r[3] {
+                let slot = &mut next[(ty - tiles[1]) as usize];
+                in_rows[*slot] = i as u32;
+                *slot += 1;
+            }
+        }
+        let rows: Vec<(Vec<u32>, Vec<Entry>)> = (0..rows_n)
             .into_par_iter()
-            .map(|ty| {
+            .map(|row| {
+                let splats = &in_rows[row_starts[row]..row_starts[row + 1]];
                 let mut counts = vec![0u32; tiles_x + 1];
-                for r in ranges.iter().filter(|r| r[1] <= ty && ty < r[3]) {
+                for &i in splats {
+                    let r = &ranges[i as usize];
                     for tx in r[0]..r[2] {
                         counts[(tx - tiles[0]) as usize + 1] += 1;
                     }
@@ -113,18 +164,9 @@ impl SplatLayer {
                 }
                 let starts = counts.clone();
                 let mut entries = vec![Entry::default(); counts[tiles_x] as usize];
-                for (p, r) in projected.iter().zip(&ranges) {
-                    if !(r[1] <= ty && ty < r[3]) {
-                        continue;
-                    }
-                    let entry = Entry {
-                        xy: p.xy,
-                        conic: p.conic,
-                        opacity: p.opacity,
-                        sigma_cut: (255.0 * p.opacity).ln() + 1e-3,
-                        z: p.z,
-                        rgb: p.rgb,
-                    };
+                for &i in splats {
+                    let r = &ranges[i as usize];
+                    let entry = Entry::new(&projected[i as usize]);
                     for tx in r[0]..r[2] {
                         let slot = &mut counts[(tx - tiles[0]) as usize];
                         entries[*slot as usize] = entry;
@@ -217,51 +259,55 @@ impl SplatLayer {
         z_per_t: &[f64],
         out: &mut [Vec<Fragment>],
     ) {
-        const LANES: usize = 16;
-        const MAX: usize = (TILE * TILE) as usize;
-        let mut px = [0f32; MAX];
-        let mut py = [0f32; MAX];
-        let mut index = [0usize; MAX];
-        let mut n = 0;
-        for y in part.y0..part.y1 {
-            for x in part.x0..part.x1 {
+        // One chunk of lanes per pixel row of `part` (at most a tile's side), so a splat
+        // walks only the rows its ellipse reaches.
+        const LANES: usize = TILE as usize;
+        let mut px = [0f32; LANES];
+        for (l, x) in px.iter_mut().zip(part.x0..part.x1) {
+            *l = x as f32 + 0.5;
+        }
+        let mut index = [[0usize; LANES]; LANES];
+        let mut live = [0u16; LANES];
+        let mut remaining = 0;
+        for (r, y) in (part.y0..part.y1).enumerate() {
+            for (l, x) in (part.x0..part.x1).enumerate() {
                 let i = ((y - window.y0) * window.width() + (x - window.x0)) as usize;
+                index[r][l] = i;
                 if z_per_t[i].is_finite() {
-                    (px[n], py[n], index[n]) = (x as f32 + 0.5, y as f32 + 0.5, i);
-                    n += 1;
+                    live[r] |= 1 << l;
+                    remaining += 1;
                 }
             }
         }
-        let chunks = n.div_ceil(LANES);
-        let mut live = [0u16; MAX / LANES];
-        for (c, l) in live.iter_mut().enumerate().take(chunks) {
-            let lanes = (n - c * LANES).min(LANES);
-            *l = if lanes == LANES {
-                u16::MAX
-            } else {
-                (1u16 << lanes) - 1
-            };
-        }
-        let mut transmittance = [1f64; MAX];
-        let mut remaining = n;
+        let (x_lo, x_hi) = (part.x0 as f32 + 0.5, (part.x1 - 1) as f32 + 0.5);
+        let mut transmittance = [[1f64; LANES]; LANES];
         for e in tile {
+            let [ex, ey] = e.extent;
+            if e.xy[0] + ex < x_lo || e.xy[0] - ex > x_hi {
+                continue;
+            }
+            // Rows whose pixel centres `y + ½` lie within the ellipse's reach.
+            let first = (e.xy[1] - ey - 0.5).ceil().max(part.y0 as f32);
+            let last = (e.xy[1] + ey - 0.5).floor().min((part.y1 - 1) as f32);
+            if !(first <= last) {
+                continue;
+            }
             let [a, b, c] = e.conic;
-            for (chunk, live) in live.iter_mut().enumerate().take(chunks) {
-                if *live == 0 {
+            for r in (first as u32 - part.y0) as usize..=(last as u32 - part.y0) as usize {
+                if live[r] == 0 {
                     continue;
                 }
-                let at = chunk * LANES;
+                let dy = e.xy[1] - ((part.y0 + r as u32) as f32 + 0.5);
                 let mut sigma = [0f32; LANES];
                 for l in 0..LANES {
-                    let dx = e.xy[0] - px[at + l];
-                    let dy = e.xy[1] - py[at + l];
+                    let dx = e.xy[0] - px[l];
                     sigma[l] = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
                 }
                 let mut reached = 0u16;
                 for (l, &v) in sigma.iter().enumerate() {
                     reached |= u16::from(v >= 0.0 && v <= e.sigma_cut) << l;
                 }
-                let mut hits = reached & *live;
+                let mut hits = reached & live[r];
                 while hits != 0 {
                     let l = hits.trailing_zeros() as usize;
                     hits &= hits - 1;
@@ -269,15 +315,16 @@ impl SplatLayer {
                     if alpha.is_nan() || alpha < MIN_ALPHA {
                         continue;
                     }
-                    let k = at + l;
-                    out[index[k]].push(Fragment {
-                        t: f64::from(e.z) / z_per_t[index[k]],
+                    let i = index[r][l];
+                    out[i].push(Fragment {
+                        t: f64::from(e.z) / z_per_t[i],
                         alpha,
                         rgb: e.rgb,
                     });
-                    transmittance[k] *= 1.0 - f64::from(alpha);
-                    if transmittance[k] <= MIN_TRANSMITTANCE {
-                        *live &= !(1 << l);
+                    let tr = &mut transmittance[r][l];
+                    *tr *= 1.0 - f64::from(alpha);
+                    if *tr <= MIN_TRANSMITTANCE {
+                        live[r] &= !(1 << l);
                         remaining -= 1;
                     }
                 }

@@ -289,7 +289,7 @@ impl SplatLayer {
             // Rows whose pixel centres `y + ½` lie within the ellipse's reach.
             let first = (e.xy[1] - ey - 0.5).ceil().max(part.y0 as f32);
             let last = (e.xy[1] + ey - 0.5).floor().min((part.y1 - 1) as f32);
-            if !(first <= last) {
+            if first > last {
                 continue;
             }
             let [a, b, c] = e.conic;

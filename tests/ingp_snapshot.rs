@@ -543,3 +543,43 @@ fn process_cpu_seconds() -> Option<f64> {
     let ticks = fields.get(11)?.parse::<u64>().ok()? + fields.get(12)?.parse::<u64>().ok()?;
     Some(ticks as f64 / 100.0)
 }
+
+/// Input that is no snapshot is refused early, naming the file and what it holds: a gzip
+/// bomb (512 MiB of zeros in half a megabyte) fails at its first value instead of being
+/// inflated whole, random bytes and a msgpack array say they are not a snapshot.
+#[test]
+fn hostile_snapshots_are_refused_early_in_the_users_terms() {
+    use std::io::Write;
+    let dir = scratch("hostile");
+    let bomb = dir.join("bomb.ingp");
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
+    let zeros = vec![0u8; 1 << 20];
+    for _ in 0..512 {
+        gz.write_all(&zeros).unwrap();
+    }
+    let packed = gz.finish().unwrap();
+    assert!(packed.len() < 1 << 20, "{} bytes", packed.len());
+    std::fs::write(&bomb, &packed).unwrap();
+    let e = IngpField::load(&bomb).err().unwrap().to_string();
+    assert!(
+        e.contains("bomb.ingp") && e.contains("holds an integer, not a map"),
+        "{e}"
+    );
+
+    let random = dir.join("random.msgpack");
+    let mut rng = SplitMix64::new(11);
+    let bytes: Vec<u8> = (0..65536).map(|_| rng.next_u64() as u8).collect();
+    std::fs::write(&random, &bytes).unwrap();
+    let e = IngpField::load(&random).err().unwrap().to_string();
+    assert!(
+        e.contains("random.msgpack") && e.contains("not a"),
+        "random bytes: {e}"
+    );
+    assert!(!e.contains("missing key"), "random bytes: {e}");
+
+    let array = dir.join("array.msgpack");
+    std::fs::write(&array, [0x90]).unwrap();
+    let e = IngpField::load(&array).err().unwrap().to_string();
+    assert!(e.contains("holds an array, not a map"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

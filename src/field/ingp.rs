@@ -135,28 +135,105 @@ impl Doc<'_> {
     }
 }
 
-/// Reads the file and decodes its msgpack (inflating it first when it is gzip-framed).
+/// The most a gzip-framed snapshot may inflate to: 4 GiB, above the largest hash grid
+/// instant-ngp trains (2²⁴ entries per level) in half precision.
+const MAX_INFLATED_BYTES: u64 = 4 << 30;
+
+/// Reads the file and decodes its msgpack, inflating a gzip-framed one as it is decoded: a
+/// stream that is not a snapshot fails at its first bad byte without being inflated whole,
+/// and no stream is inflated beyond [`MAX_INFLATED_BYTES`]. (The decoder allocates binary
+/// data as it arrives, never by the length a header claims.)
 fn read_document(path: &Path) -> Result<(Value, bool)> {
     let raw = crate::input::read_bytes(path)?;
     let gzip = raw.starts_with(&[0x1f, 0x8b]);
-    let bytes = if gzip {
-        let mut out = Vec::new();
-        flate2::read::GzDecoder::new(raw.as_slice())
-            .read_to_end(&mut out)
-            .map_err(|e| Error::format(path, "gzip stream", e.to_string()))?;
-        out
+    let decoded = if gzip {
+        let inflated = flate2::read::GzDecoder::new(raw.as_slice()).take(MAX_INFLATED_BYTES);
+        let mut stream = CountingReader {
+            inner: std::io::BufReader::new(inflated),
+            count: 0,
+        };
+        let decoded = rmpv::decode::read_value(&mut stream);
+        let at = stream.count;
+        let decoded = decoded.map_err(|e| {
+            let why = match &e {
+                rmpv::decode::Error::InvalidMarkerRead(io)
+                | rmpv::decode::Error::InvalidDataRead(io)
+                    if io.kind() != std::io::ErrorKind::UnexpectedEof =>
+                {
+                    format!("not a valid gzip stream: {io}")
+                }
+                _ if at >= MAX_INFLATED_BYTES => format!(
+                    "inflates to more than {} GiB, more than any snapshot holds",
+                    MAX_INFLATED_BYTES >> 30
+                ),
+                _ => format!("not a valid msgpack snapshot: {e}"),
+            };
+            Error::format(path, format!("inflated byte {at}"), why)
+        })?;
+        if decoded.is_map() && stream.read(&mut [0u8]).map_or(true, |n| n > 0) {
+            return Err(Error::format(
+                path,
+                format!("inflated byte {at}"),
+                "not an instant-ngp snapshot: its msgpack ends here, before the end of the \
+                 stream",
+            ));
+        }
+        decoded
     } else {
-        raw
+        let mut cursor = Cursor::new(raw.as_slice());
+        let value = rmpv::decode::read_value(&mut cursor).map_err(|e| {
+            Error::format(
+                path,
+                format!("byte {}", cursor.position()),
+                format!("not a valid msgpack snapshot: {e}"),
+            )
+        })?;
+        if cursor.position() != raw.len() as u64 {
+            return Err(Error::format(
+                path,
+                format!("byte {}", cursor.position()),
+                format!(
+                    "not an instant-ngp snapshot: its msgpack ends here, {} bytes before the \
+                     end of the file",
+                    raw.len() as u64 - cursor.position()
+                ),
+            ));
+        }
+        value
     };
-    let mut cursor = Cursor::new(bytes.as_slice());
-    let value = rmpv::decode::read_value(&mut cursor).map_err(|e| {
-        Error::format(
+    if !decoded.is_map() {
+        let kind = match &decoded {
+            Value::Nil => "nil",
+            Value::Boolean(_) => "a boolean",
+            Value::Integer(_) => "an integer",
+            Value::F32(_) | Value::F64(_) => "a number",
+            Value::String(_) => "a string",
+            Value::Binary(_) => "binary data",
+            Value::Array(_) => "an array",
+            Value::Map(_) => "a map",
+            Value::Ext(..) => "an extension value",
+        };
+        return Err(Error::format(
             path,
-            format!("byte {}", cursor.position()),
-            format!("not a valid msgpack snapshot: {e}"),
-        )
-    })?;
-    Ok((value, gzip))
+            "top level",
+            format!("not an instant-ngp snapshot: it holds {kind}, not a map of keys"),
+        ));
+    }
+    Ok((decoded, gzip))
+}
+
+/// Counts the bytes read through it (for messages: where in the stream decoding stopped).
+struct CountingReader<R> {
+    inner: R,
+    count: u64,
+}
+
+impl<R: Read> Read for CountingReader<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.count += n as u64;
+        Ok(n)
+    }
 }
 
 /// The hash grid, MLP shapes and frame, read from the configuration.

@@ -111,7 +111,9 @@ pub fn frame_path(pattern: &Path, frame: i64, several: bool) -> PathBuf {
 /// field sees each frame's `camera_to_world` exactly (see [`CameraPath::to_shot`]).
 pub fn read_shot(path: &Path, nerf_object: &str) -> Result<Shot> {
     let text = crate::input::read_text(path)?;
-    let is_camera_path = serde_json::from_str::<serde_json::Value>(&text)
+    // Python's json writes NaN and Infinity: read as null, they still leave the file's kind
+    // clear, and the reader of that kind names the element that holds one.
+    let is_camera_path = crate::input::parse_json::<serde_json::Value>(&text, path, "a shot")
         .is_ok_and(|v| v.get("camera_path").is_some());
     if is_camera_path {
         CameraPath::from_json_str(&text, path)?.to_shot(0, nerf_object)

@@ -137,7 +137,7 @@ impl CameraPath {
     /// Parses and validates camera-path JSON; `path_for_errors` names the source in messages.
     pub fn from_json_str(text: &str, path_for_errors: impl AsRef<Path>) -> Result<CameraPath> {
         let path = path_for_errors.as_ref();
-        let root = json::parse(text, path)?;
+        let root = json::parse(&crate::input::non_finite_tokens_to_null(text), path)?;
         let top = Obj::root(&root, path, PATH_STYLE)?;
         let camera_type = match top.opt("camera_type") {
             None => PathCameraType::Perspective,

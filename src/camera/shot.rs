@@ -181,7 +181,7 @@ impl Shot {
     /// Parses and validates shot JSON; `path_for_errors` names the source in messages.
     pub fn from_json_str(text: &str, path_for_errors: impl AsRef<Path>) -> Result<Shot> {
         let path = path_for_errors.as_ref();
-        let root = json::parse_with_reason(&non_finite_tokens_to_null(text), path)?;
+        let root = json::parse_with_reason(&crate::input::non_finite_tokens_to_null(text), path)?;
         let top = Obj::root(&root, path, SHOT_STYLE)?;
         let version = top.get::<u64>("version", "an integer")?;
         if version != SHOT_VERSION {
@@ -658,40 +658,6 @@ impl ShotFields for Obj<'_> {
         // Rows in the file; glam is column-major.
         Ok(DMat4::from_cols_array_2d(&m).transpose())
     }
-}
-
-/// Replaces the bare tokens `NaN`, `Infinity` and `-Infinity` outside strings (what Python's
-/// `json` writes for non-finite floats) by `null`, so that the schema walk can name the field.
-fn non_finite_tokens_to_null(text: &str) -> std::borrow::Cow<'_, str> {
-    if !(text.contains("NaN") || text.contains("Infinity")) {
-        return text.into();
-    }
-    let mut out = String::with_capacity(text.len());
-    let (mut in_string, mut escaped) = (false, false);
-    let mut rest = text;
-    while let Some(ch) = rest.chars().next() {
-        if in_string {
-            if escaped {
-                escaped = false;
-            } else if ch == '\\' {
-                escaped = true;
-            } else if ch == '"' {
-                in_string = false;
-            }
-        } else if ch == '"' {
-            in_string = true;
-        } else if let Some(token) = ["NaN", "-Infinity", "Infinity"]
-            .iter()
-            .find(|t| rest.starts_with(**t))
-        {
-            out.push_str("null");
-            rest = &rest[token.len()..];
-            continue;
-        }
-        out.push(ch);
-        rest = &rest[ch.len_utf8()..];
-    }
-    out.into()
 }
 
 #[derive(Serialize)]

@@ -65,12 +65,7 @@ impl Graph {
     /// parameters.
     pub fn from_json_str(text: &str, path: &Path) -> Result<Graph> {
         let bad = |location: &str, message: String| Error::format(path, location, message);
-        let json: Json = serde_json::from_str(text).map_err(|e| {
-            bad(
-                &format!("line {} column {}", e.line(), e.column()),
-                e.to_string(),
-            )
-        })?;
+        let json: Json = crate::input::parse_json(text, path, "a node graph")?;
         if let Some(map) = json.as_object() {
             if let Some(key) = map
                 .keys()

@@ -151,13 +151,8 @@ impl SceneDesc {
     /// Parses scene JSON; `path` is used in messages, and relative field paths are made
     /// relative to its folder.
     pub fn from_json_str(text: &str, path: &Path) -> Result<Self> {
-        let mut desc: SceneDesc = serde_json::from_str(text).map_err(|e| {
-            Error::format(
-                path,
-                format!("line {} column {}", e.line(), e.column()),
-                e.to_string(),
-            )
-        })?;
+        let mut desc: SceneDesc =
+            crate::input::parse_json(text, path, "a scene: an object {\"instances\": [...]}")?;
         for (i, inst) in desc.instances.iter().enumerate() {
             let at = format!("instances[{i}] ('{}')", inst.name);
             match &inst.field {

@@ -1,100 +1,37 @@
-//! A minimal reader of zip archives held in memory: the container of torch checkpoints.
+//! Zip archives held in memory: the container of torch checkpoints, read with the `zip` crate.
 //!
-//! Torch writes its archives with miniz: every entry stored (method 0), data aligned to 64
-//! bytes by padding in the local header's extra field, zip64 records for large archives.
-//! This reader finds the end-of-central-directory record (and its zip64 form), walks the
-//! central directory, and hands out an entry's bytes after checking their CRC-32; stored and
-//! deflated (method 8, inflated with flate2) entries are read, others refused.
-//!
-//! Layout facts used (PKWARE APPNOTE): end record `PK\5\6` (entries u16 at +10, directory
-//! size u32 at +12, offset u32 at +16); zip64 locator `PK\6\7` 20 bytes before it (record
-//! offset u64 at +8); zip64 end record `PK\6\6` (entries u64 at +32, size at +40, offset at
-//! +48); central header `PK\1\2` (method +10, CRC +16, sizes +20/+24, name/extra/comment
-//! lengths +28/+30/+32, local offset +42, name +46; zip64 extra field id 1 holds the
-//! saturated values in the order uncompressed, compressed, offset); local header `PK\3\4`
-//! (name and extra lengths +26/+28, data at +30 + both).
+//! Torch writes its archives with miniz: every entry stored, data aligned to 64 bytes by
+//! padding in the local header's extra field, zip64 records for large archives. The crate
+//! parses the directories; this module keeps the file's name on every error, refuses any
+//! compression method but stored and deflated before reading a byte, and reads an entry only
+//! up to the size the directory gives it (and the file really holds), checking its CRC-32.
 
-use std::borrow::Cow;
-use std::io::Read;
+use std::io::{Cursor, Read};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use zip::result::ZipError;
+use zip::{CompressionMethod, ZipArchive};
 
 use crate::error::{Error, Result};
 
-/// One entry of the central directory.
+/// The archive's bytes, shared so that a reader can be cloned for each `&self` read.
 #[derive(Clone, Debug)]
-struct Entry {
-    name: String,
-    method: u16,
-    crc: u32,
-    compressed: u64,
-    uncompressed: u64,
-    local_offset: u64,
+struct Bytes(Arc<Vec<u8>>);
+
+impl AsRef<[u8]> for Bytes {
+    fn as_ref(&self) -> &[u8] {
+        &self.0
+    }
 }
 
 /// A zip archive in memory.
 #[derive(Debug)]
 pub(crate) struct Zip {
     path: PathBuf,
-    bytes: Vec<u8>,
-    entries: Vec<Entry>,
+    len: u64,
+    archive: ZipArchive<Cursor<Bytes>>,
 }
-
-/// Little-endian reads that fail with the file and offset instead of panicking.
-struct At<'a> {
-    path: &'a Path,
-    bytes: &'a [u8],
-}
-
-impl<'a> At<'a> {
-    fn slice(&self, at: u64, len: u64, what: &str) -> Result<&'a [u8]> {
-        let end = at
-            .checked_add(len)
-            .filter(|&e| e <= self.bytes.len() as u64);
-        match end {
-            Some(end) => Ok(&self.bytes[at as usize..end as usize]),
-            None => Err(Error::format(
-                self.path,
-                format!("byte {at}"),
-                format!("zip archive truncated: {what} runs past the end of the file"),
-            )),
-        }
-    }
-
-    fn u16(&self, at: u64, what: &str) -> Result<u16> {
-        let b = self.slice(at, 2, what)?;
-        Ok(u16::from_le_bytes([b[0], b[1]]))
-    }
-
-    fn u32(&self, at: u64, what: &str) -> Result<u32> {
-        let b = self.slice(at, 4, what)?;
-        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    }
-
-    fn u64(&self, at: u64, what: &str) -> Result<u64> {
-        let b = self.slice(at, 8, what)?;
-        let mut a = [0u8; 8];
-        a.copy_from_slice(b);
-        Ok(u64::from_le_bytes(a))
-    }
-
-    fn expect_signature(&self, at: u64, sig: u32, what: &str) -> Result<()> {
-        if self.u32(at, what)? == sig {
-            Ok(())
-        } else {
-            Err(Error::format(
-                self.path,
-                format!("byte {at}"),
-                format!("zip archive corrupt: no {what} signature"),
-            ))
-        }
-    }
-}
-
-const END: u32 = 0x0605_4b50;
-const END64_LOCATOR: u32 = 0x0706_4b50;
-const END64: u32 = 0x0606_4b50;
-const CENTRAL: u32 = 0x0201_4b50;
-const LOCAL: u32 = 0x0403_4b50;
 
 impl Zip {
     /// Reads the archive `path` and its central directory.
@@ -105,20 +42,19 @@ impl Zip {
 
     /// An archive from its bytes (`path` names it in messages).
     pub(crate) fn from_bytes(path: &Path, bytes: Vec<u8>) -> Result<Self> {
-        let entries = read_directory(&At {
-            path,
-            bytes: &bytes,
-        })?;
+        let len = bytes.len() as u64;
+        let archive = ZipArchive::new(Cursor::new(Bytes(Arc::new(bytes))))
+            .map_err(|e| corrupt(path, "", e))?;
         Ok(Zip {
             path: path.to_path_buf(),
-            bytes,
-            entries,
+            len,
+            archive,
         })
     }
 
     /// The entries' names, in directory order.
     pub(crate) fn names(&self) -> impl Iterator<Item = &str> {
-        self.entries.iter().map(|e| e.name.as_str())
+        self.archive.file_names()
     }
 
     /// The archive's file (for messages).
@@ -127,133 +63,79 @@ impl Zip {
     }
 
     /// The contents of entry `name`, CRC-checked; `None` when there is no such entry.
-    pub(crate) fn read(&self, name: &str) -> Result<Option<Cow<'_, [u8]>>> {
-        let Some(e) = self.entries.iter().find(|e| e.name == name) else {
+    pub(crate) fn read(&self, name: &str) -> Result<Option<Vec<u8>>> {
+        let Some(index) = self.archive.index_for_name(name) else {
             return Ok(None);
         };
-        let at = At {
-            path: &self.path,
-            bytes: &self.bytes,
-        };
         let what = format!("entry '{name}'");
-        at.expect_signature(e.local_offset, LOCAL, &format!("local header of {what}"))?;
-        let n = u64::from(at.u16(e.local_offset + 26, &what)?);
-        let x = u64::from(at.u16(e.local_offset + 28, &what)?);
-        let raw = at.slice(e.local_offset + 30 + n + x, e.compressed, &what)?;
-        let data: Cow<[u8]> = match e.method {
-            0 => Cow::Borrowed(raw),
-            8 => {
-                let mut out = Vec::with_capacity(e.uncompressed.min(1 << 30) as usize);
-                flate2::read::DeflateDecoder::new(raw)
-                    .read_to_end(&mut out)
-                    .map_err(|err| {
-                        Error::format(&self.path, &what, format!("bad deflate data: {err}"))
-                    })?;
-                Cow::Owned(out)
-            }
-            m => {
-                return Err(Error::Unsupported(format!(
-                    "{}: {what}: zip compression method {m} (only stored and deflated entries)",
-                    self.path.display()
-                )))
-            }
+        // A clone shares the bytes and the parsed directory; it only has its own position.
+        let mut archive = self.archive.clone();
+        let (method, size, end) = {
+            let raw = archive
+                .by_index_raw(index)
+                .map_err(|e| corrupt(&self.path, &what, e))?;
+            let end = raw
+                .data_start()
+                .and_then(|start| start.checked_add(raw.compressed_size()));
+            (raw.compression(), raw.size(), end)
         };
-        if data.len() as u64 != e.uncompressed {
+        if !matches!(
+            method,
+            CompressionMethod::Stored | CompressionMethod::Deflated
+        ) {
+            return Err(Error::Unsupported(format!(
+                "{}: {what}: zip compression method {method} (only stored and deflated entries)",
+                self.path.display()
+            )));
+        }
+        if end.is_none_or(|end| end > self.len) {
             return Err(Error::format(
                 &self.path,
                 &what,
-                format!(
-                    "holds {} bytes, the directory says {}",
-                    data.len(),
-                    e.uncompressed
-                ),
+                "zip archive truncated: the entry runs past the end of the file",
             ));
         }
-        let mut crc = flate2::Crc::new();
-        crc.update(&data);
-        if crc.sum() != e.crc {
+        let entry = archive
+            .by_index(index)
+            .map_err(|e| corrupt(&self.path, &what, e))?;
+        // Never more than the directory's size (plus one byte, to see a longer stream);
+        // memory grows with what the data really decodes to, not with the size claimed.
+        let mut data = Vec::with_capacity(size.min(self.len) as usize);
+        entry
+            .take(size.saturating_add(1))
+            .read_to_end(&mut data)
+            .map_err(|e| corrupt(&self.path, &what, ZipError::Io(e)))?;
+        if data.len() as u64 != size {
             return Err(Error::format(
                 &self.path,
                 &what,
-                "CRC-32 mismatch: the data is corrupt",
+                format!("holds {} bytes, the directory says {size}", data.len()),
             ));
         }
         Ok(Some(data))
     }
 }
 
-/// Finds the end record and reads every central-directory entry.
-fn read_directory(at: &At) -> Result<Vec<Entry>> {
-    let len = at.bytes.len();
-    let first = len.saturating_sub(22 + 65_535);
-    let end = (first..(len + 1).saturating_sub(22))
-        .rev()
-        .find(|&i| at.bytes[i..i + 4] == END.to_le_bytes())
-        .ok_or_else(|| {
-            Error::format(
-                at.path,
-                "",
-                "not a zip archive (no end-of-central-directory record): truncated or not a \
-                 torch checkpoint",
-            )
-        })? as u64;
-    let mut count = u64::from(at.u16(end + 10, "end record")?);
-    let mut size = u64::from(at.u32(end + 12, "end record")?);
-    let mut offset = u64::from(at.u32(end + 16, "end record")?);
-    if (count == 0xFFFF || size == 0xFFFF_FFFF || offset == 0xFFFF_FFFF) && end >= 20 {
-        let loc = end - 20;
-        at.expect_signature(loc, END64_LOCATOR, "zip64 end locator")?;
-        let rec = at.u64(loc + 8, "zip64 end locator")?;
-        at.expect_signature(rec, END64, "zip64 end record")?;
-        count = at.u64(rec + 32, "zip64 end record")?;
-        size = at.u64(rec + 40, "zip64 end record")?;
-        offset = at.u64(rec + 48, "zip64 end record")?;
-    }
-    at.slice(offset, size, "central directory")?;
-    let mut entries = Vec::new();
-    let mut p = offset;
-    for i in 0..count {
-        let what = format!("central directory entry {i}");
-        at.expect_signature(p, CENTRAL, &what)?;
-        let n = u64::from(at.u16(p + 28, &what)?);
-        let x = u64::from(at.u16(p + 30, &what)?);
-        let c = u64::from(at.u16(p + 32, &what)?);
-        let name = String::from_utf8(at.slice(p + 46, n, &what)?.to_vec()).map_err(|_| {
-            Error::format(at.path, &what, "entry name is not UTF-8: corrupt archive")
-        })?;
-        let mut e = Entry {
-            name,
-            method: at.u16(p + 10, &what)?,
-            crc: at.u32(p + 16, &what)?,
-            compressed: u64::from(at.u32(p + 20, &what)?),
-            uncompressed: u64::from(at.u32(p + 24, &what)?),
-            local_offset: u64::from(at.u32(p + 42, &what)?),
-        };
-        read_zip64_extra(at, p + 46 + n, x, &mut e, &what)?;
-        entries.push(e);
-        p += 46 + n + x + c;
-    }
-    Ok(entries)
-}
-
-/// Replaces the saturated sizes and offset of `e` by the zip64 extra field's values.
-fn read_zip64_extra(at: &At, start: u64, len: u64, e: &mut Entry, what: &str) -> Result<()> {
-    let mut q = start;
-    while q + 4 <= start + len {
-        let id = at.u16(q, what)?;
-        let size = u64::from(at.u16(q + 2, what)?);
-        if id == 1 {
-            let mut r = q + 4;
-            for v in [&mut e.uncompressed, &mut e.compressed, &mut e.local_offset] {
-                if *v == 0xFFFF_FFFF && r + 8 <= q + 4 + size {
-                    *v = at.u64(r, what)?;
-                    r += 8;
-                }
-            }
+/// A zip error as an error naming the archive (and the entry, when `what` names one).
+fn corrupt(path: &Path, what: &str, e: ZipError) -> Error {
+    let message = match e {
+        ZipError::Io(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => {
+            "zip archive truncated: data runs past the end of the file".to_owned()
         }
-        q += 4 + size;
-    }
-    Ok(())
+        ZipError::Io(e) if e.to_string().contains("checksum") => {
+            "CRC-32 mismatch: the data is corrupt".to_owned()
+        }
+        ZipError::Io(e) if e.kind() == std::io::ErrorKind::InvalidData => {
+            format!("zip archive corrupt: {e}")
+        }
+        ZipError::UnsupportedArchive(m) => format!("unsupported zip archive: {m}"),
+        e if what.is_empty() => format!(
+            "not a readable zip archive, truncated or corrupt ({e}): a torch checkpoint is a \
+             zip archive"
+        ),
+        e => format!("zip archive corrupt: {e}"),
+    };
+    Error::format(path, what, message)
 }
 
 #[cfg(test)]
@@ -262,26 +144,37 @@ mod tests {
 
     /// A stored-entry archive written from the APPNOTE layout, independently of the reader.
     fn archive(files: &[(&str, &[u8])]) -> Vec<u8> {
+        let entries: Vec<_> = files.iter().map(|&(n, d)| (n, 0, d.to_vec(), d)).collect();
+        archive_with(&entries)
+    }
+
+    /// An archive of `(name, method, bytes as written, contents)` entries (APPNOTE layout:
+    /// local headers with a 3-byte extra field, central directory, end record).
+    fn archive_with(files: &[(&str, u16, Vec<u8>, &[u8])]) -> Vec<u8> {
         let mut out = Vec::new();
         let mut central = Vec::new();
-        for (name, data) in files {
+        for (name, method, raw, data) in files {
             let mut crc = flate2::Crc::new();
             crc.update(data);
             let offset = out.len() as u32;
             out.extend(0x0403_4b50u32.to_le_bytes());
-            out.extend([20, 0, 0, 0, 0, 0, 0, 0, 0, 0]);
+            out.extend([20, 0, 0, 0]);
+            out.extend(method.to_le_bytes());
+            out.extend([0, 0, 0, 0]);
             out.extend(crc.sum().to_le_bytes());
-            out.extend((data.len() as u32).to_le_bytes());
+            out.extend((raw.len() as u32).to_le_bytes());
             out.extend((data.len() as u32).to_le_bytes());
             out.extend((name.len() as u16).to_le_bytes());
             out.extend(3u16.to_le_bytes());
             out.extend(name.as_bytes());
             out.extend([0, 0, 0]);
-            out.extend(*data);
+            out.extend(raw);
             central.extend(0x0201_4b50u32.to_le_bytes());
-            central.extend([20, 0, 20, 0, 0, 0, 0, 0, 0, 0, 0, 0]);
+            central.extend([20, 0, 20, 0, 0, 0]);
+            central.extend(method.to_le_bytes());
+            central.extend([0, 0, 0, 0]);
             central.extend(crc.sum().to_le_bytes());
-            central.extend((data.len() as u32).to_le_bytes());
+            central.extend((raw.len() as u32).to_le_bytes());
             central.extend((data.len() as u32).to_le_bytes());
             central.extend((name.len() as u16).to_le_bytes());
             central.extend([0u8; 12]);
@@ -327,5 +220,48 @@ mod tests {
             let e = r.expect_err("truncated archive accepted").to_string();
             assert!(e.contains("x.ckpt"), "{e}");
         }
+    }
+
+    #[test]
+    fn reads_deflated_entries() {
+        let data: Vec<u8> = (0..5000u32).map(|i| (i % 251) as u8).collect();
+        let mut enc = flate2::write::DeflateEncoder::new(Vec::new(), flate2::Compression::best());
+        std::io::Write::write_all(&mut enc, &data).unwrap();
+        let raw = enc.finish().unwrap();
+        assert!(raw.len() < data.len());
+        let bytes = archive_with(&[("a/data/0", 8, raw, &data)]);
+        let z = Zip::from_bytes(Path::new("x.ckpt"), bytes).unwrap();
+        assert_eq!(z.read("a/data/0").unwrap().unwrap(), data);
+    }
+
+    #[test]
+    fn other_compression_methods_are_refused_naming_file_and_entry() {
+        // bzip2 (12) and LZMA (14): the bytes must never be handed out as if stored.
+        for method in [12u16, 14] {
+            let bytes = archive_with(&[("a/data.pkl", method, b"hello".to_vec(), b"hello")]);
+            let z = Zip::from_bytes(Path::new("x.ckpt"), bytes).unwrap();
+            let e = z.read("a/data.pkl").unwrap_err().to_string();
+            assert!(
+                e.contains("x.ckpt") && e.contains("a/data.pkl") && e.contains("compression"),
+                "{e}"
+            );
+        }
+    }
+
+    #[test]
+    fn an_entry_larger_than_the_file_is_refused() {
+        // The directory and local header claim 1 GiB: refused before anything is allocated.
+        let mut bytes = archive(&[("a/data/0", &[5; 16])]);
+        for sig in [0x0403_4b50u32, 0x0201_4b50] {
+            let at = bytes
+                .windows(4)
+                .position(|w| w == sig.to_le_bytes())
+                .unwrap();
+            let sizes = if sig == 0x0403_4b50 { at + 18 } else { at + 20 };
+            bytes[sizes..sizes + 8].copy_from_slice(&[0, 0, 0, 64, 0, 0, 0, 64]);
+        }
+        let r = Zip::from_bytes(Path::new("x.ckpt"), bytes).and_then(|z| z.read("a/data/0"));
+        let e = r.unwrap_err().to_string();
+        assert!(e.contains("x.ckpt"), "{e}");
     }
 }

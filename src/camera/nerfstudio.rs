@@ -35,12 +35,12 @@ use glam::DMat4;
 use serde::Serialize;
 use serde_json::Value;
 
-use super::json::{self, numbers, short, Describe, Null, Obj, Style};
 use super::{
     Camera, Equirect, Eye, Ods, Perspective, Projection, SensorFit, Shot, ShotCamera,
     ShotCameraKind, ShotFrame, ShotStereo, StereoMode, Vr180, DEFAULT_IPD,
 };
 use crate::error::{Error, Result};
+use crate::json::{self, numbers, short, Describe, Null, Obj, Style};
 use crate::scene::CropBox;
 
 /// The sensor height used when a vertical FOV becomes a Blender lens (any value works: only

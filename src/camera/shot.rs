@@ -37,12 +37,12 @@ use glam::DMat4;
 use serde::Serialize;
 use serde_json::Value;
 
-use super::json::{self, short, Describe, Null, Obj, Style};
 use super::{
     BlenderIntrinsics, Camera, Equirect, Eye, MotionBlur, Ods, Perspective, Projection, SensorFit,
     ShutterPosition, Vr180,
 };
 use crate::error::{Error, Result};
+use crate::json::{self, short, Describe, Null, Obj, Style};
 
 /// The shot-file schema version this code reads and writes.
 pub const SHOT_VERSION: u64 = 1;

@@ -27,10 +27,14 @@ use glam::Vec3;
 use half::f16;
 use rmpv::Value;
 
-use super::cascades::Cascades;
-use super::hashgrid::correctly_rounded;
-use super::{sh4, Aabb, ColorSpace, Field, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage};
+mod cascades;
+
+use super::network::{
+    correctly_rounded, sh4, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage,
+};
+use super::{Aabb, ColorSpace, Field};
 use crate::error::{Error, Result};
+use cascades::Cascades;
 
 /// Points per batch inside one density or radiance call (bounds the scratch memory).
 const CHUNK: usize = 512;
@@ -511,7 +515,7 @@ fn params_encoding(
 fn read_cascades(doc: &Doc, snap: &Value) -> Result<Cascades> {
     let at = "snapshot.density_grid_binary";
     if let Some(v) = doc.find(snap, "density_grid_size") {
-        if v.as_u64() != Some(super::cascades::GRID as u64) {
+        if v.as_u64() != Some(cascades::GRID as u64) {
             return Err(doc.err(
                 "snapshot.density_grid_size",
                 format!("expected 128, found {v}"),

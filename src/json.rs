@@ -21,12 +21,12 @@ use crate::error::{Error, Result};
 
 /// Parses `text`; a syntax error becomes a format error at `line L column C` of `path`, with
 /// the message `not valid JSON`.
-pub(super) fn parse(text: &str, path: &Path) -> Result<Value> {
+pub(crate) fn parse(text: &str, path: &Path) -> Result<Value> {
     parse_with(text, path, |_| "not valid JSON".to_string())
 }
 
 /// As [`parse`], with serde_json's reason after the message: `not valid JSON: expected value`.
-pub(super) fn parse_with_reason(text: &str, path: &Path) -> Result<Value> {
+pub(crate) fn parse_with_reason(text: &str, path: &Path) -> Result<Value> {
     parse_with(text, path, |e| {
         // serde_json's message ends with the position, already in the location.
         format!(
@@ -52,7 +52,7 @@ fn parse_with(
 
 /// The kind of a JSON value, for messages: `null`, `a boolean`, `a number`, `a string`,
 /// `a list`, `an object`.
-pub(super) fn kind_of(v: &Value) -> &'static str {
+pub(crate) fn kind_of(v: &Value) -> &'static str {
     match v {
         Value::Null => "null",
         Value::Bool(_) => "a boolean",
@@ -64,7 +64,7 @@ pub(super) fn kind_of(v: &Value) -> &'static str {
 }
 
 /// A value for a message: its JSON text, cut to 40 characters and `…`.
-pub(super) fn short(v: &Value) -> String {
+pub(crate) fn short(v: &Value) -> String {
     let s = v.to_string();
     if s.chars().count() > 40 {
         format!("{}…", s.chars().take(40).collect::<String>())
@@ -74,7 +74,7 @@ pub(super) fn short(v: &Value) -> String {
 }
 
 /// The numbers of a JSON list, or `None` unless it is a list of finite numbers only.
-pub(super) fn numbers(v: &Value) -> Option<Vec<f64>> {
+pub(crate) fn numbers(v: &Value) -> Option<Vec<f64>> {
     match v {
         Value::Array(items) => items
             .iter()
@@ -86,7 +86,7 @@ pub(super) fn numbers(v: &Value) -> Option<Vec<f64>> {
 
 /// How a required field that holds JSON `null` is treated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Null {
+pub(crate) enum Null {
     /// As if the field were absent: `missing; expected …`.
     Missing,
     /// Refused as a value: `expected …, got null (or NaN/Infinity, which JSON cannot hold)`
@@ -96,7 +96,7 @@ pub(super) enum Null {
 
 /// How a value is described where an object or a list was wanted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Describe {
+pub(crate) enum Describe {
     /// By [`kind_of`]: `expected a list, got a string`.
     Kind,
     /// By [`short`]: `expected a list, got "abc"`.
@@ -105,7 +105,7 @@ pub(super) enum Describe {
 
 /// A file's wording of the messages that [`Obj`] writes itself.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) struct Style {
+pub(crate) struct Style {
     /// What a required `null` is.
     pub null: Null,
     /// How a value that is not the object or list wanted is described.
@@ -122,7 +122,7 @@ impl Style {
 }
 
 /// A JSON object being read, with its location for messages.
-pub(super) struct Obj<'a> {
+pub(crate) struct Obj<'a> {
     map: &'a Map<String, Value>,
     path: &'a Path,
     /// JSON path of this object, e.g. `frames[3].camera`; empty at the top.

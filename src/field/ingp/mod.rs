@@ -20,7 +20,6 @@
 //! (defaults `s = 0.33`, `o = 0.5`). So `q = (s·p.y + o.y, s·p.z + o.z, s·p.x + o.x)` and,
 //! lengths being `s` times longer in instant-ngp, `σ_field = s·σ_ngp`.
 
-use std::io::{Cursor, Read};
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
@@ -29,6 +28,7 @@ use rmpv::Value;
 
 mod cascades;
 
+use super::container::{read_document, Doc};
 use super::network::{
     correctly_rounded, sh4, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage,
 };
@@ -74,93 +74,6 @@ struct Summary {
     cutlass: bool,
     n_params: usize,
     aabb_scale: f32,
-}
-
-/// Msgpack access that names the key path in errors.
-struct Doc<'a> {
-    path: &'a Path,
-}
-
-impl Doc<'_> {
-    fn err(&self, at: &str, msg: impl Into<String>) -> Error {
-        Error::format(self.path, at, msg)
-    }
-
-    fn get<'v>(&self, v: &'v Value, at: &str, key: &str) -> Result<&'v Value> {
-        self.find(v, key)
-            .ok_or_else(|| self.err(at, format!("missing key '{key}'")))
-    }
-
-    fn find<'v>(&self, v: &'v Value, key: &str) -> Option<&'v Value> {
-        v.as_map()?
-            .iter()
-            .find(|(k, _)| k.as_str() == Some(key))
-            .map(|(_, v)| v)
-    }
-
-    fn f64(&self, v: &Value, at: &str) -> Result<f64> {
-        v.as_f64()
-            .or_else(|| v.as_i64().map(|i| i as f64))
-            .or_else(|| v.as_u64().map(|i| i as f64))
-            .filter(|x| x.is_finite())
-            .ok_or_else(|| self.err(at, format!("expected a finite number, found {v}")))
-    }
-
-    fn u32_or(&self, v: &Value, at: &str, key: &str, default: u32) -> Result<u32> {
-        match self.find(v, key) {
-            None => Ok(default),
-            Some(x) => x
-                .as_u64()
-                .and_then(|x| u32::try_from(x).ok())
-                .ok_or_else(|| {
-                    self.err(
-                        &format!("{at}.{key}"),
-                        format!("expected a count, found {x}"),
-                    )
-                }),
-        }
-    }
-
-    fn vec3(&self, v: &Value, at: &str) -> Result<Vec3> {
-        let a = v
-            .as_array()
-            .filter(|a| a.len() == 3)
-            .ok_or_else(|| self.err(at, "expected an array of 3 numbers"))?;
-        let mut out = [0.0f32; 3];
-        for (o, x) in out.iter_mut().zip(a) {
-            *o = self.f64(x, at)? as f32;
-        }
-        Ok(Vec3::from_array(out))
-    }
-
-    fn bytes<'v>(&self, v: &'v Value, at: &str) -> Result<&'v [u8]> {
-        v.as_slice()
-            .ok_or_else(|| self.err(at, "expected binary data"))
-    }
-}
-
-/// Reads the file and decodes its msgpack (inflating it first when it is gzip-framed).
-fn read_document(path: &Path) -> Result<(Value, bool)> {
-    let raw = crate::input::read_bytes(path)?;
-    let gzip = raw.starts_with(&[0x1f, 0x8b]);
-    let bytes = if gzip {
-        let mut out = Vec::new();
-        flate2::read::GzDecoder::new(raw.as_slice())
-            .read_to_end(&mut out)
-            .map_err(|e| Error::format(path, "gzip stream", e.to_string()))?;
-        out
-    } else {
-        raw
-    };
-    let mut cursor = Cursor::new(bytes.as_slice());
-    let value = rmpv::decode::read_value(&mut cursor).map_err(|e| {
-        Error::format(
-            path,
-            format!("byte {}", cursor.position()),
-            format!("not a valid msgpack snapshot: {e}"),
-        )
-    })?;
-    Ok((value, gzip))
 }
 
 /// The hash grid, MLP shapes and frame, read from the configuration.

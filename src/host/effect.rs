@@ -19,11 +19,11 @@ use openfx_sys::{
 };
 
 use super::handles::{self, Kind};
-use super::instance::ClipSource;
 use super::log::{Log, Message};
 use super::options::{AbsentClip, Field, HostOptions, PADDING, ROW_SLACK};
 use super::params::{put, ParamSet};
 use super::props::{self, PropSet};
+use super::source::ClipSource;
 use super::spec::{cstr, SetKind};
 use super::{status, threads};
 use crate::image::{scaled_size, Planes, Window};

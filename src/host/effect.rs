@@ -25,7 +25,7 @@ use super::params::{put, ParamSet};
 use super::props::{self, PropSet};
 use super::source::ClipSource;
 use super::spec::{cstr, SetKind};
-use super::{status, threads};
+use super::{memory, status};
 use crate::image::{scaled_size, Planes, Window};
 
 /// Guard border around the output image, in pixels.
@@ -1031,7 +1031,7 @@ unsafe extern "C" fn image_memory_alloc(
             return s;
         }
     }
-    let ptr = threads::allocate(n);
+    let ptr = memory::allocate(n);
     if ptr.is_null() {
         return status::ERR_MEMORY;
     }
@@ -1066,7 +1066,7 @@ unsafe extern "C" fn image_memory_free(h: OfxImageMemoryHandle) -> OfxStatus {
     }
     // SAFETY: a live handle came from Box::into_raw, and this caller alone removed it.
     let m = unsafe { Box::from_raw(p as *mut ImageMemory) };
-    threads::free(m.ptr);
+    memory::free(m.ptr);
     status::OK
 }
 

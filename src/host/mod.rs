@@ -43,6 +43,7 @@ mod globals;
 mod handles;
 mod instance;
 mod log;
+mod memory;
 mod messages;
 mod options;
 mod params;

@@ -84,8 +84,9 @@ impl Zip {
             CompressionMethod::Stored | CompressionMethod::Deflated
         ) {
             return Err(Error::Unsupported(format!(
-                "{}: {what}: zip compression method {method} (only stored and deflated entries)",
-                self.path.display()
+                "{}: {what}: {} compression (only stored and deflated zip entries)",
+                self.path.display(),
+                method_name(method)
             )));
         }
         if end.is_none_or(|end| end > self.len) {
@@ -114,6 +115,24 @@ impl Zip {
         }
         Ok(Some(data))
     }
+}
+
+/// A compression method's name and number (APPNOTE 4.4.5), for messages.
+fn method_name(method: CompressionMethod) -> String {
+    let known = [
+        (CompressionMethod::IMPLODE, "implode (method 6)"),
+        (CompressionMethod::DEFLATE64, "Deflate64 (method 9)"),
+        (CompressionMethod::BZIP2, "bzip2 (method 12)"),
+        (CompressionMethod::LZMA, "LZMA (method 14)"),
+        (CompressionMethod::ZSTD, "Zstandard (method 93)"),
+        (CompressionMethod::XZ, "xz (method 95)"),
+        (CompressionMethod::PPMD, "PPMd (method 98)"),
+        (CompressionMethod::AES, "AES-encrypted (method 99)"),
+    ];
+    known
+        .iter()
+        .find(|(m, _)| *m == method)
+        .map_or_else(|| format!("{method:?}"), |(_, name)| name.to_string())
 }
 
 /// A zip error as an error naming the archive (and the entry, when `what` names one).
@@ -242,7 +261,9 @@ mod tests {
             let z = Zip::from_bytes(Path::new("x.ckpt"), bytes).unwrap();
             let e = z.read("a/data.pkl").unwrap_err().to_string();
             assert!(
-                e.contains("x.ckpt") && e.contains("a/data.pkl") && e.contains("compression"),
+                e.contains("x.ckpt")
+                    && e.contains("a/data.pkl")
+                    && e.contains(&format!("method {method})")),
                 "{e}"
             );
         }

@@ -113,7 +113,7 @@ pub fn read_shot(path: &Path, nerf_object: &str) -> Result<Shot> {
     let text = crate::input::read_text(path)?;
     // Python's json writes NaN and Infinity: read as null, they still leave the file's kind
     // clear, and the reader of that kind names the element that holds one.
-    let is_camera_path = crate::input::parse_json::<serde_json::Value>(&text, path, "a shot")
+    let is_camera_path = crate::json::parse_json::<serde_json::Value>(&text, path, "a shot")
         .is_ok_and(|v| v.get("camera_path").is_some());
     if is_camera_path {
         CameraPath::from_json_str(&text, path)?.to_shot(0, nerf_object)

@@ -26,6 +26,7 @@ pub mod graph;
 pub mod host;
 pub mod image;
 mod input;
+mod json;
 pub mod reference;
 pub mod render;
 pub mod scene;

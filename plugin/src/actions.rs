@@ -39,13 +39,13 @@
 
 use std::ffi::{c_void, CStr};
 
-use nerfx::graph::{ClipKind, Node, ParamKind, ParamValues};
+use nerfx::graph::{ClipKind, Node};
 use openfx_sys::*;
 
 use crate::images::{connected, pixel_aspect};
 use crate::instance::{self, Instance};
 use crate::message::{self, Target};
-use crate::params::values_at;
+use crate::params::{unset_file, values_at};
 use crate::props::{name, Props};
 use crate::status::{Failure, Result, OK, REPLY_DEFAULT};
 use crate::suites::{self, suites};
@@ -71,16 +71,6 @@ pub fn message_target(action: &CStr, handle: *const c_void) -> Target {
     } else {
         Target::Instance(h)
     }
-}
-
-/// The first file parameter of the node still empty in `values`: the node is not ready.
-pub fn unset_file(node: &Node, values: &ParamValues) -> Option<&'static str> {
-    node.desc
-        .params
-        .iter()
-        .filter(|p| matches!(p.kind, ParamKind::File))
-        .find(|p| values.text(p.name).is_ok_and(str::is_empty))
-        .map(|p| p.name)
 }
 
 /// Whether `reason` (`kOfxPropChangeReason`) is an edit, not the time moving.
@@ -346,38 +336,5 @@ mod tests {
         assert!(!is_edit("OfxChangeTime"));
         assert!(is_edit("OfxChangeUserEdited"));
         assert!(is_edit("OfxChangePluginEdited"));
-    }
-
-    #[test]
-    fn a_node_with_an_empty_file_is_not_ready() {
-        let node = nerfx::graph::node("org.nerfx.NeRFRender").unwrap();
-        let files: Vec<&str> = node
-            .desc
-            .params
-            .iter()
-            .filter(|p| matches!(p.kind, ParamKind::File))
-            .map(|p| p.name)
-            .collect();
-        assert!(!files.is_empty());
-        let mut values = node.defaults();
-        // Defaults: every file empty; the first one is named.
-        assert_eq!(unset_file(node, &values), Some(files[0]));
-        for (i, f) in files.iter().enumerate() {
-            values
-                .set(f, nerfx::graph::Value::Text(format!("/x/{i}.json")))
-                .unwrap();
-        }
-        assert_eq!(unset_file(node, &values), None);
-        // Nodes without files are always ready.
-        for n in nerfx::graph::nodes() {
-            if !n
-                .desc
-                .params
-                .iter()
-                .any(|p| matches!(p.kind, ParamKind::File))
-            {
-                assert_eq!(unset_file(n, &n.defaults()), None, "{}", n.desc.id);
-            }
-        }
     }
 }

@@ -15,34 +15,14 @@
 //! Properties that are niceties (description, field handling, clip-preference slaves, …)
 //! are set with [`optional`]: a host that does not know one must not lose the plugin.
 
-use nerfx::graph::{ClipKind, Context, Node, ParamKind};
+use nerfx::graph::{ClipKind, Node, ParamKind};
 use openfx_sys::*;
 
-use crate::instance::{effect_props, param_set};
+use crate::effect::{context_from_name, context_name, effect_props, param_set};
 use crate::param_defs::define_param;
 use crate::props::{name, optional, Props};
 use crate::status::{check, Failure, Result, ERR_UNSUPPORTED};
 use crate::suites::suites;
-
-/// The OpenFX name of `context`.
-pub fn context_name(context: Context) -> &'static [u8] {
-    match context {
-        Context::Generator => kOfxImageEffectContextGenerator,
-        Context::Filter => kOfxImageEffectContextFilter,
-        Context::General => kOfxImageEffectContextGeneral,
-    }
-}
-
-/// The context named `text`; other contexts are unsupported.
-pub fn context_from_name(text: &str) -> Result<Context> {
-    [Context::Generator, Context::Filter, Context::General]
-        .into_iter()
-        .find(|c| name(context_name(*c)).to_bytes() == text.as_bytes())
-        .ok_or_else(|| Failure {
-            status: ERR_UNSUPPORTED,
-            message: format!("context {text:?} is not supported"),
-        })
-}
 
 /// `kOfxActionDescribe`.
 pub fn describe(node: &Node, effect: OfxImageEffectHandle) -> Result<()> {
@@ -177,20 +157,6 @@ fn clip_preference_slaves(node: &Node) -> Vec<&'static str> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn context_names_round_trip() {
-        for c in [Context::Generator, Context::Filter, Context::General] {
-            let text = name(context_name(c)).to_str().unwrap();
-            assert_eq!(context_from_name(text).unwrap(), c);
-        }
-        assert_eq!(
-            context_from_name("OfxImageEffectContextFilter").unwrap(),
-            Context::Filter
-        );
-        let e = context_from_name("OfxImageEffectContextPaint").unwrap_err();
-        assert_eq!(e.status, ERR_UNSUPPORTED);
-    }
 
     #[test]
     fn fixed_parameters_of_a_node_with_its_own_format_are_clip_preference_slaves() {

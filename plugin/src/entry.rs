@@ -18,6 +18,7 @@ use openfx_sys::{
 };
 
 use crate::actions::{message_target, run};
+use crate::instance;
 use crate::message::{post_error, Target};
 use crate::status::{Failure, FAILED, OK};
 use crate::suites::set_host;
@@ -34,6 +35,17 @@ fn panic_text(payload: &(dyn std::any::Any + Send)) -> String {
         .unwrap_or_else(|| "unknown panic".to_string())
 }
 
+/// Posts `text` to `target` as an error, with what an instance target has already shown.
+fn report(target: Target, text: &str) {
+    let inst = match target {
+        // SAFETY: messages go to an instance only during its actions, between its create and
+        // destroy actions; the reference does not outlive this call.
+        Target::Instance(h) => unsafe { instance::get(h.cast()) }.ok(),
+        _ => None,
+    };
+    post_error(target, inst.map(|i| &i.shown), text);
+}
+
 /// Runs `f`, turning a failure or a panic into a status and a message to `target`.
 fn guarded(
     target: Target,
@@ -43,13 +55,13 @@ fn guarded(
     match catch_unwind(AssertUnwindSafe(f)) {
         Ok(Ok(status)) => status,
         Ok(Err(failure)) => {
-            post_error(target, &failure.message);
+            report(target, &failure.message);
             failure.status
         }
         Err(payload) => {
             let text = format!("{what}: internal error: {}", panic_text(payload.as_ref()));
             // Posting itself must not unwind out of here either.
-            let _ = catch_unwind(AssertUnwindSafe(|| post_error(target, &text)));
+            let _ = catch_unwind(AssertUnwindSafe(|| report(target, &text)));
             FAILED
         }
     }

@@ -12,13 +12,12 @@ use std::sync::Mutex;
 use nerfx::graph::{ClipDesc, Node};
 use openfx_sys::{
     kOfxImageEffectOutputClipName, kOfxImageEffectPropContext, kOfxPropInstanceData,
-    OfxImageClipHandle, OfxImageEffectHandle, OfxParamHandle, OfxParamSetHandle,
-    OfxPropertySetHandle,
+    OfxImageClipHandle, OfxImageEffectHandle, OfxParamHandle, OfxPropertySetHandle,
 };
 
-use crate::describe::context_from_name;
+use crate::effect::{context_from_name, effect_props, param_set};
 use crate::message::Shown;
-use crate::props::{name, Props};
+use crate::props::name;
 use crate::status::{check, Failure, Result};
 use crate::suites::suites;
 
@@ -45,32 +44,6 @@ pub struct Instance {
     pub inputs: Vec<(&'static ClipDesc, ClipRef)>,
     /// What the instance has shown the artist ([`crate::message`]).
     pub shown: Mutex<Shown>,
-}
-
-/// The effect's property set.
-pub fn effect_props(effect: OfxImageEffectHandle) -> Result<Props> {
-    let s = suites()?;
-    let get = s
-        .effect
-        .getPropertySet
-        .ok_or_else(|| Failure::missing_suite("image effect suite's getPropertySet"))?;
-    let mut set: OfxPropertySetHandle = std::ptr::null_mut();
-    // SAFETY: `effect` is the handle of the current action; `set` receives a handle.
-    check("getPropertySet", unsafe { get(effect, &mut set) })?;
-    // SAFETY: the property set lives as long as the effect.
-    Ok(unsafe { Props::new(set, s.property) })
-}
-
-/// The effect's parameter set (of a descriptor or an instance).
-pub fn param_set(effect: OfxImageEffectHandle) -> Result<OfxParamSetHandle> {
-    let get = suites()?
-        .effect
-        .getParamSet
-        .ok_or_else(|| Failure::missing_suite("image effect suite's getParamSet"))?;
-    let mut set: OfxParamSetHandle = std::ptr::null_mut();
-    // SAFETY: `effect` is the handle of the current action; `set` receives a handle.
-    check("getParamSet", unsafe { get(effect, &mut set) })?;
-    Ok(set)
 }
 
 fn clip(effect: OfxImageEffectHandle, clip_name: &str) -> Result<ClipRef> {

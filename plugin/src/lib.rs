@@ -7,7 +7,8 @@
 //! - `entry`: `OfxGetNumberOfPlugins`, `OfxGetPlugin`, `OfxSetHost`, per-node trampolines,
 //!   `catch_unwind` around everything.
 //! - `actions`: each action's meaning in terms of the core; `describe` and
-//!   `param_defs` publish nodes; `instance` keeps per-instance handles; `render` renders.
+//!   `param_defs` publish nodes; `instance` keeps per-instance handles; `render` renders;
+//!   `effect`: an action's effect handle (its property and parameter sets, its context).
 //! - `params`: parameter values at a time; `images` and `pixels`: clip images ⇄
 //!   [`nerfx::image::Planes`]; `coords`: OpenFX pixel rectangles ⇄ raster windows.
 //! - `props`, `suites`, `message`, `status`: the host's suites made safe, and errors.
@@ -16,6 +17,7 @@
 mod actions;
 mod coords;
 mod describe;
+mod effect;
 mod entry;
 mod images;
 mod instance;

@@ -20,7 +20,6 @@ use std::sync::{Mutex, PoisonError};
 
 use openfx_sys::{kOfxMessageError, kOfxMessageWarning};
 
-use crate::instance;
 use crate::props::{c_string, name};
 use crate::suites::{suites, MessageSuite};
 
@@ -76,22 +75,17 @@ fn delivery(v2: Option<bool>, target: Target, shown: Option<&mut Shown>) -> Deli
 }
 
 /// Posts `text` as an error as the module explains; standard error when the host has no
-/// message suite or its suites are not loaded yet.
-pub fn post_error(target: Target, text: &str) {
+/// message suite or its suites are not loaded yet. `shown` is the record of an instance
+/// target (none for other targets, or when the instance cannot be found).
+pub fn post_error(target: Target, shown: Option<&Mutex<Shown>>, text: &str) {
     let Ok(s) = suites() else {
         eprintln!("nerfx.ofx: {text}");
         return;
     };
     let v2 = s.message.map(|m| matches!(m, MessageSuite::V2(_)));
-    let inst = match target {
-        // SAFETY: messages go to an instance only during its actions, between its create and
-        // destroy actions; the reference does not outlive this call.
-        Target::Instance(h) => unsafe { instance::get(h.cast()) }.ok(),
-        _ => None,
-    };
-    let how = match inst {
-        Some(i) => {
-            let mut shown = i.shown.lock().unwrap_or_else(PoisonError::into_inner);
+    let how = match shown {
+        Some(shown) => {
+            let mut shown = shown.lock().unwrap_or_else(PoisonError::into_inner);
             delivery(v2, target, Some(&mut shown))
         }
         None => delivery(v2, target, None),

@@ -8,7 +8,7 @@
 use std::ffi::CStr;
 use std::os::raw::{c_char, c_int};
 
-use nerfx::graph::{parse_matrix, ParamKind, ParamValues, Value};
+use nerfx::graph::{parse_matrix, Node, ParamKind, ParamValues, Value};
 use nerfx::Error;
 use openfx_sys::OfxParamHandle;
 
@@ -95,4 +95,52 @@ pub fn values_at(instance: &Instance, time: f64) -> Result<ParamValues> {
         values.set(p.name, value)?;
     }
     Ok(values)
+}
+
+/// The first file parameter of the node still empty in `values`: the node is not ready.
+pub fn unset_file(node: &Node, values: &ParamValues) -> Option<&'static str> {
+    node.desc
+        .params
+        .iter()
+        .filter(|p| matches!(p.kind, ParamKind::File))
+        .find(|p| values.text(p.name).is_ok_and(str::is_empty))
+        .map(|p| p.name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_node_with_an_empty_file_is_not_ready() {
+        let node = nerfx::graph::node("org.nerfx.NeRFRender").unwrap();
+        let files: Vec<&str> = node
+            .desc
+            .params
+            .iter()
+            .filter(|p| matches!(p.kind, ParamKind::File))
+            .map(|p| p.name)
+            .collect();
+        assert!(!files.is_empty());
+        let mut values = node.defaults();
+        // Defaults: every file empty; the first one is named.
+        assert_eq!(unset_file(node, &values), Some(files[0]));
+        for (i, f) in files.iter().enumerate() {
+            values
+                .set(f, nerfx::graph::Value::Text(format!("/x/{i}.json")))
+                .unwrap();
+        }
+        assert_eq!(unset_file(node, &values), None);
+        // Nodes without files are always ready.
+        for n in nerfx::graph::nodes() {
+            if !n
+                .desc
+                .params
+                .iter()
+                .any(|p| matches!(p.kind, ParamKind::File))
+            {
+                assert_eq!(unset_file(n, &n.defaults()), None, "{}", n.desc.id);
+            }
+        }
+    }
 }

@@ -9,7 +9,7 @@
 //!    and write the result into the output image inside the render window (pixels of the
 //!    window outside the node's image become transparent black).
 //!
-//! A node that is not ready (a file parameter still empty, [`crate::actions::unset_file`])
+//! A node that is not ready (a file parameter still empty, [`crate::params::unset_file`])
 //! renders its first connected RGBA input unchanged, or transparent black, and no error: the
 //! render reports which file is missing, and the action marks the node with a warning.
 //! When the host renders one field of fielded footage into a full-frame image
@@ -21,11 +21,10 @@ use nerfx::graph::{check_render_scale, ClipKind, RenderRequest};
 use nerfx::image::{Plane, Planes, Window};
 use openfx_sys::*;
 
-use crate::actions::unset_file;
 use crate::coords::{Frame, PixelRect};
 use crate::images::{connected, pixel_aspect, ClipImage};
 use crate::instance::Instance;
-use crate::params::values_at;
+use crate::params::{unset_file, values_at};
 use crate::pixels::{read_planes, write_planes, Rows};
 use crate::props::{name, Props};
 use crate::status::{Failure, Result};

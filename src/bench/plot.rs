@@ -10,7 +10,7 @@ mod font;
 use std::path::Path;
 
 use crate::error::{Error, Result};
-use crate::image::encode_png_rgba8;
+use crate::image::write_png_rgba8;
 
 /// One named line of a plot.
 #[derive(Clone, Debug, PartialEq)]
@@ -64,8 +64,7 @@ pub fn plot_png(
     log_x: bool,
 ) -> Result<()> {
     let rgba = draw(title, x_label, y_label, series, log_x)?;
-    let png = encode_png_rgba8(WIDTH, HEIGHT, &rgba)?;
-    std::fs::write(path, png).map_err(|e| Error::io(path, e))
+    write_png_rgba8(path, WIDTH, HEIGHT, &rgba)
 }
 
 /// The plot as RGBA8 pixels, `WIDTH × HEIGHT`.
@@ -466,7 +465,7 @@ impl Canvas {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::image::png::png_decode::decode_rgba8;
+    use crate::image::decode_rgba8;
 
     fn bench_like_series() -> Vec<Series> {
         let preset = |label: &str, pts: &[(f64, f64)]| Series {

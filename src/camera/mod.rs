@@ -9,18 +9,15 @@
 //! into every field instance's frame (see [`crate::scene`]), so several fields with their own
 //! object transforms can be marched jointly.
 
-mod dataparser;
 mod environment;
 mod equirect;
 mod interpolate;
-mod json;
 mod nerfstudio;
 mod perspective;
 mod shot;
 mod shutter;
 mod stereo;
 
-pub use dataparser::DataparserTransform;
 pub use environment::environment_camera;
 pub use equirect::Equirect;
 pub use nerfstudio::{CameraPath, PathCameraType, PathCrop, PathFrame, PathKeyframe};

@@ -35,12 +35,12 @@ use glam::DMat4;
 use serde::Serialize;
 use serde_json::Value;
 
-use super::json::{self, numbers, short, Describe, Null, Obj, Style};
 use super::{
     Camera, Equirect, Eye, Ods, Perspective, Projection, SceneWorld, SensorFit, Shot, ShotCamera,
     ShotCameraKind, ShotFrame, ShotStereo, StereoMode, Vr180, DEFAULT_IPD,
 };
 use crate::error::{Error, Result};
+use crate::json::{self, numbers, short, Describe, Obj, Style};
 use crate::scene::CropBox;
 
 /// The sensor height used when a vertical FOV becomes a Blender lens (any value works: only
@@ -137,7 +137,7 @@ impl CameraPath {
     /// Parses and validates camera-path JSON; `path_for_errors` names the source in messages.
     pub fn from_json_str(text: &str, path_for_errors: impl AsRef<Path>) -> Result<CameraPath> {
         let path = path_for_errors.as_ref();
-        let root = json::parse(&crate::input::non_finite_tokens_to_null(text), path)?;
+        let root = json::parse(text, path)?;
         let top = Obj::root(&root, path, PATH_STYLE)?;
         let camera_type = match top.opt("camera_type") {
             None => PathCameraType::Perspective,
@@ -501,7 +501,6 @@ struct RawColor {
 /// How a camera path's messages are worded: `null` counts as absent, a value of the wrong
 /// shape is quoted.
 const PATH_STYLE: Style = Style {
-    null: Null::Missing,
     wrong_shape: Describe::Value,
 };
 

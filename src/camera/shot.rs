@@ -37,12 +37,12 @@ use glam::DMat4;
 use serde::Serialize;
 use serde_json::Value;
 
-use super::json::{self, short, Describe, Null, Obj, Style};
 use super::{
     BlenderIntrinsics, Camera, Equirect, Eye, MotionBlur, Ods, Perspective, Projection, SensorFit,
     ShutterPosition, Vr180,
 };
 use crate::error::{Error, Result};
+use crate::json::{self, short, Describe, Obj, Style};
 
 /// The shot-file schema version this code reads and writes.
 pub const SHOT_VERSION: u64 = 1;
@@ -181,7 +181,7 @@ impl Shot {
     /// Parses and validates shot JSON; `path_for_errors` names the source in messages.
     pub fn from_json_str(text: &str, path_for_errors: impl AsRef<Path>) -> Result<Shot> {
         let path = path_for_errors.as_ref();
-        let root = json::parse_with_reason(&crate::input::non_finite_tokens_to_null(text), path)?;
+        let root = json::parse_with_reason(text, path)?;
         let top = Obj::root(&root, path, SHOT_STYLE)?;
         let version = top.get::<u64>("version", "an integer")?;
         if version != SHOT_VERSION {
@@ -560,7 +560,6 @@ fn read_camera(cam: &Obj) -> Result<ShotCamera> {
 /// How a shot file's messages are worded: `null` is refused (it is what a `NaN` token became),
 /// a value of the wrong shape is named by its kind.
 const SHOT_STYLE: Style = Style {
-    null: Null::Refused,
     wrong_shape: Describe::Kind,
 };
 

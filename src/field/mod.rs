@@ -2,45 +2,39 @@
 //!
 //! A [`Field`] answers *batched* density and radiance queries in its own frame and says,
 //! conservatively, where it may have density. The [`Occupancy`] structure is built from that
-//! answer and lets the marcher skip empty space. Implementations: [`Analytic`] (spheres,
-//! boxes and Gaussian blobs with closed-form ray integrals, the ground truth for accuracy).
+//! answer and lets the marcher skip empty space.
+//!
+//! One folder per representation: `analytic/` ([`Analytic`]: spheres, boxes and Gaussian
+//! blobs with closed-form ray integrals, the ground truth for accuracy), `ingp/`
+//! ([`IngpField`]: instant-ngp snapshots), `nerfacto/` ([`NerfactoField`]: nerfstudio nerfacto
+//! runs) and `splats/` ([`Splats`]: 3D Gaussian splats, rendered as fragments rather than
+//! marched). The two trained networks share `network/` (hash grid, MLP, SH encoding); the
+//! files the fields come in (torch checkpoints and their zip archives, PLY) are read in
+//! `container/`.
 
 mod aabb;
 mod analytic;
-mod cascades;
-mod hashgrid;
+mod container;
 mod ingp;
-mod mlp;
 mod nerfacto;
-mod nerfacto_config;
-mod nerfacto_torch;
+mod network;
 mod occupancy;
-mod ply;
-mod sh;
-mod sh4;
 mod splats;
 mod srgb;
-mod torch_ckpt;
-mod zip;
 
 pub use aabb::Aabb;
-pub use analytic::{Analytic, Primitive, Shape};
-pub use hashgrid::{HashGrid, HashGridConfig, TableStorage};
+pub use analytic::{Analytic, Primitive, ShColor, Shape};
 pub use ingp::IngpField;
-pub use mlp::{Mlp, MlpConfig};
-pub(crate) use nerfacto::latest_checkpoint;
-pub use nerfacto::NerfactoField;
+pub use nerfacto::{DataparserTransform, NerfactoField};
+pub(crate) use network::sh_basis;
+pub use network::TableStorage;
 pub use occupancy::Occupancy;
-pub use sh::ShColor;
-pub use sh4::sh4;
-pub(crate) use sh4::sh_basis;
 pub(crate) use splats::{
     is_splatfacto_run, Fragment, RayLayer, RayView as SplatRayView, SplatLayer, View as SplatView,
     MIN_TRANSMITTANCE as SPLAT_MIN_TRANSMITTANCE, NEAR_PLANE as SPLAT_NEAR_PLANE,
 };
 pub use splats::{SplatColor, Splats};
 pub(crate) use srgb::{linear_to_srgb, srgb_to_linear};
-pub use torch_ckpt::{Checkpoint, DType, TensorInfo};
 
 use std::path::Path;
 

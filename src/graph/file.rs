@@ -65,7 +65,7 @@ impl Graph {
     /// parameters.
     pub fn from_json_str(text: &str, path: &Path) -> Result<Graph> {
         let bad = |location: &str, message: String| Error::format(path, location, message);
-        let json: Json = crate::input::parse_json(text, path, "a node graph")?;
+        let json: Json = crate::json::parse_json(text, path, "a node graph")?;
         if let Some(map) = json.as_object() {
             if let Some(key) = map
                 .keys()

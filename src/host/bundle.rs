@@ -10,7 +10,6 @@ use openfx_sys::OfxPlugin;
 
 use super::effect::Effect;
 use super::globals::{self as host, HostEntry};
-use super::instance::Instance;
 use super::log::{self, ActionScope, Log, Message};
 use super::options::HostOptions;
 use super::props::{args, PropSet, PropValue};
@@ -600,11 +599,6 @@ impl Bundle {
             params,
             properties: p.all(),
         })
-    }
-
-    /// An instance of `id` in `context` (describe, describeInContext, createInstance).
-    pub fn instance(&self, id: &str, context: Context) -> Result<Instance> {
-        Instance::create(self, id, context)
     }
 
     /// Every message the plugins posted, persistent ones included, with those posted

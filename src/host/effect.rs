@@ -19,13 +19,13 @@ use openfx_sys::{
 };
 
 use super::handles::{self, Kind};
-use super::instance::ClipSource;
 use super::log::{Log, Message};
 use super::options::{AbsentClip, Field, HostOptions, PADDING, ROW_SLACK};
 use super::params::{put, ParamSet};
 use super::props::{self, PropSet};
+use super::source::ClipSource;
 use super::spec::{cstr, SetKind};
-use super::{status, threads};
+use super::{memory, status};
 use crate::image::{scaled_size, Planes, Window};
 
 /// Guard border around the output image, in pixels.
@@ -1031,7 +1031,7 @@ unsafe extern "C" fn image_memory_alloc(
             return s;
         }
     }
-    let ptr = threads::allocate(n);
+    let ptr = memory::allocate(n);
     if ptr.is_null() {
         return status::ERR_MEMORY;
     }
@@ -1066,7 +1066,7 @@ unsafe extern "C" fn image_memory_free(h: OfxImageMemoryHandle) -> OfxStatus {
     }
     // SAFETY: a live handle came from Box::into_raw, and this caller alone removed it.
     let m = unsafe { Box::from_raw(p as *mut ImageMemory) };
-    threads::free(m.ptr);
+    memory::free(m.ptr);
     status::OK
 }
 

@@ -14,7 +14,7 @@ use openfx_sys::{OfxHost, OfxPropertySetHandle};
 use super::options::MessageSuiteOffer;
 use super::props::{self, PropSet, PropValue};
 use super::spec::SetKind;
-use super::{effect, messages, params, prop_suite, shim, threads};
+use super::{effect, memory, messages, params, prop_suite, shim, threads};
 
 /// One host struct handed to plugins: its property set, the `OfxHost`, the message suite it
 /// offers, and how many binaries hold it now (a host struct a binary was told to replace
@@ -203,7 +203,7 @@ unsafe extern "C" fn fetch_suite(
             (&effect::SUITE as *const ofx::OfxImageEffectSuiteV1).cast()
         }
         1 if is(ofx::kOfxParameterSuite) => (&g.params as *const ofx::OfxParameterSuiteV1).cast(),
-        1 if is(ofx::kOfxMemorySuite) => (&threads::MEMORY as *const ofx::OfxMemorySuiteV1).cast(),
+        1 if is(ofx::kOfxMemorySuite) => (&memory::MEMORY as *const ofx::OfxMemorySuiteV1).cast(),
         1 if is(ofx::kOfxMultiThreadSuite) => {
             (&threads::MULTI_THREAD as *const ofx::OfxMultiThreadSuiteV1).cast()
         }

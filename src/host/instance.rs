@@ -2,7 +2,7 @@
 
 use std::collections::HashMap;
 use std::ffi::c_void;
-use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+use std::sync::{Mutex, MutexGuard, PoisonError};
 
 use openfx_sys as ofx;
 
@@ -11,57 +11,25 @@ use super::effect::{self, Effect, Layout, RenderScope, GUARD, SENTINEL_BITS};
 use super::log::Message;
 use super::options::{ChangeReason, Field, PADDING, ROW_SLACK};
 use super::props::{args, PropSet, PropValue};
+use super::source::ClipSource;
 use super::spec::{cstr, ParamType};
 use super::status;
 use crate::error::{Error, Result};
 use crate::graph::{check_render_scale, Context, Value};
 use crate::image::{Plane, Planes, Window};
 
-/// Renders a window of an input: `(time, window, render_scale)` → planes of the window's
-/// size, in the core's raster convention (window at the render scale, `y` down).
-pub type SourceFn = dyn Fn(f64, Window, f64) -> Result<Planes> + Send + Sync;
-
-/// What feeds an input clip.
-#[derive(Clone)]
-pub struct ClipSource {
-    /// The source's region of definition `(width, height)` in full-resolution pixels.
-    pub rod: (u32, u32),
-    /// Its pixels.
-    pub render: Arc<SourceFn>,
-}
-
-impl ClipSource {
-    /// A source of size `rod` rendering through `render`.
-    pub fn new(
-        rod: (u32, u32),
-        render: impl Fn(f64, Window, f64) -> Result<Planes> + Send + Sync + 'static,
-    ) -> Self {
-        ClipSource {
-            rod,
-            render: Arc::new(render),
-        }
-    }
-
-    /// A source that is a fixed full-resolution image, the same at every time; it serves
-    /// render scale 1 only.
-    pub fn image(planes: Planes) -> Self {
-        let rod = (planes.width, planes.height);
-        ClipSource::new(rod, move |_, w, s| {
-            if s != 1.0 {
-                return Err(Error::Unsupported(format!(
-                    "a fixed image at render scale {s}"
-                )));
-            }
-            planes.crop(w)
-        })
-    }
-}
-
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Safety {
     Unsafe,
     Instance,
     Fully,
+}
+
+impl Bundle {
+    /// An instance of `id` in `context` (describe, describeInContext, createInstance).
+    pub fn instance(&self, id: &str, context: Context) -> Result<Instance> {
+        Instance::create(self, id, context)
+    }
 }
 
 /// A plugin instance. `render` (and the other render-time actions) may be called from many

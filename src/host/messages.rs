@@ -13,17 +13,35 @@ use super::effect::Effect;
 use super::handles::{self, Kind};
 use super::log::{self, Message};
 use super::spec::cstr;
-use super::{shim, status};
+use super::status;
+
+// The C-variadic functions of the suite, defined in `param_shim.c`.
+extern "C" {
+    fn nerfx_message(
+        handle: *mut c_void,
+        kind: *const c_char,
+        id: *const c_char,
+        format: *const c_char,
+        ...
+    ) -> OfxStatus;
+    fn nerfx_set_persistent_message(
+        handle: *mut c_void,
+        kind: *const c_char,
+        id: *const c_char,
+        format: *const c_char,
+        ...
+    ) -> OfxStatus;
+}
 
 /// Message suite V1.
 pub(crate) static MESSAGE_V1: ofx::OfxMessageSuiteV1 = ofx::OfxMessageSuiteV1 {
-    message: Some(shim::nerfx_message),
+    message: Some(nerfx_message),
 };
 
 /// Message suite V2.
 pub(crate) static MESSAGE_V2: ofx::OfxMessageSuiteV2 = ofx::OfxMessageSuiteV2 {
-    message: Some(shim::nerfx_message),
-    setPersistentMessage: Some(shim::nerfx_set_persistent_message),
+    message: Some(nerfx_message),
+    setPersistentMessage: Some(nerfx_set_persistent_message),
     clearPersistentMessage: Some(clear_persistent),
 };
 

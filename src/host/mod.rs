@@ -43,21 +43,24 @@ mod globals;
 mod handles;
 mod instance;
 mod log;
+mod memory;
 mod messages;
 mod options;
 mod params;
 mod prop_suite;
 mod props;
 mod shim;
+mod source;
 mod spec;
 mod status;
 mod threads;
 
 pub use bundle::{Bundle, ClipDescription, EffectDescription, ParamDescription};
-pub use instance::{ClipSource, Instance, SourceFn};
+pub use instance::Instance;
 pub use log::Message;
 pub use options::{AbsentClip, ChangeReason, Field, HostOptions, MessageSuiteOffer, PADDING};
 pub use props::PropValue;
+pub use source::{ClipSource, SourceFn};
 pub use spec::PropType;
 pub use status::{status_name, Status};
 

@@ -255,20 +255,34 @@ impl Drop for ParamSet {
     }
 }
 
+// The C-variadic functions of the suite, defined in `param_shim.c`.
+extern "C" {
+    fn nerfx_param_get_value(param: OfxParamHandle, ...) -> OfxStatus;
+    fn nerfx_param_get_value_at_time(param: OfxParamHandle, time: OfxTime, ...) -> OfxStatus;
+    fn nerfx_param_get_derivative(param: OfxParamHandle, time: OfxTime, ...) -> OfxStatus;
+    fn nerfx_param_get_integral(
+        param: OfxParamHandle,
+        time1: OfxTime,
+        time2: OfxTime,
+        ...
+    ) -> OfxStatus;
+    fn nerfx_param_set_value(param: OfxParamHandle, ...) -> OfxStatus;
+    fn nerfx_param_set_value_at_time(param: OfxParamHandle, time: OfxTime, ...) -> OfxStatus;
+}
+
 /// The suite the plugin fetches.
 pub(crate) fn suite() -> ofx::OfxParameterSuiteV1 {
-    use super::shim;
     ofx::OfxParameterSuiteV1 {
         paramDefine: Some(define),
         paramGetHandle: Some(get_handle),
         paramSetGetPropertySet: Some(set_get_property_set),
         paramGetPropertySet: Some(get_property_set),
-        paramGetValue: Some(shim::nerfx_param_get_value),
-        paramGetValueAtTime: Some(shim::nerfx_param_get_value_at_time),
-        paramGetDerivative: Some(shim::nerfx_param_get_derivative),
-        paramGetIntegral: Some(shim::nerfx_param_get_integral),
-        paramSetValue: Some(shim::nerfx_param_set_value),
-        paramSetValueAtTime: Some(shim::nerfx_param_set_value_at_time),
+        paramGetValue: Some(nerfx_param_get_value),
+        paramGetValueAtTime: Some(nerfx_param_get_value_at_time),
+        paramGetDerivative: Some(nerfx_param_get_derivative),
+        paramGetIntegral: Some(nerfx_param_get_integral),
+        paramSetValue: Some(nerfx_param_set_value),
+        paramSetValueAtTime: Some(nerfx_param_set_value_at_time),
         paramGetNumKeys: Some(get_num_keys),
         paramGetKeyTime: Some(get_key_time),
         paramGetKeyIndex: Some(get_key_index),

@@ -1,10 +1,9 @@
-//! The Rust side of `param_shim.c`: the variadic functions it defines, and the typed
-//! callbacks it forwards to (installed once by [`init`]).
+//! The Rust side of `param_shim.c`: the typed callbacks its variadic functions forward to
+//! (installed once by [`init`]). The parameter and message suites declare the variadic
+//! functions themselves.
 
 use std::ffi::{c_char, c_double, c_int, c_void, CStr};
 use std::sync::Once;
-
-use openfx_sys::{OfxParamHandle, OfxStatus, OfxTime};
 
 use super::log::Message;
 use super::{messages, params, status};
@@ -44,43 +43,6 @@ const MAX_DIM: usize = 4;
 
 extern "C" {
     fn nerfx_shim_init(callbacks: *const Callbacks);
-    pub(crate) fn nerfx_param_get_value(param: OfxParamHandle, ...) -> OfxStatus;
-    pub(crate) fn nerfx_param_get_value_at_time(
-        param: OfxParamHandle,
-        time: OfxTime,
-        ...
-    ) -> OfxStatus;
-    pub(crate) fn nerfx_param_get_derivative(
-        param: OfxParamHandle,
-        time: OfxTime,
-        ...
-    ) -> OfxStatus;
-    pub(crate) fn nerfx_param_get_integral(
-        param: OfxParamHandle,
-        time1: OfxTime,
-        time2: OfxTime,
-        ...
-    ) -> OfxStatus;
-    pub(crate) fn nerfx_param_set_value(param: OfxParamHandle, ...) -> OfxStatus;
-    pub(crate) fn nerfx_param_set_value_at_time(
-        param: OfxParamHandle,
-        time: OfxTime,
-        ...
-    ) -> OfxStatus;
-    pub(crate) fn nerfx_message(
-        handle: *mut c_void,
-        kind: *const c_char,
-        id: *const c_char,
-        format: *const c_char,
-        ...
-    ) -> OfxStatus;
-    pub(crate) fn nerfx_set_persistent_message(
-        handle: *mut c_void,
-        kind: *const c_char,
-        id: *const c_char,
-        format: *const c_char,
-        ...
-    ) -> OfxStatus;
 }
 
 static CALLBACKS: Callbacks = Callbacks {

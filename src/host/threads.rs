@@ -1,11 +1,8 @@
-//! The multithread suite (real threads and real, recursive mutexes) and the memory suite
-//! (allocations tracked, so freeing a pointer the host never gave out is a violation).
+//! The multithread suite: real threads and real, recursive mutexes.
 
-use std::alloc::{alloc, dealloc, Layout};
 use std::cell::Cell;
-use std::collections::HashMap;
 use std::ffi::{c_int, c_uint, c_void};
-use std::sync::{Condvar, Mutex, OnceLock, PoisonError};
+use std::sync::{Condvar, Mutex, PoisonError};
 use std::thread::ThreadId;
 
 use openfx_sys as ofx;
@@ -25,12 +22,6 @@ pub(crate) static MULTI_THREAD: ofx::OfxMultiThreadSuiteV1 = ofx::OfxMultiThread
     mutexLock: Some(mutex_lock),
     mutexUnLock: Some(mutex_unlock),
     mutexTryLock: Some(mutex_try_lock),
-};
-
-/// Memory suite V1.
-pub(crate) static MEMORY: ofx::OfxMemorySuiteV1 = ofx::OfxMemorySuiteV1 {
-    memoryAlloc: Some(memory_alloc),
-    memoryFree: Some(memory_free),
 };
 
 thread_local! {
@@ -189,70 +180,5 @@ unsafe extern "C" fn mutex_try_lock(h: OfxMutexHandle) -> OfxStatus {
         Some(m) if m.try_lock(false) => status::OK,
         Some(_) => status::FAILED,
         None => status::ERR_BAD_HANDLE,
-    }
-}
-
-fn allocations() -> &'static Mutex<HashMap<usize, Layout>> {
-    static ALLOCATIONS: OnceLock<Mutex<HashMap<usize, Layout>>> = OnceLock::new();
-    ALLOCATIONS.get_or_init(Default::default)
-}
-
-/// Allocates `n` bytes aligned to 16, tracked; NULL when `n` is 0 or too large.
-pub(crate) fn allocate(n: usize) -> *mut c_void {
-    let Ok(layout) = Layout::from_size_align(n.max(1), 16) else {
-        return std::ptr::null_mut();
-    };
-    // SAFETY: a non-zero size.
-    let ptr = unsafe { alloc(layout) };
-    if !ptr.is_null() {
-        allocations()
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .insert(ptr as usize, layout);
-    }
-    ptr.cast()
-}
-
-/// Frees an allocation of [`allocate`]; false when `ptr` is not one.
-pub(crate) fn free(ptr: *mut c_void) -> bool {
-    let layout = allocations()
-        .lock()
-        .unwrap_or_else(PoisonError::into_inner)
-        .remove(&(ptr as usize));
-    match layout {
-        // SAFETY: allocated by `allocate` with this layout.
-        Some(layout) => unsafe { dealloc(ptr.cast(), layout) },
-        None => return false,
-    }
-    true
-}
-
-unsafe extern "C" fn memory_alloc(
-    _handle: *mut c_void,
-    n: usize,
-    out: *mut *mut c_void,
-) -> OfxStatus {
-    if out.is_null() {
-        log::current().violation("memoryAlloc: NULL destination");
-        return status::FAILED;
-    }
-    let ptr = allocate(n);
-    // SAFETY: checked non-NULL.
-    unsafe { out.write(ptr) };
-    if ptr.is_null() {
-        status::ERR_MEMORY
-    } else {
-        status::OK
-    }
-}
-
-unsafe extern "C" fn memory_free(ptr: *mut c_void) -> OfxStatus {
-    if free(ptr) {
-        status::OK
-    } else {
-        log::current().violation(format!(
-            "memoryFree: {ptr:p} was not allocated by memoryAlloc"
-        ));
-        status::ERR_BAD_HANDLE
     }
 }

@@ -2,10 +2,12 @@
 
 mod exr_io;
 mod plane;
+mod png;
 mod replace;
-// Crate-visible so that other modules' tests can use its test PNG decoder.
-pub(crate) mod png;
 
+#[cfg(test)]
+pub(crate) use self::png::decode_rgba8;
+pub use self::png::write_png_preview;
+pub(crate) use self::png::write_png_rgba8;
 pub use exr_io::{read_exr_channels, write_exr, write_exr_layers, BACKGROUND_DEPTH};
 pub use plane::{scaled_size, Plane, Planes, Window};
-pub use png::{encode_png_rgba8, write_png_preview};

@@ -1,21 +1,10 @@
-//! 8-bit PNG previews of render planes, encoded by hand (the format is small: a signature and
-//! three chunk kinds), with zlib from `flate2`.
-//!
-//! A PNG is the 8-byte signature, then chunks `length (u32 BE) | type | data | CRC-32(type ‖
-//! data)`: `IHDR` (size, 8 bits, colour type 6 = RGBA), `IDAT` (the zlib stream of the rows,
-//! each row prefixed by its filter byte; 0 = none here) and an empty `IEND`.
+//! 8-bit PNG previews of render planes, encoded with the `png` crate.
 
-use std::io::Write;
+use std::io::{BufWriter, Write};
 use std::path::Path;
-
-use flate2::write::ZlibEncoder;
-use flate2::{Compression, Crc};
 
 use crate::error::{Error, Result};
 use crate::image::{Plane, Planes, BACKGROUND_DEPTH};
-
-/// The 8 bytes every PNG starts with.
-const SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A];
 
 /// PNG's largest width or height, 2³¹ − 1.
 const MAX_SIDE: u32 = i32::MAX as u32;
@@ -35,70 +24,48 @@ const MAX_SIDE: u32 = i32::MAX as u32;
 /// PNG; [`Error::Io`] naming `path` when the file cannot be written.
 pub fn write_png_preview(path: &Path, planes: &Planes) -> Result<()> {
     let rgba = preview_rgba8(planes)?;
-    let bytes = encode_png_rgba8(planes.width, planes.height, &rgba)?;
-    super::replace::replace_file(path, |temp| {
-        std::fs::write(temp, bytes).map_err(|e| Error::io(path, e))
-    })
+    write_png_rgba8(path, planes.width, planes.height, &rgba)
 }
 
-/// Encodes `rgba` (`width × height` pixels, 4 bytes each, rows top first, non-premultiplied
-/// alpha) as a complete PNG file.
+/// Writes `rgba` (`width × height` pixels, 4 bytes each, rows top first, non-premultiplied
+/// alpha, sRGB-encoded colour) to `path` as an 8-bit RGBA PNG tagged sRGB. The file is
+/// replaced only once complete: a failed write leaves an existing one as it was.
 ///
-/// Errors: [`Error::Invalid`] when a side is 0 or above 2³¹ − 1, or `rgba` has the wrong length.
-pub fn encode_png_rgba8(width: u32, height: u32, rgba: &[u8]) -> Result<Vec<u8>> {
+/// Errors: [`Error::Invalid`] when a side is 0 or above 2³¹ − 1, or `rgba` has the wrong
+/// length; [`Error::Io`] naming `path` when the file cannot be written.
+pub(crate) fn write_png_rgba8(path: &Path, width: u32, height: u32, rgba: &[u8]) -> Result<()> {
     if width == 0 || height == 0 || width > MAX_SIDE || height > MAX_SIDE {
         return Err(Error::invalid(
             "PNG image",
             format!("size {width}×{height} is outside 1..2³¹−1"),
         ));
     }
-    let row_bytes = width as usize * 4;
-    if rgba.len() != row_bytes * height as usize {
+    let expected = width as usize * 4 * height as usize;
+    if rgba.len() != expected {
         return Err(Error::invalid(
             "PNG image",
             format!(
-                "{} bytes of RGBA for {width}×{height} pixels (expected {})",
-                rgba.len(),
-                row_bytes * height as usize
+                "{} bytes of RGBA for {width}×{height} pixels (expected {expected})",
+                rgba.len()
             ),
         ));
     }
-
-    let mut ihdr = Vec::with_capacity(13);
-    ihdr.extend_from_slice(&width.to_be_bytes());
-    ihdr.extend_from_slice(&height.to_be_bytes());
-    // Bit depth 8, colour type 6 (RGBA), deflate, adaptive filtering, no interlace.
-    ihdr.extend_from_slice(&[8, 6, 0, 0, 0]);
-
-    let mut zlib = ZlibEncoder::new(Vec::new(), Compression::default());
-    let deflated = rgba
-        .chunks_exact(row_bytes)
-        .try_for_each(|row| {
-            zlib.write_all(&[0])?; // filter type 0: the row as is
-            zlib.write_all(row)
-        })
-        .and_then(|()| zlib.finish())
-        .map_err(|e| Error::invalid("PNG image", format!("deflate failed: {e}")))?;
-
-    let mut png = Vec::with_capacity(SIGNATURE.len() + deflated.len() + 3 * 12 + 13);
-    png.extend_from_slice(&SIGNATURE);
-    push_chunk(&mut png, b"IHDR", &ihdr);
-    push_chunk(&mut png, b"IDAT", &deflated);
-    push_chunk(&mut png, b"IEND", &[]);
-    Ok(png)
-}
-
-/// Appends one chunk: length, type, data, CRC-32 over type and data.
-fn push_chunk(png: &mut Vec<u8>, kind: &[u8; 4], data: &[u8]) {
-    // PNG caps a chunk at 2³¹ − 1 bytes; the deflated rows of the largest image we could
-    // hold in memory stay far below (a 2³¹-byte IDAT is an 8-gigapixel-ish image).
-    png.extend_from_slice(&(data.len() as u32).to_be_bytes());
-    png.extend_from_slice(kind);
-    png.extend_from_slice(data);
-    let mut crc = Crc::new();
-    crc.update(kind);
-    crc.update(data);
-    png.extend_from_slice(&crc.sum().to_be_bytes());
+    super::replace::replace_file(path, |temp| {
+        let file = std::fs::File::create(temp).map_err(|e| Error::io(path, e))?;
+        let mut out = BufWriter::new(file);
+        let mut encoder = png::Encoder::new(&mut out, width, height);
+        encoder.set_color(png::ColorType::Rgba);
+        encoder.set_depth(png::BitDepth::Eight);
+        encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+        let encoding = |e: png::EncodingError| match e {
+            png::EncodingError::IoError(e) => Error::io(path, e),
+            e => Error::invalid("PNG image", e.to_string()),
+        };
+        let mut writer = encoder.write_header().map_err(encoding)?;
+        writer.write_image_data(rgba).map_err(encoding)?;
+        writer.finish().map_err(encoding)?;
+        out.flush().map_err(|e| Error::io(path, e))
+    })
 }
 
 /// The RGBA8 pixels of the preview described at [`write_png_preview`].
@@ -199,93 +166,24 @@ fn srgb_u8(x: f32) -> u8 {
     linear_u8(srgb_encode(x.clamp(0.0, 1.0)))
 }
 
-/// A minimal PNG decoder, written independently of the encoder, for tests: checks the
-/// signature and every chunk's CRC, accepts only 8-bit RGBA, non-interlaced, filter type 0.
+/// `(width, height, rgba)` of a PNG decoded by the `png` crate, for tests: 8-bit RGBA only.
 #[cfg(test)]
-pub(crate) mod png_decode {
-    use std::io::Read;
-
-    /// CRC-32 (ISO 3309, reflected polynomial 0xEDB88320), one bit at a time.
-    fn crc32(bytes: &[u8]) -> u32 {
-        let mut crc = 0xFFFF_FFFFu32;
-        for &byte in bytes {
-            crc ^= u32::from(byte);
-            for _ in 0..8 {
-                crc = if crc & 1 == 1 {
-                    (crc >> 1) ^ 0xEDB8_8320
-                } else {
-                    crc >> 1
-                };
-            }
-        }
-        !crc
-    }
-
-    fn be32(b: &[u8]) -> u32 {
-        u32::from_be_bytes([b[0], b[1], b[2], b[3]])
-    }
-
-    /// `(width, height, rgba)` of a PNG, panicking on anything unexpected.
-    pub(crate) fn decode_rgba8(png: &[u8]) -> (u32, u32, Vec<u8>) {
-        assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n", "signature");
-        let mut at = 8;
-        let mut header = None;
-        let mut idat = Vec::new();
-        let mut kinds = Vec::new();
-        while at < png.len() {
-            let len = be32(&png[at..]) as usize;
-            let kind = &png[at + 4..at + 8];
-            let data = &png[at + 8..at + 8 + len];
-            let crc = be32(&png[at + 8 + len..]);
-            assert_eq!(
-                crc,
-                crc32(&png[at + 4..at + 8 + len]),
-                "CRC of chunk {kind:?}"
-            );
-            kinds.push(kind.to_vec());
-            match kind {
-                b"IHDR" => header = Some(data.to_vec()),
-                b"IDAT" => idat.extend_from_slice(data),
-                _ => {}
-            }
-            at += 12 + len;
-        }
-        assert_eq!(at, png.len(), "trailing bytes");
-        assert_eq!(kinds.first().map(Vec::as_slice), Some(&b"IHDR"[..]));
-        assert_eq!(kinds.last().map(Vec::as_slice), Some(&b"IEND"[..]));
-        let h = header.unwrap_or_default();
-        assert_eq!(h.len(), 13, "IHDR length");
-        let (width, height) = (be32(&h[0..]), be32(&h[4..]));
-        assert_eq!(
-            &h[8..],
-            &[8, 6, 0, 0, 0],
-            "8-bit RGBA, deflate, no interlace"
-        );
-
-        let mut raw = Vec::new();
-        flate2::read::ZlibDecoder::new(&idat[..])
-            .read_to_end(&mut raw)
-            .unwrap();
-        let stride = 1 + 4 * width as usize;
-        assert_eq!(raw.len(), stride * height as usize, "inflated size");
-        let mut rgba = Vec::with_capacity(raw.len());
-        for row in raw.chunks_exact(stride) {
-            assert_eq!(row[0], 0, "filter type");
-            rgba.extend_from_slice(&row[1..]);
-        }
-        (width, height, rgba)
-    }
-
-    #[test]
-    fn crc32_matches_the_standard_check_value() {
-        // The CRC-32 check value of the ASCII digits "123456789".
-        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
-    }
+pub(crate) fn decode_rgba8(bytes: &[u8]) -> (u32, u32, Vec<u8>) {
+    let mut reader = png::Decoder::new(std::io::Cursor::new(bytes))
+        .read_info()
+        .unwrap();
+    let mut rgba = vec![0; reader.output_buffer_size().unwrap()];
+    let frame = reader.next_frame(&mut rgba).unwrap();
+    assert_eq!(
+        (frame.color_type, frame.bit_depth),
+        (png::ColorType::Rgba, png::BitDepth::Eight)
+    );
+    rgba.truncate(frame.buffer_size());
+    (frame.width, frame.height, rgba)
 }
 
 #[cfg(test)]
 mod tests {
-    use super::png_decode::decode_rgba8;
     use super::*;
 
     fn empty(width: u32, height: u32) -> Planes {
@@ -317,6 +215,14 @@ mod tests {
             1.055 * x.powf(1.0 / 2.4) - 0.055
         };
         (v * 255.0).round() as u8
+    }
+
+    /// The preview of `planes` written to a file and read back by the `png` crate.
+    fn write_and_decode(planes: &Planes) -> (u32, u32, Vec<u8>) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("preview.png");
+        write_png_preview(&path, planes).unwrap();
+        decode_rgba8(&std::fs::read(&path).unwrap())
     }
 
     #[test]
@@ -358,8 +264,7 @@ mod tests {
         planes.rgb = Some([premul(0), premul(1), premul(2)]);
         planes.alpha = Some(plane(3, alpha.iter().map(|&a| a as f32).collect()));
 
-        let png = encode_png_rgba8(3, 2, &preview_rgba8(&planes).unwrap()).unwrap();
-        let (w, h, rgba) = decode_rgba8(&png);
+        let (w, h, rgba) = write_and_decode(&planes);
         assert_eq!((w, h), (3, 2));
         for i in 0..6 {
             let want = [
@@ -369,6 +274,39 @@ mod tests {
                 (alpha[i] * 255.0).round() as u8,
             ];
             assert_eq!(rgba[4 * i..4 * i + 4], want, "pixel {i}");
+        }
+    }
+
+    #[test]
+    fn a_transparent_background_reads_back_transparent_and_tagged_srgb() {
+        // A 4×3 render of one half-covered pixel on an empty background.
+        let (w, h) = (4, 3);
+        let mut alpha = vec![0.0; 12];
+        alpha[5] = 0.5;
+        let premul = |v: f32| plane(w, alpha.iter().map(|a| a * v).collect());
+        let mut planes = empty(w, h);
+        planes.rgb = Some([premul(1.0), premul(0.5), premul(0.0)]);
+        planes.alpha = Some(plane(w, alpha.clone()));
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("preview.png");
+        write_png_preview(&path, &planes).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let reader = png::Decoder::new(std::io::Cursor::new(&bytes))
+            .read_info()
+            .unwrap();
+        assert!(reader.info().srgb.is_some(), "sRGB chunk");
+        let (dw, dh, rgba) = decode_rgba8(&bytes);
+        assert_eq!((dw, dh), (w, h));
+        for (i, px) in rgba.chunks_exact(4).enumerate() {
+            if i == 5 {
+                assert_eq!(px, [255, srgb_reference(0.5), 0, 128]);
+            } else {
+                assert_eq!(
+                    px,
+                    [0, 0, 0, 0],
+                    "pixel {i}: the background must stay clear"
+                );
+            }
         }
     }
 
@@ -400,15 +338,10 @@ mod tests {
             w,
             (0..w * h).map(|i| (i % 256) as f32 / 255.0).collect(),
         ));
-        let nanos = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map(|d| d.as_nanos())
-            .unwrap_or(0);
-        let path =
-            std::env::temp_dir().join(format!("nerfx-png-{}-{nanos}.png", std::process::id()));
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("matte.png");
         write_png_preview(&path, &planes).unwrap();
         let bytes = std::fs::read(&path).unwrap();
-        let _ = std::fs::remove_file(&path);
         let (dw, dh, rgba) = decode_rgba8(&bytes);
         assert_eq!((dw, dh), (w, h));
         for (i, px) in rgba.chunks_exact(4).enumerate() {
@@ -419,14 +352,17 @@ mod tests {
 
     #[test]
     fn refuses_empty_and_mismatched_input() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("x.png");
         assert!(matches!(
-            encode_png_rgba8(0, 4, &[]),
+            write_png_rgba8(&out, 0, 4, &[]),
             Err(Error::Invalid { .. })
         ));
         assert!(matches!(
-            encode_png_rgba8(2, 2, &[0; 15]),
+            write_png_rgba8(&out, 2, 2, &[0; 15]),
             Err(Error::Invalid { .. })
         ));
+        assert!(!out.exists());
         assert!(matches!(
             preview_rgba8(&empty(2, 2)),
             Err(Error::Invalid { .. })

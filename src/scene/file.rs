@@ -152,7 +152,7 @@ impl SceneDesc {
     /// relative to its folder.
     pub fn from_json_str(text: &str, path: &Path) -> Result<Self> {
         let mut desc: SceneDesc =
-            crate::input::parse_json(text, path, "a scene: an object {\"instances\": [...]}")?;
+            crate::json::parse_json(text, path, "a scene: an object {\"instances\": [...]}")?;
         for (i, inst) in desc.instances.iter().enumerate() {
             let at = format!("instances[{i}] ('{}')", inst.name);
             match &inst.field {

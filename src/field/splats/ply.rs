@@ -9,7 +9,7 @@ use glam::{Quat, Vec3};
 
 use super::{SplatColor, Splats};
 use crate::error::{Error, Result};
-use crate::field::ply::{Ply, Property};
+use crate::field::container::{Ply, Property};
 
 /// Reads a splat PLY file whole (a regular file, up to its real size).
 pub(super) fn read(path: &Path) -> Result<Splats> {

@@ -12,8 +12,8 @@ use glam::Vec3;
 
 use super::{SplatColor, Splats};
 use crate::error::{Error, Result};
-use crate::field::nerfacto_config::scan;
-use crate::field::{latest_checkpoint, Checkpoint};
+use crate::field::container::Checkpoint;
+use crate::field::nerfacto::{latest_checkpoint, scan};
 
 /// The method a run's `config.yml` names (`method_name`), if it can be read.
 fn method_name(run: &Path) -> Option<String> {

@@ -20,7 +20,11 @@
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
-use super::{Aabb, Field, ShColor};
+mod sh;
+
+pub use sh::ShColor;
+
+use super::{Aabb, Field};
 use crate::error::{Error, Result};
 
 /// Relative padding of [`Field::may_be_occupied`]: much larger than f32 rounding (~1e-7), much

@@ -9,15 +9,15 @@
 //! scale `s`. As one matrix, `ns_from_data = diag(s, s, s, 1)·[T t; 0 1]`. A camera from the
 //! data's frame (`data_from_camera`) lands in the field's frame as
 //! `ns_from_data · data_from_camera`; its rotation then carries the scale `s`, which
-//! [`super::Camera::new`] removes (directions are renormalised, distances follow `s`).
+//! [`crate::camera::Camera::new`] removes (directions are renormalised, distances follow `s`).
 
 use std::path::Path;
 
 use glam::{DMat4, DVec4};
 use serde_json::Value;
 
-use super::json::{self, numbers};
 use crate::error::{Error, Result};
+use crate::json::{self, numbers};
 
 /// The dataparser transform of a nerfstudio training run.
 #[derive(Clone, Copy, Debug, PartialEq)]

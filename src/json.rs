@@ -7,10 +7,13 @@
 //! schema (and its typed getters, as a private extension trait on [`Obj`]); only the walking
 //! and the shared wording live here.
 //!
-//! The two walkers this replaced differed in two details that their messages still show, so
-//! they are a [`Style`] chosen by the caller: whether a JSON `null` counts as absent, and
-//! whether a value that is not the object or list wanted is described by its kind
-//! (`a string`) or by its text cut short (`"abc"`).
+//! Python's `json` writes `NaN` and `Infinity`, which JSON cannot hold: they are read as
+//! `null` and a required `null` is refused naming the element. Files whose schema serde
+//! walks (scenes, graphs) go through [`parse_json`], with messages in the same terms.
+//!
+//! The two walkers this replaced differ in how a value that is not the object or list
+//! wanted is described, by its kind (`a string`) or by its text cut short (`"abc"`): a
+//! [`Style`] chosen by the caller.
 
 use std::path::Path;
 
@@ -21,12 +24,12 @@ use crate::error::{Error, Result};
 
 /// Parses `text`; a syntax error becomes a format error at `line L column C` of `path`, with
 /// the message `not valid JSON`.
-pub(super) fn parse(text: &str, path: &Path) -> Result<Value> {
+pub(crate) fn parse(text: &str, path: &Path) -> Result<Value> {
     parse_with(text, path, |_| "not valid JSON".to_string())
 }
 
 /// As [`parse`], with serde_json's reason after the message: `not valid JSON: expected value`.
-pub(super) fn parse_with_reason(text: &str, path: &Path) -> Result<Value> {
+pub(crate) fn parse_with_reason(text: &str, path: &Path) -> Result<Value> {
     parse_with(text, path, |e| {
         // serde_json's message ends with the position, already in the location.
         format!(
@@ -41,7 +44,7 @@ fn parse_with(
     path: &Path,
     message: impl Fn(&serde_json::Error) -> String,
 ) -> Result<Value> {
-    serde_json::from_str(text).map_err(|e| {
+    serde_json::from_str(&non_finite_tokens_to_null(text)).map_err(|e| {
         Error::format(
             path,
             format!("line {} column {}", e.line(), e.column()),
@@ -52,7 +55,7 @@ fn parse_with(
 
 /// The kind of a JSON value, for messages: `null`, `a boolean`, `a number`, `a string`,
 /// `a list`, `an object`.
-pub(super) fn kind_of(v: &Value) -> &'static str {
+pub(crate) fn kind_of(v: &Value) -> &'static str {
     match v {
         Value::Null => "null",
         Value::Bool(_) => "a boolean",
@@ -64,7 +67,7 @@ pub(super) fn kind_of(v: &Value) -> &'static str {
 }
 
 /// A value for a message: its JSON text, cut to 40 characters and `…`.
-pub(super) fn short(v: &Value) -> String {
+pub(crate) fn short(v: &Value) -> String {
     let s = v.to_string();
     if s.chars().count() > 40 {
         format!("{}…", s.chars().take(40).collect::<String>())
@@ -74,7 +77,7 @@ pub(super) fn short(v: &Value) -> String {
 }
 
 /// The numbers of a JSON list, or `None` unless it is a list of finite numbers only.
-pub(super) fn numbers(v: &Value) -> Option<Vec<f64>> {
+pub(crate) fn numbers(v: &Value) -> Option<Vec<f64>> {
     match v {
         Value::Array(items) => items
             .iter()
@@ -84,19 +87,9 @@ pub(super) fn numbers(v: &Value) -> Option<Vec<f64>> {
     }
 }
 
-/// How a required field that holds JSON `null` is treated.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Null {
-    /// As if the field were absent: `missing; expected …`.
-    Missing,
-    /// Refused as a value: `expected …, got null (or NaN/Infinity, which JSON cannot hold)`
-    /// (for files whose `NaN` tokens were read as `null`).
-    Refused,
-}
-
 /// How a value is described where an object or a list was wanted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Describe {
+pub(crate) enum Describe {
     /// By [`kind_of`]: `expected a list, got a string`.
     Kind,
     /// By [`short`]: `expected a list, got "abc"`.
@@ -105,9 +98,7 @@ pub(super) enum Describe {
 
 /// A file's wording of the messages that [`Obj`] writes itself.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) struct Style {
-    /// What a required `null` is.
-    pub null: Null,
+pub(crate) struct Style {
     /// How a value that is not the object or list wanted is described.
     pub wrong_shape: Describe,
 }
@@ -122,7 +113,7 @@ impl Style {
 }
 
 /// A JSON object being read, with its location for messages.
-pub(super) struct Obj<'a> {
+pub(crate) struct Obj<'a> {
     map: &'a Map<String, Value>,
     path: &'a Path,
     /// JSON path of this object, e.g. `frames[3].camera`; empty at the top.
@@ -187,18 +178,16 @@ impl<'a> Obj<'a> {
         self.map.get(key).filter(|v| !v.is_null())
     }
 
-    /// The value at `key`, refused when missing (or `null`, per the [`Style`]); `expected`
-    /// describes the wanted value in the message.
+    /// The value at `key`, refused when missing or `null`; `expected` describes the wanted
+    /// value in the message.
     pub fn required(&self, key: &str, expected: &str) -> Result<&'a Value> {
-        match (self.map.get(key), self.style.null) {
-            (None, _) | (Some(Value::Null), Null::Missing) => {
-                Err(self.error(key, format!("missing; expected {expected}")))
-            }
-            (Some(Value::Null), Null::Refused) => Err(self.error(
+        match self.map.get(key) {
+            None => Err(self.error(key, format!("missing; expected {expected}"))),
+            Some(Value::Null) => Err(self.error(
                 key,
                 format!("expected {expected}, got null (or NaN/Infinity, which JSON cannot hold)"),
             )),
-            (Some(v), _) => Ok(v),
+            Some(v) => Ok(v),
         }
     }
 
@@ -236,17 +225,131 @@ impl<'a> Obj<'a> {
     }
 }
 
+/// Replaces the bare tokens `NaN`, `Infinity` and `-Infinity` outside strings (what Python's
+/// `json` writes for non-finite floats) by `null`, so that the schema walk can name the field.
+fn non_finite_tokens_to_null(text: &str) -> std::borrow::Cow<'_, str> {
+    if !(text.contains("NaN") || text.contains("Infinity")) {
+        return text.into();
+    }
+    let mut out = String::with_capacity(text.len());
+    let (mut in_string, mut escaped) = (false, false);
+    let mut rest = text;
+    while let Some(ch) = rest.chars().next() {
+        if in_string {
+            if escaped {
+                escaped = false;
+            } else if ch == '\\' {
+                escaped = true;
+            } else if ch == '"' {
+                in_string = false;
+            }
+        } else if ch == '"' {
+            in_string = true;
+        } else if let Some(token) = ["NaN", "-Infinity", "Infinity"]
+            .iter()
+            .find(|t| rest.starts_with(**t))
+        {
+            out.push_str("null");
+            rest = &rest[token.len()..];
+            continue;
+        }
+        out.push(ch);
+        rest = &rest[ch.len_utf8()..];
+    }
+    out.into()
+}
+
+/// Parses the JSON text of the file at `path` as a `T`, for files a user writes (by hand or
+/// with Python's `json`, which writes `NaN` and `Infinity`). Errors are in the user's terms:
+/// where (the element's path, `instances[0].field.analytic.primitives[1].density`, else the
+/// line and column), and what was expected in JSON's words (a number, a list, an object),
+/// never a Rust type; a non-finite number is named as such; a file that is not an object at
+/// all is described as `what` (e.g. `a scene: an object with "instances"`).
+pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(
+    text: &str,
+    path: &Path,
+    what: &str,
+) -> Result<T> {
+    let readable = non_finite_tokens_to_null(text);
+    let had_non_finite = matches!(readable, std::borrow::Cow::Owned(_));
+    let mut de = serde_json::Deserializer::from_str(&readable);
+    let value = serde_path_to_error::deserialize(&mut de)
+        .map_err(|e| (e.path().to_string(), e.into_inner()))
+        .and_then(|v| de.end().map(|()| v).map_err(|e| (String::new(), e)));
+    value.map_err(|(at, inner)| {
+        let by_line = inner.is_syntax() || inner.is_eof() || at.is_empty() || at == ".";
+        let location = if by_line {
+            format!("line {} column {}", inner.line(), inner.column())
+        } else {
+            at.clone()
+        };
+        let mut message = in_json_words(&inner.to_string());
+        if inner.is_syntax() || inner.is_eof() {
+            message = format!("not valid JSON: {message}");
+        } else if at.is_empty() || at == "." {
+            message = format!("expected {what} ({message})");
+        }
+        if had_non_finite && message.contains("null") {
+            message.push_str(" (NaN or Infinity, which JSON cannot hold, reads as null)");
+        }
+        Error::format(path, location, message)
+    })
+}
+
+/// serde's message in JSON's words: its position dropped (the location says it) and Rust's
+/// names of types replaced by what they are in JSON.
+fn in_json_words(message: &str) -> String {
+    let message = message.split(" at line ").next().unwrap_or(message);
+    let mut out: Vec<String> = Vec::new();
+    let mut words = message.split(' ').peekable();
+    while let Some(word) = words.next() {
+        let (core, tail) = word.split_at(word.trim_end_matches([',', ';', ':']).len());
+        let replaced = match core {
+            "f32" | "f64" => Some("a number".to_string()),
+            "u8" | "u16" | "u32" | "u64" | "usize" | "i32" | "i64" => {
+                Some("a whole number".to_string())
+            }
+            "sequence" => Some("a list".to_string()),
+            "map" => Some("an object".to_string()),
+            "struct" | "enum" => {
+                // `struct Name` (`with N elements`): an object; `enum Name`: one of its forms.
+                let name = words.next().unwrap_or_default();
+                let tail = &name[name.trim_end_matches([',', ';', ':']).len()..];
+                if words.peek() == Some(&"with") {
+                    for _ in 0..3 {
+                        words.next();
+                    }
+                }
+                let is_struct = core == "struct";
+                Some(format!(
+                    "{}{tail}",
+                    if is_struct {
+                        "an object"
+                    } else {
+                        "one of its forms"
+                    }
+                ))
+            }
+            _ => None,
+        };
+        match replaced {
+            Some(r) if core == "struct" || core == "enum" => out.push(r),
+            Some(r) => out.push(format!("{r}{tail}")),
+            None => out.push(word.to_string()),
+        }
+    }
+    out.join(" ")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use serde_json::json;
 
     const SHOT_LIKE: Style = Style {
-        null: Null::Refused,
         wrong_shape: Describe::Kind,
     };
     const PATH_LIKE: Style = Style {
-        null: Null::Missing,
         wrong_shape: Describe::Value,
     };
 
@@ -297,7 +400,8 @@ mod tests {
             ),
             (
                 PATH_LIKE,
-                "s.json: cam.lens: missing; expected a number",
+                "s.json: cam.lens: expected a number, got null (or NaN/Infinity, which JSON \
+                 cannot hold)",
                 "s.json: cam.tags: expected a list, got \"x\"",
             ),
         ] {
@@ -319,5 +423,58 @@ mod tests {
             message(Obj::root(&top, path, SHOT_LIKE)),
             "s.json: expected a JSON object, got a list"
         );
+    }
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Scene {
+        items: Vec<Item>,
+    }
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Item {
+        size: f32,
+        count: u32,
+    }
+
+    #[test]
+    fn json_errors_name_the_element_in_json_words() {
+        let path = Path::new("s.json");
+        let e = |text: &str| {
+            parse_json::<Scene>(text, path, "a scene: an object {\"items\": [...]}")
+                .unwrap_err()
+                .to_string()
+        };
+        assert_eq!(
+            e(r#"{"items": [{"size": 1, "count": 2}, {"size": NaN, "count": 2}]}"#),
+            "s.json: items[1].size: invalid type: null, expected a number (NaN or Infinity, \
+             which JSON cannot hold, reads as null)"
+        );
+        assert_eq!(
+            e(r#"{"items": [{"size": 1, "count": -2}]}"#),
+            "s.json: items[0].count: invalid value: integer `-2`, expected a whole number"
+        );
+        assert_eq!(
+            e("[]"),
+            "s.json: line 1 column 2: expected a scene: an object {\"items\": [...]} (invalid \
+             length 0, expected an object)"
+        );
+        let m = e("{\"items\": [\n  {\"size\": 1,}]}");
+        assert!(
+            m.starts_with("s.json: line 2 column 14: not valid JSON: trailing comma"),
+            "{m}"
+        );
+        let m = e(r#"{"items": [], "extra": 1}"#);
+        assert!(m.contains("extra") && !m.contains("struct"), "{m}");
+        let m = e(r#"{"items": []} {}"#);
+        assert!(
+            m.contains("line 1 column 15") && m.contains("trailing"),
+            "{m}"
+        );
+        // A NaN inside a string is text, not a number.
+        assert!(parse_json::<serde_json::Value>(r#"{"a": "NaN"}"#, path, "x").is_ok());
     }
 }

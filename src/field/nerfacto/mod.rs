@@ -22,7 +22,7 @@
 //! tcnn's layout; older runs: `mlp_base.params`, or `mlp_base_mlp.tcnn_encoding.params` and
 //! `mlp_base_grid.tcnn_encoding.params`) and `mlp_head.tcnn_encoding.params`; with the torch
 //! fallback, `mlp_base.model.0.hash_table` (or `mlp_base_grid.hash_table`) and
-//! `…layers.<i>.weight|bias` (see [`super::nerfacto_torch`]). Appearance:
+//! `…layers.<i>.weight|bias` (see [`torch`]). Appearance:
 //! `embedding_appearance.embedding.weight`.
 //!
 //! **Bounds and occupancy.** The field is bounded to `[−2, 2]³` in scene units (density is
@@ -41,15 +41,21 @@ use std::path::{Path, PathBuf};
 use glam::Vec3;
 use half::f16;
 
-use super::nerfacto_config::RunSettings;
-use super::nerfacto_torch::{torch_sh4, BiasedMlp, TorchHashGrid};
-use super::torch_ckpt::{Checkpoint, DType};
-use super::{sh4, Aabb, ColorSpace, Field, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage};
-use crate::camera::DataparserTransform;
+use super::container::{Checkpoint, DType};
+use super::network::{sh4, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage};
+use super::{Aabb, ColorSpace, Field};
 use crate::error::{Error, Result};
+use config::RunSettings;
 use occupancy::{cache_key, GridSettings, OccupancyGrid, Source, CACHE_FILE};
+use torch::{torch_sh4, BiasedMlp, TorchHashGrid};
 
+mod config;
+mod dataparser;
 mod occupancy;
+mod torch;
+
+pub(crate) use config::scan;
+pub use dataparser::DataparserTransform;
 
 /// Points per batch (bounds the scratch memory).
 const CHUNK: usize = 512;

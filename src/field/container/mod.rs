@@ -1,0 +1,12 @@
+//! The files trained fields come in, read without their trainers: torch checkpoints (a zip
+//! archive holding a pickle and raw tensor storages), instant-ngp's msgpack snapshots and PLY
+//! point clouds.
+
+mod checkpoint;
+mod msgpack;
+mod ply;
+mod zip;
+
+pub(crate) use checkpoint::{Checkpoint, DType};
+pub(crate) use msgpack::{read_document, Doc};
+pub(crate) use ply::{Ply, Property};

@@ -1,0 +1,12 @@
+//! The pieces the trained networks are built of, shared by instant-ngp snapshots and nerfacto
+//! runs: the multiresolution hash-grid encoding, the fully fused MLP, and the spherical-harmonics
+//! direction encoding (whose basis 3D Gaussian splats use too).
+
+mod hashgrid;
+mod mlp;
+mod sh4;
+
+pub use hashgrid::TableStorage;
+pub(crate) use hashgrid::{correctly_rounded, HashGrid, HashGridConfig};
+pub(crate) use mlp::{Mlp, MlpConfig};
+pub(crate) use sh4::{sh4, sh_basis};

@@ -29,5 +29,6 @@ mod input;
 pub mod reference;
 pub mod render;
 pub mod scene;
+pub mod standin;
 
 pub use error::{Error, Result};

@@ -125,6 +125,24 @@ enum Command {
         /// The field file (instant-ngp `.ingp` or `.msgpack`).
         field: PathBuf,
     },
+    /// Write a stand-in point cloud (binary PLY) of a field or splat file, in the frame nerfx
+    /// renders it in, to place the NeRF object by in Blender.
+    ExportStandin {
+        /// The field: an instant-ngp snapshot, a nerfacto run, a splat `.ply` or splatfacto run.
+        field: PathBuf,
+        /// Output PLY.
+        #[arg(short, long, default_value = "standin.ply")]
+        output: PathBuf,
+        /// Points at most.
+        #[arg(long, default_value_t = 200_000)]
+        points: usize,
+        /// Grid cells along the field's longest side (at most 256).
+        #[arg(long, default_value_t = 256)]
+        resolution: u32,
+        /// Opacity over a cell (or a splat's opacity) a point must exceed.
+        #[arg(long, default_value_t = 0.5)]
+        threshold: f32,
+    },
     /// Measure run time against error for each preset and a naive marcher.
     Bench {
         /// Output folder for the table (Markdown) and the plot (PNG).
@@ -306,6 +324,27 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Info { field } => {
             println!("{}", nerfx::field::describe(&field)?);
+            Ok(())
+        }
+        Command::ExportStandin {
+            field,
+            output,
+            points,
+            resolution,
+            threshold,
+        } => {
+            let started = Instant::now();
+            let scene = SceneDesc::for_path(&field)?
+                .load()?
+                .place(&|_| Ok(glam::DMat4::IDENTITY))?;
+            let cloud = nerfx::standin::points(&scene, resolution, threshold, points);
+            nerfx::standin::write_ply(&output, &cloud)?;
+            println!(
+                "export-standin: {} points in {:.2} s → {}",
+                cloud.len(),
+                started.elapsed().as_secs_f64(),
+                output.display()
+            );
             Ok(())
         }
         Command::Bench {

@@ -218,3 +218,120 @@ pub fn write_ply(path: &Path, points: &[Point]) -> Result<()> {
     let mut file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
     file.write_all(&bytes).map_err(|e| Error::io(path, e))
 }
+
+/// A triangle mesh with vertex colours, in the render frame.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Mesh {
+    /// Vertices.
+    pub vertices: Vec<Point>,
+    /// Triangles, as indices into `vertices`.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// The meshes of every field instance of a scene, joined (splats have no density grid).
+pub fn mesh(scene: &Scene, resolution: u32, threshold: f32) -> Mesh {
+    let mut out = Mesh::default();
+    for inst in &scene.instances {
+        let m = field_mesh(inst.field(), inst.world_from_field(), resolution, threshold);
+        let base = out.vertices.len() as u32;
+        out.vertices.extend(m.vertices);
+        out.triangles
+            .extend(m.triangles.into_iter().map(|t| t.map(|i| i + base)));
+    }
+    out
+}
+
+/// The isosurface where a field's opacity over a cell equals `threshold`, by naive surface
+/// nets (fast-surface-nets) on a lattice of at most [`MAX_GRID`] cells along the longest side
+/// (padded by one transparent cell so the surface closes), mapped by `world_from_field`. A
+/// vertex lies in a lattice cube the isosurface crosses, so within √3 cells of it.
+pub fn field_mesh(
+    field: &dyn Field,
+    world_from_field: DMat4,
+    resolution: u32,
+    threshold: f32,
+) -> Mesh {
+    use fast_surface_nets::{surface_nets, SurfaceNetsBuffer};
+    use ndshape::{RuntimeShape, Shape};
+    let bounds = field.bounds();
+    if bounds.is_empty() {
+        return Mesh::default();
+    }
+    let size = bounds.size();
+    let h = size.max_element() / resolution.clamp(1, MAX_GRID) as f32;
+    let cells = (size / h).ceil().max(Vec3::ONE).as_uvec3();
+    let dims = cells + glam::UVec3::splat(3);
+    let origin = bounds.min - Vec3::splat(h);
+    let shape = RuntimeShape::<u32, 3>::new(dims.to_array());
+    let mut sdf = vec![threshold; shape.usize()];
+    let mut positions = Vec::with_capacity((dims.x * dims.y) as usize);
+    let mut sigma = Vec::new();
+    for k in 1..dims.z - 1 {
+        positions.clear();
+        for j in 1..dims.y - 1 {
+            for i in 1..dims.x - 1 {
+                positions.push(origin + Vec3::new(i as f32, j as f32, k as f32) * h);
+            }
+        }
+        sigma.resize(positions.len(), 0.0);
+        field.density(&positions, &mut sigma);
+        let mut s = sigma.iter();
+        for j in 1..dims.y - 1 {
+            for i in 1..dims.x - 1 {
+                if let Some(s) = s.next() {
+                    let opacity = 1.0 - (-(s.max(0.0)) * h).exp();
+                    sdf[shape.linearize([i, j, k]) as usize] = threshold - opacity;
+                }
+            }
+        }
+    }
+    let mut buffer = SurfaceNetsBuffer::default();
+    surface_nets(&sdf, &shape, [0; 3], (dims - 1).to_array(), &mut buffer);
+    drop(sdf);
+    let local: Vec<Vec3> = buffer
+        .positions
+        .iter()
+        .map(|p| origin + Vec3::from_array(*p) * h)
+        .collect();
+    let colours = field_colours(field, &local);
+    Mesh {
+        vertices: local
+            .into_iter()
+            .zip(colours)
+            .map(|(position, rgb)| transformed(Point { position, rgb }, world_from_field))
+            .collect(),
+        triangles: buffer
+            .indices
+            .chunks_exact(3)
+            .map(|t| [t[0], t[1], t[2]])
+            .collect(),
+    }
+}
+
+/// Writes a mesh as a binary little-endian PLY: vertices as in [`write_ply`], faces as a
+/// `uchar` count and `int` indices.
+pub fn write_mesh_ply(path: &Path, mesh: &Mesh) -> Result<()> {
+    let mut bytes = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment nerfx stand-in mesh\nelement vertex {}\n\
+         property float x\nproperty float y\nproperty float z\n\
+         property uchar red\nproperty uchar green\nproperty uchar blue\n\
+         element face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        mesh.vertices.len(),
+        mesh.triangles.len()
+    )
+    .into_bytes();
+    for p in &mesh.vertices {
+        for v in p.position.to_array() {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        bytes.extend_from_slice(&p.rgb);
+    }
+    for t in &mesh.triangles {
+        bytes.push(3);
+        for i in t {
+            bytes.extend_from_slice(&i.to_le_bytes());
+        }
+    }
+    let mut file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
+    file.write_all(&bytes).map_err(|e| Error::io(path, e))
+}

@@ -95,3 +95,30 @@ fn splat_standin_is_the_splat_means() {
     let x = f32::from_le_bytes([first[0], first[1], first[2], first[3]]);
     assert_eq!(x, pts[0].position.x);
 }
+
+#[test]
+fn sphere_mesh_vertices_lie_within_root_three_cells_of_its_surface() {
+    let (center, radius) = (Vec3::new(0.1, -0.2, 0.3), 0.7);
+    let resolution = 48;
+    let cell = 2.0 * radius / resolution as f32;
+    let mesh =
+        nerfx::standin::field_mesh(&sphere(center, radius), DMat4::IDENTITY, resolution, 0.5);
+    assert!(
+        mesh.triangles.len() > 1000,
+        "{} triangles",
+        mesh.triangles.len()
+    );
+    let worst = mesh
+        .vertices
+        .iter()
+        .map(|p| ((p.position - center).length() - radius).abs())
+        .fold(0.0f32, f32::max);
+    println!(
+        "{} vertices, {} triangles, worst distance {worst:.4} (cell {cell:.4})",
+        mesh.vertices.len(),
+        mesh.triangles.len()
+    );
+    assert!(worst <= 3f32.sqrt() * cell, "worst {worst}");
+    let n = mesh.vertices.len() as u32;
+    assert!(mesh.triangles.iter().flatten().all(|&i| i < n));
+}

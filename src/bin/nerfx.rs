@@ -142,6 +142,9 @@ enum Command {
         /// Opacity over a cell (or a splat's opacity) a point must exceed.
         #[arg(long, default_value_t = 0.5)]
         threshold: f32,
+        /// Also write a triangle mesh (binary PLY) of the field's surface here.
+        #[arg(long)]
+        mesh: Option<PathBuf>,
     },
     /// Measure run time against error for each preset and a naive marcher.
     Bench {
@@ -332,6 +335,7 @@ fn run(cli: Cli) -> Result<()> {
             points,
             resolution,
             threshold,
+            mesh,
         } => {
             let started = Instant::now();
             let scene = SceneDesc::for_path(&field)?
@@ -345,6 +349,23 @@ fn run(cli: Cli) -> Result<()> {
                 started.elapsed().as_secs_f64(),
                 output.display()
             );
+            if let Some(mesh_path) = mesh {
+                if scene.instances.is_empty() {
+                    return Err(Error::invalid(
+                        field.display().to_string(),
+                        "splats have no density grid to mesh; use the point stand-in",
+                    ));
+                }
+                let surface = nerfx::standin::mesh(&scene, resolution, threshold);
+                nerfx::standin::write_mesh_ply(&mesh_path, &surface)?;
+                println!(
+                    "export-standin: a mesh of {} vertices, {} triangles in {:.2} s → {}",
+                    surface.vertices.len(),
+                    surface.triangles.len(),
+                    started.elapsed().as_secs_f64(),
+                    mesh_path.display()
+                );
+            }
             Ok(())
         }
         Command::Bench {

@@ -7,7 +7,6 @@
 //! mean whose opacity exceeds the threshold, coloured by the DC term. Colours are the
 //! capture's display colours: sRGB-encoded 8-bit.
 
-use std::io::Write;
 use std::path::Path;
 
 use glam::{DMat4, Vec3};
@@ -215,8 +214,7 @@ pub fn write_ply(path: &Path, points: &[Point]) -> Result<()> {
         }
         bytes.extend_from_slice(&p.rgb);
     }
-    let mut file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
-    file.write_all(&bytes).map_err(|e| Error::io(path, e))
+    write_replacing(path, &bytes)
 }
 
 /// A triangle mesh with vertex colours, in the render frame.
@@ -332,6 +330,12 @@ pub fn write_mesh_ply(path: &Path, mesh: &Mesh) -> Result<()> {
             bytes.extend_from_slice(&i.to_le_bytes());
         }
     }
-    let mut file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
-    file.write_all(&bytes).map_err(|e| Error::io(path, e))
+    write_replacing(path, &bytes)
+}
+
+/// Writes `bytes` to `path` so that a failure leaves a file already there as it was.
+fn write_replacing(path: &Path, bytes: &[u8]) -> Result<()> {
+    crate::image::replace_file(path, |temp| {
+        std::fs::write(temp, bytes).map_err(|e| Error::io(path, e))
+    })
 }

@@ -3,6 +3,7 @@
 mod exr_io;
 mod plane;
 mod replace;
+pub(crate) use replace::replace_file;
 // Crate-visible so that other modules' tests can use its test PNG decoder.
 pub(crate) mod png;
 

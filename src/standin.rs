@@ -12,7 +12,7 @@ use std::path::Path;
 use glam::{DMat4, Vec3};
 
 use crate::error::{Error, Result};
-use crate::field::{ColorSpace, Field, SplatColor, Splats};
+use crate::field::{Aabb, ColorSpace, Field, SplatColor, Splats};
 use crate::scene::Scene;
 
 /// Grid cells per side at most, which bounds time and memory.
@@ -99,20 +99,24 @@ pub fn field_points(field: &dyn Field, resolution: u32, threshold: f32) -> Vec<P
     };
     let index = |i: u32, j: u32, k: u32| ((k * dims.y + j) * dims.x + i) as usize;
     let mut opaque = vec![false; (dims.x * dims.y * dims.z) as usize];
-    let mut positions = Vec::with_capacity((dims.x * dims.y) as usize);
+    let mut positions = Vec::with_capacity(dims.x as usize);
     let mut sigma = Vec::new();
     for k in 0..dims.z {
-        positions.clear();
         for j in 0..dims.y {
-            for i in 0..dims.x {
-                positions.push(sample(i, j, k));
+            // A row the field's conservative occupancy calls empty stays transparent.
+            let row_min = bounds.min + Vec3::new(0.0, j as f32, k as f32) * h;
+            let row = Aabb::new(row_min, row_min + Vec3::new(dims.x as f32, 1.0, 1.0) * h);
+            if !field.may_be_occupied(&row) {
+                continue;
             }
-        }
-        sigma.resize(positions.len(), 0.0);
-        field.density(&positions, &mut sigma);
-        let layer = index(0, 0, k);
-        for (o, s) in opaque[layer..layer + sigma.len()].iter_mut().zip(&sigma) {
-            *o = 1.0 - (-(s.max(0.0)) * h).exp() > threshold;
+            positions.clear();
+            positions.extend((0..dims.x).map(|i| sample(i, j, k)));
+            sigma.resize(positions.len(), 0.0);
+            field.density(&positions, &mut sigma);
+            let start = index(0, j, k);
+            for (o, s) in opaque[start..start + sigma.len()].iter_mut().zip(&sigma) {
+                *o = 1.0 - (-(s.max(0.0)) * h).exp() > threshold;
+            }
         }
     }
     let is_opaque = |i: i64, j: i64, k: i64| {

@@ -30,5 +30,6 @@ mod json;
 pub mod reference;
 pub mod render;
 pub mod scene;
+pub mod standin;
 
 pub use error::{Error, Result};

@@ -124,6 +124,27 @@ enum Command {
         /// The field file (instant-ngp `.ingp` or `.msgpack`).
         field: PathBuf,
     },
+    /// Write a stand-in point cloud (binary PLY) of a field or splat file, in the frame nerfx
+    /// renders it in, to place the NeRF object by in Blender.
+    ExportStandin {
+        /// The field: an instant-ngp snapshot, a nerfacto run, a splat `.ply` or splatfacto run.
+        field: PathBuf,
+        /// Output PLY.
+        #[arg(short, long, default_value = "standin.ply")]
+        output: PathBuf,
+        /// Points at most.
+        #[arg(long, default_value_t = 200_000)]
+        points: usize,
+        /// Grid cells along the field's longest side (at most 256).
+        #[arg(long, default_value_t = 256)]
+        resolution: u32,
+        /// Opacity over a cell (or a splat's opacity) a point must exceed.
+        #[arg(long, default_value_t = 0.5)]
+        threshold: f32,
+        /// Also write a triangle mesh (binary PLY) of the field's surface here.
+        #[arg(long)]
+        mesh: Option<PathBuf>,
+    },
     /// Measure run time against error for each preset and a naive marcher.
     Bench {
         /// Output folder for the table (Markdown) and the plot (PNG).
@@ -300,6 +321,45 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Info { field } => {
             println!("{}", nerfx::field::describe(&field)?);
+            Ok(())
+        }
+        Command::ExportStandin {
+            field,
+            output,
+            points,
+            resolution,
+            threshold,
+            mesh,
+        } => {
+            let started = Instant::now();
+            let scene = SceneDesc::for_path(&field)?
+                .load()?
+                .place(glam::DMat4::IDENTITY, &|_| Ok(glam::DMat4::IDENTITY))?;
+            let cloud = nerfx::standin::points(&scene, resolution, threshold, points);
+            nerfx::standin::write_ply(&output, &cloud)?;
+            println!(
+                "export-standin: {} points in {:.2} s → {}",
+                cloud.len(),
+                started.elapsed().as_secs_f64(),
+                output.display()
+            );
+            if let Some(mesh_path) = mesh {
+                if scene.instances.is_empty() {
+                    return Err(Error::invalid(
+                        field.display().to_string(),
+                        "splats have no density grid to mesh; use the point stand-in",
+                    ));
+                }
+                let surface = nerfx::standin::mesh(&scene, resolution, threshold);
+                nerfx::standin::write_mesh_ply(&mesh_path, &surface)?;
+                println!(
+                    "export-standin: a mesh of {} vertices, {} triangles in {:.2} s → {}",
+                    surface.vertices.len(),
+                    surface.triangles.len(),
+                    started.elapsed().as_secs_f64(),
+                    mesh_path.display()
+                );
+            }
             Ok(())
         }
         Command::Bench {

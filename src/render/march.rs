@@ -19,7 +19,7 @@ use super::splats::Splatting;
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
 use crate::field::{
-    linear_to_srgb, Aabb, ColorSpace, Fragment, Occupancy, SPLAT_MIN_TRANSMITTANCE,
+    linear_to_srgb, Aabb, ColorSpace, Fragment, Occupancy, SplatPixel, SPLAT_MIN_TRANSMITTANCE,
 };
 use crate::image::Window;
 use crate::scene::{LocalRay, Scene};
@@ -153,9 +153,12 @@ pub(super) struct Scratch {
     owners: Vec<(u32, f64)>,
     field_out: Vec<f32>,
     rgb_out: Vec<Vec3>,
-    /// Per pixel of the tile: camera z per unit ray distance, and the splat fragments.
+    /// Per pixel of the tile: its world ray and camera z per unit ray distance; one ray's
+    /// splat fragments (panoramic cameras).
+    world_rays: Vec<Option<Ray>>,
     z_per_t: Vec<f64>,
-    fragments: Vec<Vec<Fragment>>,
+    along: Vec<Fragment>,
+    splat_pixels: Vec<SplatPixel>,
     stats: RenderStats,
 }
 
@@ -271,19 +274,36 @@ fn setup_rays(
         }
     }
     if let Some(layer) = splats {
-        s.fragments.resize_with(n_rays, Vec::new);
-        for f in &mut s.fragments[..n_rays] {
-            f.clear();
-        }
-        let rays = s.rays[..n_rays].iter().map(|st| st.ray);
-        layer.fill(tile, rays, &mut s.z_per_t, &mut s.fragments[..n_rays]);
-        for (state, fragments) in s.rays[..n_rays].iter_mut().zip(&mut s.fragments) {
-            std::mem::swap(&mut state.fragments, fragments);
-            s.stats.splat_fragments += state.fragments.len() as u64;
-            if !state.live {
-                composite_fragments(state, f64::INFINITY, outputs);
+        s.world_rays.clear();
+        s.world_rays
+            .extend(s.rays[..n_rays].iter().map(|state| state.ray));
+        // A tile of splats alone is composited sixteen pixels at once.
+        if s.active.is_empty() && !outputs.depth_median {
+            let composited =
+                layer.composite(tile, &s.world_rays, &mut s.z_per_t, &mut s.splat_pixels);
+            if let Some(fragments) = composited {
+                s.stats.splat_fragments += fragments;
+                for (state, px) in s.rays[..n_rays].iter_mut().zip(&s.splat_pixels) {
+                    state.pieces = Pieces::from_sums(px.transmittance, px.depth_moment);
+                    state.rgb = DVec3::from_array(px.rgb);
+                }
+                return;
             }
         }
+        let (rays, stats) = (&mut s.rays, &mut s.stats);
+        // A ray that marches nothing composites its fragments as they come; the others keep
+        // them to merge with their pieces.
+        let sink = |i: usize, f: Fragment| {
+            stats.splat_fragments += 1;
+            let state = &mut rays[i];
+            if state.live {
+                state.fragments.push(f);
+                true
+            } else {
+                composite_fragment(state, f, outputs)
+            }
+        };
+        layer.fill(tile, &s.world_rays, &mut s.z_per_t, &mut s.along, sink);
     }
 }
 
@@ -659,23 +679,33 @@ fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, out
 /// done: a fragment would bring its transmittance to the splats' floor (gsplat's rule, which
 /// makes a pixel of splats alone exactly gsplat's).
 fn composite_fragments(state: &mut RayState, t_end: f64, outputs: &Outputs) -> bool {
-    while let Some(f) = state.fragments.get(state.next_fragment) {
+    while let Some(&f) = state.fragments.get(state.next_fragment) {
         if f.t > t_end {
             break;
         }
-        let alpha = f64::from(f.alpha);
-        let t_enter = state.pieces.transmittance();
-        if t_enter * (1.0 - alpha) <= SPLAT_MIN_TRANSMITTANCE {
+        if !composite_fragment(state, f, outputs) {
             state.next_fragment = state.fragments.len();
             state.live = false;
             return false;
         }
-        let w = state.pieces.add_fragment(f.t, alpha);
-        state.rgb += Vec3::from_array(f.rgb).as_dvec3() * w;
-        if outputs.depth_median {
-            state.log.push([f.t, 0.0, -(-alpha).ln_1p(), t_enter]);
-        }
         state.next_fragment += 1;
+    }
+    true
+}
+
+/// Composites the ray's next splat fragment; `false` (and nothing composited) when it would
+/// bring the ray's transmittance to the splats' floor: the ray is done.
+#[inline]
+fn composite_fragment(state: &mut RayState, f: Fragment, outputs: &Outputs) -> bool {
+    let alpha = f64::from(f.alpha);
+    let t_enter = state.pieces.transmittance();
+    if t_enter * (1.0 - alpha) <= SPLAT_MIN_TRANSMITTANCE {
+        return false;
+    }
+    let w = state.pieces.add_fragment(f.t, alpha);
+    state.rgb += Vec3::from_array(f.rgb).as_dvec3() * w;
+    if outputs.depth_median {
+        state.log.push([f.t, 0.0, -(-alpha).ln_1p(), t_enter]);
     }
     true
 }

@@ -156,6 +156,7 @@ impl SplatLayer {
         // Each splat is listed in the rows of tiles it touches (in depth order), then each
         // row is binned on its own (in parallel), so every tile's list comes out sorted.
         let ranges: Vec<[u32; 4]> = projected.par_iter().map(range).collect();
+        let splat_entries: Vec<Entry> = projected.par_iter().map(Entry::new).collect();
         let rows_n = (tiles[3] - tiles[1]) as usize;
         let mut row_starts = vec![0usize; rows_n + 1];
         for r in &ranges {
@@ -193,7 +194,7 @@ impl SplatLayer {
                 let mut entries = vec![Entry::default(); counts[tiles_x] as usize];
                 for &i in splats {
                     let r = &ranges[i as usize];
-                    let entry = Entry::new(&projected[i as usize]);
+                    let entry = splat_entries[i as usize];
                     for tx in r[0]..r[2] {
                         let slot = &mut counts[(tx - tiles[0]) as usize];
                         entries[*slot as usize] = entry;
@@ -524,18 +525,24 @@ impl RowAction for Compositing<'_> {
         let colour = e.rgb.map(f64::from);
         self.fragments += u64::from(hits.count_ones());
         let mut done = 0u16;
-        for l in 0..LANES {
-            let hit = hits >> l & 1 == 1;
-            let alpha = if hit { f64::from(alphas[l]) } else { 0.0 };
-            let t_enter = transmittance[l];
-            let refused = hit && t_enter * (1.0 - alpha) <= MIN_TRANSMITTANCE;
-            let w = if refused { 0.0 } else { t_enter * alpha };
-            transmittance[l] = (t_enter - w).max(0.0);
-            depth[l] += w * z;
-            for c in 0..3 {
-                rgb[c][l] += w * colour[c];
+        // Four lanes at a time (one vector of f64), skipping the groups no fragment falls in.
+        for g in (0..LANES).step_by(4) {
+            if hits >> g & 0xF == 0 {
+                continue;
             }
-            done |= u16::from(refused) << l;
+            for l in g..g + 4 {
+                let hit = hits >> l & 1 == 1;
+                let alpha = if hit { f64::from(alphas[l]) } else { 0.0 };
+                let t_enter = transmittance[l];
+                let refused = hit && t_enter * (1.0 - alpha) <= MIN_TRANSMITTANCE;
+                let w = if refused { 0.0 } else { t_enter * alpha };
+                transmittance[l] = (t_enter - w).max(0.0);
+                depth[l] += w * z;
+                for c in 0..3 {
+                    rgb[c][l] += w * colour[c];
+                }
+                done |= u16::from(refused) << l;
+            }
         }
         done
     }

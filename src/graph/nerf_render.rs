@@ -234,10 +234,11 @@ pub(crate) fn nerf_render_node() -> Node {
         render: render_node,
         rod: Some(Format {
             size: |values, time| {
-                let time = within_shot(values, time)?;
-                Ok(camera(values, time, 1.0)?.1.resolution())
+                let shot = node_shot(values)?;
+                let time = within_shot(values, &shot, time)?;
+                Ok(camera(values, &shot, time, 1.0)?.1.resolution())
             },
-            time_domain: Some(time_domain),
+            time_domain: Some(|values| time_domain(values, &*node_shot(values)?)),
             pixel_aspect: Some(pixel_aspect),
         }),
         identity: None,
@@ -252,10 +253,14 @@ fn file<'a>(values: &'a ParamValues, name: &str) -> Result<&'a Path> {
     Ok(Path::new(path))
 }
 
+/// The node's shot, from the file cache.
+fn node_shot(values: &ParamValues) -> Result<Arc<Shot>> {
+    cached_shot(file(values, "shot")?)
+}
+
 /// The host frames the shot covers: its first and last frame less the frame offset (the
 /// node renders shot frame `time + frameOffset`).
-fn time_domain(values: &ParamValues) -> Result<Option<(f64, f64)>> {
-    let shot = cached_shot(file(values, "shot")?)?;
+fn time_domain(values: &ParamValues, shot: &Shot) -> Result<Option<(f64, f64)>> {
     let offset = values.int("frameOffset")? as f64;
     let first = shot.frames.iter().map(|f| f.frame).min();
     let last = shot.frames.iter().map(|f| f.frame).max();
@@ -267,8 +272,8 @@ fn time_domain(values: &ParamValues) -> Result<Option<(f64, f64)>> {
 /// `time` moved into the host frames the shot covers. A node's format is the shot's whatever
 /// the frame: a host asking for it at a frame outside the shot gets it, and the render of that
 /// frame is the one to fail, saying which frames the shot holds.
-fn within_shot(values: &ParamValues, time: f64) -> Result<f64> {
-    Ok(match time_domain(values)? {
+fn within_shot(values: &ParamValues, shot: &Shot, time: f64) -> Result<f64> {
+    Ok(match time_domain(values, shot)? {
         Some((first, last)) if time.is_finite() => time.clamp(first, last),
         _ => time,
     })
@@ -277,14 +282,13 @@ fn within_shot(values: &ParamValues, time: f64) -> Result<f64> {
 /// The shot's pixel aspect (`pixel_aspect_x / pixel_aspect_y`) when the camera at `time` is
 /// perspective; panoramas (from the shot or the camera model) have square pixels.
 fn pixel_aspect(values: &ParamValues, time: f64) -> Result<f64> {
-    let shot = cached_shot(file(values, "shot")?)?;
-    let (_, camera) = camera(values, within_shot(values, time)?, 1.0)?;
+    let shot = node_shot(values)?;
+    let (_, camera) = camera(values, &shot, within_shot(values, &shot, time)?, 1.0)?;
     Ok(shot.pixel_aspect_for(&camera))
 }
 
 /// The shot frame for `time` and its camera at render scale `scale`.
-fn camera(values: &ParamValues, time: f64, scale: f64) -> Result<(ShotFrame, Camera)> {
-    let shot = cached_shot(file(values, "shot")?)?;
+fn camera(values: &ParamValues, shot: &Shot, time: f64, scale: f64) -> Result<(ShotFrame, Camera)> {
     if !time.is_finite() {
         return Err(Error::invalid(
             "time",
@@ -315,7 +319,7 @@ fn camera(values: &ParamValues, time: f64, scale: f64) -> Result<(ShotFrame, Cam
             _ => {}
         }
     }
-    let (w, h) = c.intrinsics(&shot).effective_resolution()?;
+    let (w, h) = c.intrinsics(shot).effective_resolution()?;
     // The shot's format at render scale, holding only this frame (cheap to build per call).
     let one = Shot {
         fps: shot.fps,
@@ -336,7 +340,7 @@ fn camera(values: &ParamValues, time: f64, scale: f64) -> Result<(ShotFrame, Cam
 }
 
 /// The scene placed at `at`, with the transform override and crop box applied.
-fn placed_scene(values: &ParamValues, at: &ShotFrame) -> Result<Scene> {
+fn placed_scene(values: &ParamValues, shot: &Shot, at: &ShotFrame) -> Result<Scene> {
     let loaded = cached_scene(file(values, "file")?)?;
     let over_ride = if values.bool("overrideTransform")? {
         let m = values.doubles("objectTransform")?;
@@ -346,8 +350,7 @@ fn placed_scene(values: &ParamValues, at: &ShotFrame) -> Result<Scene> {
     } else {
         None
     };
-    let shot = cached_shot(file(values, "shot")?)?;
-    let scene = loaded.place(at.world_from_scene(&shot)?, &|name| match over_ride {
+    let scene = loaded.place(at.world_from_scene(shot)?, &|name| match over_ride {
         Some(m) => Ok(m),
         None => at.object_matrix(name),
     })?;
@@ -383,22 +386,22 @@ fn placed_scene(values: &ParamValues, at: &ShotFrame) -> Result<Scene> {
 const LOOK: &[&str] = &["output", "background", "exposure"];
 
 fn render_node(values: &ParamValues, request: &RenderRequest) -> Result<Planes> {
-    let shot = Arc::downgrade(&cached_shot(file(values, "shot")?)?);
+    let shot = node_shot(values)?;
     let key = RenderKey {
         scene: Arc::downgrade(&cached_scene(file(values, "file")?)?),
-        shot,
+        shot: Arc::downgrade(&shot),
         values: values.with_defaults(LOOK),
         time: request.time,
         render_scale: request.render_scale,
         window: request.window,
         draft: request.draft,
     };
-    let planes = shared_render(key, || march(values, request))?;
+    let planes = shared_render(key, || march(values, &shot, request))?;
     look(values, request, &planes)
 }
 
 /// Every pass of the node's scene for `request`, from one march per shutter time.
-fn march(values: &ParamValues, request: &RenderRequest) -> Result<Planes> {
+fn march(values: &ParamValues, shot: &Shot, request: &RenderRequest) -> Result<Planes> {
     let window = request.window;
     let quality = match values.choice("quality")? {
         _ if request.draft => Quality::Draft,
@@ -414,7 +417,6 @@ fn march(values: &ParamValues, request: &RenderRequest) -> Result<Planes> {
         ..RenderSettings::new(quality.params(), Outputs::all())
     };
     // With the shot's motion blur, the average of renders over the shutter (as nerfx render).
-    let shot = cached_shot(file(values, "shot")?)?;
     let offset = values.int("frameOffset")? as f64;
     let samples = match values.int("shutterSamples")? {
         0 => quality.shutter_samples(),
@@ -430,7 +432,7 @@ fn march(values: &ParamValues, request: &RenderRequest) -> Result<Planes> {
     };
     let mut renders = Vec::with_capacity(times.len());
     for time in times {
-        let (at, camera) = camera(values, time, request.render_scale)?;
+        let (at, camera) = camera(values, shot, time, request.render_scale)?;
         if camera.clamp_window(window)? != window {
             let (w, h) = camera.resolution();
             return Err(Error::invalid(
@@ -441,7 +443,7 @@ fn march(values: &ParamValues, request: &RenderRequest) -> Result<Planes> {
                 ),
             ));
         }
-        let scene = placed_scene(values, &at)?;
+        let scene = placed_scene(values, shot, &at)?;
         renders.push(render(&scene, &camera, window, &settings)?);
     }
     match renders.len() {

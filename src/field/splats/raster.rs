@@ -317,9 +317,10 @@ trait RowAction {
     fn start(&mut self, part: Window, index: [[usize; LANES]; LANES]);
     /// Whether lane `l` of row `r` is a pixel with a ray.
     fn has_ray(&self, r: usize, l: usize) -> bool;
-    /// Row `r`'s lanes in `hits` get a fragment of entry `e` with opacity `alphas[l]`
-    /// (in `[MIN_ALPHA, MAX_ALPHA]`). Returns the lanes that want no more.
-    fn row(&mut self, r: usize, hits: u16, alphas: &[f32; LANES], e: &Entry) -> u16;
+    /// Row `r`'s lanes get a fragment of entry `e` with opacity `alphas[l]` (in
+    /// `[MIN_ALPHA, MAX_ALPHA]`), or none where it is 0. Returns the lanes that want no
+    /// more (as bits).
+    fn row(&mut self, r: usize, alphas: &[f32; LANES], e: &Entry) -> u16;
     /// The part is done.
     fn finish(&mut self) {}
 }
@@ -334,17 +335,20 @@ fn walk_part_avx2<A: RowAction>(tile: &[Entry], part: Window, action: &mut A) {
 #[inline(always)]
 fn walk_part_lanes<A: RowAction>(tile: &[Entry], part: Window, action: &mut A) {
     // One chunk of lanes per pixel row of `part` (at most a tile's side), so a splat walks
-    // only the rows its ellipse reaches.
+    // only the rows its ellipse reaches. Lanes are kept as numbers (a live lane's factor is
+    // 1, a pixel without a ray or done is 0) so that the row loops vectorise.
     let mut px = [0f32; LANES];
     for (l, x) in px.iter_mut().zip(part.x0..part.x1) {
         *l = x as f32 + 0.5;
     }
-    let mut live = [0u16; LANES];
+    let mut live = [[0f32; LANES]; LANES];
+    let mut live_rows = [false; LANES];
     let mut remaining = 0;
-    for (r, row) in live.iter_mut().enumerate().take(part.height() as usize) {
+    for r in 0..part.height() as usize {
         for l in 0..part.width() as usize {
             if action.has_ray(r, l) {
-                *row |= 1 << l;
+                live[r][l] = 1.0;
+                live_rows[r] = true;
                 remaining += 1;
             }
         }
@@ -365,43 +369,35 @@ fn walk_part_lanes<A: RowAction>(tile: &[Entry], part: Window, action: &mut A) {
             continue;
         }
         let [a, b, c] = e.conic;
-        let rows = (first as u32 - part.y0) as usize..=(last as u32 - part.y0) as usize;
-        for (r, live) in live
-            .iter_mut()
-            .enumerate()
-            .take(*rows.end() + 1)
-            .skip(*rows.start())
-        {
-            if *live == 0 {
+        for r in (first as u32 - part.y0) as usize..=(last as u32 - part.y0) as usize {
+            if !live_rows[r] {
                 continue;
             }
+            // The row's sixteen fragments at once: opacity, or 0 where the pixel gets none.
             let dy = e.xy[1] - ((part.y0 + r as u32) as f32 + 0.5);
-            let mut sigma = [0f32; LANES];
+            let mut alphas = [0f32; LANES];
             for l in 0..LANES {
                 let dx = e.xy[0] - px[l];
-                sigma[l] = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
+                let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
+                let alpha = (e.opacity * exp_neg(sigma.clamp(0.0, 80.0))).min(MAX_ALPHA);
+                let met = (sigma >= 0.0) & (sigma <= e.sigma_cut) & (alpha >= MIN_ALPHA);
+                alphas[l] = if met { alpha * live[r][l] } else { 0.0 };
             }
-            let mut reached = 0u16;
-            for (l, &v) in sigma.iter().enumerate() {
-                reached |= u16::from(v >= 0.0 && v <= e.sigma_cut) << l;
-            }
-            if reached & *live == 0 {
+            // No fragment in the row: every opacity is +0 (its bits OR to zero, a reduction
+            // that vectorises where a float comparison chain would not).
+            if alphas.iter().fold(0u32, |m, &a| m | a.to_bits()) == 0 {
                 continue;
             }
-            // The row's sixteen exponentials at once (a loop the compiler vectorises).
-            let mut alphas = [0f32; LANES];
-            let mut strong = 0u16;
-            for l in 0..LANES {
-                alphas[l] = (e.opacity * exp_neg(sigma[l].clamp(0.0, 80.0))).min(MAX_ALPHA);
-                strong |= u16::from(alphas[l] >= MIN_ALPHA) << l;
+            let done = action.row(r, &alphas, e);
+            if done != 0 {
+                for (l, lane) in live[r].iter_mut().enumerate() {
+                    if done >> l & 1 == 1 && *lane != 0.0 {
+                        *lane = 0.0;
+                        remaining -= 1;
+                    }
+                }
+                live_rows[r] = live[r].iter().any(|&v| v != 0.0);
             }
-            let hits = reached & strong & *live;
-            if hits == 0 {
-                continue;
-            }
-            let done = action.row(r, hits, &alphas, e) & *live;
-            *live &= !done;
-            remaining -= done.count_ones();
         }
         if remaining == 0 {
             return;
@@ -428,12 +424,13 @@ impl<S: FnMut(usize, Fragment) -> bool> RowAction for Handing<'_, S> {
     }
 
     #[inline(always)]
-    fn row(&mut self, r: usize, mut hits: u16, alphas: &[f32; LANES], e: &Entry) -> u16 {
+    fn row(&mut self, r: usize, alphas: &[f32; LANES], e: &Entry) -> u16 {
         let mut done = 0;
-        while hits != 0 {
-            let l = hits.trailing_zeros() as usize;
-            hits &= hits - 1;
-            let (i, alpha) = (self.index[r][l], alphas[l]);
+        for (l, &alpha) in alphas.iter().enumerate() {
+            if alpha == 0.0 {
+                continue;
+            }
+            let i = self.index[r][l];
             let wants_more = (self.sink)(
                 i,
                 Fragment {
@@ -517,34 +514,34 @@ impl RowAction for Compositing<'_> {
     /// transmittance to the floor takes nothing and is done, as a compositing sink would
     /// refuse it.
     #[inline(always)]
-    fn row(&mut self, r: usize, hits: u16, alphas: &[f32; LANES], e: &Entry) -> u16 {
+    fn row(&mut self, r: usize, alphas: &[f32; LANES], e: &Entry) -> u16 {
         let transmittance = &mut self.acc.transmittance[r];
         let rgb = &mut self.acc.rgb[r];
         let depth = &mut self.acc.depth_moment[r];
         let z = f64::from(e.z);
         let colour = e.rgb.map(f64::from);
-        self.fragments += u64::from(hits.count_ones());
-        let mut done = 0u16;
-        // Four lanes at a time (one vector of f64), skipping the groups no fragment falls in.
-        for g in (0..LANES).step_by(4) {
-            if hits >> g & 0xF == 0 {
-                continue;
-            }
-            for l in g..g + 4 {
-                let hit = hits >> l & 1 == 1;
-                let alpha = if hit { f64::from(alphas[l]) } else { 0.0 };
-                let t_enter = transmittance[l];
-                let refused = hit && t_enter * (1.0 - alpha) <= MIN_TRANSMITTANCE;
-                let w = if refused { 0.0 } else { t_enter * alpha };
-                transmittance[l] = (t_enter - w).max(0.0);
-                depth[l] += w * z;
-                for c in 0..3 {
-                    rgb[c][l] += w * colour[c];
-                }
-                done |= u16::from(refused) << l;
+        let mut refused = [false; LANES];
+        let mut met = 0;
+        for l in 0..LANES {
+            let alpha = f64::from(alphas[l]);
+            met += u64::from(alpha > 0.0);
+            let t_enter = transmittance[l];
+            refused[l] = alpha > 0.0 && t_enter * (1.0 - alpha) <= MIN_TRANSMITTANCE;
+            let w = if refused[l] { 0.0 } else { t_enter * alpha };
+            transmittance[l] = (t_enter - w).max(0.0);
+            depth[l] += w * z;
+            for c in 0..3 {
+                rgb[c][l] += w * colour[c];
             }
         }
-        done
+        self.fragments += met;
+        if !refused.contains(&true) {
+            return 0;
+        }
+        refused
+            .iter()
+            .enumerate()
+            .fold(0, |done, (l, &no)| done | u16::from(no) << l)
     }
 
     fn finish(&mut self) {

@@ -344,11 +344,11 @@ fn walk_part_lanes<A: RowAction>(tile: &[Entry], part: Window, action: &mut A) {
     let mut live = [[0f32; LANES]; LANES];
     let mut live_rows = [false; LANES];
     let mut remaining = 0;
-    for r in 0..part.height() as usize {
-        for l in 0..part.width() as usize {
-            if action.has_ray(r, l) {
-                live[r][l] = 1.0;
-                live_rows[r] = true;
+    for (r, (row, any)) in live.iter_mut().zip(&mut live_rows).enumerate() {
+        for (l, lane) in row.iter_mut().enumerate().take(part.width() as usize) {
+            if r < part.height() as usize && action.has_ray(r, l) {
+                *lane = 1.0;
+                *any = true;
                 remaining += 1;
             }
         }

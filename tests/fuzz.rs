@@ -289,14 +289,14 @@ fn build_targets() -> Vec<Target> {
                 common_ingp::snapshot_bytes(&ingp),
                 common_ingp::snapshot_bytes(&ingp_old),
             ],
-            cases: 60,
+            cases: 100,
             check: check_ingp_raw,
         },
         Target {
             name: TARGET_NAMES[5],
-            kind: Kind::Bytes,
+            kind: Kind::GzipMsgpack,
             seeds: vec![gzip(&ingp), gzip(&ingp_old)],
-            cases: 80,
+            cases: 40,
             check: check_ingp_gzip,
         },
         Target {

@@ -13,8 +13,10 @@ use super::common_fields::SplitMix64;
 pub enum Kind {
     /// JSON, YAML: numbers are replaced as text.
     Text,
-    /// msgpack: its str/bin/array/map length fields are set huge.
+    /// msgpack: its str/bin/array/map length fields are set huge, its numbers extreme.
     Msgpack,
+    /// gzip-framed msgpack: as [`Kind::Msgpack`] inside the framing, or bytes of the stream.
+    GzipMsgpack,
     /// A Python pickle: its length-prefixed opcodes and integers are set huge.
     Pickle,
     /// A zip archive: its size, count and offset fields are set huge.
@@ -74,6 +76,15 @@ const FLOATS: &[f32] = &[
 pub fn mutate(rng: &mut SplitMix64, inputs: &[Vec<u8>], which: usize, kind: Kind) -> Vec<u8> {
     let mut bytes = inputs[which].clone();
     let structured = kind != Kind::Bytes && rng.below(5) < 3;
+    if kind == Kind::GzipMsgpack {
+        if !structured {
+            return mutate(rng, inputs, which, Kind::Bytes);
+        }
+        // The document inside the framing, mutated as msgpack and framed again.
+        if let Some(inner) = gunzip(&bytes) {
+            return gzip(&mutate(rng, &[inner], 0, Kind::Msgpack));
+        }
+    }
     let rounds = 1 + rng.below(4);
     for _ in 0..rounds {
         if !(structured && mutate_structure(rng, &mut bytes, kind)) {
@@ -87,7 +98,7 @@ pub fn mutate(rng: &mut SplitMix64, inputs: &[Vec<u8>], which: usize, kind: Kind
 fn mutate_structure(rng: &mut SplitMix64, b: &mut Vec<u8>, kind: Kind) -> bool {
     match kind {
         Kind::Text => replace_number(rng, b),
-        Kind::Msgpack => huge_msgpack_length(rng, b),
+        Kind::Msgpack => extreme_msgpack_field(rng, b),
         Kind::Pickle => huge_pickle_field(rng, b),
         Kind::Zip => huge_zip_field(rng, b),
         Kind::Ply => {
@@ -97,7 +108,7 @@ fn mutate_structure(rng: &mut SplitMix64, b: &mut Vec<u8>, kind: Kind) -> bool {
                 replace_float(rng, b)
             }
         }
-        Kind::Bytes => false,
+        Kind::GzipMsgpack | Kind::Bytes => false,
     }
 }
 
@@ -191,26 +202,93 @@ fn replace_float(rng: &mut SplitMix64, b: &mut [u8]) -> bool {
     true
 }
 
-/// Sets the length of one msgpack str/bin/array/map with an explicit length field (found by
-/// its marker byte: some hits are data, which is a mutation too) to a huge value.
-fn huge_msgpack_length(rng: &mut SplitMix64, b: &mut [u8]) -> bool {
-    let width = |m: u8| match m {
-        0xc4 | 0xd9 => 1,
-        0xc5 | 0xda | 0xdc | 0xde => 2,
-        0xc6 | 0xdb | 0xdd | 0xdf => 4,
-        _ => 0,
+/// `(offset, width)` of lengths and `(offset, marker)` of numbers: see [`msgpack_fields`].
+type MsgpackFields = (Vec<(usize, usize)>, Vec<(usize, u8)>);
+
+/// Where the fields of a msgpack document are: `(offset, width)` of every explicit length
+/// (str8–32, bin8–32, array16/32, map16/32) and `(offset, marker)` of every number that has
+/// bytes of its own (floats and sized integers). A linear walk: containers' elements follow
+/// their header, strings' and binaries' payloads are skipped. It stops where the bytes stop
+/// being msgpack (after earlier mutations).
+fn msgpack_fields(b: &[u8]) -> MsgpackFields {
+    let (mut lengths, mut numbers) = (Vec::new(), Vec::new());
+    let mut i = 0;
+    let be = |at: usize, w: usize| -> Option<usize> {
+        let bytes = b.get(at..at + w)?;
+        Some(bytes.iter().fold(0usize, |n, &x| (n << 8) | usize::from(x)))
     };
-    let at: Vec<usize> = (0..b.len())
-        .filter(|&i| width(b[i]) > 0 && i + width(b[i]) < b.len())
-        .collect();
-    if at.is_empty() {
+    while i < b.len() {
+        let m = b[i];
+        let next = match m {
+            0x00..=0x9f | 0xc0..=0xc3 | 0xe0..=0xff => Some(i + 1),
+            0xa0..=0xbf => Some(i + 1 + usize::from(m & 0x1f)),
+            0xc4..=0xc6 | 0xd9..=0xdb => {
+                let w = match m {
+                    0xc4 | 0xd9 => 1,
+                    0xc5 | 0xda => 2,
+                    _ => 4,
+                };
+                lengths.push((i + 1, w));
+                be(i + 1, w).map(|n| i + 1 + w + n)
+            }
+            0xc7..=0xc9 => {
+                let w = 1 << (m - 0xc7);
+                lengths.push((i + 1, w));
+                be(i + 1, w).map(|n| i + 2 + w + n)
+            }
+            0xca..=0xd3 => {
+                numbers.push((i, m));
+                let w = match m {
+                    0xca => 4,
+                    0xcb => 8,
+                    _ => 1 << ((m - 0xcc) % 4),
+                };
+                Some(i + 1 + w)
+            }
+            0xd4..=0xd8 => Some(i + 2 + (1 << (m - 0xd4))),
+            0xdc..=0xdf => {
+                let w = if m % 2 == 0 { 2 } else { 4 };
+                lengths.push((i + 1, w));
+                Some(i + 1 + w)
+            }
+        };
+        match next {
+            Some(n) if n > i => i = n,
+            _ => break,
+        }
+    }
+    lengths.retain(|&(at, w)| at + w <= b.len());
+    (lengths, numbers)
+}
+
+/// Sets the length of one msgpack str/bin/array/map to a huge value, or one of its numbers to
+/// an extreme one (NaN, infinity, the float's largest, the integer's largest).
+fn extreme_msgpack_field(rng: &mut SplitMix64, b: &mut [u8]) -> bool {
+    let (lengths, numbers) = msgpack_fields(b);
+    if !numbers.is_empty() && (lengths.is_empty() || rng.below(2) == 0) {
+        let (at, m) = numbers[rng.below(numbers.len() as u64) as usize];
+        let v = FLOATS[rng.below(FLOATS.len() as u64) as usize];
+        let bytes: Vec<u8> = match m {
+            0xca => v.to_be_bytes().to_vec(),
+            0xcb => f64::from(v).to_be_bytes().to_vec(),
+            _ => {
+                let w = 1usize << ((m - 0xcc) % 4);
+                vec![if rng.below(2) == 0 { 0xff } else { 0x7f }; w]
+            }
+        };
+        if let Some(dst) = b.get_mut(at + 1..at + 1 + bytes.len()) {
+            dst.copy_from_slice(&bytes);
+            return true;
+        }
         return false;
     }
-    let i = at[rng.below(at.len() as u64) as usize];
-    let w = width(b[i]);
+    if lengths.is_empty() {
+        return false;
+    }
+    let (at, w) = lengths[rng.below(lengths.len() as u64) as usize];
     let value = huge(rng, w);
     // msgpack lengths are big-endian.
-    b[i + 1..i + 1 + w].copy_from_slice(&value.to_be_bytes()[8 - w..]);
+    b[at..at + w].copy_from_slice(&value.to_be_bytes()[8 - w..]);
     true
 }
 
@@ -282,4 +360,16 @@ fn huge(rng: &mut SplitMix64, width: usize) -> u64 {
 
 fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {
     hay.windows(needle.len()).position(|w| w == needle)
+}
+
+fn gunzip(b: &[u8]) -> Option<Vec<u8>> {
+    let mut out = Vec::new();
+    std::io::Read::read_to_end(&mut flate2::read::GzDecoder::new(b), &mut out).ok()?;
+    Some(out)
+}
+
+fn gzip(b: &[u8]) -> Vec<u8> {
+    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    std::io::Write::write_all(&mut enc, b).expect("writing to memory");
+    enc.finish().expect("writing to memory")
 }

@@ -182,14 +182,15 @@ struct Fixtures {
     /// The files of two valid nerfacto runs (tiny-cuda-nn's layout, the torch fallback's):
     /// config.yml, dataparser_transforms.json, the checkpoint.
     runs: [[Vec<u8>; 3]; 2],
-    _dir: tempfile::TempDir,
 }
 
+/// The fixtures, made once per binary. The demo's files stay (statics are not dropped) in
+/// the build's scratch folder, as the OpenFX tests' do; the runs are kept as bytes only.
 fn fixtures() -> &'static Fixtures {
     static F: OnceLock<Fixtures> = OnceLock::new();
     F.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let demo = dir.path().join("demo");
+        let demo = Path::new(env!("CARGO_TARGET_TMPDIR"))
+            .join(format!("nerfx-fuzz-demo-{}", std::process::id()));
         std::fs::create_dir_all(&demo).unwrap();
         nerfx::demo::write_graph(&demo, 8, 8).unwrap();
         let mut desc = nerfx::demo::scene_desc();
@@ -197,7 +198,8 @@ fn fixtures() -> &'static Fixtures {
             inst.object = None;
         }
         let run = |spec: common_nerfacto::Spec| {
-            let run = common_nerfacto::write_run(&dir.path().join(format!("{}", spec.seed)), &spec);
+            let dir = tempfile::tempdir().unwrap();
+            let run = common_nerfacto::write_run(dir.path(), &spec);
             let read = |p: &str| std::fs::read(run.join(p)).unwrap();
             [
                 read("config.yml"),
@@ -212,7 +214,6 @@ fn fixtures() -> &'static Fixtures {
                 run(common_nerfacto::Spec::tcnn()),
                 run(common_nerfacto::Spec::torch()),
             ],
-            _dir: dir,
         }
     })
 }

@@ -583,3 +583,80 @@ fn hostile_snapshots_are_refused_early_in_the_users_terms() {
     assert!(e.contains("holds an array, not a map"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The snapshot of `spec` (raw msgpack) with `edit` applied to the bytes of `snapshot.<key>`.
+fn with_snapshot_bytes(spec: &Spec, key: &str, edit: impl Fn(&mut Vec<u8>)) -> Vec<u8> {
+    use rmpv::Value;
+    let mut top = rmpv::decode::read_value(&mut &common_ingp::snapshot_bytes(spec)[..]).unwrap();
+    let Value::Map(entries) = &mut top else {
+        panic!("top level is not a map")
+    };
+    let (_, Value::Map(snap)) = entries
+        .iter_mut()
+        .find(|(k, _)| k.as_str() == Some("snapshot"))
+        .unwrap()
+    else {
+        panic!("snapshot is not a map")
+    };
+    let (_, Value::Binary(bytes)) = snap
+        .iter_mut()
+        .find(|(k, _)| k.as_str() == Some(key))
+        .unwrap()
+    else {
+        panic!("{key} is not binary")
+    };
+    edit(bytes);
+    let mut out = Vec::new();
+    rmpv::encode::write_value(&mut out, &top).unwrap();
+    out
+}
+
+/// A diverged training's NaN or infinite weights would render nothing without a word: they
+/// are refused at load, naming the file and the block; so is a NaN in the density grid (its
+/// negative values, cells no camera saw, are not).
+#[test]
+fn non_finite_weights_and_density_grid_values_are_refused_naming_the_block() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = Spec {
+        gzip: false,
+        ..Spec::small_8x4()
+    };
+    let (nd, nr, _) = common_ingp::param_counts(&spec);
+    let path = dir.path().join("diverged.msgpack");
+    let nan = half::f16::NAN.to_le_bytes();
+    let inf = half::f16::INFINITY.to_le_bytes();
+    for (index, value, block) in [
+        (3, nan, "density MLP"),
+        (nd + 7, inf, "rgb MLP"),
+        (nd + nr + 100, nan, "hash grid"),
+    ] {
+        let bytes = with_snapshot_bytes(&spec, "params_binary", |b| {
+            b[2 * index..2 * index + 2].copy_from_slice(&value)
+        });
+        std::fs::write(&path, bytes).unwrap();
+        let e = IngpField::load(&path).err().unwrap().to_string();
+        assert!(
+            e.contains("diverged.msgpack: snapshot.params_binary: the ")
+                && e.contains(block)
+                && e.contains("1 of ")
+                && e.contains("NaN or infinite"),
+            "{block}: {e}"
+        );
+    }
+    let bytes = with_snapshot_bytes(&spec, "density_grid_binary", |b| {
+        b[10..12].copy_from_slice(&nan);
+        b[20..22].copy_from_slice(&half::f16::from_f32(-1.0).to_le_bytes());
+    });
+    std::fs::write(&path, bytes).unwrap();
+    let e = IngpField::load(&path).err().unwrap().to_string();
+    assert!(
+        e.contains("snapshot.density_grid_binary") && e.contains("1 of ") && e.contains("NaN"),
+        "{e}"
+    );
+    let bytes = with_snapshot_bytes(&spec, "density_grid_binary", |b| {
+        b[20..22].copy_from_slice(&half::f16::from_f32(-1.0).to_le_bytes());
+        b[30..32].copy_from_slice(&inf);
+    });
+    std::fs::write(&path, bytes).unwrap();
+    IngpField::load(&path).unwrap();
+}

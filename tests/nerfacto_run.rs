@@ -323,3 +323,28 @@ fn the_occupancy_grid_is_cached_next_to_the_run() {
     assert_eq!(occupancy_pattern(&sixth), want);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A checkpoint whose training diverged is refused naming the tensor, and an empty
+/// `config.yml` is called empty rather than blaming the checkpoint for not matching it.
+#[test]
+fn nan_weights_and_an_empty_config_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = Spec {
+        density_offset: f32::NAN,
+        ..Spec::torch()
+    };
+    let run = write_run(dir.path(), &spec);
+    let e = NerfactoField::load(&run).unwrap_err().to_string();
+    assert!(
+        e.contains(&format!("step-{STEP:09}.ckpt"))
+            && e.contains("_model.field.mlp_base.model.1.layers.1.bias")
+            && e.contains("1 of 16 weights are NaN or infinite"),
+        "{e}"
+    );
+
+    let run = write_run(&dir.path().join("empty"), &Spec::tcnn());
+    std::fs::write(run.join("config.yml"), "").unwrap();
+    let e = NerfactoField::load(&run).unwrap_err().to_string();
+    assert!(e.contains("config.yml: is empty"), "{e}");
+    assert!(!e.contains("step-"), "{e}");
+}

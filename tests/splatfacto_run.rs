@@ -150,6 +150,21 @@ fn a_splatfacto_run_is_splats_everywhere_and_never_a_nerfacto_field() {
         err.contains("splatfacto") && err.contains("splats"),
         "{err}"
     );
+    // Named as a nerfacto field in a scene file, it says what it is and how to name it.
+    let scene = dir.path().join("scene.json");
+    let text = serde_json::json!({"instances": [{"name": "poster",
+        "field": {"nerfacto": {"path": run.to_string_lossy()}}}]});
+    std::fs::write(&scene, text.to_string()).unwrap();
+    let err = nerfx::scene::SceneDesc::read(&scene)
+        .unwrap()
+        .load()
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        err.contains("splatfacto run") && err.contains("{\"splats\": {\"path\""),
+        "{err}"
+    );
 
     let info = Command::new(env!("CARGO_BIN_EXE_nerfx"))
         .arg("info")

@@ -5,7 +5,7 @@
 //! an OpenFX instance of the bundle through the host (the farm's path, `host` feature). Both
 //! see the same requests, so their images can be compared pixel for pixel.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 
 use super::file::{Graph, GraphNode};
 use super::node::RenderRequest;
@@ -44,8 +44,11 @@ fn image_size(
 }
 
 /// Renders the nodes of `graph` that its outputs need at `time` and `render_scale` with
-/// `render_node`, and returns their whole images by node name. `on_node` hears each node's
-/// name as it finishes (for a progress bar).
+/// `render_node`, and returns the images of the output and the layers by node name. `on_node`
+/// hears each node's name as it finishes (for a progress bar).
+///
+/// An intermediate image lives until its last consumer has rendered, so the images alive at
+/// once are bounded by the graph's width, not its length: a chain of any length holds two.
 pub fn evaluate(
     graph: &Graph,
     time: f64,
@@ -55,13 +58,43 @@ pub fn evaluate(
     on_node: &dyn Fn(&str),
 ) -> Result<BTreeMap<String, Planes>> {
     let need = graph.needed();
-    let mut images: BTreeMap<String, Planes> = BTreeMap::new();
+    let index: HashMap<&str, usize> = graph
+        .nodes
+        .iter()
+        .enumerate()
+        .map(|(i, n)| (n.name.as_str(), i))
+        .collect();
+    let kept: Vec<bool> = graph
+        .nodes
+        .iter()
+        .map(|n| n.name == graph.output || graph.layers.iter().any(|(_, l)| *l == n.name))
+        .collect();
+    // How many connections of needed nodes still have to read each node's image.
+    let mut readers = vec![0usize; graph.nodes.len()];
     for (node, _) in graph.nodes.iter().zip(&need).filter(|(_, &n)| n) {
-        let inputs: BTreeMap<String, Planes> = node
-            .inputs
-            .iter()
-            .filter_map(|(clip, up)| images.get(up).map(|p| (clip.clone(), p.clone())))
-            .collect();
+        for up in node.inputs.values().filter_map(|up| index.get(up.as_str())) {
+            readers[*up] += 1;
+        }
+    }
+    // The images still to be read, by node index.
+    let mut images: BTreeMap<usize, Planes> = BTreeMap::new();
+    for (i, node) in graph.nodes.iter().enumerate().filter(|(i, _)| need[*i]) {
+        let mut inputs = BTreeMap::new();
+        for (clip, up) in &node.inputs {
+            let Some(&j) = index.get(up.as_str()) else {
+                continue;
+            };
+            readers[j] -= 1;
+            // The last reader takes the image; earlier ones (and outputs) copy it.
+            let image = if readers[j] == 0 && !kept[j] {
+                images.remove(&j)
+            } else {
+                images.get(&j).cloned()
+            };
+            if let Some(image) = image {
+                inputs.insert(clip.clone(), image);
+            }
+        }
         // Every failure names the node it happened in.
         let named = |e: Error| match e {
             Error::Invalid { what, message } => {
@@ -79,10 +112,17 @@ pub fn evaluate(
             ..RenderRequest::new(time, Window::new(0, 0, w, h), render_scale)
         };
         let planes = render_node(node, &request).map_err(named)?;
+        // The inputs go before the next node's are gathered.
+        drop(request);
         on_node(&node.name);
-        images.insert(node.name.clone(), planes);
+        if readers[i] > 0 || kept[i] {
+            images.insert(i, planes);
+        }
     }
-    Ok(images)
+    Ok(images
+        .into_iter()
+        .map(|(i, image)| (graph.nodes[i].name.clone(), image))
+        .collect())
 }
 
 /// Renders a node with the registry, in process: the reference for the OpenFX path.

@@ -18,9 +18,11 @@
 //! option identifier (`"final"`) or index. File parameters are relative to the graph file.
 //! Everything is checked at load — unknown nodes, parameters, clips or upstream names,
 //! out-of-range values, unconnected mandatory clips, cycles — with errors naming the file and
-//! the node, so a farm job fails before its first frame rather than on it.
+//! the node, so a farm job fails before its first frame rather than on it. A graph holds at
+//! most [`Graph::MAX_NODES`] nodes; nothing walks it recursively, so its depth is free.
 
-use std::collections::BTreeMap;
+use std::cmp::Reverse;
+use std::collections::{BTreeMap, BinaryHeap, HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use serde_json::Value as Json;
@@ -55,6 +57,10 @@ pub struct Graph {
 }
 
 impl Graph {
+    /// The most nodes a graph may hold: far beyond a hand-built comp, and few enough that one
+    /// plugin instance per node (the farm's path) stays within a render node's memory.
+    pub const MAX_NODES: usize = 10_000;
+
     /// Reads and checks the graph file at `path`.
     pub fn read(path: &Path) -> Result<Graph> {
         let text = crate::input::read_text(path)?;
@@ -79,13 +85,24 @@ impl Graph {
             .get("nodes")
             .and_then(Json::as_array)
             .ok_or_else(|| bad("nodes", "expected a list of nodes".into()))?;
+        if list.len() > Graph::MAX_NODES {
+            return Err(bad(
+                "nodes",
+                format!(
+                    "{} nodes; a graph holds at most {}",
+                    list.len(),
+                    Graph::MAX_NODES
+                ),
+            ));
+        }
         let mut nodes = Vec::with_capacity(list.len());
+        let mut names = HashSet::with_capacity(list.len());
         for (i, entry) in list.iter().enumerate() {
             let node = read_node(entry, base).map_err(|e| match e {
                 Error::Invalid { what, message } => bad(&format!("nodes[{i}]: {what}"), message),
                 other => other,
             })?;
-            if nodes.iter().any(|n: &GraphNode| n.name == node.name) {
+            if !names.insert(node.name.clone()) {
                 return Err(bad(
                     &format!("nodes[{i}].name"),
                     format!("{:?} is used twice", node.name),
@@ -97,7 +114,7 @@ impl Graph {
             let name = v
                 .as_str()
                 .ok_or_else(|| bad(key, "expected a node name".into()))?;
-            if !nodes.iter().any(|n| n.name == name) {
+            if !names.contains(name) {
                 return Err(bad(key, format!("no node is named {name:?}")));
             }
             Ok(name.to_string())
@@ -134,11 +151,12 @@ impl Graph {
             .iter()
             .map(|n| n.name == self.output || self.layers.iter().any(|(_, l)| *l == n.name))
             .collect();
+        let index = name_index(&self.nodes);
         // Downstream nodes come last, so one backward pass reaches every ancestor.
         for i in (0..self.nodes.len()).rev() {
             if need[i] {
                 for up in self.nodes[i].inputs.values() {
-                    if let Some(j) = self.nodes.iter().position(|n| &n.name == up) {
+                    if let Some(&j) = index.get(up.as_str()) {
                         need[j] = true;
                     }
                 }
@@ -313,33 +331,63 @@ fn describe(kind: &ParamKind) -> String {
     }
 }
 
+/// Each node's position in `nodes` by name.
+fn name_index(nodes: &[GraphNode]) -> HashMap<&str, usize> {
+    nodes
+        .iter()
+        .enumerate()
+        .map(|(i, n)| (n.name.as_str(), i))
+        .collect()
+}
+
 /// The nodes reordered so that every node comes after its inputs (Kahn's algorithm, stable:
-/// otherwise the file's order); unknown upstream names and cycles are refused.
+/// of the nodes ready, the first in the file's order goes first); unknown upstream names and
+/// cycles are refused.
 fn upstream_first(nodes: Vec<GraphNode>) -> std::result::Result<Vec<GraphNode>, String> {
-    for n in &nodes {
+    let index = name_index(&nodes);
+    // Per node: how many of its connections are not yet ordered, and who reads it.
+    let mut waiting = vec![0usize; nodes.len()];
+    let mut readers: Vec<Vec<usize>> = vec![Vec::new(); nodes.len()];
+    for (i, n) in nodes.iter().enumerate() {
         for (clip, up) in &n.inputs {
-            if !nodes.iter().any(|m| &m.name == up) {
-                return Err(format!("{}.inputs.{clip}: no node is named {up:?}", n.name));
+            let &j = index
+                .get(up.as_str())
+                .ok_or_else(|| format!("{}.inputs.{clip}: no node is named {up:?}", n.name))?;
+            waiting[i] += 1;
+            readers[j].push(i);
+        }
+    }
+    let mut ready: BinaryHeap<Reverse<usize>> = (0..nodes.len())
+        .filter(|&i| waiting[i] == 0)
+        .map(Reverse)
+        .collect();
+    let mut order = Vec::with_capacity(nodes.len());
+    while let Some(Reverse(i)) = ready.pop() {
+        order.push(i);
+        for &r in &readers[i] {
+            waiting[r] -= 1;
+            if waiting[r] == 0 {
+                ready.push(Reverse(r));
             }
         }
     }
-    let mut pending = nodes;
-    let mut ordered: Vec<GraphNode> = Vec::with_capacity(pending.len());
-    while !pending.is_empty() {
-        let ready = pending.iter().position(|n| {
-            n.inputs
-                .values()
-                .all(|up| ordered.iter().any(|m| &m.name == up))
-        });
-        match ready {
-            Some(i) => ordered.push(pending.remove(i)),
-            None => {
-                let names: Vec<&str> = pending.iter().map(|n| n.name.as_str()).collect();
-                return Err(format!("the inputs of {} form a cycle", names.join(", ")));
-            }
-        }
+    if order.len() < nodes.len() {
+        let stuck: Vec<&str> = (0..nodes.len())
+            .filter(|&i| waiting[i] > 0)
+            .map(|i| nodes[i].name.as_str())
+            .collect();
+        let shown = stuck.len().min(10);
+        let more = match stuck.len() - shown {
+            0 => String::new(),
+            n => format!(" and {n} more"),
+        };
+        return Err(format!(
+            "the inputs of {}{more} form a cycle",
+            stuck[..shown].join(", ")
+        ));
     }
-    Ok(ordered)
+    let mut slots: Vec<Option<GraphNode>> = nodes.into_iter().map(Some).collect();
+    Ok(order.into_iter().filter_map(|i| slots[i].take()).collect())
 }
 
 #[cfg(test)]

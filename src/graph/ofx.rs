@@ -138,8 +138,12 @@ impl OfxGraph {
             let instance = instances.get_mut(&node.name).ok_or_else(|| {
                 Error::invalid(format!("graph node {}", node.name), "was not instantiated")
             })?;
+            // The instance's clips see the images only while this render holds them.
+            let mut held = Vec::with_capacity(request.inputs.len());
             for (clip, image) in &request.inputs {
-                instance.connect(clip, upstream(image, request.render_scale))?;
+                let image = Arc::new(image.clone());
+                instance.connect(clip, upstream(&image, request.render_scale))?;
+                held.push(image);
             }
             instance.render(
                 request.time,
@@ -169,11 +173,12 @@ fn as_published(node: &GraphNode, name: &str, value: &Value) -> Value {
 }
 
 /// An upstream node's whole image at `scale` as a clip source; its region of definition in
-/// full-resolution pixels is the image's size undone by the scale.
-fn upstream(image: &Planes, scale: f64) -> ClipSource {
-    let image = Arc::new(image.clone());
+/// full-resolution pixels is the image's size undone by the scale. The source holds the image
+/// weakly: once the render that connected it is over, the instance keeps no pixels.
+fn upstream(image: &Arc<Planes>, scale: f64) -> ClipSource {
     let full = |n: u32| (f64::from(n) / scale).floor().max(1.0) as u32;
     let rod = (full(image.width), full(image.height));
+    let image = Arc::downgrade(image);
     ClipSource::new(rod, move |_, window, s| {
         if s != scale {
             return Err(Error::invalid(
@@ -181,6 +186,12 @@ fn upstream(image: &Planes, scale: f64) -> ClipSource {
                 format!("rendered at render scale {scale}, asked for {s}"),
             ));
         }
+        let image = image.upgrade().ok_or_else(|| {
+            Error::invalid(
+                "clip source",
+                "its upstream image was released after the render it was connected for",
+            )
+        })?;
         image.crop(window)
     })
 }

@@ -39,6 +39,11 @@ fn default_cutoff() -> f32 {
     4.0
 }
 
+/// The largest Gaussian cutoff, in standard deviations. Past about 14σ the density is 0 in
+/// single precision anyway, while the support still has to be stepped through: a cutoff of
+/// 2³¹ turns a small blob into one billions of steps across.
+const MAX_CUTOFF: f32 = 64.0;
+
 /// The support of a primitive, in field space.
 ///
 /// JSON: `{"sphere": {"center": [x, y, z], "radius": r}}`,
@@ -149,7 +154,17 @@ impl Shape {
             } => {
                 finite("gaussian.center", center)?;
                 positive("gaussian.sigma", sigma)?;
-                positive("gaussian.cutoff", cutoff)
+                positive("gaussian.cutoff", cutoff)?;
+                if cutoff > MAX_CUTOFF {
+                    return Err(Error::invalid(
+                        format!("{what}.gaussian.cutoff"),
+                        format!(
+                            "{cutoff} standard deviations is past the most, {MAX_CUTOFF} (the \
+                             density is 0 beyond about 14)"
+                        ),
+                    ));
+                }
+                Ok(())
             }
         }
     }
@@ -671,6 +686,11 @@ mod tests {
         assert!(e.contains("primitives[1].shape.gaussian.sigma"), "{e}");
         let e = bad(gauss(Vec3::ZERO, 1.0, f32::INFINITY, 1.0));
         assert!(e.contains("primitives[1].shape.gaussian.cutoff"), "{e}");
+        let e = bad(gauss(Vec3::ZERO, 0.6, 2147483647.0, 1.0));
+        assert!(
+            e.contains("gaussian.cutoff") && e.contains("past the most"),
+            "{e}"
+        );
         let e = bad(sphere(Vec3::ZERO, 1.0, -2.0, Vec3::ONE));
         assert!(e.contains("primitives[1].density"), "{e}");
         let e = bad(sphere(Vec3::ZERO, 1.0, f32::NAN, Vec3::ONE));

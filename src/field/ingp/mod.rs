@@ -30,7 +30,7 @@ mod cascades;
 
 use super::container::{read_document, Doc};
 use super::network::{
-    correctly_rounded, sh4, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage,
+    correctly_rounded, non_finite, sh4, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage,
 };
 use super::{Aabb, ColorSpace, Field};
 use crate::error::{Error, Result};
@@ -206,6 +206,16 @@ impl IngpField {
                 .collect()
         };
         let (nd, nr) = (layout.density.n_params(), layout.rgb.n_params());
+        let blocks = [
+            ("density MLP", 0..nd),
+            ("rgb MLP", nd..nd + nr),
+            ("hash grid", nd + nr..nd + nr + layout.grid.n_params()),
+        ];
+        for (block, range) in blocks {
+            if let Some(why) = params.get(range).and_then(non_finite) {
+                return Err(doc.err("snapshot.params_binary", format!("the {block}: {why}")));
+            }
+        }
         let bad = |what: &str| doc.err("snapshot.params_binary", format!("bad {what} parameters"));
         let density_mlp =
             Mlp::new(layout.density, &params[..nd]).ok_or_else(|| bad("density MLP"))?;
@@ -443,6 +453,19 @@ fn read_cascades(doc: &Doc, snap: &Value) -> Result<Cascades> {
         .chunks_exact(2)
         .map(|b| f16::from_le_bytes([b[0], b[1]]).to_f32())
         .collect();
+    // Negative values mark cells no camera saw and +∞ a density past fp16's range; NaN is
+    // neither, and would read as empty.
+    if let Some(first) = values.iter().position(|v| v.is_nan()) {
+        let count = values.iter().filter(|v| v.is_nan()).count();
+        return Err(doc.err(
+            at,
+            format!(
+                "{count} of {} density grid values are NaN (the first at index {first}): the \
+                 training diverged before this was saved",
+                values.len()
+            ),
+        ));
+    }
     Cascades::from_densities(&values).ok_or_else(|| {
         doc.err(
             at,

@@ -92,6 +92,26 @@ impl RunSettings {
 
     /// Parses the text of `config.yml` (`file` names it in messages).
     pub(crate) fn from_text(text: &str, file: &Path) -> Result<Self> {
+        // Without this, an empty or foreign file reads as all defaults and the checkpoint is
+        // blamed for not matching them.
+        if text.lines().all(|l| {
+            let l = l.trim();
+            l.is_empty() || l.starts_with('#')
+        }) {
+            return Err(Error::format(
+                file,
+                "",
+                "is empty; a nerfstudio run's config.yml (ns-train writes it) holds its \
+                 method_name and pipeline.model settings",
+            ));
+        }
+        if scan(text, "method_name", file)?.is_none() && scan(text, "pipeline", file)?.is_none() {
+            return Err(Error::format(
+                file,
+                "",
+                "has neither method_name nor pipeline: not a nerfstudio run's config.yml",
+            ));
+        }
         let s = RunSettings {
             method_name: scan(text, "method_name", file)?.unwrap_or_default(),
             num_levels: parsed(text, "num_levels", 16, file)?,
@@ -194,5 +214,22 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
         assert!(e.contains("twice"), "{e}");
         let t = TEXT.replace("0.01", "-1");
         assert!(RunSettings::from_text(&t, Path::new("config.yml")).is_err());
+    }
+
+    #[test]
+    fn an_empty_or_foreign_file_is_called_so() {
+        for (text, needle) in [
+            ("", "config.yml: is empty"),
+            ("\n  \n# nothing\n", "config.yml: is empty"),
+            (
+                "camera_model: OPENCV\nw: 640\n",
+                "not a nerfstudio run's config.yml",
+            ),
+        ] {
+            let e = RunSettings::from_text(text, Path::new("config.yml"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(needle), "{needle:?} not in {e}");
+        }
     }
 }

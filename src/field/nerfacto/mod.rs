@@ -42,7 +42,7 @@ use glam::Vec3;
 use half::f16;
 
 use super::container::{Checkpoint, DType};
-use super::network::{sh4, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage};
+use super::network::{non_finite, sh4, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage};
 use super::{Aabb, ColorSpace, Field};
 use crate::error::{Error, Result};
 use config::RunSettings;
@@ -470,7 +470,7 @@ fn read_appearance(ckpt: &Checkpoint, keys: &Keys) -> Result<(Vec<f32>, usize)> 
     if n == 0 {
         return Err(keys.err(&name, "no embeddings"));
     }
-    let w = ckpt.read_f32(&name)?;
+    let w = read_weights(ckpt, &name)?;
     let mean = (0..d)
         .map(|j| ((0..n).map(|i| f64::from(w[i * d + j])).sum::<f64>() / n as f64) as f32)
         .collect();
@@ -543,7 +543,7 @@ fn read_tcnn(
     let density = Mlp::new(density_config, &mlp_params)
         .ok_or_else(|| keys.err(&grid_name, "density MLP parameters do not match the config"))?;
     let head_name = keys.name("mlp_head.tcnn_encoding.params");
-    let head_params = ckpt.read_f32(&head_name)?;
+    let head_params = read_weights(ckpt, &head_name)?;
     let head_config = [16, 8]
         .map(|align| MlpConfig {
             n_inputs: 16 + (N_BASE - 1) + n_appearance,
@@ -579,9 +579,19 @@ fn read_tcnn(
     ))
 }
 
+/// The tensor `name` as float32 values, refused naming the checkpoint and the tensor when
+/// any is NaN or infinite (see [`non_finite`]).
+fn read_weights(ckpt: &Checkpoint, name: &str) -> Result<Vec<f32>> {
+    let values = ckpt.read_f32(name)?;
+    match non_finite(&values) {
+        Some(why) => Err(Error::format(ckpt.path().to_path_buf(), name, why)),
+        None => Ok(values),
+    }
+}
+
 /// A flat parameter tensor of exactly `count` values.
 fn read_params(ckpt: &Checkpoint, keys: &Keys, name: &str, count: usize) -> Result<Vec<f32>> {
-    let p = ckpt.read_f32(name)?;
+    let p = read_weights(ckpt, name)?;
     if p.len() != count {
         return Err(keys.err(
             name,
@@ -614,7 +624,7 @@ fn read_torch(
         ));
     };
     let table_name = keys.name(table_name);
-    let table = ckpt.read_f32(&table_name)?;
+    let table = read_weights(ckpt, &table_name)?;
     let nf = s.features_per_level as usize;
     let grid = TorchHashGrid::new(
         s.num_levels,
@@ -667,8 +677,11 @@ fn read_linear_layers(
     let mut layers = Vec::new();
     let mut count = 0;
     while keys.has(&format!("{prefix}.{}.weight", layers.len())) {
-        let w = ckpt.read_f32(&keys.name(&format!("{prefix}.{}.weight", layers.len())))?;
-        let b = ckpt.read_f32(&keys.name(&format!("{prefix}.{}.bias", layers.len())))?;
+        let w = read_weights(
+            ckpt,
+            &keys.name(&format!("{prefix}.{}.weight", layers.len())),
+        )?;
+        let b = read_weights(ckpt, &keys.name(&format!("{prefix}.{}.bias", layers.len())))?;
         count += w.len() + b.len();
         layers.push((w, b));
     }

@@ -5,8 +5,10 @@
 mod hashgrid;
 mod mlp;
 mod sh4;
+mod weights;
 
 pub use hashgrid::TableStorage;
 pub(crate) use hashgrid::{correctly_rounded, HashGrid, HashGridConfig};
 pub(crate) use mlp::{Mlp, MlpConfig};
 pub(crate) use sh4::{sh4, sh_basis};
+pub(crate) use weights::non_finite;

@@ -25,13 +25,17 @@ pub(crate) const MIN_TRANSMITTANCE: f64 = 1e-4;
 /// calls so that a loop of them vectorises: `e^(−s) = 2^n · e^r` with `n = round(−s / ln 2)`,
 /// `r = −s − n·ln 2` (ln 2 split in two, the first part with trailing zero bits so `n` times
 /// it is exact) and `e^r` by its Taylor series to `r⁷` (`|r| ≤ ln 2 / 2`: truncation below
-/// 6e-9 relative).
+/// 6e-9 relative). `n` is rounded by adding `1.5·2²³`, where floats are spaced by 1, so it
+/// lands in the low bits of the sum (no float-to-int conversion, whose saturation checks
+/// would not vectorise as well).
 #[inline(always)]
 fn exp_neg(s: f32) -> f32 {
     const LN2_HI: f32 = 0.693_145_75;
     const LN2_LO: f32 = 1.428_606_8e-6;
+    const ROUND: f32 = 12_582_912.0;
     let x = -s;
-    let n = (x * std::f32::consts::LOG2_E).round();
+    let shifted = x * std::f32::consts::LOG2_E + ROUND;
+    let n = shifted - ROUND;
     let r = (x - n * LN2_HI) - n * LN2_LO;
     let mut p: f32 = 1.0 / 5040.0;
     for c in [
@@ -45,7 +49,9 @@ fn exp_neg(s: f32) -> f32 {
     ] {
         p = p * r + c;
     }
-    p * f32::from_bits(((n as i32 + 127) as u32) << 23)
+    // `n` (in [−116, 0]) as the low bits of `shifted`, moved into a float's exponent.
+    let n_bits = shifted.to_bits().wrapping_sub(ROUND.to_bits());
+    p * f32::from_bits(n_bits.wrapping_add(127) << 23)
 }
 
 /// One splat's contribution to one pixel.

@@ -15,6 +15,7 @@ use std::sync::Arc;
 use glam::{DVec3, Vec3};
 
 use super::composite::{crossing_depth, Pieces};
+use super::proposal::{self, ProposalScratch};
 use super::splats::Splatting;
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
@@ -122,6 +123,22 @@ struct RayState {
     /// The pixel's splat fragments, front to back, and the next one to composite.
     fragments: Vec<Fragment>,
     next_fragment: usize,
+    /// The pixel's proposal-sampled volume fragments (module `proposal`), front to back,
+    /// and the next one to composite.
+    volume: Vec<Fragment>,
+    next_volume: usize,
+}
+
+impl RayState {
+    /// Distance of the next fragment to composite, splat or volume.
+    fn next_fragment_t(&self) -> Option<f64> {
+        let splat = self.fragments.get(self.next_fragment).map(|f| f.t);
+        let volume = self.volume.get(self.next_volume).map(|f| f.t);
+        match (splat, volume) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
 }
 
 /// Per-thread scratch reused from tile to tile: no allocation per sample.
@@ -156,6 +173,10 @@ pub(super) struct Scratch {
     /// Per pixel of the tile: camera z per unit ray distance, and the splat fragments.
     z_per_t: Vec<f64>,
     fragments: Vec<Vec<Fragment>>,
+    /// Per pixel of the tile: its world ray and its proposal-sampled fragments.
+    tile_rays: Vec<Option<Ray>>,
+    volume: Vec<Vec<Fragment>>,
+    proposal: ProposalScratch,
     stats: RenderStats,
 }
 
@@ -265,9 +286,24 @@ fn setup_rays(
         union_in_place(&mut state.segments);
         state.fragments.clear();
         state.next_fragment = 0;
+        state.volume.clear();
+        state.next_volume = 0;
         state.live = !state.segments.is_empty();
         if state.live {
             s.active.push(r as u32);
+        }
+    }
+    if !scene.proposal.is_empty() {
+        s.volume.resize_with(n_rays, Vec::new);
+        for f in &mut s.volume[..n_rays] {
+            f.clear();
+        }
+        s.tile_rays.clear();
+        s.tile_rays.extend(s.rays[..n_rays].iter().map(|st| st.ray));
+        let volume = &mut s.volume[..n_rays];
+        proposal::fill(scene, &s.tile_rays, &mut s.proposal, volume, &mut s.stats);
+        for (state, volume) in s.rays[..n_rays].iter_mut().zip(&mut s.volume) {
+            std::mem::swap(&mut state.volume, volume);
         }
     }
     if let Some(layer) = splats {
@@ -280,9 +316,11 @@ fn setup_rays(
         for (state, fragments) in s.rays[..n_rays].iter_mut().zip(&mut s.fragments) {
             std::mem::swap(&mut state.fragments, fragments);
             s.stats.splat_fragments += state.fragments.len() as u64;
-            if !state.live {
-                composite_fragments(state, f64::INFINITY, outputs);
-            }
+        }
+    }
+    for state in &mut s.rays[..n_rays] {
+        if !state.live {
+            composite_fragments(state, f64::INFINITY, outputs);
         }
     }
 }
@@ -614,11 +652,7 @@ fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, out
         let mut t0 = a.t;
         let mut stopped = false;
         loop {
-            let fragment = state
-                .fragments
-                .get(state.next_fragment)
-                .map(|f| f.t)
-                .filter(|&t| t < b.t);
+            let fragment = state.next_fragment_t().filter(|&t| t < b.t);
             let t1 = fragment.map_or(b.t, |t| t.max(t0));
             let t_enter = state.pieces.transmittance();
             let w = state.pieces.add(t0, t1 - t0, 0.5 * sum);
@@ -655,27 +689,42 @@ fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, out
     }
 }
 
-/// Composites the ray's splat fragments up to `t_end`, in order. `false` when the ray is
-/// done: a fragment would bring its transmittance to the splats' floor (gsplat's rule, which
-/// makes a pixel of splats alone exactly gsplat's).
+/// Composites the ray's fragments up to `t_end`, splat and volume ones merged in order.
+/// `false` when the ray is done: a splat fragment would bring its transmittance to the
+/// splats' floor (gsplat's rule, which makes a pixel of splats alone exactly gsplat's).
+/// Volume fragments (proposal samples) have no such floor: nerfstudio composites every
+/// sample.
 fn composite_fragments(state: &mut RayState, t_end: f64, outputs: &Outputs) -> bool {
-    while let Some(f) = state.fragments.get(state.next_fragment) {
+    loop {
+        let splat = state.fragments.get(state.next_fragment);
+        let volume = state.volume.get(state.next_volume);
+        let (f, is_splat) = match (splat, volume) {
+            (Some(a), Some(b)) if b.t < a.t => (*b, false),
+            (Some(a), _) => (*a, true),
+            (None, Some(b)) => (*b, false),
+            (None, None) => break,
+        };
         if f.t > t_end {
             break;
         }
         let alpha = f64::from(f.alpha);
         let t_enter = state.pieces.transmittance();
-        if t_enter * (1.0 - alpha) <= SPLAT_MIN_TRANSMITTANCE {
+        if is_splat && t_enter * (1.0 - alpha) <= SPLAT_MIN_TRANSMITTANCE {
             state.next_fragment = state.fragments.len();
+            state.next_volume = state.volume.len();
             state.live = false;
             return false;
         }
         let w = state.pieces.add_fragment(f.t, alpha);
         state.rgb += Vec3::from_array(f.rgb).as_dvec3() * w;
-        if outputs.depth_median {
+        if outputs.depth_median && alpha > 0.0 {
             state.log.push([f.t, 0.0, -(-alpha).ln_1p(), t_enter]);
         }
-        state.next_fragment += 1;
+        if is_splat {
+            state.next_fragment += 1;
+        } else {
+            state.next_volume += 1;
+        }
     }
     true
 }

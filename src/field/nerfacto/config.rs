@@ -73,14 +73,13 @@ pub(crate) fn scan(text: &str, path: &str, file: &Path) -> Result<Option<String>
     Ok(found)
 }
 
+/// One item of a YAML sequence: its `key: value` pairs.
+pub(crate) type Item = Vec<(String, String)>;
+
 /// The items of the sequence at the dotted `path` (PyYAML's block style: `- ` items at the
 /// key's indentation or deeper, or an inline `[a, b]`), each as its `key: value` pairs (a
 /// scalar item as one pair with an empty key); `None` when the key is absent.
-pub(crate) fn scan_items(
-    text: &str,
-    path: &str,
-    file: &Path,
-) -> Result<Option<Vec<Vec<(String, String)>>>> {
+pub(crate) fn scan_items(text: &str, path: &str, file: &Path) -> Result<Option<Vec<Item>>> {
     let Some(inline) = scan(text, path, file)? else {
         return Ok(None);
     };
@@ -90,7 +89,7 @@ pub(crate) fn scan_items(
     }
     let mut stack: Vec<(usize, &str)> = Vec::new();
     let mut key_indent = None;
-    let mut items: Vec<Vec<(String, String)>> = Vec::new();
+    let mut items: Vec<Item> = Vec::new();
     for line in text.lines() {
         let content = line.trim_start();
         let indent = line.len() - content.len();
@@ -433,5 +432,54 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
         assert!(e.contains("twice"), "{e}");
         let t = TEXT.replace("0.01", "-1");
         assert!(RunSettings::from_text(&t, Path::new("config.yml")).is_err());
+    }
+
+    #[test]
+    fn reads_the_sampler_from_pyyaml_sequences() {
+        let t = TEXT.replace(
+            "    hidden_dim: 32\n",
+            "    hidden_dim: 32
+    num_proposal_samples_per_ray: !!python/tuple
+    - 128
+    - 64
+    num_nerf_samples_per_ray: 32
+    proposal_net_args_list:
+    - hidden_dim: 16
+      log2_hashmap_size: 17
+      max_res: 128
+      num_levels: 5
+      use_linear: false
+    - hidden_dim: 8
+      max_res: 256
+      num_levels: 4
+      use_linear: true
+",
+        );
+        let s = SamplerSettings::from_text(&t, Path::new("config.yml")).unwrap();
+        assert_eq!(
+            (s.proposal_samples.clone(), s.nerf_samples),
+            (vec![128, 64], 32)
+        );
+        assert_eq!(s.far_plane, 1000.0);
+        assert!(!s.same_network && !s.uniform_initial);
+        assert_eq!(s.nets.len(), 2);
+        assert_eq!((s.nets[0].max_res, s.nets[0].log2_hashmap_size), (128, 17));
+        // Keys an entry leaves out take HashMLPDensityField's defaults.
+        let n = &s.nets[1];
+        assert_eq!(
+            (n.num_levels, n.hidden_dim, n.log2_hashmap_size),
+            (4, 8, 18)
+        );
+        assert!(n.use_linear && n.num_layers == 2 && n.base_res == 16);
+        // Absent: nerfacto's defaults.
+        let d = SamplerSettings::from_text(TEXT, Path::new("config.yml")).unwrap();
+        assert_eq!((d.proposal_samples, d.nerf_samples), (vec![256, 96], 48));
+        assert_eq!([d.nets[0].max_res, d.nets[1].max_res], [128, 256]);
+        // A bad count names the key.
+        let bad = t.replace("- 64", "- many");
+        let e = SamplerSettings::from_text(&bad, Path::new("config.yml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("num_proposal_samples_per_ray"), "{e}");
     }
 }

@@ -315,3 +315,99 @@ fn the_occupancy_sampler_is_chosen_per_instance_and_runs_without_proposals_say_s
     assert_eq!(placed(&dir, "occupancy").unwrap().instances.len(), 1);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A `Quality::Final` RGBA render of a synthetic run of nerfacto's real architecture (16
+/// levels × 2, `2^19` rows, fp16; proposal networks of `2^17` rows, max res 128 and 256;
+/// 256 + 96 proposal and 48 main samples) sampled by its proposal networks, 1920×1080 unless
+/// `NERFX_BENCH_SIZE=WxH`: `cargo test --release --test nerfacto_proposal -- --ignored
+/// --nocapture bench`. Prints the frame time and the split between the proposal networks and
+/// the main field (thread-seconds, from sampling every pixel's ray again in 256-ray
+/// batches); timing is never asserted. Its seeded weights make a fog, not a surface: rays
+/// rarely stop early, the worst case for the sampler.
+#[test]
+#[ignore = "benchmark"]
+fn bench_proposal_render_1080p_final() {
+    use nerfx::field::SamplerStats;
+    use nerfx::render::render_with_progress;
+    use rayon::prelude::*;
+    use std::time::Instant;
+
+    let (w, h) = std::env::var("NERFX_BENCH_SIZE")
+        .ok()
+        .and_then(|s| {
+            let (a, b) = s.split_once('x')?;
+            Some((a.parse().ok()?, b.parse().ok()?))
+        })
+        .unwrap_or((1920u32, 1080u32));
+    let dir = scratch("proposal-bench");
+    let spec = Spec {
+        log2_table_size: 19,
+        proposal: Some((17, [128, 256])),
+        ..Spec::tcnn()
+    };
+    let t = Instant::now();
+    write_run(&dir, &spec);
+    let scene = placed(&dir, "proposal").unwrap();
+    println!(
+        "run written and loaded in {:.1} s",
+        t.elapsed().as_secs_f64()
+    );
+    let p = Perspective::from_vertical_fov(w, h, 50.0).unwrap();
+    let camera = Camera::new(
+        nerfx::demo::look_at(DVec3::new(0.5, -3.0, 1.0), DVec3::ZERO),
+        Projection::Perspective(p),
+    )
+    .unwrap();
+    let settings = RenderSettings::new(Quality::Final.params(), Outputs::rgba());
+    let t = Instant::now();
+    let (planes, stats) =
+        render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {}).unwrap();
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    let n = f64::from(w * h);
+    let alpha = planes.alpha.as_ref().unwrap();
+    let mean_alpha = alpha.data.iter().map(|&a| f64::from(a)).sum::<f64>() / n;
+    println!(
+        "{w}x{h} Final rgba, proposal sampler, {} rayon threads: {ms:.0} ms/frame; per pixel \
+         {:.1} density and {:.1} colour queries; mean alpha {mean_alpha:.3}",
+        rayon::current_num_threads(),
+        stats.density_samples as f64 / n,
+        stats.color_samples as f64 / n,
+    );
+    // The split, sampling every ray again outside the renderer.
+    let field = scene.proposal[0].field();
+    let rays: Vec<SamplerRay> = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .filter_map(|(x, y)| camera.ray(f64::from(x) + 0.5, f64::from(y) + 0.5))
+        .filter_map(|r| scene.proposal[0].sampler_ray(&r).map(|(s, _)| s))
+        .collect();
+    let t = Instant::now();
+    let split = rays
+        .par_chunks(256)
+        .map_init(
+            || (SamplerScratch::default(), Vec::new()),
+            |(s, pieces), batch| {
+                pieces.clear();
+                field.sample_rays(batch, pieces, s).unwrap()
+            },
+        )
+        .reduce(SamplerStats::default, |mut a, b| {
+            a += b;
+            a
+        });
+    let (prop, main) = (
+        split.proposal_time.as_secs_f64(),
+        split.main_time.as_secs_f64(),
+    );
+    println!(
+        "sampling alone: {:.0} ms wall; thread-seconds: proposal networks {prop:.1} s ({:.0} %, \
+         {:.1} queries/pixel), main field {main:.1} s ({:.0} %, {:.1} density and {:.1} colour \
+         queries/pixel)",
+        t.elapsed().as_secs_f64() * 1e3,
+        100.0 * prop / (prop + main),
+        split.proposal_queries as f64 / n,
+        100.0 * main / (prop + main),
+        split.main_queries as f64 / n,
+        split.color_queries as f64 / n,
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

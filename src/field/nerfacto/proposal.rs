@@ -105,8 +105,9 @@ pub struct SamplerScratch {
     prev_edges: Vec<f64>,
     /// Weights per ray (`n` each) of the last evaluated iteration.
     weights: Vec<f64>,
-    /// `(g(near), g(far))` per ray.
+    /// `(g(near), g(far))` per ray, and the distances of this iteration's edges.
     span: Vec<[f64; 2]>,
+    distances: Vec<f64>,
     /// Optical depth so far, per ray; rays still being evaluated.
     tau: Vec<f64>,
     live: Vec<u32>,
@@ -260,32 +261,33 @@ impl NerfactoField {
                 }
                 n = b - 1;
             }
+            s.distances.clear();
+            for (r, ray) in rays.iter().enumerate() {
+                let span = s.span[r];
+                let mut prev = ray.near;
+                for &e in &s.edges[r * (n + 1)..(r + 1) * (n + 1)] {
+                    // Kept within the ray's span and in order (rounding in `g⁻¹`).
+                    let t = sampler.distance(e, span).clamp(prev, ray.far);
+                    s.distances.push(t);
+                    prev = t;
+                }
+            }
             if level < iterations {
                 stats.proposal_queries += self.weigh(sampler, level, rays, n, s);
             }
         }
         stats.proposal_time = start.elapsed();
         let start = Instant::now();
-        self.shade_main(sampler, rays, n, pieces, s, &mut stats);
+        self.shade_main(rays, n, pieces, s, &mut stats);
         stats.main_time = start.elapsed();
         Some(stats)
     }
 
-    /// Midpoint of interval `j` of ray `r` (`n` intervals per ray), and its ends.
+    /// Interval `j` of ray `r` (`n` intervals per ray) of the current iteration.
     #[inline]
-    fn interval(
-        sampler: &ProposalSampler,
-        s: &SamplerScratch,
-        ray: &SamplerRay,
-        r: usize,
-        j: usize,
-        n: usize,
-    ) -> (f64, f64) {
-        let e = &s.edges[r * (n + 1)..];
-        // Kept within the ray's span and in order (rounding in `g⁻¹`).
-        let t0 = sampler.distance(e[j], s.span[r]).clamp(ray.near, ray.far);
-        let t1 = sampler.distance(e[j + 1], s.span[r]).clamp(t0, ray.far);
-        (t0, t1)
+    fn interval(s: &SamplerScratch, r: usize, j: usize, n: usize) -> (f64, f64) {
+        let at = r * (n + 1) + j;
+        (s.distances[at], s.distances[at + 1])
     }
 
     /// Evaluates proposal iteration `level` (`n` intervals per ray) front to back, filling
@@ -314,7 +316,7 @@ impl NerfactoField {
             for &r in &s.live {
                 let ray = &rays[r as usize];
                 for j in first..last {
-                    let (t0, t1) = Self::interval(sampler, s, ray, r as usize, j, n);
+                    let (t0, t1) = Self::interval(s, r as usize, j, n);
                     s.points
                         .push((ray.origin + ray.dir * (0.5 * (t0 + t1))).as_vec3());
                     s.owners.push((r, j as u32));
@@ -325,7 +327,7 @@ impl NerfactoField {
             queries += s.points.len() as u64;
             for (&(r, j), &sigma) in s.owners.iter().zip(&s.sigma) {
                 let (r, j) = (r as usize, j as usize);
-                let (t0, t1) = Self::interval(sampler, s, &rays[r], r, j, n);
+                let (t0, t1) = Self::interval(s, r, j, n);
                 let x = sanitised(sigma) * (t1 - t0);
                 s.weights[r * n + j] = -(-x).exp_m1() * (-s.tau[r]).exp();
                 s.tau[r] += x;
@@ -342,7 +344,6 @@ impl NerfactoField {
     /// the samples whose weight matters.
     fn shade_main(
         &self,
-        sampler: &ProposalSampler,
         rays: &[SamplerRay],
         n: usize,
         pieces: &mut Vec<Piece>,
@@ -352,9 +353,9 @@ impl NerfactoField {
         let n_geo = self.n_base - 1;
         let base = pieces.len();
         pieces.resize(base + rays.len() * n, Piece::default());
-        for (r, ray) in rays.iter().enumerate() {
+        for r in 0..rays.len() {
             for j in 0..n {
-                let (t0, t1) = Self::interval(sampler, s, ray, r, j, n);
+                let (t0, t1) = Self::interval(s, r, j, n);
                 pieces[base + r * n + j] = Piece {
                     t0,
                     t1,

@@ -33,8 +33,9 @@ pub(crate) use network::sh_basis;
 pub use network::TableStorage;
 pub use occupancy::Occupancy;
 pub(crate) use splats::{
-    is_splatfacto_run, Fragment, RayLayer, RayView as SplatRayView, SplatLayer, View as SplatView,
-    MIN_TRANSMITTANCE as SPLAT_MIN_TRANSMITTANCE, NEAR_PLANE as SPLAT_NEAR_PLANE,
+    is_splatfacto_run, Fragment, RayLayer, RayView as SplatRayView, SplatLayer, SplatPixel,
+    View as SplatView, MIN_TRANSMITTANCE as SPLAT_MIN_TRANSMITTANCE,
+    NEAR_PLANE as SPLAT_NEAR_PLANE,
 };
 pub use splats::{SplatColor, Splats};
 pub(crate) use srgb::{linear_to_srgb, srgb_to_linear};

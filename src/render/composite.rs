@@ -95,6 +95,14 @@ impl Pieces {
         }
     }
 
+    /// The pieces of a pixel composited elsewhere, from its transmittance `T` and `Σ w·t`.
+    pub fn from_sums(transmittance: f64, depth_moment: f64) -> Self {
+        Pieces {
+            transmittance,
+            depth_moment,
+        }
+    }
+
     /// Composites the piece `[t, t + δ]` of density `σ` (both ≥ 0; σ may be `inf`) and
     /// returns its weight `w = T·α`.
     #[inline]

@@ -20,7 +20,7 @@ use super::splats::Splatting;
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
 use crate::field::{
-    linear_to_srgb, Aabb, ColorSpace, Fragment, Occupancy, SPLAT_MIN_TRANSMITTANCE,
+    linear_to_srgb, Aabb, ColorSpace, Fragment, Occupancy, SplatPixel, SPLAT_MIN_TRANSMITTANCE,
 };
 use crate::image::Window;
 use crate::scene::{LocalRay, Scene};
@@ -170,11 +170,13 @@ pub(super) struct Scratch {
     owners: Vec<(u32, f64)>,
     field_out: Vec<f32>,
     rgb_out: Vec<Vec3>,
-    /// Per pixel of the tile: camera z per unit ray distance, and the splat fragments.
+    /// Per pixel of the tile: its world ray and camera z per unit ray distance; one ray's
+    /// splat fragments (panoramic cameras).
+    world_rays: Vec<Option<Ray>>,
     z_per_t: Vec<f64>,
-    fragments: Vec<Vec<Fragment>>,
-    /// Per pixel of the tile: its world ray and its proposal-sampled fragments.
-    tile_rays: Vec<Option<Ray>>,
+    along: Vec<Fragment>,
+    splat_pixels: Vec<SplatPixel>,
+    /// Per pixel of the tile: its proposal-sampled fragments.
     volume: Vec<Vec<Fragment>>,
     proposal: ProposalScratch,
     stats: RenderStats,
@@ -293,30 +295,48 @@ fn setup_rays(
             s.active.push(r as u32);
         }
     }
+    s.world_rays.clear();
+    s.world_rays
+        .extend(s.rays[..n_rays].iter().map(|state| state.ray));
     if !scene.proposal.is_empty() {
         s.volume.resize_with(n_rays, Vec::new);
         for f in &mut s.volume[..n_rays] {
             f.clear();
         }
-        s.tile_rays.clear();
-        s.tile_rays.extend(s.rays[..n_rays].iter().map(|st| st.ray));
         let volume = &mut s.volume[..n_rays];
-        proposal::fill(scene, &s.tile_rays, &mut s.proposal, volume, &mut s.stats);
+        proposal::fill(scene, &s.world_rays, &mut s.proposal, volume, &mut s.stats);
         for (state, volume) in s.rays[..n_rays].iter_mut().zip(&mut s.volume) {
             std::mem::swap(&mut state.volume, volume);
         }
     }
     if let Some(layer) = splats {
-        s.fragments.resize_with(n_rays, Vec::new);
-        for f in &mut s.fragments[..n_rays] {
-            f.clear();
+        // A tile of splats alone is composited sixteen pixels at once.
+        if s.active.is_empty() && scene.proposal.is_empty() && !outputs.depth_median {
+            let composited =
+                layer.composite(tile, &s.world_rays, &mut s.z_per_t, &mut s.splat_pixels);
+            if let Some(fragments) = composited {
+                s.stats.splat_fragments += fragments;
+                for (state, px) in s.rays[..n_rays].iter_mut().zip(&s.splat_pixels) {
+                    state.pieces = Pieces::from_sums(px.transmittance, px.depth_moment);
+                    state.rgb = DVec3::from_array(px.rgb);
+                }
+                return;
+            }
         }
-        let rays = s.rays[..n_rays].iter().map(|st| st.ray);
-        layer.fill(tile, rays, &mut s.z_per_t, &mut s.fragments[..n_rays]);
-        for (state, fragments) in s.rays[..n_rays].iter_mut().zip(&mut s.fragments) {
-            std::mem::swap(&mut state.fragments, fragments);
-            s.stats.splat_fragments += state.fragments.len() as u64;
-        }
+        let (rays, stats) = (&mut s.rays, &mut s.stats);
+        // A ray that marches nothing and has no volume fragments composites its fragments as
+        // they come; the others keep them to merge with their pieces or volume fragments.
+        let sink = |i: usize, f: Fragment| {
+            stats.splat_fragments += 1;
+            let state = &mut rays[i];
+            if state.live || !state.volume.is_empty() {
+                state.fragments.push(f);
+                true
+            } else {
+                composite_fragment(state, f, outputs)
+            }
+        };
+        layer.fill(tile, &s.world_rays, &mut s.z_per_t, &mut s.along, sink);
     }
     for state in &mut s.rays[..n_rays] {
         if !state.live {
@@ -707,24 +727,47 @@ fn composite_fragments(state: &mut RayState, t_end: f64, outputs: &Outputs) -> b
         if f.t > t_end {
             break;
         }
-        let alpha = f64::from(f.alpha);
-        let t_enter = state.pieces.transmittance();
-        if is_splat && t_enter * (1.0 - alpha) <= SPLAT_MIN_TRANSMITTANCE {
+        if !is_splat {
+            composite_volume_fragment(state, f, outputs);
+            state.next_volume += 1;
+        } else if composite_fragment(state, f, outputs) {
+            state.next_fragment += 1;
+        } else {
             state.next_fragment = state.fragments.len();
             state.next_volume = state.volume.len();
             state.live = false;
             return false;
         }
-        let w = state.pieces.add_fragment(f.t, alpha);
-        state.rgb += Vec3::from_array(f.rgb).as_dvec3() * w;
-        if outputs.depth_median && alpha > 0.0 {
-            state.log.push([f.t, 0.0, -(-alpha).ln_1p(), t_enter]);
-        }
-        if is_splat {
-            state.next_fragment += 1;
-        } else {
-            state.next_volume += 1;
-        }
+    }
+    true
+}
+
+/// Composites a volume fragment (a proposal sample): no floor, as nerfstudio composites
+/// every sample.
+#[inline]
+fn composite_volume_fragment(state: &mut RayState, f: Fragment, outputs: &Outputs) {
+    let alpha = f64::from(f.alpha);
+    let t_enter = state.pieces.transmittance();
+    let w = state.pieces.add_fragment(f.t, alpha);
+    state.rgb += Vec3::from_array(f.rgb).as_dvec3() * w;
+    if outputs.depth_median && alpha > 0.0 {
+        state.log.push([f.t, 0.0, -(-alpha).ln_1p(), t_enter]);
+    }
+}
+
+/// Composites the ray's next splat fragment; `false` (and nothing composited) when it would
+/// bring the ray's transmittance to the splats' floor: the ray is done.
+#[inline]
+fn composite_fragment(state: &mut RayState, f: Fragment, outputs: &Outputs) -> bool {
+    let alpha = f64::from(f.alpha);
+    let t_enter = state.pieces.transmittance();
+    if t_enter * (1.0 - alpha) <= SPLAT_MIN_TRANSMITTANCE {
+        return false;
+    }
+    let w = state.pieces.add_fragment(f.t, alpha);
+    state.rgb += Vec3::from_array(f.rgb).as_dvec3() * w;
+    if outputs.depth_median {
+        state.log.push([f.t, 0.0, -(-alpha).ln_1p(), t_enter]);
     }
     true
 }

@@ -7,7 +7,9 @@ use glam::{DMat3, DMat4, DVec4};
 use super::Outputs;
 use crate::camera::{Camera, Projection, Ray};
 use crate::error::{Error, Result};
-use crate::field::{Fragment, RayLayer, SplatLayer, SplatRayView, SplatView, SPLAT_NEAR_PLANE};
+use crate::field::{
+    Fragment, RayLayer, SplatLayer, SplatPixel, SplatRayView, SplatView, SPLAT_NEAR_PLANE,
+};
 use crate::image::Window;
 use crate::scene::Scene;
 
@@ -36,31 +38,57 @@ impl Splatting {
         }
     }
 
-    /// Fills `out[i]` with the fragments of the `i`-th pixel of `window` (row-major), whose
-    /// world ray is `rays[i]`; `z_per_t` is scratch.
+    /// Hands each pixel of `window` (row-major) whose world ray is `rays[i]` its fragments,
+    /// front to back, through `sink(i, fragment)` (see [`SplatLayer::fill`]); `z_per_t` and
+    /// `along` are scratch.
     pub(super) fn fill(
         &self,
         window: Window,
-        rays: impl Iterator<Item = Option<Ray>>,
+        rays: &[Option<Ray>],
         z_per_t: &mut Vec<f64>,
-        out: &mut [Vec<Fragment>],
+        along: &mut Vec<Fragment>,
+        mut sink: impl FnMut(usize, Fragment) -> bool,
     ) {
         match self {
             Splatting::Tiles(layer) => {
                 z_per_t.clear();
-                z_per_t.extend(rays.map(|r| r.map_or(f64::NAN, |r| r.z_per_t)));
-                layer.fill(window, z_per_t, out);
+                z_per_t.extend(rays.iter().map(|r| r.map_or(f64::NAN, |r| r.z_per_t)));
+                layer.fill(window, z_per_t, sink);
             }
             Splatting::Rays(layer) => {
-                for (ray, out) in rays.zip(out) {
-                    if let Some(r) = ray {
-                        layer.fragments(r.origin, r.dir, out);
-                        // Within the camera's clipping, as the marcher's rays are.
-                        out.retain(|f| f.t >= r.near && f.t <= r.far);
+                for (i, ray) in rays.iter().enumerate() {
+                    let Some(r) = ray else { continue };
+                    along.clear();
+                    layer.fragments(r.origin, r.dir, along);
+                    // Within the camera's clipping, as the marcher's rays are.
+                    for f in along.iter().filter(|f| f.t >= r.near && f.t <= r.far) {
+                        if !sink(i, *f) {
+                            break;
+                        }
                     }
                 }
             }
         }
+    }
+
+    /// Composites each pixel of `window` (row-major) whose world ray is `rays[i]` from its
+    /// fragments alone into `out[i]` (see [`SplatLayer::composite`]), when this layer can
+    /// (a perspective camera's): the number of fragments met, or `None` where [`Self::fill`]
+    /// must be used.
+    pub(super) fn composite(
+        &self,
+        window: Window,
+        rays: &[Option<Ray>],
+        z_per_t: &mut Vec<f64>,
+        out: &mut Vec<SplatPixel>,
+    ) -> Option<u64> {
+        let Splatting::Tiles(layer) = self else {
+            return None;
+        };
+        z_per_t.clear();
+        z_per_t.extend(rays.iter().map(|r| r.map_or(f64::NAN, |r| r.z_per_t)));
+        out.resize(rays.len(), SplatPixel::default());
+        Some(layer.composite(window, z_per_t, out))
     }
 }
 

@@ -12,7 +12,7 @@ mod rays;
 mod splatfacto;
 
 pub(crate) use project::{View, NEAR_PLANE};
-pub(crate) use raster::{Fragment, SplatLayer, MIN_TRANSMITTANCE};
+pub(crate) use raster::{Fragment, SplatLayer, SplatPixel, MIN_TRANSMITTANCE};
 pub(crate) use rays::{RayLayer, RayView};
 pub(crate) use splatfacto::is_splatfacto_run;
 

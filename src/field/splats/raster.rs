@@ -156,6 +156,7 @@ impl SplatLayer {
         // Each splat is listed in the rows of tiles it touches (in depth order), then each
         // row is binned on its own (in parallel), so every tile's list comes out sorted.
         let ranges: Vec<[u32; 4]> = projected.par_iter().map(range).collect();
+        let splat_entries: Vec<Entry> = projected.par_iter().map(Entry::new).collect();
         let rows_n = (tiles[3] - tiles[1]) as usize;
         let mut row_starts = vec![0usize; rows_n + 1];
         for r in &ranges {
@@ -193,7 +194,7 @@ impl SplatLayer {
                 let mut entries = vec![Entry::default(); counts[tiles_x] as usize];
                 for &i in splats {
                     let r = &ranges[i as usize];
-                    let entry = Entry::new(&projected[i as usize]);
+                    let entry = splat_entries[i as usize];
                     for tx in r[0]..r[2] {
                         let slot = &mut counts[(tx - tiles[0]) as usize];
                         entries[*slot as usize] = entry;
@@ -215,157 +216,349 @@ impl SplatLayer {
         }
     }
 
-    /// Fills each pixel's fragments for the pixels of `window` (row-major, `out[i]` and
-    /// `z_per_t[i]` for its `i`-th pixel; a non-finite `z_per_t` marks a pixel without a
-    /// ray), front to back, up to the one that brings the pixel's transmittance (from splats
-    /// alone) to [`MIN_TRANSMITTANCE`] or below.
+    /// Hands each pixel of `window` its fragments, front to back: `sink(i, fragment)` for
+    /// its `i`-th pixel (row-major; `z_per_t[i]` is that pixel's, a non-finite one marks a
+    /// pixel without a ray), up to the one that brings the pixel's transmittance (from
+    /// splats alone) to [`MIN_TRANSMITTANCE`] or below, or until the sink returns `false`
+    /// (it wants no more for that pixel).
+    pub fn fill<S: FnMut(usize, Fragment) -> bool>(
+        &self,
+        window: Window,
+        z_per_t: &[f64],
+        mut sink: S,
+    ) {
+        self.walk(
+            window,
+            &mut Handing {
+                index: [[0; LANES]; LANES],
+                z_per_t,
+                transmittance: [[1.0; LANES]; LANES],
+                sink: &mut sink,
+            },
+        );
+    }
+
+    /// Composites each pixel of `window` from its fragments alone, as [`SplatLayer::fill`]
+    /// would hand them to a sink that composites them in order (alpha over, stopping before
+    /// the transmittance would fall to [`MIN_TRANSMITTANCE`]): `out[i]` for the `i`-th pixel
+    /// (row-major), whose ray has camera z `z_per_t[i]` per unit distance (non-finite: no
+    /// ray, left transparent). Sixteen pixels of a row are composited at once. Returns the
+    /// number of fragments met.
+    pub fn composite(&self, window: Window, z_per_t: &[f64], out: &mut [SplatPixel]) -> u64 {
+        for px in out.iter_mut() {
+            *px = SplatPixel::default();
+        }
+        let mut compositing = Compositing {
+            index: [[0; LANES]; LANES],
+            part: window,
+            acc: LaneSums::default(),
+            out,
+            z_per_t,
+            fragments: 0,
+        };
+        self.walk(window, &mut compositing);
+        compositing.fragments
+    }
+
+    /// Walks every tile part of `window` with `action`.
     ///
     /// Per image tile, the splats are walked once for all its pixels of the window, sixteen
     /// pixels at a time: the quadratic form is evaluated for the sixteen together (a loop the
     /// compiler vectorises), and only the pixels it reaches go on to the exponential.
-    pub fn fill(&self, window: Window, z_per_t: &[f64], out: &mut [Vec<Fragment>]) {
+    fn walk<A: RowAction>(&self, window: Window, action: &mut A) {
         for ty in window.y0 / TILE..window.y1.div_ceil(TILE) {
             for tx in window.x0 / TILE..window.x1.div_ceil(TILE) {
-                if tx < self.tiles[0]
-                    || tx >= self.tiles[2]
-                    || ty < self.tiles[1]
-                    || ty >= self.tiles[3]
-                {
-                    continue;
-                }
                 let part = window.intersect(&Window::new(
                     tx * TILE,
                     ty * TILE,
                     (tx + 1) * TILE,
                     (ty + 1) * TILE,
                 ));
+                let mut index = [[usize::MAX; LANES]; LANES];
+                for (r, y) in (part.y0..part.y1).enumerate() {
+                    for (l, x) in (part.x0..part.x1).enumerate() {
+                        index[r][l] = ((y - window.y0) * window.width() + (x - window.x0)) as usize;
+                    }
+                }
+                action.start(part, index);
+                if tx < self.tiles[0]
+                    || tx >= self.tiles[2]
+                    || ty < self.tiles[1]
+                    || ty >= self.tiles[3]
+                {
+                    action.finish();
+                    continue;
+                }
                 let (starts, entries) = &self.rows[(ty - self.tiles[1]) as usize];
                 let col = (tx - self.tiles[0]) as usize;
                 let tile = &entries[starts[col] as usize..starts[col + 1] as usize];
-                self.fill_part(tile, window, part, z_per_t, out);
+                self.walk_part(tile, part, action);
+                action.finish();
             }
         }
     }
 
-    fn fill_part(
-        &self,
-        tile: &[Entry],
-        window: Window,
-        part: Window,
-        z_per_t: &[f64],
-        out: &mut [Vec<Fragment>],
-    ) {
+    fn walk_part<A: RowAction>(&self, tile: &[Entry], part: Window, action: &mut A) {
         #[cfg(target_arch = "x86_64")]
         if self.avx2 {
             // SAFETY: `build` found AVX2 and FMA on this CPU.
-            return unsafe { self.fill_part_avx2(tile, window, part, z_per_t, out) };
+            return unsafe { walk_part_avx2(tile, part, action) };
         }
-        self.fill_part_lanes(tile, window, part, z_per_t, out);
+        walk_part_lanes(tile, part, action);
+    }
+}
+
+/// Lanes of the pixel loop: a tile's row.
+const LANES: usize = TILE as usize;
+
+/// What the walk does with the fragments one splat gives one row of a tile part.
+trait RowAction {
+    /// A tile part begins: `index[r][l]` is the pixel index of its row `r`, lane `l`.
+    fn start(&mut self, part: Window, index: [[usize; LANES]; LANES]);
+    /// Whether lane `l` of row `r` is a pixel with a ray.
+    fn has_ray(&self, r: usize, l: usize) -> bool;
+    /// Row `r`'s lanes in `hits` get a fragment of entry `e` with opacity `alphas[l]`
+    /// (in `[MIN_ALPHA, MAX_ALPHA]`). Returns the lanes that want no more.
+    fn row(&mut self, r: usize, hits: u16, alphas: &[f32; LANES], e: &Entry) -> u16;
+    /// The part is done.
+    fn finish(&mut self) {}
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn walk_part_avx2<A: RowAction>(tile: &[Entry], part: Window, action: &mut A) {
+    walk_part_lanes(tile, part, action);
+}
+
+/// The pixels of `part` against the entries of its image tile, `tile`.
+#[inline(always)]
+fn walk_part_lanes<A: RowAction>(tile: &[Entry], part: Window, action: &mut A) {
+    // One chunk of lanes per pixel row of `part` (at most a tile's side), so a splat walks
+    // only the rows its ellipse reaches.
+    let mut px = [0f32; LANES];
+    for (l, x) in px.iter_mut().zip(part.x0..part.x1) {
+        *l = x as f32 + 0.5;
+    }
+    let mut live = [0u16; LANES];
+    let mut remaining = 0;
+    for (r, row) in live.iter_mut().enumerate().take(part.height() as usize) {
+        for l in 0..part.width() as usize {
+            if action.has_ray(r, l) {
+                *row |= 1 << l;
+                remaining += 1;
+            }
+        }
+    }
+    if remaining == 0 {
+        return;
+    }
+    let (x_lo, x_hi) = (part.x0 as f32 + 0.5, (part.x1 - 1) as f32 + 0.5);
+    for e in tile {
+        let [ex, ey] = e.extent;
+        if e.xy[0] + ex < x_lo || e.xy[0] - ex > x_hi {
+            continue;
+        }
+        // Rows whose pixel centres `y + ½` lie within the ellipse's reach.
+        let first = (e.xy[1] - ey - 0.5).ceil().max(part.y0 as f32);
+        let last = (e.xy[1] + ey - 0.5).floor().min((part.y1 - 1) as f32);
+        if first > last {
+            continue;
+        }
+        let [a, b, c] = e.conic;
+        let rows = (first as u32 - part.y0) as usize..=(last as u32 - part.y0) as usize;
+        for (r, live) in live
+            .iter_mut()
+            .enumerate()
+            .take(*rows.end() + 1)
+            .skip(*rows.start())
+        {
+            if *live == 0 {
+                continue;
+            }
+            let dy = e.xy[1] - ((part.y0 + r as u32) as f32 + 0.5);
+            let mut sigma = [0f32; LANES];
+            for l in 0..LANES {
+                let dx = e.xy[0] - px[l];
+                sigma[l] = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
+            }
+            let mut reached = 0u16;
+            for (l, &v) in sigma.iter().enumerate() {
+                reached |= u16::from(v >= 0.0 && v <= e.sigma_cut) << l;
+            }
+            if reached & *live == 0 {
+                continue;
+            }
+            // The row's sixteen exponentials at once (a loop the compiler vectorises).
+            let mut alphas = [0f32; LANES];
+            let mut strong = 0u16;
+            for l in 0..LANES {
+                alphas[l] = (e.opacity * exp_neg(sigma[l].clamp(0.0, 80.0))).min(MAX_ALPHA);
+                strong |= u16::from(alphas[l] >= MIN_ALPHA) << l;
+            }
+            let hits = reached & strong & *live;
+            if hits == 0 {
+                continue;
+            }
+            let done = action.row(r, hits, &alphas, e) & *live;
+            *live &= !done;
+            remaining -= done.count_ones();
+        }
+        if remaining == 0 {
+            return;
+        }
+    }
+}
+
+/// Hands fragments to a sink, tracking each pixel's transmittance from splats alone.
+struct Handing<'a, S> {
+    index: [[usize; LANES]; LANES],
+    z_per_t: &'a [f64],
+    transmittance: [[f64; LANES]; LANES],
+    sink: &'a mut S,
+}
+
+impl<S: FnMut(usize, Fragment) -> bool> RowAction for Handing<'_, S> {
+    fn start(&mut self, _part: Window, index: [[usize; LANES]; LANES]) {
+        self.index = index;
+        self.transmittance = [[1.0; LANES]; LANES];
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn fill_part_avx2(
-        &self,
-        tile: &[Entry],
-        window: Window,
-        part: Window,
-        z_per_t: &[f64],
-        out: &mut [Vec<Fragment>],
-    ) {
-        self.fill_part_lanes(tile, window, part, z_per_t, out);
+    fn has_ray(&self, r: usize, l: usize) -> bool {
+        self.z_per_t[self.index[r][l]].is_finite()
     }
 
-    /// The pixels of `part` (inside `window`) against the entries of image tile `tile`.
     #[inline(always)]
-    fn fill_part_lanes(
-        &self,
-        tile: &[Entry],
-        window: Window,
-        part: Window,
-        z_per_t: &[f64],
-        out: &mut [Vec<Fragment>],
-    ) {
-        // One chunk of lanes per pixel row of `part` (at most a tile's side), so a splat
-        // walks only the rows its ellipse reaches.
-        const LANES: usize = TILE as usize;
-        let mut px = [0f32; LANES];
-        for (l, x) in px.iter_mut().zip(part.x0..part.x1) {
-            *l = x as f32 + 0.5;
-        }
-        let mut index = [[0usize; LANES]; LANES];
-        let mut live = [0u16; LANES];
-        let mut remaining = 0;
-        for (r, y) in (part.y0..part.y1).enumerate() {
-            for (l, x) in (part.x0..part.x1).enumerate() {
-                let i = ((y - window.y0) * window.width() + (x - window.x0)) as usize;
-                index[r][l] = i;
-                if z_per_t[i].is_finite() {
-                    live[r] |= 1 << l;
-                    remaining += 1;
-                }
+    fn row(&mut self, r: usize, mut hits: u16, alphas: &[f32; LANES], e: &Entry) -> u16 {
+        let mut done = 0;
+        while hits != 0 {
+            let l = hits.trailing_zeros() as usize;
+            hits &= hits - 1;
+            let (i, alpha) = (self.index[r][l], alphas[l]);
+            let wants_more = (self.sink)(
+                i,
+                Fragment {
+                    t: f64::from(e.z) / self.z_per_t[i],
+                    alpha,
+                    rgb: e.rgb,
+                },
+            );
+            let tr = &mut self.transmittance[r][l];
+            *tr *= 1.0 - f64::from(alpha);
+            if *tr <= MIN_TRANSMITTANCE || !wants_more {
+                done |= 1 << l;
             }
         }
-        let (x_lo, x_hi) = (part.x0 as f32 + 0.5, (part.x1 - 1) as f32 + 0.5);
-        let mut transmittance = [[1f64; LANES]; LANES];
-        for e in tile {
-            let [ex, ey] = e.extent;
-            if e.xy[0] + ex < x_lo || e.xy[0] - ex > x_hi {
+        done
+    }
+}
+
+/// A pixel composited from its splat fragments alone (see [`SplatLayer::composite`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct SplatPixel {
+    /// Transmittance left (1 − accumulation).
+    pub transmittance: f64,
+    /// Premultiplied colour in the trained space.
+    pub rgb: [f64; 3],
+    /// `Σ w·t`: the weights times the fragments' ray distances.
+    pub depth_moment: f64,
+}
+
+impl Default for SplatPixel {
+    fn default() -> Self {
+        SplatPixel {
+            transmittance: 1.0,
+            rgb: [0.0; 3],
+            depth_moment: 0.0,
+        }
+    }
+}
+
+/// One tile part's running sums, lane by lane (f64, as a pixel's pieces are composited).
+#[derive(Clone, Copy)]
+struct LaneSums {
+    transmittance: [[f64; LANES]; LANES],
+    rgb: [[[f64; LANES]; 3]; LANES],
+    /// `Σ w·z` with the camera z of the fragments' splats.
+    depth_moment: [[f64; LANES]; LANES],
+}
+
+impl Default for LaneSums {
+    fn default() -> Self {
+        LaneSums {
+            transmittance: [[1.0; LANES]; LANES],
+            rgb: [[[0.0; LANES]; 3]; LANES],
+            depth_moment: [[0.0; LANES]; LANES],
+        }
+    }
+}
+
+/// Composites fragments where they fall, sixteen lanes at a time.
+struct Compositing<'a> {
+    index: [[usize; LANES]; LANES],
+    part: Window,
+    acc: LaneSums,
+    out: &'a mut [SplatPixel],
+    z_per_t: &'a [f64],
+    fragments: u64,
+}
+
+impl RowAction for Compositing<'_> {
+    fn start(&mut self, part: Window, index: [[usize; LANES]; LANES]) {
+        self.index = index;
+        self.part = part;
+        self.acc = LaneSums::default();
+    }
+
+    fn has_ray(&self, r: usize, l: usize) -> bool {
+        self.z_per_t[self.index[r][l]].is_finite()
+    }
+
+    /// Alpha over, lane by lane without branches: a lane whose fragment would bring its
+    /// transmittance to the floor takes nothing and is done, as a compositing sink would
+    /// refuse it.
+    #[inline(always)]
+    fn row(&mut self, r: usize, hits: u16, alphas: &[f32; LANES], e: &Entry) -> u16 {
+        let transmittance = &mut self.acc.transmittance[r];
+        let rgb = &mut self.acc.rgb[r];
+        let depth = &mut self.acc.depth_moment[r];
+        let z = f64::from(e.z);
+        let colour = e.rgb.map(f64::from);
+        self.fragments += u64::from(hits.count_ones());
+        let mut done = 0u16;
+        // Four lanes at a time (one vector of f64), skipping the groups no fragment falls in.
+        for g in (0..LANES).step_by(4) {
+            if hits >> g & 0xF == 0 {
                 continue;
             }
-            // Rows whose pixel centres `y + ½` lie within the ellipse's reach.
-            let first = (e.xy[1] - ey - 0.5).ceil().max(part.y0 as f32);
-            let last = (e.xy[1] + ey - 0.5).floor().min((part.y1 - 1) as f32);
-            if first > last {
-                continue;
+            for l in g..g + 4 {
+                let hit = hits >> l & 1 == 1;
+                let alpha = if hit { f64::from(alphas[l]) } else { 0.0 };
+                let t_enter = transmittance[l];
+                let refused = hit && t_enter * (1.0 - alpha) <= MIN_TRANSMITTANCE;
+                let w = if refused { 0.0 } else { t_enter * alpha };
+                transmittance[l] = (t_enter - w).max(0.0);
+                depth[l] += w * z;
+                for c in 0..3 {
+                    rgb[c][l] += w * colour[c];
+                }
+                done |= u16::from(refused) << l;
             }
-            let [a, b, c] = e.conic;
-            for r in (first as u32 - part.y0) as usize..=(last as u32 - part.y0) as usize {
-                if live[r] == 0 {
+        }
+        done
+    }
+
+    fn finish(&mut self) {
+        for r in 0..self.part.height() as usize {
+            for l in 0..self.part.width() as usize {
+                let i = self.index[r][l];
+                if !self.z_per_t[i].is_finite() {
                     continue;
                 }
-                let dy = e.xy[1] - ((part.y0 + r as u32) as f32 + 0.5);
-                let mut sigma = [0f32; LANES];
-                for l in 0..LANES {
-                    let dx = e.xy[0] - px[l];
-                    sigma[l] = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
-                }
-                let mut reached = 0u16;
-                for (l, &v) in sigma.iter().enumerate() {
-                    reached |= u16::from(v >= 0.0 && v <= e.sigma_cut) << l;
-                }
-                let mut hits = reached & live[r];
-                if hits == 0 {
-                    continue;
-                }
-                // The row's sixteen exponentials at once (a loop the compiler vectorises).
-                let mut alphas = [0f32; LANES];
-                for l in 0..LANES {
-                    alphas[l] = e.opacity * exp_neg(sigma[l].clamp(0.0, 80.0));
-                }
-                while hits != 0 {
-                    let l = hits.trailing_zeros() as usize;
-                    hits &= hits - 1;
-                    let alpha = alphas[l].min(MAX_ALPHA);
-                    if alpha.is_nan() || alpha < MIN_ALPHA {
-                        continue;
-                    }
-                    let i = index[r][l];
-                    out[i].push(Fragment {
-                        t: f64::from(e.z) / z_per_t[i],
-                        alpha,
-                        rgb: e.rgb,
-                    });
-                    let tr = &mut transmittance[r][l];
-                    *tr *= 1.0 - f64::from(alpha);
-                    if *tr <= MIN_TRANSMITTANCE {
-                        live[r] &= !(1 << l);
-                        remaining -= 1;
-                    }
-                }
-            }
-            if remaining == 0 {
-                return;
+                self.out[i] = SplatPixel {
+                    transmittance: self.acc.transmittance[r][l],
+                    rgb: [0, 1, 2].map(|c| self.acc.rgb[r][c][l]),
+                    depth_moment: self.acc.depth_moment[r][l] / self.z_per_t[i],
+                };
             }
         }
     }

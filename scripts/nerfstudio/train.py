@@ -1,6 +1,6 @@
 """Trains nerfstudio's `nerfacto` on the CPU, small enough to commit as a test fixture.
 
-    cd WORK && python train.py DATA OUTPUTS [--iterations 400] [--rays 1024] [--log2-hashmap 14]
+    cd WORK && python train.py DATA OUTPUTS [--iterations 250] [--rays 1024] [--log2-hashmap 14]
 
 DATA holds transforms.json (make_dataset.py); give DATA and OUTPUTS relative to the working
 folder, so that config.yml records relative paths. The run lands in
@@ -15,8 +15,8 @@ only where a CPU fixture needs it:
 - pipeline.model.camera_optimizer.mode off: the synthetic poses are exact, and pose tweaks
   would move the field away from the analytic scene it is compared with;
 - pipeline.datamanager.train_num_rays_per_batch 1024 (default 4096), max_num_iterations,
-  the latest checkpoint only (every 100 steps and the last), no evaluation during training, TensorBoard instead
-  of the web viewer;
+  the latest checkpoint only (every 50 steps and the last), no evaluation during training,
+  TensorBoard instead of the web viewer;
 - pipeline.model.implementation stays "tcnn": tiny-cuda-nn is not installed, so nerfstudio
   falls back to its torch layout, as it does for any user without it.
 """
@@ -59,9 +59,9 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("data")
     ap.add_argument("outputs")
-    ap.add_argument("--iterations", type=int, default=400)
+    ap.add_argument("--iterations", type=int, default=250)
     ap.add_argument("--rays", type=int, default=1024)
-    ap.add_argument("--save-every", type=int, default=100, help="keeps only the latest")
+    ap.add_argument("--save-every", type=int, default=50, help="keeps only the latest")
     ap.add_argument("--log2-hashmap", type=int, default=14)
     ap.add_argument("--proposal-log2-hashmap", type=int, default=12)
     args = ap.parse_args()

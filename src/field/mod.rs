@@ -25,7 +25,10 @@ mod srgb;
 pub use aabb::Aabb;
 pub use analytic::{Analytic, Primitive, ShColor, Shape};
 pub use ingp::IngpField;
-pub use nerfacto::{DataparserTransform, NerfactoField};
+pub use nerfacto::{
+    DataparserTransform, NerfactoField, Piece, SamplerRay, SamplerScratch, SamplerStats,
+    COLOR_MIN_WEIGHT, STOP_TRANSMITTANCE,
+};
 pub(crate) use network::sh_basis;
 pub use network::TableStorage;
 pub use occupancy::Occupancy;

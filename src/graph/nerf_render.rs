@@ -378,7 +378,13 @@ fn placed_scene(values: &ParamValues, shot: &Shot, at: &ShotFrame) -> Result<Sce
             )
         })
         .collect::<Result<Vec<_>>>()?;
-    Ok(Scene::new(instances))
+    let mut cropped = Scene::new(instances);
+    cropped.proposal = scene
+        .proposal
+        .iter()
+        .map(|p| p.with_crop(Some(crop)))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(cropped)
 }
 
 /// Parameters that only pick or grade the output: nodes differing only in these share one

@@ -15,6 +15,7 @@ use std::sync::Arc;
 use glam::{DVec3, Vec3};
 
 use super::composite::{crossing_depth, Pieces};
+use super::proposal::{self, ProposalScratch};
 use super::splats::Splatting;
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
@@ -122,6 +123,22 @@ struct RayState {
     /// The pixel's splat fragments, front to back, and the next one to composite.
     fragments: Vec<Fragment>,
     next_fragment: usize,
+    /// The pixel's proposal-sampled volume fragments (module `proposal`), front to back,
+    /// and the next one to composite.
+    volume: Vec<Fragment>,
+    next_volume: usize,
+}
+
+impl RayState {
+    /// Distance of the next fragment to composite, splat or volume.
+    fn next_fragment_t(&self) -> Option<f64> {
+        let splat = self.fragments.get(self.next_fragment).map(|f| f.t);
+        let volume = self.volume.get(self.next_volume).map(|f| f.t);
+        match (splat, volume) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
 }
 
 /// Per-thread scratch reused from tile to tile: no allocation per sample.
@@ -159,6 +176,9 @@ pub(super) struct Scratch {
     z_per_t: Vec<f64>,
     along: Vec<Fragment>,
     splat_pixels: Vec<SplatPixel>,
+    /// Per pixel of the tile: its proposal-sampled fragments.
+    volume: Vec<Vec<Fragment>>,
+    proposal: ProposalScratch,
     stats: RenderStats,
 }
 
@@ -268,17 +288,30 @@ fn setup_rays(
         union_in_place(&mut state.segments);
         state.fragments.clear();
         state.next_fragment = 0;
+        state.volume.clear();
+        state.next_volume = 0;
         state.live = !state.segments.is_empty();
         if state.live {
             s.active.push(r as u32);
         }
     }
+    s.world_rays.clear();
+    s.world_rays
+        .extend(s.rays[..n_rays].iter().map(|state| state.ray));
+    if !scene.proposal.is_empty() {
+        s.volume.resize_with(n_rays, Vec::new);
+        for f in &mut s.volume[..n_rays] {
+            f.clear();
+        }
+        let volume = &mut s.volume[..n_rays];
+        proposal::fill(scene, &s.world_rays, &mut s.proposal, volume, &mut s.stats);
+        for (state, volume) in s.rays[..n_rays].iter_mut().zip(&mut s.volume) {
+            std::mem::swap(&mut state.volume, volume);
+        }
+    }
     if let Some(layer) = splats {
-        s.world_rays.clear();
-        s.world_rays
-            .extend(s.rays[..n_rays].iter().map(|state| state.ray));
         // A tile of splats alone is composited sixteen pixels at once.
-        if s.active.is_empty() && !outputs.depth_median {
+        if s.active.is_empty() && scene.proposal.is_empty() && !outputs.depth_median {
             let composited =
                 layer.composite(tile, &s.world_rays, &mut s.z_per_t, &mut s.splat_pixels);
             if let Some(fragments) = composited {
@@ -291,12 +324,12 @@ fn setup_rays(
             }
         }
         let (rays, stats) = (&mut s.rays, &mut s.stats);
-        // A ray that marches nothing composites its fragments as they come; the others keep
-        // them to merge with their pieces.
+        // A ray that marches nothing and has no volume fragments composites its fragments as
+        // they come; the others keep them to merge with their pieces or volume fragments.
         let sink = |i: usize, f: Fragment| {
             stats.splat_fragments += 1;
             let state = &mut rays[i];
-            if state.live {
+            if state.live || !state.volume.is_empty() {
                 state.fragments.push(f);
                 true
             } else {
@@ -304,6 +337,11 @@ fn setup_rays(
             }
         };
         layer.fill(tile, &s.world_rays, &mut s.z_per_t, &mut s.along, sink);
+    }
+    for state in &mut s.rays[..n_rays] {
+        if !state.live {
+            composite_fragments(state, f64::INFINITY, outputs);
+        }
     }
 }
 
@@ -634,11 +672,7 @@ fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, out
         let mut t0 = a.t;
         let mut stopped = false;
         loop {
-            let fragment = state
-                .fragments
-                .get(state.next_fragment)
-                .map(|f| f.t)
-                .filter(|&t| t < b.t);
+            let fragment = state.next_fragment_t().filter(|&t| t < b.t);
             let t1 = fragment.map_or(b.t, |t| t.max(t0));
             let t_enter = state.pieces.transmittance();
             let w = state.pieces.add(t0, t1 - t0, 0.5 * sum);
@@ -675,22 +709,50 @@ fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, out
     }
 }
 
-/// Composites the ray's splat fragments up to `t_end`, in order. `false` when the ray is
-/// done: a fragment would bring its transmittance to the splats' floor (gsplat's rule, which
-/// makes a pixel of splats alone exactly gsplat's).
+/// Composites the ray's fragments up to `t_end`, splat and volume ones merged in order.
+/// `false` when the ray is done: a splat fragment would bring its transmittance to the
+/// splats' floor (gsplat's rule, which makes a pixel of splats alone exactly gsplat's).
+/// Volume fragments (proposal samples) have no such floor: nerfstudio composites every
+/// sample.
 fn composite_fragments(state: &mut RayState, t_end: f64, outputs: &Outputs) -> bool {
-    while let Some(&f) = state.fragments.get(state.next_fragment) {
+    loop {
+        let splat = state.fragments.get(state.next_fragment);
+        let volume = state.volume.get(state.next_volume);
+        let (f, is_splat) = match (splat, volume) {
+            (Some(a), Some(b)) if b.t < a.t => (*b, false),
+            (Some(a), _) => (*a, true),
+            (None, Some(b)) => (*b, false),
+            (None, None) => break,
+        };
         if f.t > t_end {
             break;
         }
-        if !composite_fragment(state, f, outputs) {
+        if !is_splat {
+            composite_volume_fragment(state, f, outputs);
+            state.next_volume += 1;
+        } else if composite_fragment(state, f, outputs) {
+            state.next_fragment += 1;
+        } else {
             state.next_fragment = state.fragments.len();
+            state.next_volume = state.volume.len();
             state.live = false;
             return false;
         }
-        state.next_fragment += 1;
     }
     true
+}
+
+/// Composites a volume fragment (a proposal sample): no floor, as nerfstudio composites
+/// every sample.
+#[inline]
+fn composite_volume_fragment(state: &mut RayState, f: Fragment, outputs: &Outputs) {
+    let alpha = f64::from(f.alpha);
+    let t_enter = state.pieces.transmittance();
+    let w = state.pieces.add_fragment(f.t, alpha);
+    state.rgb += Vec3::from_array(f.rgb).as_dvec3() * w;
+    if outputs.depth_median && alpha > 0.0 {
+        state.log.push([f.t, 0.0, -(-alpha).ln_1p(), t_enter]);
+    }
 }
 
 /// Composites the ray's next splat fragment; `false` (and nothing composited) when it would

@@ -7,12 +7,15 @@
 //!       "object": "NeRF",
 //!       "crop": { "center": [0, 0, 0], "scale": [2, 2, 2], "rotation": [0, 0, 0] } },
 //!     { "name": "garden", "field": { "ingp": { "path": "garden.ingp" } } },
-//!     { "name": "poster", "field": { "nerfacto": { "path": "outputs/poster/nerfacto/run1" } } },
+//!     { "name": "poster", "field": { "nerfacto": { "path": "outputs/poster/nerfacto/run1",
+//!                                                "sampler": "proposal" } } },
 //!     { "name": "scan", "field": { "splats": { "path": "scan.ply", "antialiased": false } } } ] }
 //! ```
 //! An instance is placed by `world_from_field` (row-major 4×4, default identity) or, when
 //! `object` is given, by that object's `matrix_world` in the shot, read per frame.
-//! Field files named by a relative path are found next to the scene file (the path is made
+//! A nerfacto instance is sampled by its own proposal networks (`"sampler": "proposal"`, the
+//! default: what nerfstudio shows) or marched by nerfx's occupancy estimator
+//! (`"occupancy"`). Field files named by a relative path are found next to the scene file (the path is made
 //! absolute when the scene file is read).
 
 use std::path::{Path, PathBuf};
@@ -22,7 +25,7 @@ use glam::DMat4;
 use serde::{Deserialize, Serialize};
 
 use super::instance::FieldHandle;
-use super::{CropBox, Instance, Scene, SplatInstance};
+use super::{CropBox, Instance, ProposalInstance, Scene, SplatInstance};
 use crate::error::{Error, Result};
 use crate::field::{Analytic, IngpField, NerfactoField, Splats};
 
@@ -43,6 +46,9 @@ pub enum FieldSource {
     Nerfacto {
         /// The run directory (relative paths: from the scene file's folder).
         path: PathBuf,
+        /// Where the field is sampled along each ray.
+        #[serde(default)]
+        sampler: NerfactoSampler,
     },
     /// 3D Gaussian splats (an INRIA-layout `.ply`), in the frame of their file.
     Splats {
@@ -53,6 +59,19 @@ pub enum FieldSource {
         #[serde(default)]
         antialiased: bool,
     },
+}
+
+/// How a nerfacto instance is sampled along each ray.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NerfactoSampler {
+    /// nerfacto's own proposal networks, as nerfstudio's viewer and `ns-render` sample it:
+    /// what the artist approved (the main field is trained only where they sample).
+    #[default]
+    Proposal,
+    /// nerfx's occupancy marcher, jointly with the other instances (error-targeted
+    /// quality presets; may show density nerfacto never learned to suppress).
+    Occupancy,
 }
 
 /// One instance in a scene file.
@@ -94,6 +113,7 @@ pub struct LoadedScene {
 enum Contents {
     Field(FieldHandle),
     Splats(Arc<Splats>),
+    Proposal(Arc<NerfactoField>),
 }
 
 /// A row-major nested 4×4 as a matrix.
@@ -123,7 +143,10 @@ impl SceneDesc {
                 antialiased: false,
             }
         } else if path.is_dir() {
-            FieldSource::Nerfacto { path: file }
+            FieldSource::Nerfacto {
+                path: file,
+                sampler: NerfactoSampler::default(),
+            }
         } else {
             match ext.as_deref() {
                 Some("ingp" | "msgpack") => FieldSource::Ingp { path: file },
@@ -166,7 +189,7 @@ impl SceneDesc {
                         "is empty",
                     ))
                 }
-                FieldSource::Nerfacto { path: file } if file.as_os_str().is_empty() => {
+                FieldSource::Nerfacto { path: file, .. } if file.as_os_str().is_empty() => {
                     return Err(Error::format(
                         path,
                         format!("{at}.field.nerfacto.path"),
@@ -195,7 +218,7 @@ impl SceneDesc {
         let base = path.parent().unwrap_or(Path::new(""));
         for inst in &mut desc.instances {
             if let FieldSource::Ingp { path: file }
-            | FieldSource::Nerfacto { path: file }
+            | FieldSource::Nerfacto { path: file, .. }
             | FieldSource::Splats { path: file, .. } = &mut inst.field
             {
                 if file.is_relative() {
@@ -223,7 +246,13 @@ impl SceneDesc {
                 Ok(match &inst.field {
                     FieldSource::Analytic(a) => Contents::Field(FieldHandle::analytic(a.clone())),
                     FieldSource::Ingp { path } => field(Arc::new(IngpField::load(path)?)),
-                    FieldSource::Nerfacto { path } => field(Arc::new(NerfactoField::load(path)?)),
+                    FieldSource::Nerfacto { path, sampler } => {
+                        let run = Arc::new(NerfactoField::load(path)?);
+                        match sampler {
+                            NerfactoSampler::Proposal => Contents::Proposal(run),
+                            NerfactoSampler::Occupancy => field(run),
+                        }
+                    }
                     FieldSource::Splats { path, .. } => {
                         Contents::Splats(Arc::new(Splats::load(path)?))
                     }
@@ -284,6 +313,12 @@ impl LoadedScene {
                 Contents::Field(field) => scene.instances.push(Instance::new(
                     inst.name.clone(),
                     field.clone(),
+                    m,
+                    inst.crop,
+                )?),
+                Contents::Proposal(run) => scene.proposal.push(ProposalInstance::new(
+                    inst.name.clone(),
+                    run.clone(),
                     m,
                     inst.crop,
                 )?),

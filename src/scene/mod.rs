@@ -15,11 +15,13 @@
 mod crop;
 mod file;
 mod instance;
+mod proposal;
 mod splats;
 
 pub use crop::CropBox;
-pub use file::{FieldSource, InstanceDesc, LoadedScene, SceneDesc};
+pub use file::{FieldSource, InstanceDesc, LoadedScene, NerfactoSampler, SceneDesc};
 pub use instance::{FieldHandle, Instance, LocalRay};
+pub use proposal::ProposalInstance;
 pub use splats::SplatInstance;
 
 use crate::field::ColorSpace;
@@ -31,6 +33,9 @@ pub struct Scene {
     pub instances: Vec<Instance>,
     /// The splat instances, rasterised into fragments merged with the march.
     pub splats: Vec<SplatInstance>,
+    /// The nerfacto instances sampled by their own proposal networks, their samples merged
+    /// with the march as the splats' fragments are.
+    pub proposal: Vec<ProposalInstance>,
 }
 
 impl Scene {
@@ -39,6 +44,7 @@ impl Scene {
         Scene {
             instances,
             splats: Vec::new(),
+            proposal: Vec::new(),
         }
     }
 
@@ -50,9 +56,10 @@ impl Scene {
 
     /// The space colours are composited in: sRGB-encoded when any instance was trained on
     /// photographs (its trainer composited encoded colours; linear instances are encoded to
-    /// join it), as splats always are, else linear.
+    /// join it), as splats and nerfacto runs always are, else linear.
     pub fn composite_space(&self) -> ColorSpace {
         if !self.splats.is_empty()
+            || !self.proposal.is_empty()
             || self
                 .instances
                 .iter()

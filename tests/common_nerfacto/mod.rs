@@ -27,6 +27,12 @@ pub struct Spec {
     /// Whether the occupancy computed at load should have empty cells (about half).
     pub expect_empty_space: bool,
     pub seed: u64,
+    /// The two proposal networks' `log2_hashmap_size` and `max_res` (5 levels × 2
+    /// features, hidden 16, as nerfacto's); `None`: no proposal networks in the checkpoint.
+    pub proposal: Option<(u32, [u32; 2])>,
+    /// Added to the proposal networks' output (torch layout: the bias; tcnn layout: spread
+    /// over the output row's weights), shifting their density.
+    pub proposal_offset: f32,
 }
 
 impl Spec {
@@ -40,6 +46,8 @@ impl Spec {
             density_offset: 0.0,
             expect_empty_space: false,
             seed: 11,
+            proposal: Some((12, [64, 128])),
+            proposal_offset: 0.0,
         }
     }
 
@@ -53,6 +61,8 @@ impl Spec {
             density_offset: -2.0,
             expect_empty_space: true,
             seed: 12,
+            proposal: Some((11, [64, 128])),
+            proposal_offset: 1.0,
         }
     }
 }
@@ -144,19 +154,68 @@ impl StateDict {
 /// tiny-cuda-nn's hash-grid parameter count for the spec (levels of
 /// `min(next_multiple_of_8(res³), 2^log2T)` entries, `res = ⌈2^(l·log2 b)·16 − 1⌉ + 1`).
 pub fn tcnn_grid_params(s: &Spec) -> usize {
-    let b = ((2048f64.ln() - 16f64.ln()) / 15.0).exp() as f32;
+    tcnn_grid_params_of(LEVELS, s.log2_table_size, 2048)
+}
+
+/// The same for `levels` levels from 16 to `max_res`, 2 features each.
+pub fn tcnn_grid_params_of(levels: u32, log2_table_size: u32, max_res: u32) -> usize {
+    let b = ((f64::from(max_res).ln() - 16f64.ln()) / f64::from(levels - 1)).exp() as f32;
     let log2_b = (b as f64).log2() as f32;
-    (0..LEVELS)
+    (0..levels)
         .map(|l| {
             let scale = ((l as f32 * log2_b) as f64).exp2() as f32 * 16.0 - 1.0;
             let r = scale.ceil() as usize + 1;
             (r * r * r)
                 .div_ceil(8)
                 .saturating_mul(8)
-                .min(1 << s.log2_table_size)
+                .min(1 << log2_table_size)
         })
         .sum::<usize>()
         * FEATURES
+}
+
+/// nerfacto's proposal networks: `HashMLPDensityField`s of 5 levels × 2 features, one
+/// hidden layer of 16, under `_model.proposal_networks.<i>.` (the grid under both of its
+/// names, `encoding` and `mlp_base.0`, as torch's state dict holds it).
+fn add_proposal_networks(sd: &mut StateDict, s: &Spec, rng: &mut SplitMix64) {
+    let Some((log2, max_res)) = s.proposal else {
+        return;
+    };
+    for (i, max) in max_res.into_iter().enumerate() {
+        let p = format!("_model.proposal_networks.{i}.");
+        if s.torch {
+            let rows = 5 * (1usize << log2);
+            let table = seeded(rng, rows * FEATURES, 1.0);
+            for name in ["encoding.hash_table", "mlp_base.0.hash_table"] {
+                sd.add(&format!("{p}{name}"), &[rows, FEATURES], &table, false);
+            }
+            let w0 = seeded(rng, 10 * 16, 0.5);
+            let b0 = seeded(rng, 16, 0.2);
+            sd.add_linear(&format!("{p}mlp_base.1.layers.0"), &w0, &b0, 10);
+            let w1 = seeded(rng, 16, 0.5);
+            let b1 = vec![s.proposal_offset];
+            sd.add_linear(&format!("{p}mlp_base.1.layers.1"), &w1, &b1, 16);
+        } else {
+            let grid = seeded(rng, tcnn_grid_params_of(5, log2, max), 1.0);
+            for name in [
+                "encoding.tcnn_encoding.params",
+                "mlp_base.0.tcnn_encoding.params",
+            ] {
+                sd.add(&format!("{p}{name}"), &[grid.len()], &grid, s.half);
+            }
+            // 10 inputs padded to 16 → 16 → 1 padded to 16.
+            let mut mlp = seeded(rng, 16 * 16 + 16 * 16, 0.5);
+            for w in &mut mlp[16 * 16..16 * 16 + 16] {
+                *w += s.proposal_offset / 8.0;
+            }
+            sd.add(
+                &format!("{p}mlp_base.1.tcnn_encoding.params"),
+                &[mlp.len()],
+                &mlp,
+                false,
+            );
+        }
+    }
 }
 
 fn seeded(rng: &mut SplitMix64, n: usize, amplitude: f32) -> Vec<f32> {
@@ -169,13 +228,9 @@ fn state_dict(s: &Spec) -> StateDict {
     let f = "_model.field.";
     let n_grid_out = LEVELS as usize * FEATURES;
     let head_in = 16 + 15 + APPEARANCE;
-    // An unrelated tensor first (the proposal network), as in real runs.
-    sd.add(
-        "_model.proposal_networks.0.encoding.tcnn_encoding.params",
-        &[40],
-        &seeded(&mut rng, 40, 1.0),
-        false,
-    );
+    // The proposal networks first, as in real runs (from a generator of their own, so the
+    // main field's weights do not depend on them).
+    add_proposal_networks(&mut sd, s, &mut SplitMix64::new(s.seed ^ 0x9e37_79b9));
     if s.torch {
         let rows = LEVELS as usize * (1 << s.log2_table_size);
         let table = seeded(&mut rng, rows * FEATURES, 1.0);
@@ -495,17 +550,34 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
     log2_hashmap_size: {}
     max_res: 2048
     num_levels: {LEVELS}
+    far_plane: 1000.0
+    near_plane: 0.05
+    num_nerf_samples_per_ray: 48
+    num_proposal_iterations: 2
+    num_proposal_samples_per_ray: !!python/tuple
+    - 256
+    - 96
+    proposal_initial_sampler: piecewise
     proposal_net_args_list:
     - hidden_dim: 16
-      log2_hashmap_size: 17
+      log2_hashmap_size: {p_log2}
+      max_res: {p0}
       num_levels: 5
-      max_res: 128
+      use_linear: false
+    - hidden_dim: 16
+      log2_hashmap_size: {p_log2}
+      max_res: {p1}
+      num_levels: 5
       use_linear: false
     use_average_appearance_embedding: true
+    use_same_proposal_network: false
 ",
         s.average_init_density,
         if s.torch { "torch" } else { "tcnn" },
         s.log2_table_size,
+        p_log2 = s.proposal.map_or(17, |p| p.0),
+        p0 = s.proposal.map_or(128, |p| p.1[0]),
+        p1 = s.proposal.map_or(256, |p| p.1[1]),
     )
 }
 

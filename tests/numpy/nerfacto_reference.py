@@ -243,9 +243,14 @@ def main():
     run, points_in, out_path = sys.argv[1:4]
     cfg = model_settings(os.path.join(run, "config.yml"))
     state = load_state(run)
-    f = "_model.field."
     rows = np.fromfile(points_in, dtype=F32).reshape(-1, 6)
-    p, d = rows[:, :3], rows[:, 3:]
+    sigma, srgb = field(cfg, state, rows[:, :3], rows[:, 3:])
+    np.concatenate([sigma[:, None], srgb], axis=1).astype(F32).tofile(out_path)
+
+
+def field(cfg, state, p, d):
+    """The main field's density (no selector) and sRGB colour at points p, directions d."""
+    f = "_model.field."
     u = ((contract(p) + F32(2)) / F32(4)).astype(F32)
     emb = state[f + "embedding_appearance.embedding.weight"]
     appearance = emb.astype(np.float64).mean(axis=0).astype(F32)
@@ -272,7 +277,7 @@ def main():
         out = torch_mlp(head_in, layers("mlp_head.layers"))
     sigma = (F32(cfg["average_init_density"]) * np.exp(base[:, 0])).astype(F32)
     srgb = (F32(1) / (F32(1) + np.exp(-out))).astype(F32)
-    np.concatenate([sigma[:, None], srgb], axis=1).astype(F32).tofile(out_path)
+    return sigma, srgb
 
 
 if __name__ == "__main__":

@@ -73,6 +73,75 @@ pub(crate) fn scan(text: &str, path: &str, file: &Path) -> Result<Option<String>
     Ok(found)
 }
 
+/// One item of a YAML sequence: its `key: value` pairs.
+pub(crate) type Item = Vec<(String, String)>;
+
+/// The items of the sequence at the dotted `path` (PyYAML's block style: `- ` items at the
+/// key's indentation or deeper, or an inline `[a, b]`), each as its `key: value` pairs (a
+/// scalar item as one pair with an empty key); `None` when the key is absent.
+pub(crate) fn scan_items(text: &str, path: &str, file: &Path) -> Result<Option<Vec<Item>>> {
+    let Some(inline) = scan(text, path, file)? else {
+        return Ok(None);
+    };
+    let scalar = |v: &str| vec![(String::new(), v.trim().to_owned())];
+    if let Some(list) = inline.strip_prefix('[').and_then(|v| v.strip_suffix(']')) {
+        return Ok(Some(list.split(',').map(scalar).collect()));
+    }
+    let mut stack: Vec<(usize, &str)> = Vec::new();
+    let mut key_indent = None;
+    let mut items: Vec<Item> = Vec::new();
+    for line in text.lines() {
+        let content = line.trim_start();
+        let indent = line.len() - content.len();
+        if content.is_empty() || content.starts_with('#') {
+            continue;
+        }
+        if let Some(ki) = key_indent {
+            let item = content
+                .strip_prefix('-')
+                .filter(|r| r.is_empty() || r.starts_with(' '));
+            match item {
+                Some(rest) if indent >= ki => {
+                    items.push(Vec::new());
+                    let rest = rest.trim();
+                    if !rest.is_empty() {
+                        push_pair(items.last_mut(), rest);
+                    }
+                }
+                None if indent > ki && !items.is_empty() => push_pair(items.last_mut(), content),
+                _ => break,
+            }
+            continue;
+        }
+        if content.starts_with('-') {
+            continue;
+        }
+        let Some((key, _)) = content.split_once(':') else {
+            continue;
+        };
+        while stack.last().is_some_and(|&(i, _)| i >= indent) {
+            stack.pop();
+        }
+        stack.push((indent, key));
+        if stack.iter().map(|(_, k)| *k).collect::<Vec<_>>().join(".") == path {
+            key_indent = Some(indent);
+        }
+    }
+    Ok(Some(items))
+}
+
+/// Adds `key: value` (or a bare scalar) to a sequence item.
+fn push_pair(item: Option<&mut Vec<(String, String)>>, text: &str) {
+    let Some(item) = item else { return };
+    match text
+        .split_once(": ")
+        .or_else(|| text.strip_suffix(':').map(|k| (k, "")))
+    {
+        Some((k, v)) => item.push((k.trim().to_owned(), v.trim().to_owned())),
+        None => item.push((String::new(), text.trim().to_owned())),
+    }
+}
+
 fn parsed<T: std::str::FromStr>(text: &str, key: &str, default: T, file: &Path) -> Result<T> {
     let path = format!("pipeline.model.{key}");
     match scan(text, &path, file)? {
@@ -84,12 +153,6 @@ fn parsed<T: std::str::FromStr>(text: &str, key: &str, default: T, file: &Path) 
 }
 
 impl RunSettings {
-    /// Reads `config.yml` at `file`.
-    pub(crate) fn read(file: &Path) -> Result<Self> {
-        let text = crate::input::read_text(file)?;
-        Self::from_text(&text, file)
-    }
-
     /// Parses the text of `config.yml` (`file` names it in messages).
     pub(crate) fn from_text(text: &str, file: &Path) -> Result<Self> {
         // Without this, an empty or foreign file reads as all defaults and the checkpoint is
@@ -154,6 +217,181 @@ impl RunSettings {
         }
         Ok(s)
     }
+}
+
+/// One proposal density field's shape (an entry of `proposal_net_args_list`, with
+/// `HashMLPDensityField`'s defaults for the keys it leaves out).
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct ProposalNetSettings {
+    pub num_levels: u32,
+    pub features_per_level: u32,
+    pub log2_hashmap_size: u32,
+    pub base_res: u32,
+    pub max_res: u32,
+    pub hidden_dim: usize,
+    /// Layers of the MLP counting the output layer (nerfstudio's `num_layers`).
+    pub num_layers: usize,
+    pub use_linear: bool,
+}
+
+/// How nerfacto samples a ray at inference (`ProposalNetworkSampler`'s settings).
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct SamplerSettings {
+    /// Where sampling ends, in the normalised frame's units (`far_plane`; the near plane is
+    /// reset to 0 at inference).
+    pub far_plane: f32,
+    /// Samples per ray of each proposal iteration (`num_proposal_samples_per_ray`).
+    pub proposal_samples: Vec<usize>,
+    /// Samples per ray of the main field (`num_nerf_samples_per_ray`).
+    pub nerf_samples: usize,
+    /// `use_same_proposal_network`.
+    pub same_network: bool,
+    /// `proposal_initial_sampler` is `uniform` (else `piecewise`).
+    pub uniform_initial: bool,
+    /// The proposal networks' shapes, one per network.
+    pub nets: Vec<ProposalNetSettings>,
+}
+
+impl SamplerSettings {
+    /// Reads the sampler's keys under `pipeline.model` (nerfacto's defaults when absent).
+    pub(crate) fn from_text(text: &str, file: &Path) -> Result<Self> {
+        let bad =
+            |key: &str, why: String| Error::format(file, format!("pipeline.model.{key}"), why);
+        let iterations: usize = parsed(text, "num_proposal_iterations", 2, file)?;
+        let same_network = parsed(text, "use_same_proposal_network", false, file)?;
+        let key = "pipeline.model.num_proposal_samples_per_ray";
+        let proposal_samples = match scan_items(text, key, file)? {
+            None => vec![256, 96],
+            Some(items) => items
+                .iter()
+                .map(|item| match &item[..] {
+                    [(k, v)] if k.is_empty() => v.parse::<usize>().ok(),
+                    _ => None,
+                })
+                .collect::<Option<Vec<_>>>()
+                .ok_or_else(|| {
+                    bad(
+                        "num_proposal_samples_per_ray",
+                        "expected a list of counts".into(),
+                    )
+                })?,
+        };
+        if !(1..=8).contains(&iterations) || proposal_samples.len() < iterations {
+            return Err(bad(
+                "num_proposal_iterations",
+                format!("{iterations} iterations need 1 to 8 counts in num_proposal_samples_per_ray, found {}", proposal_samples.len()),
+            ));
+        }
+        let nerf_samples: usize = parsed(text, "num_nerf_samples_per_ray", 48, file)?;
+        if proposal_samples
+            .iter()
+            .chain([&nerf_samples])
+            .any(|&n| !(1..=4096).contains(&n))
+        {
+            return Err(bad(
+                "num_nerf_samples_per_ray",
+                "sample counts must be 1 to 4096".into(),
+            ));
+        }
+        let initial = scan(text, "pipeline.model.proposal_initial_sampler", file)?;
+        let uniform_initial = match initial.as_deref() {
+            None | Some("piecewise") => false,
+            Some("uniform") => true,
+            Some(other) => {
+                return Err(bad(
+                    "proposal_initial_sampler",
+                    format!("'{other}' is not piecewise or uniform"),
+                ))
+            }
+        };
+        let far_plane: f32 = parsed(text, "far_plane", 1000.0, file)?;
+        if !(far_plane.is_finite() && far_plane > 0.0) {
+            return Err(bad("far_plane", "must be a positive number".into()));
+        }
+        let key = "pipeline.model.proposal_net_args_list";
+        let args = scan_items(text, key, file)?.unwrap_or_else(|| {
+            [128, 256]
+                .map(|r| {
+                    [
+                        ("hidden_dim", "16"),
+                        ("log2_hashmap_size", "17"),
+                        ("num_levels", "5"),
+                        ("max_res", if r == 128 { "128" } else { "256" }),
+                        ("use_linear", "false"),
+                    ]
+                    .map(|(k, v)| (k.to_owned(), v.to_owned()))
+                    .to_vec()
+                })
+                .to_vec()
+        });
+        let wanted = if same_network { 1 } else { iterations };
+        if args.is_empty() || (same_network && args.len() != 1) {
+            return Err(bad(
+                "proposal_net_args_list",
+                format!("{} entries; the sampler needs {wanted}", args.len()),
+            ));
+        }
+        // nerfacto gives network i the entry min(i, len − 1).
+        let nets = (0..wanted)
+            .map(|i| net_settings(&args[i.min(args.len() - 1)], i, file))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(SamplerSettings {
+            far_plane,
+            proposal_samples: proposal_samples[..iterations].to_vec(),
+            nerf_samples,
+            same_network,
+            uniform_initial,
+            nets,
+        })
+    }
+}
+
+/// One entry of `proposal_net_args_list`.
+fn net_settings(pairs: &[(String, String)], i: usize, file: &Path) -> Result<ProposalNetSettings> {
+    let at = format!("pipeline.model.proposal_net_args_list[{i}]");
+    let get = |key: &str, default: u64| -> Result<u64> {
+        match pairs.iter().find(|(k, _)| k == key) {
+            None => Ok(default),
+            Some((_, v)) => v.parse().map_err(|_| {
+                Error::format(
+                    file,
+                    format!("{at}.{key}"),
+                    format!("'{v}' is not a whole number"),
+                )
+            }),
+        }
+    };
+    let use_linear = match pairs.iter().find(|(k, _)| k == "use_linear") {
+        None => false,
+        Some((_, v)) => v.parse().map_err(|_| {
+            Error::format(
+                file,
+                format!("{at}.use_linear"),
+                format!("'{v}' is not true or false"),
+            )
+        })?,
+    };
+    let s = ProposalNetSettings {
+        num_levels: get("num_levels", 8)? as u32,
+        features_per_level: get("features_per_level", 2)? as u32,
+        log2_hashmap_size: get("log2_hashmap_size", 18)? as u32,
+        base_res: get("base_res", 16)? as u32,
+        max_res: get("max_res", 1024)? as u32,
+        hidden_dim: get("hidden_dim", 64)? as usize,
+        num_layers: get("num_layers", 2)? as usize,
+        use_linear,
+    };
+    let ok = (1..=32).contains(&s.num_levels)
+        && [1, 2, 4, 8].contains(&s.features_per_level)
+        && (1..=30).contains(&s.log2_hashmap_size)
+        && s.base_res > 0
+        && (s.base_res..=1 << 20).contains(&s.max_res)
+        && (1..=1024).contains(&s.hidden_dim)
+        && (1..=16).contains(&s.num_layers);
+    if !ok {
+        return Err(Error::format(file, at, "a size out of range (levels 1-32, features 1/2/4/8, log2 table 1-30, 0 < base_res <= max_res, widths 1-1024)"));
+    }
+    Ok(s)
 }
 
 #[cfg(test)]
@@ -231,5 +469,54 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
                 .to_string();
             assert!(e.contains(needle), "{needle:?} not in {e}");
         }
+    }
+
+    #[test]
+    fn reads_the_sampler_from_pyyaml_sequences() {
+        let t = TEXT.replace(
+            "    hidden_dim: 32\n",
+            "    hidden_dim: 32
+    num_proposal_samples_per_ray: !!python/tuple
+    - 128
+    - 64
+    num_nerf_samples_per_ray: 32
+    proposal_net_args_list:
+    - hidden_dim: 16
+      log2_hashmap_size: 17
+      max_res: 128
+      num_levels: 5
+      use_linear: false
+    - hidden_dim: 8
+      max_res: 256
+      num_levels: 4
+      use_linear: true
+",
+        );
+        let s = SamplerSettings::from_text(&t, Path::new("config.yml")).unwrap();
+        assert_eq!(
+            (s.proposal_samples.clone(), s.nerf_samples),
+            (vec![128, 64], 32)
+        );
+        assert_eq!(s.far_plane, 1000.0);
+        assert!(!s.same_network && !s.uniform_initial);
+        assert_eq!(s.nets.len(), 2);
+        assert_eq!((s.nets[0].max_res, s.nets[0].log2_hashmap_size), (128, 17));
+        // Keys an entry leaves out take HashMLPDensityField's defaults.
+        let n = &s.nets[1];
+        assert_eq!(
+            (n.num_levels, n.hidden_dim, n.log2_hashmap_size),
+            (4, 8, 18)
+        );
+        assert!(n.use_linear && n.num_layers == 2 && n.base_res == 16);
+        // Absent: nerfacto's defaults.
+        let d = SamplerSettings::from_text(TEXT, Path::new("config.yml")).unwrap();
+        assert_eq!((d.proposal_samples, d.nerf_samples), (vec![256, 96], 48));
+        assert_eq!([d.nets[0].max_res, d.nets[1].max_res], [128, 256]);
+        // A bad count names the key.
+        let bad = t.replace("- 64", "- many");
+        let e = SamplerSettings::from_text(&bad, Path::new("config.yml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("num_proposal_samples_per_ray"), "{e}");
     }
 }

@@ -45,17 +45,24 @@ use super::container::{Checkpoint, DType};
 use super::network::{non_finite, sh4, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage};
 use super::{Aabb, ColorSpace, Field};
 use crate::error::{Error, Result};
-use config::RunSettings;
+use config::{RunSettings, SamplerSettings};
+use density_field::DensityField;
 use occupancy::{cache_key, GridSettings, OccupancyGrid, Source, CACHE_FILE};
+use proposal::ProposalSampler;
 use torch::{torch_sh4, BiasedMlp, TorchHashGrid};
 
 mod config;
 mod dataparser;
+mod density_field;
 mod occupancy;
+mod proposal;
 mod torch;
 
 pub(crate) use config::scan;
 pub use dataparser::DataparserTransform;
+pub use proposal::{
+    Piece, SamplerRay, SamplerScratch, SamplerStats, COLOR_MIN_WEIGHT, STOP_TRANSMITTANCE,
+};
 
 /// Points per batch (bounds the scratch memory).
 const CHUNK: usize = 512;
@@ -101,12 +108,16 @@ pub struct NerfactoField {
     n_images: usize,
     n_params: usize,
     occupancy: OccupancyGrid,
+    /// nerfacto's own sampler, when the checkpoint holds its proposal networks.
+    proposal: Option<ProposalSampler>,
 }
 
 impl NerfactoField {
     /// Loads the run directory `run` (the checkpoint with the highest step).
     pub fn load(run: &Path) -> Result<Self> {
-        let settings = RunSettings::read(&run.join("config.yml"))?;
+        let config_file = run.join("config.yml");
+        let config_text = crate::input::read_text(&config_file)?;
+        let settings = RunSettings::from_text(&config_text, &config_file)?;
         let method = settings.method_name.as_str();
         if !(method.is_empty() || method.contains("nerfacto") || method.starts_with("splatfacto")) {
             return Err(Error::Unsupported(format!(
@@ -140,6 +151,7 @@ impl NerfactoField {
         } else {
             read_torch(&ckpt, &keys, &settings, appearance.len())?
         };
+        let proposal = read_proposal(&ckpt, &config_text, &config_file, &settings)?;
         let mut field = NerfactoField {
             run: run.to_path_buf(),
             checkpoint,
@@ -152,6 +164,7 @@ impl NerfactoField {
             appearance,
             n_images,
             occupancy: OccupancyGrid::full(&OCCUPANCY),
+            proposal,
         };
         let config = run.join("config.yml");
         let key = cache_key(&OCCUPANCY, &field.checkpoint, &config);
@@ -209,6 +222,31 @@ impl NerfactoField {
                 ),
             ),
         };
+        let sampler = match &self.proposal {
+            Some(p) => {
+                let ps = p.settings();
+                format!(
+                    "{} proposal network{} ({} parameters), {} samples then {} of the field, \
+                     {} initial spacing, far plane {}",
+                    ps.nets.len(),
+                    if ps.nets.len() == 1 { "" } else { "s" },
+                    p.n_params(),
+                    ps.proposal_samples
+                        .iter()
+                        .map(usize::to_string)
+                        .collect::<Vec<_>>()
+                        .join(" then "),
+                    ps.nerf_samples,
+                    if ps.uniform_initial {
+                        "uniform"
+                    } else {
+                        "piecewise"
+                    },
+                    ps.far_plane
+                )
+            }
+            None => "none (no proposal networks in the checkpoint)".into(),
+        };
         let b = self.bounds();
         format!(
             "run: {}\n\
@@ -217,6 +255,7 @@ impl NerfactoField {
              density MLP: {density} (average_init_density {} * exp)\n\
              colour MLP: {head} (sigmoid, sRGB to linear); appearance: {} of {} embeddings of {}\n\
              scene contraction: L-infinity; dataparser scale {}\n\
+             nerfacto's own sampler: {sampler}\n\
              bounds (nerfstudio frame): [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]\n\
              occupancy: {}^3 cells {}, fill ratio {:.4}",
             self.run.display(),
@@ -360,6 +399,33 @@ impl NerfactoField {
         }
     }
 
+    /// Densities and geometry features as nerfacto's own sampler sees them: on all of space
+    /// (no bounds, no occupancy), zero outside the contraction's selector.
+    fn density_features_unbounded(&self, points: &[Vec3], sigma: &mut [f32], features: &mut [f32]) {
+        let n_geo = self.n_base - 1;
+        self.for_each_base(points, |i, o| {
+            sigma[i] = if Self::unit_from_field(points[i]).is_some() {
+                self.sigma_from_raw(o[0])
+            } else {
+                0.0
+            };
+            features[i * n_geo..(i + 1) * n_geo].copy_from_slice(&o[1..]);
+        });
+    }
+
+    /// Where nerfacto's sampler stops, field units from the camera (`far_plane`; 1000 for a
+    /// run without proposal networks).
+    pub fn far_plane(&self) -> f32 {
+        self.proposal
+            .as_ref()
+            .map_or(1000.0, |p| p.settings().far_plane)
+    }
+
+    /// Whether the run holds nerfacto's proposal networks (so [`Self::sample_rays`] works).
+    pub fn has_proposal_sampler(&self) -> bool {
+        self.proposal.is_some()
+    }
+
     /// The density outputs at every point (nerfacto zeroes the position outside its
     /// selector), calling `each(i, outputs)` per point.
     fn for_each_base(&self, points: &[Vec3], mut each: impl FnMut(usize, &[f32])) {
@@ -376,6 +442,26 @@ impl NerfactoField {
             }
         }
     }
+}
+
+/// nerfacto's proposal sampler, when the checkpoint has proposal networks.
+fn read_proposal(
+    ckpt: &Checkpoint,
+    config_text: &str,
+    config_file: &Path,
+    settings: &RunSettings,
+) -> Result<Option<ProposalSampler>> {
+    if Keys::under(ckpt, "_model.proposal_networks.").is_none() {
+        return Ok(None);
+    }
+    let sampler = SamplerSettings::from_text(config_text, config_file)?;
+    let nets = sampler
+        .nets
+        .iter()
+        .enumerate()
+        .map(|(i, net)| DensityField::read(ckpt, i, net, settings.average_init_density))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(Some(ProposalSampler::new(sampler, nets)))
 }
 
 /// `nerfstudio_models/step-<n>.ckpt` with the highest `n`.
@@ -413,19 +499,23 @@ struct Keys<'a> {
 
 impl<'a> Keys<'a> {
     fn find(ckpt: &'a Checkpoint) -> Result<Self> {
-        const MARK: &str = "_model.field.";
+        Self::under(ckpt, "_model.field.").ok_or_else(|| {
+            Error::format(
+                ckpt.path().to_path_buf(),
+                "pipeline",
+                "no '_model.field.' tensors: not a nerfacto checkpoint",
+            )
+        })
+    }
+
+    /// The keys under the module path `mark` (`_model.<module>.`), wherever the state
+    /// dict puts it; `None` when no tensor is under it.
+    fn under(ckpt: &'a Checkpoint, mark: &str) -> Option<Self> {
         let prefix = ckpt
             .tensors()
             .keys()
-            .find_map(|k| k.find(MARK).map(|i| k[..i + MARK.len()].to_owned()))
-            .ok_or_else(|| {
-                Error::format(
-                    ckpt.path().to_path_buf(),
-                    "pipeline",
-                    "no '_model.field.' tensors: not a nerfacto checkpoint",
-                )
-            })?;
-        Ok(Keys {
+            .find_map(|k| k.find(mark).map(|i| k[..i + mark.len()].to_owned()))?;
+        Some(Keys {
             ckpt,
             prefix,
             path: ckpt.path().to_path_buf(),
@@ -485,19 +575,13 @@ fn read_tcnn(
     n_appearance: usize,
 ) -> Result<(Net, usize, usize)> {
     const N_BASE: usize = 16;
-    let growth = if s.num_levels > 1 {
-        ((f64::from(s.max_res).ln() - f64::from(s.base_res).ln()) / f64::from(s.num_levels - 1))
-            .exp()
-    } else {
-        1.0
-    };
-    let grid_config = HashGridConfig {
-        n_levels: s.num_levels,
-        n_features: s.features_per_level,
-        log2_table_size: s.log2_hashmap_size,
-        base_resolution: s.base_res,
-        per_level_scale: growth as f32,
-    };
+    let grid_config = tcnn_grid_config(
+        s.num_levels,
+        s.features_per_level,
+        s.log2_hashmap_size,
+        s.base_res,
+        s.max_res,
+    );
     let density_config = MlpConfig {
         n_inputs: grid_config.n_outputs(),
         width: s.hidden_dim,
@@ -532,14 +616,7 @@ fn read_tcnn(
                 g,
             )
         };
-    let half_grid = ckpt.get(&grid_name).is_some_and(|t| t.dtype == DType::F16);
-    let grid = if half_grid {
-        let h: Vec<f16> = grid_params.iter().map(|&v| f16::from_f32(v)).collect();
-        HashGrid::new(grid_config, &h, TableStorage::F16)
-    } else {
-        HashGrid::from_f32(grid_config, grid_params)
-    }
-    .ok_or_else(|| keys.err(&grid_name, "hash grid parameters do not match the config"))?;
+    let grid = tcnn_grid(ckpt, keys, &grid_name, grid_config, grid_params)?;
     let density = Mlp::new(density_config, &mlp_params)
         .ok_or_else(|| keys.err(&grid_name, "density MLP parameters do not match the config"))?;
     let head_name = keys.name("mlp_head.tcnn_encoding.params");
@@ -587,6 +664,47 @@ fn read_weights(ckpt: &Checkpoint, name: &str) -> Result<Vec<f32>> {
         Some(why) => Err(Error::format(ckpt.path().to_path_buf(), name, why)),
         None => Ok(values),
     }
+}
+
+/// tiny-cuda-nn's hash grid as nerfstudio configures it: per-level scale
+/// `exp((ln N_max − ln N_min)/(L − 1))` (computed in f64, stored as f32).
+fn tcnn_grid_config(
+    n_levels: u32,
+    n_features: u32,
+    log2_table_size: u32,
+    base_res: u32,
+    max_res: u32,
+) -> HashGridConfig {
+    let growth = if n_levels > 1 {
+        ((f64::from(max_res).ln() - f64::from(base_res).ln()) / f64::from(n_levels - 1)).exp()
+    } else {
+        1.0
+    };
+    HashGridConfig {
+        n_levels,
+        n_features,
+        log2_table_size,
+        base_resolution: base_res,
+        per_level_scale: growth as f32,
+    }
+}
+
+/// A tiny-cuda-nn grid from its parameters, kept in f16 when the checkpoint stores them so.
+fn tcnn_grid(
+    ckpt: &Checkpoint,
+    keys: &Keys,
+    name: &str,
+    config: HashGridConfig,
+    params: Vec<f32>,
+) -> Result<HashGrid> {
+    let half = ckpt.get(name).is_some_and(|t| t.dtype == DType::F16);
+    if half {
+        let h: Vec<f16> = params.iter().map(|&v| f16::from_f32(v)).collect();
+        HashGrid::new(config, &h, TableStorage::F16)
+    } else {
+        HashGrid::from_f32(config, params)
+    }
+    .ok_or_else(|| keys.err(name, "hash grid parameters do not match the config"))
 }
 
 /// A flat parameter tensor of exactly `count` values.

@@ -1,0 +1,459 @@
+//! nerfacto's own estimator at inference (nerfstudio's `ProposalNetworkSampler`): where the
+//! main field is sampled along a ray, decided by the proposal density fields it was trained
+//! with. Deterministic at inference (no jitter, no annealing).
+//!
+//! Distances `t` are in the field's frame from the ray's origin, between `near` and `far`
+//! (nerfstudio: 0 — its collider resets the near plane at inference — and `far_plane`,
+//! 1000). Sampling works in a *spacing* coordinate `s ∈ [0, 1]`:
+//! `t(s) = g⁻¹(s·g(far) + (1 − s)·g(near))` with, for the default piecewise initial sampler,
+//! `g(x) = x/2` for `x < 1` and `1 − 1/(2x)` beyond (uniform to distance 1, uniform in
+//! disparity after), or `g(x) = x` for the uniform one.
+//!
+//! 1. Iteration 0 lays `N₀` (256) intervals between the edges `s_j = j/N₀`.
+//! 2. Each interval `[t_j, t_{j+1}]` is sampled at its midpoint; with `δ_j = t_{j+1} − t_j`
+//!    the weights are `w_j = (1 − e^{−σ_j δ_j})·e^{−Σ_{k<j} σ_k δ_k}` (`get_weights`: every
+//!    δ is an interval's length, the last one too).
+//! 3. The next iteration (`N₁` = 96, then the main field's 48) resamples by inverse CDF
+//!    (`PDFSampler`, `include_original` false): `p_j = w_j + 0.01` (histogram padding),
+//!    normalised (`+1e-5` spread over the bins if their sum falls below it),
+//!    `c = [0, min(1, cumsum p)]`, `B = N + 1` edges at `u_k = (k + ½)/B`; for each, the
+//!    first `i` with `c_i > u_k`, `lo = clamp(i − 1)`, `hi = clamp(i)` in `0..=N_prev`, and
+//!    `s = s_lo + clip((u − c_lo)/(c_hi − c_lo), 0, 1)·(s_hi − s_lo)` (0/0 → 0, x/0 → 1).
+//! 4. The last iteration's intervals are where the main field is sampled; its weights give
+//!    the pixel.
+//!
+//! Two savings, both bounded: once a ray's transmittance falls below [`STOP_TRANSMITTANCE`]
+//! its later samples are not evaluated (their weights are below it, beside a padding of
+//! 0.01 per bin), and colour is not evaluated for main samples of weight below
+//! [`COLOR_MIN_WEIGHT`].
+
+use std::time::{Duration, Instant};
+
+use glam::{DVec3, Vec3};
+
+use super::config::SamplerSettings;
+use super::density_field::{DensityField, DensityScratch};
+use super::NerfactoField;
+
+/// Transmittance below which a ray's later samples are not evaluated.
+pub const STOP_TRANSMITTANCE: f64 = 1e-6;
+/// Main-field samples lighter than this are not shaded (at most 48 of them per ray).
+pub const COLOR_MIN_WEIGHT: f64 = 1e-6;
+/// Samples per ray evaluated per round (front to back, so rays can stop early).
+const ROUND: usize = 16;
+/// `PDFSampler`'s histogram padding and `eps`.
+const HISTOGRAM_PADDING: f64 = 0.01;
+const PDF_EPS: f64 = 1e-5;
+
+/// A ray to sample, in the field's frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SamplerRay {
+    /// Origin (the camera).
+    pub origin: DVec3,
+    /// Unit direction.
+    pub dir: DVec3,
+    /// Where sampling starts and ends, field units from the origin.
+    pub near: f64,
+    /// See `near`.
+    pub far: f64,
+}
+
+/// One main-field sample of a ray: the interval `[t0, t1]` (field units from the ray's
+/// origin), its density and colour (trained space; black where not shaded).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Piece {
+    /// Interval start.
+    pub t0: f64,
+    /// Interval end.
+    pub t1: f64,
+    /// Density per field unit.
+    pub sigma: f32,
+    /// Colour, as trained.
+    pub rgb: [f32; 3],
+}
+
+/// What a batch of sampling did: queries and time in the proposal fields and the main field.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SamplerStats {
+    /// Proposal-field density queries.
+    pub proposal_queries: u64,
+    /// Main-field density queries.
+    pub main_queries: u64,
+    /// Main-field colour queries.
+    pub color_queries: u64,
+    /// Time in the proposal iterations (evaluation and resampling).
+    pub proposal_time: Duration,
+    /// Time in the main field (density, features, colour).
+    pub main_time: Duration,
+}
+
+impl std::ops::AddAssign for SamplerStats {
+    fn add_assign(&mut self, o: SamplerStats) {
+        self.proposal_queries += o.proposal_queries;
+        self.main_queries += o.main_queries;
+        self.color_queries += o.color_queries;
+        self.proposal_time += o.proposal_time;
+        self.main_time += o.main_time;
+    }
+}
+
+/// Reusable buffers for [`NerfactoField::sample_rays`].
+#[derive(Clone, Debug, Default)]
+pub struct SamplerScratch {
+    /// Spacing edges per ray (`n + 1` each) of this iteration and the last.
+    edges: Vec<f64>,
+    prev_edges: Vec<f64>,
+    /// Weights per ray (`n` each) of the last evaluated iteration.
+    weights: Vec<f64>,
+    /// `(g(near), g(far))` per ray, and the distances of this iteration's edges.
+    span: Vec<[f64; 2]>,
+    distances: Vec<f64>,
+    /// Optical depth so far, per ray; rays still being evaluated.
+    tau: Vec<f64>,
+    live: Vec<u32>,
+    points: Vec<Vec3>,
+    owners: Vec<(u32, u32)>,
+    sigma: Vec<f32>,
+    features: Vec<f32>,
+    density: DensityScratch,
+    /// Main samples to shade: `(ray, sample)`, their features and directions, colours.
+    shade: Vec<(u32, u32)>,
+    shade_features: Vec<f32>,
+    dirs: Vec<Vec3>,
+    rgb: Vec<Vec3>,
+}
+
+/// The proposal networks and the sampler's settings.
+#[derive(Clone, Debug)]
+pub(crate) struct ProposalSampler {
+    settings: SamplerSettings,
+    nets: Vec<DensityField>,
+}
+
+impl ProposalSampler {
+    pub(crate) fn new(settings: SamplerSettings, nets: Vec<DensityField>) -> Self {
+        ProposalSampler { settings, nets }
+    }
+
+    /// The network of proposal iteration `i`.
+    fn net(&self, i: usize) -> &DensityField {
+        &self.nets[if self.settings.same_network { 0 } else { i }]
+    }
+
+    pub(crate) fn settings(&self) -> &SamplerSettings {
+        &self.settings
+    }
+
+    /// Parameters of the proposal networks.
+    pub(crate) fn n_params(&self) -> usize {
+        self.nets.iter().map(DensityField::n_params).sum()
+    }
+
+    /// The spacing function `g`.
+    fn spacing(&self, x: f64) -> f64 {
+        if self.settings.uniform_initial {
+            x
+        } else if x < 1.0 {
+            x / 2.0
+        } else {
+            1.0 - 1.0 / (2.0 * x)
+        }
+    }
+
+    /// `g⁻¹`.
+    fn spacing_inv(&self, s: f64) -> f64 {
+        if self.settings.uniform_initial {
+            s
+        } else if s < 0.5 {
+            2.0 * s
+        } else {
+            1.0 / (2.0 - 2.0 * s)
+        }
+    }
+
+    /// Distance of spacing `s` on a ray with `span = (g(near), g(far))`.
+    #[inline]
+    fn distance(&self, s: f64, span: [f64; 2]) -> f64 {
+        self.spacing_inv(s * span[1] + (1.0 - s) * span[0])
+    }
+}
+
+/// `B` edges resampled by inverse CDF from `edges` (`n + 1`) and their `weights` (`n`);
+/// see the module's step 3.
+pub(crate) fn resample(edges: &[f64], weights: &[f64], b: usize, out: &mut Vec<f64>) {
+    let n = weights.len();
+    let mut sum: f64 = weights.iter().map(|w| w + HISTOGRAM_PADDING).sum();
+    let pad = (PDF_EPS - sum).max(0.0);
+    sum += pad;
+    let pad = pad / n as f64;
+    // The CDF, with its leading 0: c[0] = 0, c[i] = min(1, Σ_{j<i} p_j).
+    let mut cdf = Vec::with_capacity(n + 1);
+    cdf.push(0.0);
+    let mut acc = 0.0;
+    for w in weights {
+        acc += (w + HISTOGRAM_PADDING + pad) / sum;
+        cdf.push(acc.min(1.0));
+    }
+    let mut i = 0;
+    for k in 0..b {
+        let u = (k as f64 + 0.5) / b as f64;
+        // First index with c_i > u (u grows with k, so the search resumes).
+        while i < cdf.len() && cdf[i] <= u {
+            i += 1;
+        }
+        let lo = i.saturating_sub(1).min(n);
+        let hi = i.min(n);
+        let (c0, c1) = (cdf[lo], cdf[hi]);
+        let t = if c1 - c0 > 0.0 {
+            ((u - c0) / (c1 - c0)).clamp(0.0, 1.0)
+        } else if u - c0 > 0.0 {
+            1.0
+        } else {
+            0.0
+        };
+        out.push(edges[lo] + t * (edges[hi] - edges[lo]));
+    }
+}
+
+impl NerfactoField {
+    /// Samples `rays` as nerfstudio does at inference and evaluates the main field there:
+    /// `pieces` receives `nerf_samples` pieces per ray, in order (those after a ray's
+    /// transmittance fell below [`STOP_TRANSMITTANCE`] with σ = 0). `None` when the run has
+    /// no proposal networks.
+    pub fn sample_rays(
+        &self,
+        rays: &[SamplerRay],
+        pieces: &mut Vec<Piece>,
+        s: &mut SamplerScratch,
+    ) -> Option<SamplerStats> {
+        let sampler = self.proposal.as_ref()?;
+        let mut stats = SamplerStats::default();
+        let settings = sampler.settings();
+        let iterations = settings.proposal_samples.len();
+        let start = Instant::now();
+        s.span.clear();
+        s.span.extend(
+            rays.iter()
+                .map(|r| [sampler.spacing(r.near), sampler.spacing(r.far)]),
+        );
+        // Iteration 0: uniform in spacing.
+        let mut n = settings.proposal_samples[0];
+        s.edges.clear();
+        for _ in rays {
+            s.edges.extend((0..=n).map(|j| j as f64 / n as f64));
+        }
+        for level in 0..=iterations {
+            if level > 0 {
+                let b = if level < iterations {
+                    settings.proposal_samples[level]
+                } else {
+                    settings.nerf_samples
+                } + 1;
+                std::mem::swap(&mut s.edges, &mut s.prev_edges);
+                s.edges.clear();
+                for r in 0..rays.len() {
+                    resample(
+                        &s.prev_edges[r * (n + 1)..(r + 1) * (n + 1)],
+                        &s.weights[r * n..(r + 1) * n],
+                        b,
+                        &mut s.edges,
+                    );
+                }
+                n = b - 1;
+            }
+            s.distances.clear();
+            for (r, ray) in rays.iter().enumerate() {
+                let span = s.span[r];
+                let mut prev = ray.near;
+                for &e in &s.edges[r * (n + 1)..(r + 1) * (n + 1)] {
+                    // Kept within the ray's span and in order (rounding in `g⁻¹`).
+                    let t = sampler.distance(e, span).clamp(prev, ray.far);
+                    s.distances.push(t);
+                    prev = t;
+                }
+            }
+            if level < iterations {
+                stats.proposal_queries += self.weigh(sampler, level, rays, n, s);
+            }
+        }
+        stats.proposal_time = start.elapsed();
+        let start = Instant::now();
+        self.shade_main(rays, n, pieces, s, &mut stats);
+        stats.main_time = start.elapsed();
+        Some(stats)
+    }
+
+    /// Interval `j` of ray `r` (`n` intervals per ray) of the current iteration.
+    #[inline]
+    fn interval(s: &SamplerScratch, r: usize, j: usize, n: usize) -> (f64, f64) {
+        let at = r * (n + 1) + j;
+        (s.distances[at], s.distances[at + 1])
+    }
+
+    /// Evaluates proposal iteration `level` (`n` intervals per ray) front to back, filling
+    /// `s.weights`; returns the queries made.
+    fn weigh(
+        &self,
+        sampler: &ProposalSampler,
+        level: usize,
+        rays: &[SamplerRay],
+        n: usize,
+        s: &mut SamplerScratch,
+    ) -> u64 {
+        let net = sampler.net(level);
+        let mut queries = 0;
+        s.weights.clear();
+        s.weights.resize(rays.len() * n, 0.0);
+        s.tau.clear();
+        s.tau.resize(rays.len(), 0.0);
+        s.live.clear();
+        s.live.extend(0..rays.len() as u32);
+        let mut first = 0;
+        while !s.live.is_empty() && first < n {
+            let last = (first + ROUND).min(n);
+            s.points.clear();
+            s.owners.clear();
+            for &r in &s.live {
+                let ray = &rays[r as usize];
+                for j in first..last {
+                    let (t0, t1) = Self::interval(s, r as usize, j, n);
+                    s.points
+                        .push((ray.origin + ray.dir * (0.5 * (t0 + t1))).as_vec3());
+                    s.owners.push((r, j as u32));
+                }
+            }
+            s.sigma.resize(s.points.len(), 0.0);
+            net.density(&s.points, &mut s.sigma, &mut s.density);
+            queries += s.points.len() as u64;
+            for (&(r, j), &sigma) in s.owners.iter().zip(&s.sigma) {
+                let (r, j) = (r as usize, j as usize);
+                let (t0, t1) = Self::interval(s, r, j, n);
+                let x = sanitised(sigma) * (t1 - t0);
+                s.weights[r * n + j] = -(-x).exp_m1() * (-s.tau[r]).exp();
+                s.tau[r] += x;
+            }
+            let tau = &s.tau;
+            s.live
+                .retain(|&r| (-tau[r as usize]).exp() >= STOP_TRANSMITTANCE);
+            first = last;
+        }
+        queries
+    }
+
+    /// Evaluates the main field on the final intervals (`n` per ray) front to back and shades
+    /// the samples whose weight matters.
+    fn shade_main(
+        &self,
+        rays: &[SamplerRay],
+        n: usize,
+        pieces: &mut Vec<Piece>,
+        s: &mut SamplerScratch,
+        stats: &mut SamplerStats,
+    ) {
+        let n_geo = self.n_base - 1;
+        let base = pieces.len();
+        pieces.resize(base + rays.len() * n, Piece::default());
+        for r in 0..rays.len() {
+            for j in 0..n {
+                let (t0, t1) = Self::interval(s, r, j, n);
+                pieces[base + r * n + j] = Piece {
+                    t0,
+                    t1,
+                    ..Piece::default()
+                };
+            }
+        }
+        s.tau.clear();
+        s.tau.resize(rays.len(), 0.0);
+        s.live.clear();
+        s.live.extend(0..rays.len() as u32);
+        s.shade.clear();
+        s.shade_features.clear();
+        s.dirs.clear();
+        let mut first = 0;
+        while !s.live.is_empty() && first < n {
+            let last = (first + ROUND).min(n);
+            s.points.clear();
+            s.owners.clear();
+            for &r in &s.live {
+                let ray = &rays[r as usize];
+                for j in first..last {
+                    let p = &pieces[base + r as usize * n + j];
+                    s.points
+                        .push((ray.origin + ray.dir * (0.5 * (p.t0 + p.t1))).as_vec3());
+                    s.owners.push((r, j as u32));
+                }
+            }
+            s.sigma.resize(s.points.len(), 0.0);
+            s.features.resize(s.points.len() * n_geo, 0.0);
+            self.density_features_unbounded(&s.points, &mut s.sigma, &mut s.features);
+            stats.main_queries += s.points.len() as u64;
+            for (k, (&(r, j), &sigma)) in s.owners.iter().zip(&s.sigma).enumerate() {
+                let (r, j) = (r as usize, j as usize);
+                let p = &mut pieces[base + r * n + j];
+                p.sigma = sanitised(sigma) as f32;
+                let x = f64::from(p.sigma) * (p.t1 - p.t0);
+                let w = -(-x).exp_m1() * (-s.tau[r]).exp();
+                s.tau[r] += x;
+                if w >= COLOR_MIN_WEIGHT {
+                    s.shade.push((r as u32, j as u32));
+                    s.shade_features
+                        .extend_from_slice(&s.features[k * n_geo..(k + 1) * n_geo]);
+                    s.dirs.push(rays[r].dir.as_vec3());
+                }
+            }
+            let tau = &s.tau;
+            s.live
+                .retain(|&r| (-tau[r as usize]).exp() >= STOP_TRANSMITTANCE);
+            first = last;
+        }
+        s.rgb.clear();
+        s.rgb.resize(s.shade.len(), Vec3::ZERO);
+        self.colour(&s.shade_features, &s.dirs, &mut s.rgb);
+        stats.color_queries += s.shade.len() as u64;
+        for (&(r, j), c) in s.shade.iter().zip(&s.rgb) {
+            pieces[base + r as usize * n + j as usize].rgb = c.to_array();
+        }
+    }
+}
+
+/// NaN or negative densities count as empty, infinities as huge.
+#[inline]
+fn sanitised(sigma: f32) -> f64 {
+    if sigma > 0.0 {
+        f64::from(sigma.min(f32::MAX))
+    } else {
+        0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resampling_uniform_weights_keeps_the_edges_spread() {
+        // Equal weights: the CDF is linear, so B edges land at (k + ½)/B of the span.
+        let edges: Vec<f64> = (0..=4).map(|j| j as f64 / 4.0).collect();
+        let mut out = Vec::new();
+        resample(&edges, &[0.25; 4], 5, &mut out);
+        for (k, e) in out.iter().enumerate() {
+            assert!((e - (k as f64 + 0.5) / 5.0).abs() < 1e-12, "{k}: {e}");
+        }
+    }
+
+    #[test]
+    fn resampling_concentrates_edges_where_the_weight_is() {
+        // All weight in bin 2 of 4 (plus the padding 0.01 each): p = (0.01, 0.01, 1.01,
+        // 0.01)/1.04; the 9 edges at u = (k + ½)/9 from k = 1 to 7 fall inside [0.5, 0.75].
+        let edges: Vec<f64> = (0..=4).map(|j| j as f64 / 4.0).collect();
+        let mut out = Vec::new();
+        resample(&edges, &[0.0, 0.0, 1.0, 0.0], 9, &mut out);
+        let c1 = 0.02 / 1.04;
+        // u = 1/18 lies in bin 2: 0.5 + 0.25·(u − c1)/(1.01/1.04).
+        let want = 0.5 + 0.25 * (1.0 / 18.0 - c1) / (1.01 / 1.04);
+        assert!((out[0] - want).abs() < 1e-12, "{} {want}", out[0]);
+        assert!(out[1..8].iter().all(|&e| (0.5..=0.75).contains(&e)));
+        assert!(out.windows(2).all(|w| w[0] <= w[1]));
+    }
+}

@@ -1,6 +1,6 @@
 """Compares nerfx's render of a nerfacto run with nerfstudio's, and both with the truth.
 
-    python compare.py FIXTURE [--nerfx target/release/nerfx]
+    python compare.py FIXTURE [--nerfx target/release/nerfx] [--quality final]
 
 FIXTURE is tests/data/nerfstudio/: run/, camera_path.json, truth_shot.json, scene.json (the
 analytic scene the run was trained on, in the dataset's frame) and render/ (render.py's
@@ -48,9 +48,9 @@ def stat(d):
     return f"{d.mean():.4f} ({np.median(d):.4f})" if d.size else "n/a"
 
 
-def render(nerfx, scene, shot, out, colour):
+def render(nerfx, scene, shot, out, colour, quality):
     subprocess.run([nerfx, "render", str(scene), str(shot), "-o", str(out / "f.####.exr"),
-                    "--colour", colour, "--quality", "final"], check=True,
+                    "--colour", colour, "--quality", quality], check=True,
                    stdout=subprocess.DEVNULL)
     return [read_exr(p) for p in sorted(out.glob("f.*.exr"))]
 
@@ -59,6 +59,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("fixture", type=Path)
     ap.add_argument("--nerfx", default="target/release/nerfx")
+    ap.add_argument("--quality", default="final", help="nerfx's preset for the run")
     args = ap.parse_args()
     fx = args.fixture
     scale = json.loads((fx / "run" / "dataparser_transforms.json").read_text())["scale"]
@@ -71,9 +72,9 @@ def main():
         (tmp / "nerfx").mkdir()
         (tmp / "truth").mkdir()
         ours = render(args.nerfx, tmp / "scene.json", fx / "camera_path.json", tmp / "nerfx",
-                      "as-trained")
+                      "as-trained", args.quality)
         truth = render(args.nerfx, fx / "scene.json", fx / "truth_shot.json", tmp / "truth",
-                       "linear")
+                       "linear", "final")
     print("camera | nerfstudio: mean acc, rgb range, depth (median) range | PSNR ns–truth, "
           "nerfx–truth, nerfx–ns | mean |Δacc| | expected depth |Δ| mean (median) | "
           "median depth |Δ| mean (median) | ns expected depth − truth |Δ| mean (median)")

@@ -105,11 +105,18 @@ fn occupancy_is_conservative_at_sampled_points() {
     let dir = scratch("occupancy");
     let run = write_run(&dir, &Spec::tcnn());
     let field = NerfactoField::load(&run).unwrap();
+    // The field reaches the far plane (config.yml's, nerfacto's 1000 by default): the
+    // contraction maps all of space into the hash grid.
     let b = field.bounds();
-    assert_eq!((b.min, b.max), (Vec3::splat(-2.0), Vec3::splat(2.0)));
-    // Wherever the density is non-zero, the point's region is occupied; outside the
-    // bounds the density is zero.
-    let (pts, _) = samples(4000, 5);
+    assert_eq!((b.min, b.max), (Vec3::splat(-1000.0), Vec3::splat(1000.0)));
+    // Wherever the density is non-zero, the point's region is occupied (in the unit cube, the
+    // near shell and out to the far plane); outside the bounds the density is zero.
+    let (mut pts, _) = samples(4000, 5);
+    let (far, _) = common_fields::samples(4000, 6, |rng, i| {
+        let r = [5.0, 40.0, 999.0][i % 3];
+        rng.vec(-r, r)
+    });
+    pts.extend(far);
     let mut sigma = vec![0.0; pts.len()];
     field.density(&pts, &mut sigma);
     for (p, s) in pts.iter().zip(&sigma) {
@@ -117,11 +124,15 @@ fn occupancy_is_conservative_at_sampled_points() {
             assert!(field.may_be_occupied(&Aabb::new(*p, *p)), "{p}");
         }
     }
-    let far = [Vec3::new(2.5, 0.0, 0.0), Vec3::new(0.0, -7.0, 1.0)];
+    let beyond = [Vec3::new(1000.5, 0.0, 0.0), Vec3::new(0.0, -7.0, 1e4)];
     let mut s = [1.0; 2];
-    field.density(&far, &mut s);
+    field.density(&beyond, &mut s);
     assert_eq!(s, [0.0, 0.0]);
-    assert!(!field.may_be_occupied(&Aabb::new(Vec3::splat(3.0), Vec3::splat(4.0))));
+    assert!(!field.may_be_occupied(&Aabb::new(Vec3::splat(1001.0), Vec3::splat(1e4))));
+    // The seeded run has density in the shell, where the field used to end.
+    let mut s = [0.0; 1];
+    field.density(&[Vec3::new(2.5, 0.0, 0.0)], &mut s);
+    assert!(s[0] > 0.0);
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -219,7 +230,9 @@ fn the_features_path_gives_the_same_samples() {
         let run = write_run(&dir, &spec);
         let field = NerfactoField::load(&run).unwrap();
         let (mut pts, dirs) = samples(700, 9);
-        pts[0] = Vec3::new(2.5, 0.0, 0.0);
+        // Beyond the far plane's cube (the field ends there), and out in the contracted shell.
+        pts[0] = Vec3::new(1500.0, 0.0, 0.0);
+        pts[1] = Vec3::new(-40.0, 300.0, 2.5);
         let n = pts.len();
         let (mut sigma, mut rgb) = (vec![0.0; n], vec![Vec3::ZERO; n]);
         field.density(&pts, &mut sigma);

@@ -25,16 +25,26 @@
 //! `…layers.<i>.weight|bias` (see [`torch`]). Appearance:
 //! `embedding_appearance.embedding.weight`.
 //!
-//! **Bounds and occupancy.** The field is bounded to `[−2, 2]³` in scene units (density is
-//! zero outside: the contracted shell beyond `‖x‖∞ = 2`, contracted radius 1.5–2, is not
-//! rendered). nerfacto has no occupancy grid, so one is computed at load: `64³` cells over
-//! the bounds; the density is sampled at every cell corner and centre; a cell is occupied
-//! when `max σ · cell diagonal ≥ 10⁻³` (an opacity of about 10⁻³ across it), and the
-//! occupied set is then dilated by one cell (26-neighbourhood). This is conservative in
-//! practice, not by proof (a peak narrower than half a cell between samples could be
-//! missed); so that the [`Field`] contract holds exactly, the density is set to zero in
-//! empty cells. The grid is cached next to the run (`nerfx_occupancy.bin`, keyed by the
-//! checkpoint, `config.yml` and the grid settings; see `nerfacto/occupancy.rs`).
+//! **Bounds and occupancy.** The contraction maps all of space into the hash grid, so the
+//! field is defined everywhere: the sky and the distant scene of an outdoor capture live in
+//! the shell `‖x‖∞ > 1`. As `ns-render` does, a ray is integrated from `near_plane` to
+//! `far_plane` (`config.yml`; 0.05 and 1000 by default), distances along it from the camera
+//! in the field's units; the bounds are the cube `‖x‖∞ ≤ far_plane` (density zero beyond).
+//! The field says it is [unbounded](Field::unbounded) with the unit cube as its core: there
+//! the marcher steps and skips empty space as for any field; beyond it its steps grow as
+//! `‖x‖∞²` (a constant step in contracted coordinates, where the hash grid's cells are) and
+//! it skips empty space through [`Field::may_be_occupied`]. Depth of far content is thus
+//! finite (at most `far_plane` field units). nerfacto has no occupancy grid, so one is
+//! computed at load: `64³` cells over the *contracted* cube `[−2, 2]³`; the density is
+//! sampled at every cell corner and centre; a cell is occupied when `max σ · L ≥ 10⁻³`,
+//! `L` the cell's diagonal in field units (an opacity of about 10⁻³ across it; far cells
+//! are long, so their threshold is low), and the occupied set is then dilated by one cell
+//! (26-neighbourhood). This is conservative in practice, not by proof (a peak narrower than
+//! half a cell between samples could be missed); so that the [`Field`] contract holds
+//! exactly, the density is set to zero in empty cells. The grid is cached
+//! (`nerfx_occupancy.bin` in the run directory, or when that cannot be written a per-user
+//! cache directory; keyed by the checkpoint, `config.yml` and the grid settings; never
+//! trusted beyond its key and checksum; see `nerfacto/occupancy.rs`).
 
 use std::path::{Path, PathBuf};
 
@@ -43,10 +53,10 @@ use half::f16;
 
 use super::container::{Checkpoint, DType};
 use super::network::{sh4, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage};
-use super::{Aabb, ColorSpace, Field};
+use super::{Aabb, ColorSpace, Field, Unbounded};
 use crate::error::{Error, Result};
 use config::RunSettings;
-use occupancy::{cache_key, GridSettings, OccupancyGrid, Source, CACHE_FILE};
+use occupancy::{cache_key, contract, GridSettings, OccupancyGrid, Source, CACHE_FILE};
 use torch::{torch_sh4, BiasedMlp, TorchHashGrid};
 
 mod config;
@@ -61,15 +71,13 @@ pub use dataparser::DataparserTransform;
 const CHUNK: usize = 512;
 /// Largest exponent fed to `exp` for the density (keeps σ finite).
 const MAX_LOG_DENSITY: f32 = 80.0;
-/// Half the side of the field's bounds, scene units.
-const HALF_EXTENT: f32 = 2.0;
-/// The occupancy grid's settings: `64³` cells over the bounds, occupied at an opacity of
-/// 10⁻³ across a cell.
-const OCCUPANCY: GridSettings = GridSettings {
-    n: 64,
-    opacity: 1e-3,
-    half_extent: HALF_EXTENT,
-};
+/// The occupancy grid's cells per axis over the contracted cube…
+const OCCUPANCY_CELLS: usize = 64;
+/// …and the opacity across a cell above which it is occupied.
+const OCCUPANCY_OPACITY: f32 = 1e-3;
+/// The marcher's empty-space step beyond the unit cube, in contracted units: one cell of
+/// the occupancy grid (4/64).
+const FAR_SKIP: f32 = 1.0 / 16.0;
 
 /// The networks, in one of the two layouts.
 #[derive(Clone, Debug)]
@@ -128,6 +136,11 @@ impl NerfactoField {
             )));
         }
         let dataparser = DataparserTransform::read(run.join("dataparser_transforms.json"))?;
+        let grid = GridSettings {
+            n: OCCUPANCY_CELLS,
+            opacity: OCCUPANCY_OPACITY,
+            far: settings.far_plane,
+        };
         let (checkpoint, step) = latest_checkpoint(&run.join("nerfstudio_models"))?;
         let ckpt = Checkpoint::open(&checkpoint)?;
         let keys = Keys::find(&ckpt)?;
@@ -151,12 +164,12 @@ impl NerfactoField {
             n_params: n_params + appearance.len() * n_images,
             appearance,
             n_images,
-            occupancy: OccupancyGrid::full(&OCCUPANCY),
+            occupancy: OccupancyGrid::full(&grid),
         };
         let config = run.join("config.yml");
-        let key = cache_key(&OCCUPANCY, &field.checkpoint, &config);
-        field.occupancy = OccupancyGrid::load_or_build(&OCCUPANCY, run, key.as_deref(), |p, s| {
-            field.density_unmasked(p, s)
+        let key = cache_key(&grid, &field.checkpoint, &config);
+        field.occupancy = OccupancyGrid::load_or_build(&grid, run, key.as_deref(), |c, s| {
+            field.density_contracted(c, s)
         });
         Ok(field)
     }
@@ -217,8 +230,9 @@ impl NerfactoField {
              density MLP: {density} (average_init_density {} * exp)\n\
              colour MLP: {head} (sigmoid, sRGB to linear); appearance: {} of {} embeddings of {}\n\
              scene contraction: L-infinity; dataparser scale {}\n\
-             bounds (nerfstudio frame): [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]\n\
-             occupancy: {}^3 cells {}, fill ratio {:.4}",
+             bounds (nerfstudio frame): [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]; rays \
+             from near_plane {} to far_plane {}\n\
+             occupancy: {}^3 cells over the contracted cube {}, fill ratio {:.4}",
             self.run.display(),
             if s.method_name.is_empty() {
                 "(unnamed method)"
@@ -244,6 +258,8 @@ impl NerfactoField {
             b.max.x,
             b.max.y,
             b.max.z,
+            s.near_plane,
+            s.far_plane,
             self.occupancy.resolution(),
             match self.occupancy.source() {
                 Source::Computed => "computed at load".to_string(),
@@ -257,13 +273,7 @@ impl NerfactoField {
     /// then `(c + 2)/4`), or `None` outside nerfacto's selector `0 < u < 1`.
     #[inline]
     fn unit_from_field(p: Vec3) -> Option<Vec3> {
-        let mag = p.abs().max_element();
-        let c = if mag < 1.0 {
-            p
-        } else {
-            (p / mag) * (2.0 - 1.0 / mag)
-        };
-        let u = (c + Vec3::splat(2.0)) / 4.0;
+        let u = (contract(p) + Vec3::splat(2.0)) / 4.0;
         (u.cmpgt(Vec3::ZERO).all() && u.cmplt(Vec3::ONE).all()).then_some(u)
     }
 
@@ -284,6 +294,29 @@ impl NerfactoField {
                     grid.encode(*x, enc);
                     density.forward(enc, o, &mut scratch);
                 }
+            }
+        }
+    }
+
+    /// Densities without the occupancy mask at contracted points `c` (`‖c‖∞ < 2`; zero
+    /// outside nerfacto's selector).
+    fn density_contracted(&self, cs: &[Vec3], sigma: &mut [f32]) {
+        let (mut xs, mut idx) = (Vec::with_capacity(CHUNK), Vec::with_capacity(CHUNK));
+        let (mut enc, mut out) = (Vec::new(), Vec::new());
+        for (pts, sig) in cs.chunks(CHUNK).zip(sigma.chunks_mut(CHUNK)) {
+            xs.clear();
+            idx.clear();
+            for (i, c) in pts.iter().enumerate() {
+                sig[i] = 0.0;
+                let u = (*c + Vec3::splat(2.0)) / 4.0;
+                if u.cmpgt(Vec3::ZERO).all() && u.cmplt(Vec3::ONE).all() {
+                    xs.push(u);
+                    idx.push(i);
+                }
+            }
+            self.base(&xs, &mut enc, &mut out);
+            for (k, &i) in idx.iter().enumerate() {
+                sig[i] = self.sigma_from_raw(out[k * self.n_base]);
             }
         }
     }
@@ -682,8 +715,22 @@ fn read_linear_layers(
 }
 
 impl Field for NerfactoField {
+    /// The cube `‖x‖∞ ≤ far_plane`: a ray from a camera at the centre ends at the far plane
+    /// inside it.
     fn bounds(&self) -> Aabb {
-        Aabb::new(Vec3::splat(-HALF_EXTENT), Vec3::splat(HALF_EXTENT))
+        let far = self.settings.far_plane;
+        Aabb::new(Vec3::splat(-far), Vec3::splat(far))
+    }
+
+    /// The unit cube as the core (the contraction is the identity there), the empty-space
+    /// step beyond it one occupancy cell, and the run's near and far planes.
+    fn unbounded(&self) -> Option<Unbounded> {
+        Some(Unbounded {
+            core: 1.0,
+            skip: FAR_SKIP,
+            near: self.settings.near_plane,
+            far: self.settings.far_plane,
+        })
     }
 
     fn color_space(&self) -> ColorSpace {

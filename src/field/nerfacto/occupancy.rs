@@ -1,10 +1,18 @@
 //! The occupancy grid a nerfacto run gets at load (nerfacto has none of its own), and its
 //! on-disk cache next to the run.
 //!
-//! **Grid.** `N³` cells over the field's bounds `[−h, h]³`; a cell is occupied when the
-//! largest density sampled at its corners and centre reaches `opacity / cell diagonal`, and
+//! **Grid.** `N³` cells over the *contracted* cube `[−2, 2]³` (nerfacto's L∞ contraction,
+//! `c = x` inside `‖x‖∞ < 1`, else `(2 − 1/‖x‖∞)·x/‖x‖∞`), so one grid covers all of space:
+//! the unit cube at the grid's resolution and the shell beyond it at the resolution the
+//! hash grid has there. A cell is occupied when the largest density sampled at its corners
+//! and centre (in contracted coordinates) reaches `opacity / L`, where `L` is the cell's
+//! diagonal in *field* units at its outer edge (the contracted diagonal times
+//! `max(1, r²)`, `r = 1/(2 − ‖c‖∞)` the field radius there, capped at the far plane), and
 //! the occupied set is dilated by one cell (26-neighbourhood). A bit per cell is kept as 3-D
-//! prefix sums, so a region's test is eight lookups.
+//! prefix sums, so a region's test is eight lookups. A field-space box is tested through
+//! the box of its contracted image: `c = x·g(‖x‖∞)` with `g` positive and non-increasing,
+//! so over the box `g` lies between its values at the box's largest and smallest `‖x‖∞`,
+//! and each `c_a` between the products of the interval bounds.
 //!
 //! **Cache** (`<run>/nerfx_occupancy.bin`). Computing the grid takes `(N + 1)²·2N + N³`
 //! density samples (~0.5 M for `N = 64`: about a second), so it is kept next to the run:
@@ -27,21 +35,78 @@ use crate::field::Aabb;
 
 /// The cache file's name inside the run directory.
 pub(super) const CACHE_FILE: &str = "nerfx_occupancy.bin";
-/// Bumped whenever the grid rule or the file layout changes.
-const CACHE_VERSION: u32 = 1;
+/// Bumped whenever the grid rule or the file layout changes (2: cells in contracted
+/// coordinates).
+const CACHE_VERSION: u32 = 2;
 const MAGIC: &[u8; 8] = b"NERFXOCC";
 /// Bytes hashed at each end of the checkpoint for the key.
 const KEY_SAMPLE: u64 = 64 * 1024;
 
-/// How the grid is computed: cells per axis, the opacity rule and the bounds.
+/// Half the side of the contracted cube the grid covers.
+const CONTRACTED: f32 = 2.0;
+
+/// How the grid is computed: cells per axis and the opacity rule.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct GridSettings {
     /// Cells per axis `N`.
     pub n: usize,
     /// Opacity across a cell above which it is occupied.
     pub opacity: f32,
-    /// Half the side of the bounds `h`.
-    pub half_extent: f32,
+    /// The field radius `‖x‖∞` beyond which nothing is rendered (the far plane): caps the
+    /// outermost cells' extent in the opacity rule.
+    pub far: f32,
+}
+
+/// nerfacto's L∞ contraction of a field point (`(x/m)·(2 − 1/m)` beyond the unit cube, in
+/// that order, as nerfstudio computes it).
+#[inline]
+pub(super) fn contract(p: Vec3) -> Vec3 {
+    let m = p.abs().max_element();
+    if m < 1.0 {
+        p
+    } else {
+        (p / m) * (2.0 - 1.0 / m)
+    }
+}
+
+/// `g(m)`: the contraction is `c = x·g(‖x‖∞)`; 1 inside the unit cube, `(2 − 1/m)/m` beyond
+/// (positive, non-increasing, 0 at infinity).
+#[inline]
+fn shrink(m: f32) -> f32 {
+    if m < 1.0 {
+        1.0
+    } else if m.is_finite() {
+        (2.0 - 1.0 / m) / m
+    } else {
+        0.0
+    }
+}
+
+/// A box holding the contracted image of the field-space box `b` (see the module docs).
+fn contract_box(b: &Aabb) -> Aabb {
+    let (lo, hi) = (b.min.to_array(), b.max.to_array());
+    let (mut near, mut far) = (0.0f32, 0.0f32);
+    for a in 0..3 {
+        let gap = if lo[a] > 0.0 {
+            lo[a]
+        } else if hi[a] < 0.0 {
+            -hi[a]
+        } else {
+            0.0
+        };
+        near = near.max(gap);
+        far = far.max(lo[a].abs()).max(hi[a].abs());
+    }
+    let (g_lo, g_hi) = (shrink(far), shrink(near));
+    let axis = |a: usize| {
+        let min = lo[a] * if lo[a] >= 0.0 { g_lo } else { g_hi };
+        let max = hi[a] * if hi[a] >= 0.0 { g_hi } else { g_lo };
+        // A few ulps of room for the f32 rounding of `contract`.
+        let pad = 4.0 * f32::EPSILON * CONTRACTED;
+        (min - pad, max + pad)
+    };
+    let [x, y, z] = [0, 1, 2].map(axis);
+    Aabb::new(Vec3::new(x.0, y.0, z.0), Vec3::new(x.1, y.1, z.1))
 }
 
 /// Where a grid came from.
@@ -57,7 +122,6 @@ pub(super) enum Source {
 #[derive(Clone, Debug)]
 pub(super) struct OccupancyGrid {
     n: usize,
-    half_extent: f32,
     /// `(n+1)³` prefix counts: `sums[(z·(n+1) + y)·(n+1) + x]` = occupied cells below.
     sums: Vec<u32>,
     source: Source,
@@ -88,17 +152,13 @@ impl OccupancyGrid {
                 }
             }
         }
-        OccupancyGrid {
-            n,
-            half_extent: settings.half_extent,
-            sums,
-            source,
-        }
+        OccupancyGrid { n, sums, source }
     }
 
     /// The grid for a run: read from the cache in `run` when it is current for `key`,
-    /// otherwise computed from `density` (the field's unmasked density) and cached; with no
-    /// key (the checkpoint could not be examined), computed and not cached.
+    /// otherwise computed from `density` (the field's unmasked density at *contracted*
+    /// points) and cached; with no key (the checkpoint could not be examined), computed and
+    /// not cached.
     pub fn load_or_build(
         settings: &GridSettings,
         run: &Path,
@@ -141,24 +201,31 @@ impl OccupancyGrid {
         v as u32
     }
 
-    /// Cell index range covering `[a, b]` along one axis (clamped to the grid).
+    /// Cell index range covering contracted `[a, b]` along one axis (clamped to the grid).
     fn range(&self, a: f32, b: f32) -> (usize, usize) {
-        let (n, h) = (self.n as f32, self.half_extent);
+        let (n, h) = (self.n as f32, CONTRACTED);
         let to = |v: f32| ((v + h) / (2.0 * h) * n).clamp(0.0, n);
         let lo = to(a).floor() as usize;
         let hi = (to(b).floor() as usize + 1).min(self.n);
         (lo.min(self.n - 1), hi)
     }
 
-    /// Whether any cell meeting `region` is occupied.
-    pub fn region(&self, region: &Aabb) -> bool {
-        let r = [0, 1, 2].map(|a| self.range(region.min[a], region.max[a]));
+    /// Whether any cell meeting the contracted box `c` is occupied.
+    fn contracted_region(&self, c: &Aabb) -> bool {
+        let r = [0, 1, 2].map(|a| self.range(c.min[a], c.max[a]));
         self.count([r[0].0, r[1].0, r[2].0], [r[0].1, r[1].1, r[2].1]) > 0
     }
 
-    /// Whether the cell of `p` is occupied.
+    /// Whether any cell meeting the contracted image of the field-space box `region` is
+    /// occupied.
+    pub fn region(&self, region: &Aabb) -> bool {
+        self.contracted_region(&contract_box(region))
+    }
+
+    /// Whether the cell of the field point `p` is occupied.
     pub fn point(&self, p: Vec3) -> bool {
-        self.region(&Aabb::new(p, p))
+        let c = contract(p);
+        self.contracted_region(&Aabb::new(c, c))
     }
 
     /// Occupied cells over all cells.
@@ -168,12 +235,23 @@ impl OccupancyGrid {
     }
 }
 
-/// Samples `density` and applies the rule of the module docs: the occupied cells (`n³`).
+/// Samples `density` (at contracted points) and applies the rule of the module docs: the
+/// occupied cells (`n³`).
 fn compute_cells(s: &GridSettings, density: impl Fn(&[Vec3], &mut [f32]) + Sync) -> Vec<bool> {
     let n = s.n;
-    let cell = 2.0 * s.half_extent / n as f32;
-    let threshold = s.opacity / (cell * 3f32.sqrt());
-    let at = |i: f32| -s.half_extent + i * cell;
+    let cell = 2.0 * CONTRACTED / n as f32;
+    let at = |i: f32| -CONTRACTED + i * cell;
+    // A cell's field-space diagonal at its outer edge: by its contracted radius there.
+    let threshold = |x: usize, y: usize, z: usize| {
+        let edge = |i: usize| at(i as f32).abs().max(at(i as f32 + 1.0).abs());
+        let outer = edge(x).max(edge(y)).max(edge(z));
+        let r = if outer < 2.0 {
+            (1.0 / (2.0 - outer)).min(s.far)
+        } else {
+            s.far
+        };
+        s.opacity / (cell * 3f32.sqrt() * r.max(1.0).powi(2))
+    };
     // Per z-slab of cells: the max density over its corners and centres.
     let slabs: Vec<Vec<f32>> = (0..n)
         .into_par_iter()
@@ -208,7 +286,12 @@ fn compute_cells(s: &GridSettings, density: impl Fn(&[Vec3], &mut [f32]) + Sync)
                 .collect()
         })
         .collect();
-    let hot: Vec<bool> = slabs.concat().iter().map(|&s| s >= threshold).collect();
+    let hot: Vec<bool> = slabs
+        .concat()
+        .iter()
+        .enumerate()
+        .map(|(i, &m)| m >= threshold(i % n, i / n % n, i / (n * n)))
+        .collect();
     let mut cells = vec![false; n * n * n];
     for z in 0..n {
         for y in 0..n {
@@ -253,11 +336,12 @@ pub(super) fn cache_key(
     }
     let path = std::fs::canonicalize(checkpoint).unwrap_or_else(|_| PathBuf::from(checkpoint));
     Some(format!(
-        "grid n={} opacity={:08x} half_extent={:08x} dilation=1; checkpoint {} size={size} \
-         mtime={mtime} ends={:016x}; config size={config_size} mtime={config_mtime}",
+        "grid n={} opacity={:08x} contracted far={:08x} dilation=1; checkpoint {} \
+         size={size} mtime={mtime} ends={:016x}; config size={config_size} \
+         mtime={config_mtime}",
         settings.n,
         settings.opacity.to_bits(),
-        settings.half_extent.to_bits(),
+        settings.far.to_bits(),
         path.display(),
         fnv1a(&ends),
     ))
@@ -341,7 +425,7 @@ mod tests {
     const SETTINGS: GridSettings = GridSettings {
         n: 8,
         opacity: 1e-3,
-        half_extent: 2.0,
+        far: 1000.0,
     };
 
     #[test]
@@ -349,19 +433,65 @@ mod tests {
         let n = 64;
         let settings = GridSettings { n, ..SETTINGS };
         let mut cells = vec![false; n * n * n];
-        // One occupied cell at (10, 20, 30): x ∈ [−2 + 10·h, −2 + 11·h], h = 4/64.
+        // One occupied cell at (10, 20, 30): contracted x ∈ [−2 + 10·h, −2 + 11·h], h = 4/64.
         cells[(30 * n + 20) * n + 10] = true;
         let g = OccupancyGrid::from_cells(&settings, &cells, Source::Computed);
         let h = 4.0 / n as f32;
         let centre = Vec3::new(-2.0 + 10.5 * h, -2.0 + 20.5 * h, -2.0 + 30.5 * h);
-        assert!(g.point(centre));
-        assert!(!g.point(centre + Vec3::new(h, 0.0, 0.0)));
-        assert!(g.region(&Aabb::new(
+        let at = |c: Vec3| g.contracted_region(&Aabb::new(c, c));
+        assert!(at(centre));
+        assert!(!at(centre + Vec3::new(h, 0.0, 0.0)));
+        assert!(g.contracted_region(&Aabb::new(
             centre - Vec3::splat(2.0 * h),
             centre - Vec3::splat(0.4 * h)
         )));
-        assert!(!g.region(&Aabb::new(Vec3::splat(-2.0), Vec3::splat(-1.0))));
+        assert!(!g.contracted_region(&Aabb::new(Vec3::splat(-2.0), Vec3::splat(-1.0))));
         assert!((g.fill_ratio() - 1.0 / (n * n * n) as f64).abs() < 1e-12);
+        // The same cell from field space: contracted x = −1.34 is field x = −1/(2 − 1.34)
+        // scaled along its ray; the centre's field point lies in it.
+        let m = centre.abs().max_element();
+        let field_point = centre / m / (2.0 - m);
+        assert!((contract(field_point) - centre).length() < 1e-5);
+        assert!(g.point(field_point));
+        assert!(g.region(&Aabb::new(field_point, field_point * 1.001)));
+    }
+
+    #[test]
+    fn contracted_boxes_hold_the_contracted_points() {
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for k in 0..2000 {
+            // Boxes from the unit cube out to 500 units, some straddling the axes.
+            let scale = [0.5, 3.0, 40.0, 500.0][k % 4];
+            let a = Vec3::new(next(), next(), next()) * 2.0 - Vec3::ONE;
+            let b = Vec3::new(next(), next(), next()) * 2.0 - Vec3::ONE;
+            let (lo, hi) = (a.min(b) * scale, a.max(b) * scale);
+            let c = contract_box(&Aabb::new(lo, hi));
+            for _ in 0..8 {
+                let t = Vec3::new(next(), next(), next());
+                let p = lo + t * (hi - lo);
+                let q = contract(p);
+                assert!(
+                    c.contains(q),
+                    "box {lo}..{hi}: contracted {q} of {p} outside {:?}..{:?}",
+                    c.min,
+                    c.max
+                );
+            }
+        }
+        // Contraction at the formula's landmarks.
+        assert_eq!(
+            contract(Vec3::new(0.5, -0.25, 0.0)),
+            Vec3::new(0.5, -0.25, 0.0)
+        );
+        assert!(
+            (contract(Vec3::new(4.0, 2.0, -1.0)) - Vec3::new(1.75, 0.875, -0.4375)).length() < 1e-6
+        );
     }
 
     #[test]

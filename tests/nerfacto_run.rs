@@ -328,11 +328,88 @@ fn the_occupancy_grid_is_cached_next_to_the_run() {
     assert!(occupancy_line(&fifth).contains("computed at load"));
     assert_eq!(occupancy_pattern(&fifth), want);
     assert!(occupancy_line(&NerfactoField::load(&run).unwrap()).contains("read from"));
-    // A cache path that cannot be written (a directory there): computed, no error.
-    std::fs::remove_file(&cache).unwrap();
-    std::fs::create_dir(&cache).unwrap();
-    let sixth = NerfactoField::load(&run).unwrap();
-    assert!(occupancy_line(&sixth).contains("computed at load"));
-    assert_eq!(occupancy_pattern(&sixth), want);
+    // Garbage of any length (random bytes, then bytes starting like a cache) is ignored.
+    let mut rng = common_nerfacto::SplitMix64::new(3);
+    let noise: Vec<u8> = (0..5000).map(|_| (rng.next_u64() >> 56) as u8).collect();
+    for garbage in [
+        noise.as_slice(),
+        b"NERFXOCC\x02\x00\x00\x00\xff\xff\xff\xff".as_slice(),
+    ] {
+        std::fs::write(&cache, garbage).unwrap();
+        let again = NerfactoField::load(&run).unwrap();
+        assert!(occupancy_line(&again).contains("computed at load"));
+        assert_eq!(occupancy_pattern(&again), want);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `nerfx info` on a run, with the per-user cache directory at `cache_home`: its occupancy
+/// line.
+fn info_occupancy(run: &std::path::Path, cache_home: &std::path::Path) -> String {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_nerfx"))
+        .arg("info")
+        .arg(run)
+        .env("XDG_CACHE_HOME", cache_home)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout).to_string();
+    text.lines()
+        .find(|l| l.starts_with("occupancy:"))
+        .unwrap_or_else(|| panic!("no occupancy line in:\n{text}"))
+        .to_string()
+}
+
+/// A run directory that cannot hold the cache (read-only; when the tests run as root, who
+/// may write anyway, a directory in the cache file's place): the grid is cached in the
+/// per-user cache directory instead, and read from there; garbage and another run's cache
+/// there are ignored and replaced.
+#[test]
+fn the_occupancy_cache_falls_back_to_the_user_cache_directory() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = scratch("occupancy-fallback");
+    let other = write_run(&dir.join("other"), &Spec::tcnn());
+    let foreign = info_occupancy(&other, &dir.join("unused"));
+    assert!(foreign.contains("computed at load"), "{foreign}");
+    let run = write_run(&dir, &Spec::torch());
+    let cache_home = dir.join("cache-home");
+    std::fs::set_permissions(&run, std::fs::Permissions::from_mode(0o555)).unwrap();
+    let probe = run.join("probe");
+    let read_only = std::fs::write(&probe, b"").is_err();
+    if !read_only {
+        println!("running as a user who may write a read-only directory: a directory takes the cache file's place instead");
+        std::fs::remove_file(&probe).unwrap();
+        std::fs::set_permissions(&run, std::fs::Permissions::from_mode(0o755)).unwrap();
+        std::fs::create_dir(run.join("nerfx_occupancy.bin")).unwrap();
+    }
+    let first = info_occupancy(&run, &cache_home);
+    assert!(first.contains("computed at load"), "{first}");
+    assert!(!run.join("nerfx_occupancy.bin").is_file());
+    let cached: Vec<_> = std::fs::read_dir(cache_home.join("nerfx"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(cached.len(), 1, "{cached:?}");
+    let second = info_occupancy(&run, &cache_home);
+    assert_eq!(
+        second,
+        first.replace(
+            "computed at load",
+            &format!("read from {}", cached[0].display())
+        )
+    );
+    for bad in [
+        b"not a grid".to_vec(),
+        std::fs::read(other.join("nerfx_occupancy.bin")).unwrap(),
+    ] {
+        std::fs::write(&cached[0], bad).unwrap();
+        assert_eq!(info_occupancy(&run, &cache_home), first);
+        assert_eq!(info_occupancy(&run, &cache_home), second);
+    }
+    std::fs::set_permissions(&run, std::fs::Permissions::from_mode(0o755)).unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -25,6 +25,9 @@ pub enum Density {
     /// faint inside contracted radius ~1.97 (field radius ~30) and grows beyond it until the
     /// far field is opaque. Finer levels are zero.
     Shell,
+    /// The reverse, near only: `raw = relu(A·(ρ₀ − ρ)) − B` with ρ₀ = 0.8: a dense cube
+    /// inside contracted (and field) radius ~0.6, faint everywhere else.
+    Core,
 }
 
 /// What to write.
@@ -71,6 +74,16 @@ impl Spec {
             average_init_density: sigma,
             density: Density::Constant,
             seed: 21,
+            ..Spec::tcnn()
+        }
+    }
+
+    /// tiny-cuda-nn's layout with a dense core and nothing far ([`Density::Core`]).
+    pub fn core() -> Self {
+        Spec {
+            density: Density::Core,
+            seed: 23,
+            expect_empty_space: true,
             ..Spec::tcnn()
         }
     }
@@ -253,7 +266,8 @@ fn state_dict(s: &Spec) -> StateDict {
         match s.density {
             Density::Seeded => {}
             Density::Constant => params[..64 * n_in].fill(0.0),
-            Density::Shell => shell_network(&mut params, &mut grid, n_in),
+            Density::Shell => shell_network(&mut params, &mut grid, n_in, 1.8, 1.0),
+            Density::Core => shell_network(&mut params, &mut grid, n_in, 0.8, -1.0),
         }
         params.extend(grid);
         sd.add(
@@ -285,12 +299,13 @@ fn state_dict(s: &Spec) -> StateDict {
 /// row-major) and the grid's (level 0 first: 16³ entries of 2 features, dense, entry
 /// `x + 16y + 256z` for the vertex whose hash-grid coordinate is `(x, y, z)`, at
 /// `u = (g − 1/2)/15` per axis, contracted `c = 4u − 2`).
-fn shell_network(mlp: &mut [f32], grid: &mut [f32], n_in: usize) {
+/// `rho0` is ρ₀; `outward` 1 for a shell, −1 for a core.
+fn shell_network(mlp: &mut [f32], grid: &mut [f32], n_in: usize, rho0: f32, outward: f32) {
     const RES: usize = 16;
-    let (a, rho0, b) = (30.0, 1.8, 5.0);
+    let (a, b) = (30.0 * outward, 5.0);
     let (first, second) = mlp.split_at_mut(64 * n_in);
     first.fill(0.0);
-    first[0] = a; // hidden 0 = relu(A·ρ − A·ρ₀·1)
+    first[0] = a; // hidden 0 = relu(±A·(ρ − ρ₀))
     first[1] = -a * rho0;
     first[n_in + 1] = 1.0; // hidden 1 = relu(1) = 1
     for o in 0..16 {

@@ -56,7 +56,9 @@ use super::network::{sh4, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage
 use super::{Aabb, ColorSpace, Field, Unbounded};
 use crate::error::{Error, Result};
 use config::RunSettings;
-use occupancy::{cache_key, contract, GridSettings, OccupancyGrid, Source, CACHE_FILE};
+use occupancy::{
+    cache_key, cache_paths, contract, GridSettings, OccupancyGrid, Source, CACHE_FILE,
+};
 use torch::{torch_sh4, BiasedMlp, TorchHashGrid};
 
 mod config;
@@ -168,7 +170,8 @@ impl NerfactoField {
         };
         let config = run.join("config.yml");
         let key = cache_key(&grid, &field.checkpoint, &config);
-        field.occupancy = OccupancyGrid::load_or_build(&grid, run, key.as_deref(), |c, s| {
+        let caches = cache_paths(run);
+        field.occupancy = OccupancyGrid::load_or_build(&grid, &caches, key.as_deref(), |c, s| {
             field.density_contracted(c, s)
         });
         Ok(field)
@@ -263,7 +266,10 @@ impl NerfactoField {
             self.occupancy.resolution(),
             match self.occupancy.source() {
                 Source::Computed => "computed at load".to_string(),
-                Source::Cached => format!("read from {CACHE_FILE}"),
+                Source::Cached(path) if *path == self.run.join(CACHE_FILE) => {
+                    format!("read from {CACHE_FILE}")
+                }
+                Source::Cached(path) => format!("read from {}", path.display()),
             },
             self.occupancy.fill_ratio(),
         )

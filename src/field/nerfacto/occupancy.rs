@@ -14,16 +14,20 @@
 //! so over the box `g` lies between its values at the box's largest and smallest `‖x‖∞`,
 //! and each `c_a` between the products of the interval bounds.
 //!
-//! **Cache** (`<run>/nerfx_occupancy.bin`). Computing the grid takes `(N + 1)²·2N + N³`
-//! density samples (~0.5 M for `N = 64`: about a second), so it is kept next to the run:
+//! **Cache.** Computing the grid takes `(N + 1)²·2N + N³` density samples (~0.5 M for
+//! `N = 64`: about a second), so it is kept: next to the run (`<run>/nerfx_occupancy.bin`)
+//! when the run directory can be written, else in the per-user cache directory
+//! (`$XDG_CACHE_HOME/nerfx`, else `~/.cache/nerfx`; `occupancy-<hash of the run's
+//! path>.bin`), else in memory only. Either file is read only when it is whole and its key
+//! matches, so it is never a correctness dependency. The file:
 //! `"NERFXOCC"`, format version (u32 LE), key length (u32 LE) and key, `N` (u32 LE), the cells
 //! as bits (x fastest, then y, then z; bit `i % 8` of byte `i / 8`), then an FNV-1a 64 hash
 //! of everything before it (u64 LE). The key names what the grid depends on: the grid
 //! settings, the checkpoint (path, size, modification time and a hash of its first and last
 //! 64 KiB) and `config.yml` (size, modification time). A cache that is missing, stale (another
-//! key), truncated or corrupt (hash) is recomputed and rewritten (through a temporary file
-//! and a rename, so a reader never sees half a file); one that cannot be written is not an
-//! error, the grid is simply not cached.
+//! key, another run's), truncated or corrupt (hash) is recomputed and rewritten (through a
+//! temporary file and a rename, so a reader never sees half a file); one that cannot be
+//! written anywhere is not an error, the grid is simply not cached.
 
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
@@ -110,12 +114,12 @@ fn contract_box(b: &Aabb) -> Aabb {
 }
 
 /// Where a grid came from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub(super) enum Source {
     /// Sampled from the field at this load.
     Computed,
-    /// Read from the cache file.
-    Cached,
+    /// Read from this cache file.
+    Cached(PathBuf),
 }
 
 /// A bit per cell, as prefix sums.
@@ -155,30 +159,35 @@ impl OccupancyGrid {
         OccupancyGrid { n, sums, source }
     }
 
-    /// The grid for a run: read from the cache in `run` when it is current for `key`,
-    /// otherwise computed from `density` (the field's unmasked density at *contracted*
-    /// points) and cached; with no key (the checkpoint could not be examined), computed and
-    /// not cached.
+    /// The grid for a run: read from the first of `caches` (see [`cache_paths`]) that is
+    /// current for `key`, otherwise computed from `density` (the field's unmasked density at
+    /// *contracted* points) and written to the first of `caches` that can be written; with
+    /// no key (the checkpoint could not be examined), computed and not cached.
     pub fn load_or_build(
         settings: &GridSettings,
-        run: &Path,
+        caches: &[PathBuf],
         key: Option<&str>,
         density: impl Fn(&[Vec3], &mut [f32]) + Sync,
     ) -> Self {
-        let path = run.join(CACHE_FILE);
-        if let Some(cells) = key.and_then(|k| read_cache(&path, k, settings.n)) {
-            return Self::from_cells(settings, &cells, Source::Cached);
+        if let Some(k) = key {
+            for path in caches {
+                if let Some(cells) = read_cache(path, k, settings.n) {
+                    return Self::from_cells(settings, &cells, Source::Cached(path.clone()));
+                }
+            }
         }
         let cells = compute_cells(settings, density);
         if let Some(k) = key {
-            write_cache(&path, k, settings.n, &cells);
+            let _ = caches
+                .iter()
+                .find(|path| write_cache(path, k, settings.n, &cells));
         }
         Self::from_cells(settings, &cells, Source::Computed)
     }
 
     /// Where the grid came from.
-    pub fn source(&self) -> Source {
-        self.source
+    pub fn source(&self) -> &Source {
+        &self.source
     }
 
     /// Cells per axis.
@@ -405,17 +414,54 @@ fn decode(bytes: &[u8], key: &str, n: usize) -> Option<Vec<bool>> {
     )
 }
 
+/// Where a run's grid may be cached, in order: next to the run, then in the per-user cache
+/// directory (`$XDG_CACHE_HOME/nerfx` when that is an absolute path, else
+/// `$HOME/.cache/nerfx`) under a name from the run's path.
+pub(super) fn cache_paths(run: &Path) -> Vec<PathBuf> {
+    let mut paths = vec![run.join(CACHE_FILE)];
+    let absolute = |v: std::ffi::OsString| Some(PathBuf::from(v)).filter(|p| p.is_absolute());
+    let user = std::env::var_os("XDG_CACHE_HOME")
+        .and_then(absolute)
+        .or_else(|| {
+            std::env::var_os("HOME")
+                .and_then(absolute)
+                .map(|h| h.join(".cache"))
+        });
+    if let Some(dir) = user {
+        let run = std::fs::canonicalize(run).unwrap_or_else(|_| run.to_path_buf());
+        let name = format!(
+            "occupancy-{:016x}.bin",
+            fnv1a(run.as_os_str().as_encoded_bytes())
+        );
+        paths.push(dir.join("nerfx").join(name));
+    }
+    paths
+}
+
 fn read_cache(path: &Path, key: &str, n: usize) -> Option<Vec<bool>> {
+    // A cache is a few tens of KiB: anything much larger is not one (and is not read).
+    let len = std::fs::metadata(path).ok()?.len();
+    if len > 1 << 20 {
+        return None;
+    }
     decode(&std::fs::read(path).ok()?, key, n)
 }
 
-/// Writes the cache through a temporary file and a rename; failures leave no cache.
-fn write_cache(path: &Path, key: &str, n: usize, cells: &[bool]) {
+/// Writes the cache (creating its directory) through a temporary file and a rename;
+/// whether it was written. Failures leave no file behind.
+fn write_cache(path: &Path, key: &str, n: usize, cells: &[bool]) -> bool {
+    if let Some(dir) = path.parent() {
+        if std::fs::create_dir_all(dir).is_err() {
+            return false;
+        }
+    }
     let tmp = path.with_extension(format!("tmp-{}", std::process::id()));
     if std::fs::write(&tmp, encode(key, n, cells)).is_err() || std::fs::rename(&tmp, path).is_err()
     {
         let _ = std::fs::remove_file(&tmp);
+        return false;
     }
+    true
 }
 
 #[cfg(test)]
@@ -549,18 +595,55 @@ mod tests {
                 *s = if p.x < 0.0 { 1.0 } else { 0.0 };
             }
         };
-        let a = OccupancyGrid::load_or_build(&SETTINGS, &dir, Some("k1"), density);
-        assert_eq!(a.source(), Source::Computed);
+        let caches = [dir.join(CACHE_FILE)];
+        let a = OccupancyGrid::load_or_build(&SETTINGS, &caches, Some("k1"), density);
+        assert_eq!(a.source(), &Source::Computed);
         let computed = calls.load(std::sync::atomic::Ordering::Relaxed);
         assert!(computed > 0);
-        let b = OccupancyGrid::load_or_build(&SETTINGS, &dir, Some("k1"), density);
-        assert_eq!(b.source(), Source::Cached);
+        let b = OccupancyGrid::load_or_build(&SETTINGS, &caches, Some("k1"), density);
+        assert_eq!(b.source(), &Source::Cached(caches[0].clone()));
         assert_eq!(calls.load(std::sync::atomic::Ordering::Relaxed), computed);
         assert_eq!(a.sums, b.sums);
         // Another key: recomputed (and the cache rewritten for it).
-        let c = OccupancyGrid::load_or_build(&SETTINGS, &dir, Some("k2"), density);
-        assert_eq!(c.source(), Source::Computed);
+        let c = OccupancyGrid::load_or_build(&SETTINGS, &caches, Some("k2"), density);
+        assert_eq!(c.source(), &Source::Computed);
         assert_eq!(a.sums, c.sums);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_cache_that_cannot_be_written_falls_back_and_garbage_is_ignored() {
+        let dir = std::env::temp_dir().join(format!("nerfx-occ-fallback-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        // The first place is taken by a directory: the grid goes to the second, whose
+        // folder is created.
+        let caches = [
+            dir.join("run").join(CACHE_FILE),
+            dir.join("user/nerfx/x.bin"),
+        ];
+        std::fs::create_dir_all(&caches[0]).unwrap();
+        let density = |pts: &[Vec3], sigma: &mut [f32]| {
+            for (p, s) in pts.iter().zip(sigma.iter_mut()) {
+                *s = if p.y > 0.5 { 1.0 } else { 0.0 };
+            }
+        };
+        let a = OccupancyGrid::load_or_build(&SETTINGS, &caches, Some("k"), density);
+        assert_eq!(a.source(), &Source::Computed);
+        assert!(caches[1].is_file());
+        let b = OccupancyGrid::load_or_build(&SETTINGS, &caches, Some("k"), density);
+        assert_eq!(b.source(), &Source::Cached(caches[1].clone()));
+        assert_eq!(a.sums, b.sums);
+        // Garbage in the first place (now a file) is passed over for the second.
+        std::fs::remove_dir(&caches[0]).unwrap();
+        std::fs::write(&caches[0], b"NERFXOCC garbage, not a grid").unwrap();
+        let c = OccupancyGrid::load_or_build(&SETTINGS, &caches, Some("k"), density);
+        assert_eq!(c.source(), &Source::Cached(caches[1].clone()));
+        // With nowhere to write, the grid is computed and kept in memory only.
+        let nowhere = [dir.join("run").join(CACHE_FILE).join("below-a-file.bin")];
+        let d = OccupancyGrid::load_or_build(&SETTINGS, &nowhere, Some("k"), density);
+        assert_eq!(d.source(), &Source::Computed);
+        assert_eq!(a.sums, d.sums);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

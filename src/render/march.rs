@@ -316,11 +316,12 @@ fn occupied_segments(
 }
 
 /// Appends to `out` the intervals of `[0, length]` (field units along the local ray) outside
-/// an unbounded field's core where it may have density: the ray is walked in steps of
-/// [`Unbounded::skip`] contracted units (`skip·core·(r/core)²` field units at `‖x‖∞ = r`:
-/// since `r` grows by at most one unit per unit of a unit ray, the contracted coordinate
-/// moves by at most `skip` per step), each step's box asked of
-/// [`Field::may_be_occupied`]; occupied steps that touch are merged.
+/// an unbounded field's core where it may have density. The ray is walked in steps of about
+/// [`Unbounded::skip`] contracted units at the finest (`skip·core·(r/core)²` field units at
+/// `‖x‖∞ = r`: `r` changes by at most one unit per unit of a unit ray), each step's box
+/// asked of [`Field::may_be_occupied`]. A step found empty doubles the next (so an empty shell costs a
+/// few queries, not one per cell); one found occupied is retried at half the length until
+/// it is the finest, and only the finest occupied steps are kept, merged when they touch.
 fn far_segments(
     lr: &LocalRay,
     u: &Unbounded,
@@ -334,19 +335,24 @@ fn far_segments(
     };
     let first = out.len();
     for [a, b] in outside {
-        let mut t = a;
+        let (mut t, mut scale) = (a, 1.0f32);
         while t < b {
             let p = lr.origin + lr.dir * t;
-            let step = (u.skip * u.core * u.step_growth(p)).max(f32::EPSILON * t.abs());
-            let t1 = (t + step).min(b);
+            let fine = u.skip * u.core * u.step_growth(p);
+            let t1 = (t + (fine * scale).max(f32::EPSILON * t.abs())).min(b);
             let q = lr.origin + lr.dir * t1;
-            if field.may_be_occupied(&Aabb::new(p.min(q), p.max(q))) {
+            if !field.may_be_occupied(&Aabb::new(p.min(q), p.max(q))) {
+                t = t1;
+                scale *= 2.0;
+            } else if scale > 1.0 {
+                scale = (scale * 0.5).max(1.0);
+            } else {
                 match out[first..].last_mut() {
                     Some(last) if last[1] >= t => last[1] = t1,
                     _ => out.push([t, t1]),
                 }
+                t = t1;
             }
-            t = t1;
         }
     }
 }

@@ -25,8 +25,9 @@ pub enum Density {
     /// faint inside contracted radius ~1.97 (field radius ~30) and grows beyond it until the
     /// far field is opaque. Finer levels are zero.
     Shell,
-    /// The reverse, near only: `raw = relu(A·(ρ₀ − ρ)) − B` with ρ₀ = 0.8: a dense cube
-    /// inside contracted (and field) radius ~0.6, faint everywhere else.
+    /// Near only: `raw = relu(A·(ρ₀ − ρ)) − B` with A = 150, ρ₀ = 0.8, B = 25: a dense cube
+    /// inside contracted (and field) radius ~0.63, and a density of 10⁻¹³ elsewhere, which
+    /// nothing renders.
     Core,
 }
 
@@ -47,9 +48,8 @@ pub struct Spec {
     pub expect_empty_space: bool,
     pub seed: u64,
     pub density: Density,
-    /// `near_plane` and `far_plane` written into `config.yml` (nerfacto's defaults, 0.05 and
-    /// 1000, when absent).
-    pub planes: Option<(f32, f32)>,
+    /// `far_plane` written into `config.yml` (nerfacto's default, 1000, when absent).
+    pub far_plane: Option<f32>,
 }
 
 impl Spec {
@@ -64,7 +64,7 @@ impl Spec {
             expect_empty_space: false,
             seed: 11,
             density: Density::Seeded,
-            planes: None,
+            far_plane: None,
         }
     }
 
@@ -109,7 +109,7 @@ impl Spec {
             expect_empty_space: true,
             seed: 12,
             density: Density::Seeded,
-            planes: None,
+            far_plane: None,
         }
     }
 }
@@ -266,8 +266,8 @@ fn state_dict(s: &Spec) -> StateDict {
         match s.density {
             Density::Seeded => {}
             Density::Constant => params[..64 * n_in].fill(0.0),
-            Density::Shell => shell_network(&mut params, &mut grid, n_in, 1.8, 1.0),
-            Density::Core => shell_network(&mut params, &mut grid, n_in, 0.8, -1.0),
+            Density::Shell => shell_network(&mut params, &mut grid, n_in, 1.8, 30.0, 5.0),
+            Density::Core => shell_network(&mut params, &mut grid, n_in, 0.8, -150.0, 25.0),
         }
         params.extend(grid);
         sd.add(
@@ -299,13 +299,12 @@ fn state_dict(s: &Spec) -> StateDict {
 /// row-major) and the grid's (level 0 first: 16³ entries of 2 features, dense, entry
 /// `x + 16y + 256z` for the vertex whose hash-grid coordinate is `(x, y, z)`, at
 /// `u = (g − 1/2)/15` per axis, contracted `c = 4u − 2`).
-/// `rho0` is ρ₀; `outward` 1 for a shell, −1 for a core.
-fn shell_network(mlp: &mut [f32], grid: &mut [f32], n_in: usize, rho0: f32, outward: f32) {
+/// `raw = relu(a·(ρ − ρ₀)) − b` (a negative `a`: a core instead of a shell).
+fn shell_network(mlp: &mut [f32], grid: &mut [f32], n_in: usize, rho0: f32, a: f32, b: f32) {
     const RES: usize = 16;
-    let (a, b) = (30.0 * outward, 5.0);
     let (first, second) = mlp.split_at_mut(64 * n_in);
     first.fill(0.0);
-    first[0] = a; // hidden 0 = relu(±A·(ρ − ρ₀))
+    first[0] = a; // hidden 0 = relu(a·(ρ − ρ₀))
     first[1] = -a * rho0;
     first[n_in + 1] = 1.0; // hidden 1 = relu(1) = 1
     for o in 0..16 {
@@ -606,9 +605,8 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
         s.average_init_density,
         if s.torch { "torch" } else { "tcnn" },
         s.log2_table_size,
-        s.planes.map_or(String::new(), |(near, far)| format!(
-            "    near_plane: {near:?}\n    far_plane: {far:?}\n"
-        )),
+        s.far_plane
+            .map_or(String::new(), |far| format!("    far_plane: {far:?}\n")),
     )
 }
 

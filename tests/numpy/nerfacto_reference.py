@@ -25,7 +25,7 @@ def model_settings(path):
     wanted = {
         "num_levels": 16, "features_per_level": 2, "log2_hashmap_size": 19,
         "base_res": 16, "max_res": 2048, "hidden_dim": 64, "hidden_dim_color": 64,
-        "average_init_density": 1.0, "near_plane": 0.05, "far_plane": 1000.0,
+        "average_init_density": 1.0, "far_plane": 1000.0,
     }
     out = dict(wanted)
     model_indent = None

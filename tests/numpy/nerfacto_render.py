@@ -5,8 +5,9 @@ Usage: nerfacto_render.py <run> <rays.bin> <out.bin>. rays.bin holds little-endi
 rows of 6, two per ray: (origin xyz, unit direction xyz) in nerfstudio's normalised frame,
 then (n, 0, 0, 0, 0, 0): the number of samples.
 
-Each ray is integrated from `near_plane` to `far_plane` (config.yml; nerfacto's defaults
-0.05 and 1000), distances along it from its origin. The samples are uniform in
+Each ray is integrated from its origin to `far_plane` (config.yml; nerfacto's default 1000),
+a distance along it: nerfstudio's NearFarCollider starts rays at 0 at inference (its
+`near_plane` applies in training). The samples are uniform in
 s(t) = t (t < 1), 2 − 1/t (t >= 1): nerfstudio's spacing for unbounded scenes, uniform in
 distance to 1 and in disparity beyond, which for a ray from near the centre is uniform in
 the contracted coordinates where the field's detail lies. n bins of equal width in s; the
@@ -37,7 +38,7 @@ def t_of_s(s):
 def main():
     run, rays_path, out_path = sys.argv[1:4]
     evaluate = field(run)
-    near, far = float(evaluate.cfg["near_plane"]), float(evaluate.cfg["far_plane"])
+    near, far = 0.0, float(evaluate.cfg["far_plane"])
     rows = np.fromfile(rays_path, dtype="<f4").reshape(-1, 2, 6)
     out = []
     for ray in rows:

@@ -9,9 +9,10 @@
 //! `base_res` 16, `max_res` 2048, `hidden_dim` 64, `hidden_dim_color` 64,
 //! `average_init_density` (1.0: older versions had no such factor; the nerfacto method sets
 //! 0.01), `disable_scene_contraction` false, `use_average_appearance_embedding` true (when
-//! false, nerfacto renders with a zero appearance), `near_plane` 0.05 and `far_plane` 1000
-//! (nerfacto's own collider reads these, not the base model's `collider_params`); and the
-//! top-level `method_name`.
+//! false, nerfacto renders with a zero appearance), `far_plane` 1000 (nerfacto's own
+//! collider reads it, not the base model's `collider_params`; its `near_plane` applies in
+//! training only: at inference the collider starts rays at 0); and the top-level
+//! `method_name`.
 
 use std::path::Path;
 
@@ -31,7 +32,6 @@ pub(crate) struct RunSettings {
     pub average_init_density: f32,
     pub disable_scene_contraction: bool,
     pub use_average_appearance_embedding: bool,
-    pub near_plane: f32,
     pub far_plane: f32,
 }
 
@@ -113,7 +113,6 @@ impl RunSettings {
                 true,
                 file,
             )?,
-            near_plane: parsed(text, "near_plane", 0.05, file)?,
             far_plane: parsed(text, "far_plane", 1000.0, file)?,
         };
         let bad = |key: &str, why: &str| Error::format(file, format!("pipeline.model.{key}"), why);
@@ -138,14 +137,8 @@ impl RunSettings {
         if !(s.average_init_density.is_finite() && s.average_init_density > 0.0) {
             return Err(bad("average_init_density", "must be a positive number"));
         }
-        if !(s.near_plane.is_finite() && s.near_plane >= 0.0) {
-            return Err(bad("near_plane", "must be a number >= 0"));
-        }
-        if !(s.far_plane.is_finite() && s.far_plane > s.near_plane && s.far_plane <= 1e7) {
-            return Err(bad(
-                "far_plane",
-                "must be a number above near_plane, at most 1e7",
-            ));
+        if !(s.far_plane.is_finite() && s.far_plane > 0.0 && s.far_plane <= 1e7) {
+            return Err(bad("far_plane", "must be a positive number, at most 1e7"));
         }
         Ok(s)
     }
@@ -184,8 +177,8 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
         assert_eq!((s.max_res, s.num_levels), (2048, 16));
         assert!(!s.disable_scene_contraction);
         assert!(s.use_average_appearance_embedding);
-        // nerfacto's planes; `collider_params` belongs to the base model and is not read.
-        assert_eq!((s.near_plane, s.far_plane), (0.05, 1000.0));
+        // nerfacto's far plane; `collider_params` belongs to the base model and is not read.
+        assert_eq!(s.far_plane, 1000.0);
         let s = RunSettings::from_text(
             &TEXT.replace(
                 "    hidden_dim: 32\n",
@@ -222,7 +215,7 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
         assert!(RunSettings::from_text(&t, Path::new("config.yml")).is_err());
         let t = TEXT.replace(
             "    hidden_dim: 32\n",
-            "    hidden_dim: 32\n    far_plane: 0.01\n",
+            "    hidden_dim: 32\n    far_plane: -1\n",
         );
         let e = RunSettings::from_text(&t, Path::new("config.yml"))
             .unwrap_err()

@@ -27,9 +27,10 @@
 //!
 //! **Bounds and occupancy.** The contraction maps all of space into the hash grid, so the
 //! field is defined everywhere: the sky and the distant scene of an outdoor capture live in
-//! the shell `‖x‖∞ > 1`. As `ns-render` does, a ray is integrated from `near_plane` to
-//! `far_plane` (`config.yml`; 0.05 and 1000 by default), distances along it from the camera
-//! in the field's units; the bounds are the cube `‖x‖∞ ≤ far_plane` (density zero beyond).
+//! the shell `‖x‖∞ > 1`. As `ns-render` does, a ray is integrated from the camera to
+//! `far_plane` (`config.yml`, 1000 by default), a distance along it in the field's units
+//! (nerfstudio's collider starts rays at 0 at inference; `near_plane` applies in training);
+//! the bounds are the cube `‖x‖∞ ≤ far_plane` (density zero beyond).
 //! The field says it is [unbounded](Field::unbounded) with the unit cube as its core: there
 //! the marcher steps and skips empty space as for any field; beyond it its steps grow as
 //! `‖x‖∞²` (a constant step in contracted coordinates, where the hash grid's cells are) and
@@ -77,9 +78,11 @@ const MAX_LOG_DENSITY: f32 = 80.0;
 const OCCUPANCY_CELLS: usize = 64;
 /// …and the opacity across a cell above which it is occupied.
 const OCCUPANCY_OPACITY: f32 = 1e-3;
-/// The marcher's empty-space step beyond the unit cube, in contracted units: one cell of
-/// the occupancy grid (4/64).
-const FAR_SKIP: f32 = 1.0 / 16.0;
+/// The marcher's finest empty-space step beyond the unit cube, in contracted units: a
+/// quarter of a cell of the occupancy grid (4/64), so that the segments it marches begin
+/// close to where the occupied cells do (with a whole cell, 30 % more samples on the far
+/// shell of `tests/nerfacto_far.rs` at Final, in cells the mask empties).
+const FAR_SKIP: f32 = 1.0 / 64.0;
 
 /// The networks, in one of the two layouts.
 #[derive(Clone, Debug)]
@@ -234,7 +237,7 @@ impl NerfactoField {
              colour MLP: {head} (sigmoid, sRGB to linear); appearance: {} of {} embeddings of {}\n\
              scene contraction: L-infinity; dataparser scale {}\n\
              bounds (nerfstudio frame): [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]; rays \
-             from near_plane {} to far_plane {}\n\
+             to far_plane {}\n\
              occupancy: {}^3 cells over the contracted cube {}, fill ratio {:.4}",
             self.run.display(),
             if s.method_name.is_empty() {
@@ -261,7 +264,6 @@ impl NerfactoField {
             b.max.x,
             b.max.y,
             b.max.z,
-            s.near_plane,
             s.far_plane,
             self.occupancy.resolution(),
             match self.occupancy.source() {
@@ -728,13 +730,14 @@ impl Field for NerfactoField {
         Aabb::new(Vec3::splat(-far), Vec3::splat(far))
     }
 
-    /// The unit cube as the core (the contraction is the identity there), the empty-space
-    /// step beyond it one occupancy cell, and the run's near and far planes.
+    /// The unit cube as the core (the contraction is the identity there), the finest
+    /// empty-space step beyond it a quarter of an occupancy cell, rays from the camera
+    /// (nerfstudio's near plane at inference) to the run's far plane.
     fn unbounded(&self) -> Option<Unbounded> {
         Some(Unbounded {
             core: 1.0,
             skip: FAR_SKIP,
-            near: self.settings.near_plane,
+            near: 0.0,
             far: self.settings.far_plane,
         })
     }

@@ -72,7 +72,7 @@ fn faint_density_everywhere_matches_the_closed_form() {
             Projection::Equirect(Equirect::new(12, 6).unwrap()),
         )
         .unwrap();
-        let (want_alpha, want_depth) = closed_form(f64::from(sigma), near.into(), far.into());
+        let (want_alpha, want_depth) = closed_form(f64::from(sigma), near, far.into());
         for quality in [Quality::Draft, Quality::Final] {
             let out = render_at(&scene, &camera, quality);
             let (alpha, depth) = (out.alpha.unwrap(), out.depth_ray.unwrap());

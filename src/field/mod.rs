@@ -54,16 +54,19 @@ pub enum ColorSpace {
 
 /// How a field defined on all of space is marched (nerfstudio's nerfacto, whose scene
 /// contraction maps every point to its hash grid): its detail lies in the *core* cube
-/// `‖x‖∞ ≤ core`, marched like a bounded field (the occupancy grid covers the core, steps do
-/// not grow); beyond it the field's own coordinates are contracted like `2 − core/‖x‖∞`, so
-/// a step at `‖x‖∞ = r` is `(r/core)²` times the core's step (a constant step in the
-/// contracted coordinates) and empty space is skipped with [`Field::may_be_occupied`] in
-/// steps of [`Unbounded::skip`] contracted units. A ray is integrated from `near` to `far`:
-/// distances along it from its origin, in field units (nerfstudio's near and far planes).
+/// `‖x‖∞ ≤ core`, where steps do not grow; beyond it the field's own coordinates are
+/// contracted like `2 − core/‖x‖∞`, so a step at `‖x‖∞ = r` is `(r/core)²` times the core's
+/// step (a constant step in the contracted coordinates). The marcher's occupancy grid covers
+/// the cube `‖x‖∞ ≤ grid` (`grid ≥ core`), skipping empty space there as for a bounded
+/// field; beyond it empty space is skipped with [`Field::may_be_occupied`] in steps of
+/// [`Unbounded::skip`] contracted units. A ray is integrated from `near` to `far`: distances
+/// along it from its origin, in field units (nerfstudio's near and far planes).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Unbounded {
     /// Half the side of the core cube, centred on the field's origin (field units).
     pub core: f32,
+    /// Half the side of the cube the marcher's occupancy grid covers.
+    pub grid: f32,
     /// The empty-space test's step in contracted units (fractions of the core's half side).
     pub skip: f32,
     /// Where a ray's integration starts: distance from its origin, field units.
@@ -76,6 +79,11 @@ impl Unbounded {
     /// The core cube.
     pub fn core_box(&self) -> Aabb {
         Aabb::new(Vec3::splat(-self.core), Vec3::splat(self.core))
+    }
+
+    /// The cube the marcher's occupancy grid covers.
+    pub fn grid_box(&self) -> Aabb {
+        Aabb::new(Vec3::splat(-self.grid), Vec3::splat(self.grid))
     }
 
     /// The factor a step at field point `p` grows by: `(‖p‖∞/core)²` beyond the core, else 1.

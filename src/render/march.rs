@@ -316,7 +316,7 @@ fn occupied_segments(
 }
 
 /// Appends to `out` the intervals of `[0, length]` (field units along the local ray) outside
-/// an unbounded field's core where it may have density. The ray is walked in steps of about
+/// an unbounded field's grid cube where it may have density. The ray is walked in steps of about
 /// [`Unbounded::skip`] contracted units at the finest (`skip·core·(r/core)²` field units at
 /// `‖x‖∞ = r`: `r` changes by at most one unit per unit of a unit ray), each step's box
 /// asked of [`Field::may_be_occupied`]. A step found empty doubles the next (so an empty shell costs a
@@ -329,19 +329,25 @@ fn far_segments(
     length: f32,
     out: &mut Vec<[f32; 2]>,
 ) {
-    let outside = match u.core_box().clip_ray(lr.origin, lr.dir, 0.0, length) {
+    let outside = match u.grid_box().clip_ray(lr.origin, lr.dir, 0.0, length) {
         Some((a, b)) => [[0.0, a], [b, length]],
         None => [[0.0, length], [length, length]],
     };
     let first = out.len();
+    let box_of = |t0: f32, t1: f32| {
+        let (p, q) = (lr.origin + lr.dir * t0, lr.origin + lr.dir * t1);
+        Aabb::new(p.min(q), p.max(q))
+    };
     for [a, b] in outside {
+        // A run with nothing far answers for the whole stretch at once.
+        if a >= b || !field.may_be_occupied(&box_of(a, b)) {
+            continue;
+        }
         let (mut t, mut scale) = (a, 1.0f32);
         while t < b {
-            let p = lr.origin + lr.dir * t;
-            let fine = u.skip * u.core * u.step_growth(p);
+            let fine = u.skip * u.core * u.step_growth(lr.origin + lr.dir * t);
             let t1 = (t + (fine * scale).max(f32::EPSILON * t.abs())).min(b);
-            let q = lr.origin + lr.dir * t1;
-            if !field.may_be_occupied(&Aabb::new(p.min(q), p.max(q))) {
+            if !field.may_be_occupied(&box_of(t, t1)) {
                 t = t1;
                 scale *= 2.0;
             } else if scale > 1.0 {

@@ -32,9 +32,10 @@
 //! (nerfstudio's collider starts rays at 0 at inference; `near_plane` applies in training);
 //! the bounds are the cube `‖x‖∞ ≤ far_plane` (density zero beyond).
 //! The field says it is [unbounded](Field::unbounded) with the unit cube as its core: there
-//! the marcher steps and skips empty space as for any field; beyond it its steps grow as
-//! `‖x‖∞²` (a constant step in contracted coordinates, where the hash grid's cells are) and
-//! it skips empty space through [`Field::may_be_occupied`]. Depth of far content is thus
+//! the marcher steps as for any field; beyond it its steps grow as `‖x‖∞²` (a constant step
+//! in contracted coordinates, where the hash grid's cells are). Empty space is skipped with
+//! the marcher's occupancy grid within `[−2, 2]³`, beyond it through
+//! [`Field::may_be_occupied`]. Depth of far content is thus
 //! finite (at most `far_plane` field units). nerfacto has no occupancy grid, so one is
 //! computed at load: `64³` cells over the *contracted* cube `[−2, 2]³`; the density is
 //! sampled at every cell corner and centre; a cell is occupied when `max σ · L ≥ 10⁻³`,
@@ -730,12 +731,16 @@ impl Field for NerfactoField {
         Aabb::new(Vec3::splat(-far), Vec3::splat(far))
     }
 
-    /// The unit cube as the core (the contraction is the identity there), the finest
-    /// empty-space step beyond it a quarter of an occupancy cell, rays from the camera
-    /// (nerfstudio's near plane at inference) to the run's far plane.
+    /// The unit cube as the core (the contraction is the identity there); the marcher's
+    /// occupancy grid over `[−2, 2]³`, as when the field ended there (so a run whose content
+    /// is near is skipped through as before, and the coarse far-field test starts where its
+    /// boxes no longer reach the core's cells); the finest empty-space step beyond it a
+    /// quarter of an occupancy cell; rays from the camera (nerfstudio's near plane at
+    /// inference) to the run's far plane.
     fn unbounded(&self) -> Option<Unbounded> {
         Some(Unbounded {
             core: 1.0,
+            grid: 2.0,
             skip: FAR_SKIP,
             near: 0.0,
             far: self.settings.far_plane,

@@ -86,8 +86,10 @@ fn shrink(m: f32) -> f32 {
     }
 }
 
-/// A box holding the contracted image of the field-space box `b` (see the module docs).
-fn contract_box(b: &Aabb) -> Aabb {
+/// A box holding the contracted image of the field-space box `b` (see the module docs), and
+/// the least `‖c‖∞` of that image: `‖c‖∞ = h(‖x‖∞)` with `h(m) = m·g(m)` increasing, so the
+/// image lies outside the cube of half side `h` of the box's least `‖x‖∞`.
+fn contract_box(b: &Aabb) -> (Aabb, f32) {
     let (lo, hi) = (b.min.to_array(), b.max.to_array());
     let (mut near, mut far) = (0.0f32, 0.0f32);
     for a in 0..3 {
@@ -110,7 +112,11 @@ fn contract_box(b: &Aabb) -> Aabb {
         (min - pad, max + pad)
     };
     let [x, y, z] = [0, 1, 2].map(axis);
-    Aabb::new(Vec3::new(x.0, y.0, z.0), Vec3::new(x.1, y.1, z.1))
+    let inner = near * shrink(near) - 4.0 * f32::EPSILON * CONTRACTED;
+    (
+        Aabb::new(Vec3::new(x.0, y.0, z.0), Vec3::new(x.1, y.1, z.1)),
+        inner,
+    )
 }
 
 /// Where a grid came from.
@@ -226,9 +232,21 @@ impl OccupancyGrid {
     }
 
     /// Whether any cell meeting the contracted image of the field-space box `region` is
-    /// occupied.
+    /// occupied: the cells of its contracted box (see [`contract_box`]) that lie outside the
+    /// cube its image cannot enter, as up to six boxes (one per face of that cube).
     pub fn region(&self, region: &Aabb) -> bool {
-        self.contracted_region(&contract_box(region))
+        let (c, inner) = contract_box(region);
+        if inner <= 0.0 {
+            return self.contracted_region(&c);
+        }
+        (0..3).any(|a| {
+            let (mut above, mut below) = (c, c);
+            above.min[a] = above.min[a].max(inner);
+            below.max[a] = below.max[a].min(-inner);
+            [above, below]
+                .iter()
+                .any(|b| !b.is_empty() && self.contracted_region(b))
+        })
     }
 
     /// Whether the cell of the field point `p` is occupied.
@@ -499,7 +517,21 @@ mod tests {
         let field_point = centre / m / (2.0 - m);
         assert!((contract(field_point) - centre).length() < 1e-5);
         assert!(g.point(field_point));
-        assert!(g.region(&Aabb::new(field_point, field_point * 1.001)));
+        let (p, q) = (field_point, field_point * 1.001);
+        assert!(g.region(&Aabb::new(p.min(q), p.max(q))));
+        // A cell near the centre is not reached from a box out beyond ‖x‖∞ = 2, whose
+        // plain interval bound of the contraction would reach down to it.
+        let mut cells = vec![false; n * n * n];
+        cells[(32 * n + 32) * n + 40] = true; // contracted x ∈ [0.5, 0.5625], y, z ∈ [0, h]
+        let g = OccupancyGrid::from_cells(&settings, &cells, Source::Computed);
+        assert!(g.point(Vec3::new(0.53, 0.01, 0.01)));
+        let far = Aabb::new(Vec3::new(2.0, -0.5, -0.1), Vec3::new(10.0, 1.5, 0.1));
+        assert!(contract_box(&far).0.contains(Vec3::new(0.53, 0.01, 0.01)));
+        assert!(!g.region(&far));
+        assert!(g.region(&Aabb::new(
+            Vec3::new(0.3, -0.5, -0.1),
+            Vec3::new(10.0, 1.5, 0.1)
+        )));
     }
 
     #[test]
@@ -517,14 +549,14 @@ mod tests {
             let a = Vec3::new(next(), next(), next()) * 2.0 - Vec3::ONE;
             let b = Vec3::new(next(), next(), next()) * 2.0 - Vec3::ONE;
             let (lo, hi) = (a.min(b) * scale, a.max(b) * scale);
-            let c = contract_box(&Aabb::new(lo, hi));
+            let (c, inner) = contract_box(&Aabb::new(lo, hi));
             for _ in 0..8 {
                 let t = Vec3::new(next(), next(), next());
                 let p = lo + t * (hi - lo);
                 let q = contract(p);
                 assert!(
-                    c.contains(q),
-                    "box {lo}..{hi}: contracted {q} of {p} outside {:?}..{:?}",
+                    c.contains(q) && q.abs().max_element() >= inner,
+                    "box {lo}..{hi}: contracted {q} of {p} outside {:?}..{:?} or within {inner}",
                     c.min,
                     c.max
                 );

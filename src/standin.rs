@@ -86,11 +86,19 @@ fn jitter(i: u32, j: u32, k: u32, axis: u32) -> f32 {
     (h >> 8) as f32 / (1u32 << 24) as f32
 }
 
+/// Where a field's stand-in is sampled: its bounds, or an unbounded field's core (the cube
+/// `ns-export` exports by default for nerfacto), not the far-plane cube.
+fn detail_bounds(field: &dyn Field) -> Aabb {
+    field
+        .unbounded()
+        .map_or_else(|| field.bounds(), |u| u.core_box())
+}
+
 /// Points of a field in its own frame: one per surface cell, a cell whose sample is opaque
 /// and which has a transparent (or out-of-grid) neighbour along an axis, so a solid object
 /// gives its shell. A surface cell's point lies within two cells of the surface.
 pub fn field_points(field: &dyn Field, resolution: u32, threshold: f32) -> Vec<Point> {
-    let bounds = field.bounds();
+    let bounds = detail_bounds(field);
     if bounds.is_empty() {
         return Vec::new();
     }
@@ -263,7 +271,7 @@ pub fn field_mesh(
 ) -> Mesh {
     use fast_surface_nets::{surface_nets, SurfaceNetsBuffer};
     use ndshape::{RuntimeShape, Shape};
-    let bounds = field.bounds();
+    let bounds = detail_bounds(field);
     if bounds.is_empty() {
         return Mesh::default();
     }

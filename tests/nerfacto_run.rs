@@ -105,11 +105,18 @@ fn occupancy_is_conservative_at_sampled_points() {
     let dir = scratch("occupancy");
     let run = write_run(&dir, &Spec::tcnn());
     let field = NerfactoField::load(&run).unwrap();
+    // The field reaches the far plane (config.yml's, nerfacto's 1000 by default): the
+    // contraction maps all of space into the hash grid.
     let b = field.bounds();
-    assert_eq!((b.min, b.max), (Vec3::splat(-2.0), Vec3::splat(2.0)));
-    // Wherever the density is non-zero, the point's region is occupied; outside the
-    // bounds the density is zero.
-    let (pts, _) = samples(4000, 5);
+    assert_eq!((b.min, b.max), (Vec3::splat(-1000.0), Vec3::splat(1000.0)));
+    // Wherever the density is non-zero, the point's region is occupied (in the unit cube, the
+    // near shell and out to the far plane); outside the bounds the density is zero.
+    let (mut pts, _) = samples(4000, 5);
+    let (far, _) = common_fields::samples(4000, 6, |rng, i| {
+        let r = [5.0, 40.0, 999.0][i % 3];
+        rng.vec(-r, r)
+    });
+    pts.extend(far);
     let mut sigma = vec![0.0; pts.len()];
     field.density(&pts, &mut sigma);
     for (p, s) in pts.iter().zip(&sigma) {
@@ -117,11 +124,15 @@ fn occupancy_is_conservative_at_sampled_points() {
             assert!(field.may_be_occupied(&Aabb::new(*p, *p)), "{p}");
         }
     }
-    let far = [Vec3::new(2.5, 0.0, 0.0), Vec3::new(0.0, -7.0, 1.0)];
+    let beyond = [Vec3::new(1000.5, 0.0, 0.0), Vec3::new(0.0, -7.0, 1e4)];
     let mut s = [1.0; 2];
-    field.density(&far, &mut s);
+    field.density(&beyond, &mut s);
     assert_eq!(s, [0.0, 0.0]);
-    assert!(!field.may_be_occupied(&Aabb::new(Vec3::splat(3.0), Vec3::splat(4.0))));
+    assert!(!field.may_be_occupied(&Aabb::new(Vec3::splat(1001.0), Vec3::splat(1e4))));
+    // The seeded run has density in the shell, where the field used to end.
+    let mut s = [0.0; 1];
+    field.density(&[Vec3::new(2.5, 0.0, 0.0)], &mut s);
+    assert!(s[0] > 0.0);
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -219,7 +230,9 @@ fn the_features_path_gives_the_same_samples() {
         let run = write_run(&dir, &spec);
         let field = NerfactoField::load(&run).unwrap();
         let (mut pts, dirs) = samples(700, 9);
-        pts[0] = Vec3::new(2.5, 0.0, 0.0);
+        // Beyond the far plane's cube (the field ends there), and out in the contracted shell.
+        pts[0] = Vec3::new(1500.0, 0.0, 0.0);
+        pts[1] = Vec3::new(-40.0, 300.0, 2.5);
         let n = pts.len();
         let (mut sigma, mut rgb) = (vec![0.0; n], vec![Vec3::ZERO; n]);
         field.density(&pts, &mut sigma);
@@ -315,12 +328,89 @@ fn the_occupancy_grid_is_cached_next_to_the_run() {
     assert!(occupancy_line(&fifth).contains("computed at load"));
     assert_eq!(occupancy_pattern(&fifth), want);
     assert!(occupancy_line(&NerfactoField::load(&run).unwrap()).contains("read from"));
-    // A cache path that cannot be written (a directory there): computed, no error.
-    std::fs::remove_file(&cache).unwrap();
-    std::fs::create_dir(&cache).unwrap();
-    let sixth = NerfactoField::load(&run).unwrap();
-    assert!(occupancy_line(&sixth).contains("computed at load"));
-    assert_eq!(occupancy_pattern(&sixth), want);
+    // Garbage of any length (random bytes, then bytes starting like a cache) is ignored.
+    let mut rng = common_nerfacto::SplitMix64::new(3);
+    let noise: Vec<u8> = (0..5000).map(|_| (rng.next_u64() >> 56) as u8).collect();
+    for garbage in [
+        noise.as_slice(),
+        b"NERFXOCC\x02\x00\x00\x00\xff\xff\xff\xff".as_slice(),
+    ] {
+        std::fs::write(&cache, garbage).unwrap();
+        let again = NerfactoField::load(&run).unwrap();
+        assert!(occupancy_line(&again).contains("computed at load"));
+        assert_eq!(occupancy_pattern(&again), want);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `nerfx info` on a run, with the per-user cache directory at `cache_home`: its occupancy
+/// line.
+fn info_occupancy(run: &std::path::Path, cache_home: &std::path::Path) -> String {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_nerfx"))
+        .arg("info")
+        .arg(run)
+        .env("XDG_CACHE_HOME", cache_home)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout).to_string();
+    text.lines()
+        .find(|l| l.starts_with("occupancy:"))
+        .unwrap_or_else(|| panic!("no occupancy line in:\n{text}"))
+        .to_string()
+}
+
+/// A run directory that cannot hold the cache (read-only; when the tests run as root, who
+/// may write anyway, a directory in the cache file's place): the grid is cached in the
+/// per-user cache directory instead, and read from there; garbage and another run's cache
+/// there are ignored and replaced.
+#[test]
+fn the_occupancy_cache_falls_back_to_the_user_cache_directory() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = scratch("occupancy-fallback");
+    let other = write_run(&dir.join("other"), &Spec::tcnn());
+    let foreign = info_occupancy(&other, &dir.join("unused"));
+    assert!(foreign.contains("computed at load"), "{foreign}");
+    let run = write_run(&dir, &Spec::torch());
+    let cache_home = dir.join("cache-home");
+    std::fs::set_permissions(&run, std::fs::Permissions::from_mode(0o555)).unwrap();
+    let probe = run.join("probe");
+    let read_only = std::fs::write(&probe, b"").is_err();
+    if !read_only {
+        println!("running as a user who may write a read-only directory: a directory takes the cache file's place instead");
+        std::fs::remove_file(&probe).unwrap();
+        std::fs::set_permissions(&run, std::fs::Permissions::from_mode(0o755)).unwrap();
+        std::fs::create_dir(run.join("nerfx_occupancy.bin")).unwrap();
+    }
+    let first = info_occupancy(&run, &cache_home);
+    assert!(first.contains("computed at load"), "{first}");
+    assert!(!run.join("nerfx_occupancy.bin").is_file());
+    let cached: Vec<_> = std::fs::read_dir(cache_home.join("nerfx"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(cached.len(), 1, "{cached:?}");
+    let second = info_occupancy(&run, &cache_home);
+    assert_eq!(
+        second,
+        first.replace(
+            "computed at load",
+            &format!("read from {}", cached[0].display())
+        )
+    );
+    for bad in [
+        b"not a grid".to_vec(),
+        std::fs::read(other.join("nerfx_occupancy.bin")).unwrap(),
+    ] {
+        std::fs::write(&cached[0], bad).unwrap();
+        assert_eq!(info_occupancy(&run, &cache_home), first);
+        assert_eq!(info_occupancy(&run, &cache_home), second);
+    }
+    std::fs::set_permissions(&run, std::fs::Permissions::from_mode(0o755)).unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }
 

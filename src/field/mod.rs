@@ -56,6 +56,52 @@ pub enum ColorSpace {
     Srgb,
 }
 
+/// How a field defined on all of space is marched (nerfstudio's nerfacto, whose scene
+/// contraction maps every point to its hash grid): its detail lies in the *core* cube
+/// `‖x‖∞ ≤ core`, where steps do not grow; beyond it the field's own coordinates are
+/// contracted like `2 − core/‖x‖∞`, so a step at `‖x‖∞ = r` is `(r/core)²` times the core's
+/// step (a constant step in the contracted coordinates). The marcher's occupancy grid covers
+/// the cube `‖x‖∞ ≤ grid` (`grid ≥ core`), skipping empty space there as for a bounded
+/// field; beyond it empty space is skipped with [`Field::may_be_occupied`] in steps of
+/// [`Unbounded::skip`] contracted units. A ray is integrated from `near` to `far`: distances
+/// along it from its origin, in field units (nerfstudio's near and far planes).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Unbounded {
+    /// Half the side of the core cube, centred on the field's origin (field units).
+    pub core: f32,
+    /// Half the side of the cube the marcher's occupancy grid covers.
+    pub grid: f32,
+    /// The empty-space test's step in contracted units (fractions of the core's half side).
+    pub skip: f32,
+    /// Where a ray's integration starts: distance from its origin, field units.
+    pub near: f32,
+    /// Where it ends.
+    pub far: f32,
+}
+
+impl Unbounded {
+    /// The core cube.
+    pub fn core_box(&self) -> Aabb {
+        Aabb::new(Vec3::splat(-self.core), Vec3::splat(self.core))
+    }
+
+    /// The cube the marcher's occupancy grid covers.
+    pub fn grid_box(&self) -> Aabb {
+        Aabb::new(Vec3::splat(-self.grid), Vec3::splat(self.grid))
+    }
+
+    /// The factor a step at field point `p` grows by: `(‖p‖∞/core)²` beyond the core, else 1.
+    #[inline]
+    pub fn step_growth(&self, p: Vec3) -> f32 {
+        let r = p.abs().max_element() / self.core;
+        if r > 1.0 {
+            r * r
+        } else {
+            1.0
+        }
+    }
+}
+
 /// A radiance field in its own frame ("field space").
 ///
 /// Queries are batched: the marcher gathers a tile's samples and asks once, so an
@@ -63,6 +109,13 @@ pub enum ColorSpace {
 pub trait Field: Send + Sync {
     /// A box outside of which the density is exactly zero.
     fn bounds(&self) -> Aabb;
+
+    /// For a field defined on all of space through a contraction, how to march it (see
+    /// [`Unbounded`]); `None` (the default): a bounded field, marched within
+    /// [`Field::bounds`] at the base step.
+    fn unbounded(&self) -> Option<Unbounded> {
+        None
+    }
 
     /// Volume density σ (per field-space unit of length, ≥ 0, finite) at each point.
     /// `sigma.len() == points.len()`.

@@ -341,12 +341,14 @@ pub struct Occupancy {
 
 impl Occupancy {
     /// Builds the grid for `field` at `resolution³` cells (clamped to 1..=512) over
-    /// `field.bounds()` padded by 0.1 %. Occupancy is marked top-down per z-slice, in
-    /// parallel; the radii by dilation (see the module docs). A field with empty bounds
-    /// gives a grid with no occupied cell.
+    /// `field.bounds()` (an [unbounded](Field::unbounded) field's grid cube) padded by
+    /// 0.1 %. Occupancy is marked top-down per z-slice, in parallel; the radii by dilation
+    /// (see the module docs). A field with empty bounds gives a grid with no occupied cell.
     pub fn build(field: &dyn Field, resolution: u32) -> Occupancy {
         let n = resolution.clamp(1, MAX_RESOLUTION);
-        let field_bounds = field.bounds();
+        let field_bounds = field
+            .unbounded()
+            .map_or_else(|| field.bounds(), |u| u.grid_box());
         let bounds = if field_bounds.is_empty() {
             Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5))
         } else {

@@ -20,7 +20,8 @@ use super::splats::Splatting;
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
 use crate::field::{
-    linear_to_srgb, Aabb, ColorSpace, Fragment, Occupancy, SplatPixel, SPLAT_MIN_TRANSMITTANCE,
+    linear_to_srgb, Aabb, ColorSpace, Field, Fragment, Occupancy, SplatPixel, Unbounded,
+    SPLAT_MIN_TRANSMITTANCE,
 };
 use crate::image::Window;
 use crate::scene::{LocalRay, Scene};
@@ -52,6 +53,8 @@ pub(super) struct InstancePlan {
     smooth: f64,
     /// A linear field in a scene composited in sRGB-encoded space: its colours are encoded.
     encode: bool,
+    /// How the field is marched beyond its core, when it is defined on all of space.
+    unbounded: Option<Unbounded>,
 }
 
 impl InstancePlan {
@@ -73,6 +76,7 @@ impl InstancePlan {
                     smooth: inst.field().smooth_length().max(0.0) as f64,
                     encode: space == ColorSpace::Srgb
                         && inst.field().color_space() == ColorSpace::Linear,
+                    unbounded: inst.field().unbounded(),
                 }
             })
             .collect()
@@ -281,7 +285,7 @@ fn setup_rays(
         for (inst, plan) in scene.instances.iter().zip(plans) {
             let local = ray.and_then(|ray| inst.local_ray(&ray, ray.near, ray.far));
             if let Some(lr) = &local {
-                occupied_segments(lr, plan, &mut s.occupied, &mut state.segments);
+                occupied_segments(lr, plan, inst.field(), &mut s.occupied, &mut state.segments);
             }
             s.local.push(local);
         }
@@ -349,6 +353,7 @@ fn setup_rays(
 fn occupied_segments(
     lr: &LocalRay,
     plan: &InstancePlan,
+    field: &dyn Field,
     scratch: &mut Vec<[f32; 2]>,
     out: &mut Vec<[f64; 2]>,
 ) {
@@ -357,12 +362,63 @@ fn occupied_segments(
     scratch.clear();
     plan.occupancy
         .segments(lr.origin, lr.dir, 0.0, length, scratch);
+    if let Some(u) = &plan.unbounded {
+        far_segments(lr, u, field, length, scratch);
+    }
     out.extend(scratch.iter().map(|&[u0, u1]| {
         [
             (lr.t_near + u0 as f64 / k).max(lr.t_near),
             (lr.t_near + u1 as f64 / k).min(lr.t_far),
         ]
     }));
+}
+
+/// Appends to `out` the intervals of `[0, length]` (field units along the local ray) outside
+/// an unbounded field's grid cube where it may have density. The ray is walked in steps of about
+/// [`Unbounded::skip`] contracted units at the finest (`skip·core·(r/core)²` field units at
+/// `‖x‖∞ = r`: `r` changes by at most one unit per unit of a unit ray), each step's box
+/// asked of [`Field::may_be_occupied`]. A step found empty doubles the next (so an empty shell costs a
+/// few queries, not one per cell); one found occupied is retried at half the length until
+/// it is the finest, and only the finest occupied steps are kept, merged when they touch.
+fn far_segments(
+    lr: &LocalRay,
+    u: &Unbounded,
+    field: &dyn Field,
+    length: f32,
+    out: &mut Vec<[f32; 2]>,
+) {
+    let outside = match u.grid_box().clip_ray(lr.origin, lr.dir, 0.0, length) {
+        Some((a, b)) => [[0.0, a], [b, length]],
+        None => [[0.0, length], [length, length]],
+    };
+    let first = out.len();
+    let box_of = |t0: f32, t1: f32| {
+        let (p, q) = (lr.origin + lr.dir * t0, lr.origin + lr.dir * t1);
+        Aabb::new(p.min(q), p.max(q))
+    };
+    for [a, b] in outside {
+        // A run with nothing far answers for the whole stretch at once.
+        if a >= b || !field.may_be_occupied(&box_of(a, b)) {
+            continue;
+        }
+        let (mut t, mut scale) = (a, 1.0f32);
+        while t < b {
+            let fine = u.skip * u.core * u.step_growth(lr.origin + lr.dir * t);
+            let t1 = (t + (fine * scale).max(f32::EPSILON * t.abs())).min(b);
+            if !field.may_be_occupied(&box_of(t, t1)) {
+                t = t1;
+                scale *= 2.0;
+            } else if scale > 1.0 {
+                scale = (scale * 0.5).max(1.0);
+            } else {
+                match out[first..].last_mut() {
+                    Some(last) if last[1] >= t => last[1] = t1,
+                    _ => out.push([t, t1]),
+                }
+                t = t1;
+            }
+        }
+    }
 }
 
 /// Sorts intervals and merges the overlapping ones.
@@ -391,7 +447,7 @@ fn step_at(r: usize, t: f64, plans: &[InstancePlan], params: &MarchParams, s: &S
             let step = plan.base_step / lr.units_per_world as f64;
             anywhere = anywhere.min(step);
             if t >= lr.t_near && t <= lr.t_far {
-                here = here.min(step);
+                here = here.min(step * growth(plan, lr, t));
             }
         }
     }
@@ -399,6 +455,14 @@ fn step_at(r: usize, t: f64, plans: &[InstancePlan], params: &MarchParams, s: &S
     let base = if here.is_finite() { here } else { anywhere };
     let grown = (params.cone as f64 * t).min(base * params.max_step_factor.max(1.0) as f64);
     base.max(grown).max(f64::MIN_POSITIVE)
+}
+
+/// How much an instance's step grows at world distance `t` (beyond an unbounded field's
+/// core; 1 elsewhere).
+#[inline]
+fn growth(plan: &InstancePlan, lr: &LocalRay, t: f64) -> f64 {
+    plan.unbounded
+        .map_or(1.0, |u| f64::from(u.step_growth(lr.at(t))))
 }
 
 /// Lays the next chunk of regular nodes for ray `r` into `s.pending`.
@@ -633,7 +697,8 @@ fn smooth_step(r: usize, a: &Node, b: &Node, plans: &[InstancePlan], s: &Scratch
         let Some(lr) = &s.local[r * n_inst + i] else {
             return true;
         };
-        sa > 0.0 && sb > 0.0 && (b.t - a.t) * lr.units_per_world as f64 <= plan.smooth
+        let smooth = plan.smooth * growth(plan, lr, a.t).min(growth(plan, lr, b.t));
+        sa > 0.0 && sb > 0.0 && (b.t - a.t) * lr.units_per_world as f64 <= smooth
     })
 }
 

@@ -182,10 +182,16 @@ impl Instance {
     }
 
     /// The field-space interval `[u0, u1]` of the field-space ray `o + u·d` (`d` unit) inside
-    /// the field's bounds and the crop box, in f64.
+    /// the field's bounds and the crop box, in f64; for an unbounded field, also between its
+    /// near and far distances from `o`.
     fn clip_local(&self, o: DVec3, d: DVec3) -> Option<(f64, f64)> {
         let b = self.field().bounds();
-        let (mut lo, mut hi) = (0.0f64, f64::INFINITY);
+        let (mut lo, mut hi) = self
+            .field()
+            .unbounded()
+            .map_or((0.0f64, f64::INFINITY), |u| {
+                (f64::from(u.near).max(0.0), f64::from(u.far))
+            });
         for axis in 0..3 {
             let (mn, mx) = (b.min[axis] as f64, b.max[axis] as f64);
             if d[axis] == 0.0 {

@@ -11,6 +11,26 @@ use half::f16;
 // writer declares as `mod common_fields`).
 pub use super::common_fields::SplitMix64;
 
+/// What the density network computes (tiny-cuda-nn layout only for the two shaped ones).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Density {
+    /// Seeded weights throughout.
+    Seeded,
+    /// The density MLP's first layer zero: `raw = 0` everywhere, so `σ` is
+    /// `average_init_density` at every point of space (geometry features zero too).
+    Constant,
+    /// A shell far out: the coarsest (dense) hash level holds, per grid vertex, its
+    /// contracted radius `‖c‖∞` and a constant 1; the density MLP computes
+    /// `raw = relu(A·(ρ − ρ₀)) − B` from them (A = 30, ρ₀ = 1.8, B = 5), so the density is
+    /// faint inside contracted radius ~1.97 (field radius ~30) and grows beyond it until the
+    /// far field is opaque. Finer levels are zero.
+    Shell,
+    /// Near only: `raw = relu(A·(ρ₀ − ρ)) − B` with A = 150, ρ₀ = 0.8, B = 25: a dense cube
+    /// inside contracted (and field) radius ~0.63, and a density of 10⁻¹³ elsewhere, which
+    /// nothing renders.
+    Core,
+}
+
 /// What to write.
 #[derive(Clone, Debug)]
 pub struct Spec {
@@ -33,6 +53,9 @@ pub struct Spec {
     /// Added to the proposal networks' output (torch layout: the bias; tcnn layout: spread
     /// over the output row's weights), shifting their density.
     pub proposal_offset: f32,
+    pub density: Density,
+    /// `far_plane` written into `config.yml` (nerfacto's default, 1000, when absent).
+    pub far_plane: Option<f32>,
 }
 
 impl Spec {
@@ -48,6 +71,38 @@ impl Spec {
             seed: 11,
             proposal: Some((12, [64, 128])),
             proposal_offset: 0.0,
+            density: Density::Seeded,
+            far_plane: None,
+        }
+    }
+
+    /// tiny-cuda-nn's layout with `σ` = `sigma` everywhere.
+    pub fn constant(sigma: f32) -> Self {
+        Spec {
+            average_init_density: sigma,
+            density: Density::Constant,
+            seed: 21,
+            ..Spec::tcnn()
+        }
+    }
+
+    /// tiny-cuda-nn's layout with a dense core and nothing far ([`Density::Core`]).
+    pub fn core() -> Self {
+        Spec {
+            density: Density::Core,
+            seed: 23,
+            expect_empty_space: true,
+            ..Spec::tcnn()
+        }
+    }
+
+    /// tiny-cuda-nn's layout with a distant shell ([`Density::Shell`]).
+    pub fn shell() -> Self {
+        Spec {
+            density: Density::Shell,
+            seed: 22,
+            expect_empty_space: true,
+            ..Spec::tcnn()
         }
     }
 
@@ -63,6 +118,8 @@ impl Spec {
             seed: 12,
             proposal: Some((11, [64, 128])),
             proposal_offset: 1.0,
+            density: Density::Seeded,
+            far_plane: None,
         }
     }
 }
@@ -257,9 +314,17 @@ fn state_dict(s: &Spec) -> StateDict {
             sd.add_linear(&format!("{f}mlp_head.layers.{k}"), &w, &b, n_in);
         }
     } else {
-        let density = 64 * n_grid_out.next_multiple_of(16) + 16 * 64;
+        let n_in = n_grid_out.next_multiple_of(16);
+        let density = 64 * n_in + 16 * 64;
         let mut params = seeded(&mut rng, density, 0.35);
-        params.extend(seeded(&mut rng, tcnn_grid_params(s), 1.0));
+        let mut grid = seeded(&mut rng, tcnn_grid_params(s), 1.0);
+        match s.density {
+            Density::Seeded => {}
+            Density::Constant => params[..64 * n_in].fill(0.0),
+            Density::Shell => shell_network(&mut params, &mut grid, n_in, 1.8, 30.0, 5.0),
+            Density::Core => shell_network(&mut params, &mut grid, n_in, 0.8, -150.0, 25.0),
+        }
+        params.extend(grid);
         sd.add(
             &format!("{f}mlp_base.model.params"),
             &[params.len()],
@@ -283,6 +348,40 @@ fn state_dict(s: &Spec) -> StateDict {
         false,
     );
     sd
+}
+
+/// The weights of [`Density::Shell`]: the density MLP's (`[64][n_in]` then `[16][64]`,
+/// row-major) and the grid's (level 0 first: 16³ entries of 2 features, dense, entry
+/// `x + 16y + 256z` for the vertex whose hash-grid coordinate is `(x, y, z)`, at
+/// `u = (g − 1/2)/15` per axis, contracted `c = 4u − 2`).
+/// `raw = relu(a·(ρ − ρ₀)) − b` (a negative `a`: a core instead of a shell).
+fn shell_network(mlp: &mut [f32], grid: &mut [f32], n_in: usize, rho0: f32, a: f32, b: f32) {
+    const RES: usize = 16;
+    let (first, second) = mlp.split_at_mut(64 * n_in);
+    first.fill(0.0);
+    first[0] = a; // hidden 0 = relu(a·(ρ − ρ₀))
+    first[1] = -a * rho0;
+    first[n_in + 1] = 1.0; // hidden 1 = relu(1) = 1
+    for o in 0..16 {
+        // Output 0: raw = hidden 0 − B·hidden 1; the geometry features keep seeded weights on
+        // those two hidden units only.
+        let row = &mut second[o * 64..(o + 1) * 64];
+        let (h0, h1) = (row[0], row[1]);
+        row.fill(0.0);
+        (row[0], row[1]) = if o == 0 { (1.0, -b) } else { (h0, h1) };
+    }
+    grid.fill(0.0);
+    for z in 0..RES {
+        for y in 0..RES {
+            for x in 0..RES {
+                let c = |g: usize| 4.0 * (g as f32 - 0.5) / 15.0 - 2.0;
+                let rho = c(x).abs().max(c(y).abs()).max(c(z).abs());
+                let e = x + RES * y + RES * RES * z;
+                grid[2 * e] = rho;
+                grid[2 * e + 1] = 1.0;
+            }
+        }
+    }
 }
 
 /// Pickle opcodes (protocol 2), written from the format.
@@ -571,10 +670,12 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
       use_linear: false
     use_average_appearance_embedding: true
     use_same_proposal_network: false
-",
+{}",
         s.average_init_density,
         if s.torch { "torch" } else { "tcnn" },
         s.log2_table_size,
+        s.far_plane
+            .map_or(String::new(), |far| format!("    far_plane: {far:?}\n")),
         p_log2 = s.proposal.map_or(17, |p| p.0),
         p0 = s.proposal.map_or(128, |p| p.1[0]),
         p1 = s.proposal.map_or(256, |p| p.1[1]),

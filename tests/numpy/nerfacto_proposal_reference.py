@@ -203,7 +203,7 @@ def main():
     p = midpoints(t)
     _, sel = unit_and_selector(p)
     dirs = np.repeat(d, counts[-1], axis=0).astype(F32)
-    sigma, srgb = ref.field(cfg, state, p, dirs)
+    sigma, srgb = ref.field(run)(p, dirs)
     sigma = (sigma * sel).astype(np.float64).reshape(t.shape[0], -1)
     w = get_weights(sigma, t)
     rgb = (w[:, :, None] * srgb.reshape(t.shape[0], -1, 3).astype(np.float64)).sum(axis=1)

@@ -25,7 +25,7 @@ def model_settings(path):
     wanted = {
         "num_levels": 16, "features_per_level": 2, "log2_hashmap_size": 19,
         "base_res": 16, "max_res": 2048, "hidden_dim": 64, "hidden_dim_color": 64,
-        "average_init_density": 1.0,
+        "average_init_density": 1.0, "far_plane": 1000.0,
     }
     out = dict(wanted)
     model_indent = None
@@ -239,45 +239,53 @@ def contract(p):
     return np.where(mag < 1, p, outer).astype(F32)
 
 
-def main():
-    run, points_in, out_path = sys.argv[1:4]
+def field(run):
+    """The run's field: a function (points, unit directions) -> (sigma, sRGB colour), float32,
+    with the run's settings as its `cfg` attribute."""
     cfg = model_settings(os.path.join(run, "config.yml"))
     state = load_state(run)
-    rows = np.fromfile(points_in, dtype=F32).reshape(-1, 6)
-    sigma, srgb = field(cfg, state, rows[:, :3], rows[:, 3:])
-    np.concatenate([sigma[:, None], srgb], axis=1).astype(F32).tofile(out_path)
-
-
-def field(cfg, state, p, d):
-    """The main field's density (no selector) and sRGB colour at points p, directions d."""
     f = "_model.field."
-    u = ((contract(p) + F32(2)) / F32(4)).astype(F32)
     emb = state[f + "embedding_appearance.embedding.weight"]
     appearance = emb.astype(np.float64).mean(axis=0).astype(F32)
     n_grid = cfg["num_levels"] * cfg["features_per_level"]
-    dirs01 = ((d + F32(1)) / F32(2)).astype(F32)
-    if f + "mlp_head.tcnn_encoding.params" in state:
-        flat = state[f + "mlp_base.model.params"]
-        n_mlp = cfg["hidden_dim"] * (-(-n_grid // 16) * 16) + 16 * cfg["hidden_dim"]
-        enc = tcnn_grid(u, cfg, flat[n_mlp:])
-        base = tcnn_mlp(enc, flat[:n_mlp], n_grid, cfg["hidden_dim"], 1, 16)
-        sh = sh_tcnn((dirs01 * F32(2) - F32(1)).astype(F32))
-        head_in = np.concatenate(
-            [sh, base[:, 1:], np.broadcast_to(appearance, (u.shape[0], appearance.size))], axis=1)
-        out = tcnn_mlp(head_in, state[f + "mlp_head.tcnn_encoding.params"],
-                       head_in.shape[1], cfg["hidden_dim_color"], 2, 3)
-    else:
-        enc = torch_grid(u, cfg, state[f + "mlp_base.model.0.hash_table"])
-        layers = lambda pre: [(state[f"{f}{pre}.{k}.weight"], state[f"{f}{pre}.{k}.bias"])
-                              for k in range(10) if f"{f}{pre}.{k}.weight" in state]
-        base = torch_mlp(enc, layers("mlp_base.model.1.layers"))
-        sh = sh_torch(dirs01)
-        head_in = np.concatenate(
-            [sh, base[:, 1:], np.broadcast_to(appearance, (u.shape[0], appearance.size))], axis=1)
-        out = torch_mlp(head_in, layers("mlp_head.layers"))
-    sigma = (F32(cfg["average_init_density"]) * np.exp(base[:, 0])).astype(F32)
-    srgb = (F32(1) / (F32(1) + np.exp(-out))).astype(F32)
-    return sigma, srgb
+
+    def evaluate(p, d):
+        u = ((contract(p) + F32(2)) / F32(4)).astype(F32)
+        dirs01 = ((d + F32(1)) / F32(2)).astype(F32)
+        if f + "mlp_head.tcnn_encoding.params" in state:
+            flat = state[f + "mlp_base.model.params"]
+            n_mlp = cfg["hidden_dim"] * (-(-n_grid // 16) * 16) + 16 * cfg["hidden_dim"]
+            enc = tcnn_grid(u, cfg, flat[n_mlp:])
+            base = tcnn_mlp(enc, flat[:n_mlp], n_grid, cfg["hidden_dim"], 1, 16)
+            sh = sh_tcnn((dirs01 * F32(2) - F32(1)).astype(F32))
+            head_in = np.concatenate(
+                [sh, base[:, 1:], np.broadcast_to(appearance, (u.shape[0], appearance.size))],
+                axis=1)
+            out = tcnn_mlp(head_in, state[f + "mlp_head.tcnn_encoding.params"],
+                           head_in.shape[1], cfg["hidden_dim_color"], 2, 3)
+        else:
+            enc = torch_grid(u, cfg, state[f + "mlp_base.model.0.hash_table"])
+            layers = lambda pre: [(state[f"{f}{pre}.{k}.weight"], state[f"{f}{pre}.{k}.bias"])
+                                  for k in range(10) if f"{f}{pre}.{k}.weight" in state]
+            base = torch_mlp(enc, layers("mlp_base.model.1.layers"))
+            sh = sh_torch(dirs01)
+            head_in = np.concatenate(
+                [sh, base[:, 1:], np.broadcast_to(appearance, (u.shape[0], appearance.size))],
+                axis=1)
+            out = torch_mlp(head_in, layers("mlp_head.layers"))
+        sigma = (F32(cfg["average_init_density"]) * np.exp(base[:, 0])).astype(F32)
+        srgb = (F32(1) / (F32(1) + np.exp(-out))).astype(F32)
+        return sigma, srgb
+
+    evaluate.cfg = cfg
+    return evaluate
+
+
+def main():
+    run, points_in, out_path = sys.argv[1:4]
+    rows = np.fromfile(points_in, dtype=F32).reshape(-1, 6)
+    sigma, srgb = field(run)(rows[:, :3], rows[:, 3:])
+    np.concatenate([sigma[:, None], srgb], axis=1).astype(F32).tofile(out_path)
 
 
 if __name__ == "__main__":

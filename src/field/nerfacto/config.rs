@@ -9,7 +9,10 @@
 //! `base_res` 16, `max_res` 2048, `hidden_dim` 64, `hidden_dim_color` 64,
 //! `average_init_density` (1.0: older versions had no such factor; the nerfacto method sets
 //! 0.01), `disable_scene_contraction` false, `use_average_appearance_embedding` true (when
-//! false, nerfacto renders with a zero appearance); and the top-level `method_name`.
+//! false, nerfacto renders with a zero appearance), `far_plane` 1000 (nerfacto's own
+//! collider reads it, not the base model's `collider_params`; its `near_plane` applies in
+//! training only: at inference the collider starts rays at 0); and the top-level
+//! `method_name`.
 
 use std::path::Path;
 
@@ -29,6 +32,7 @@ pub(crate) struct RunSettings {
     pub average_init_density: f32,
     pub disable_scene_contraction: bool,
     pub use_average_appearance_embedding: bool,
+    pub far_plane: f32,
 }
 
 /// The scalar value at the dotted `path`, if present.
@@ -192,6 +196,7 @@ impl RunSettings {
                 true,
                 file,
             )?,
+            far_plane: parsed(text, "far_plane", 1000.0, file)?,
         };
         let bad = |key: &str, why: &str| Error::format(file, format!("pipeline.model.{key}"), why);
         if !(1..=32).contains(&s.num_levels) {
@@ -214,6 +219,9 @@ impl RunSettings {
         }
         if !(s.average_init_density.is_finite() && s.average_init_density > 0.0) {
             return Err(bad("average_init_density", "must be a positive number"));
+        }
+        if !(s.far_plane.is_finite() && s.far_plane > 0.0 && s.far_plane <= 1e7) {
+            return Err(bad("far_plane", "must be a positive number, at most 1e7"));
         }
         Ok(s)
     }
@@ -427,6 +435,17 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
         assert_eq!((s.max_res, s.num_levels), (2048, 16));
         assert!(!s.disable_scene_contraction);
         assert!(s.use_average_appearance_embedding);
+        // nerfacto's far plane; `collider_params` belongs to the base model and is not read.
+        assert_eq!(s.far_plane, 1000.0);
+        let s = RunSettings::from_text(
+            &TEXT.replace(
+                "    hidden_dim: 32\n",
+                "    hidden_dim: 32\n    far_plane: 50.0\n",
+            ),
+            Path::new("config.yml"),
+        )
+        .unwrap();
+        assert_eq!(s.far_plane, 50.0);
         let t = TEXT.replace(
             "    hidden_dim: 32\n",
             "    hidden_dim: 32\n    use_average_appearance_embedding: false\n",
@@ -452,6 +471,14 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
         assert!(e.contains("twice"), "{e}");
         let t = TEXT.replace("0.01", "-1");
         assert!(RunSettings::from_text(&t, Path::new("config.yml")).is_err());
+        let t = TEXT.replace(
+            "    hidden_dim: 32\n",
+            "    hidden_dim: 32\n    far_plane: -1\n",
+        );
+        let e = RunSettings::from_text(&t, Path::new("config.yml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("far_plane"), "{e}");
     }
 
     #[test]

@@ -25,16 +25,28 @@
 //! `…layers.<i>.weight|bias` (see [`torch`]). Appearance:
 //! `embedding_appearance.embedding.weight`.
 //!
-//! **Bounds and occupancy.** The field is bounded to `[−2, 2]³` in scene units (density is
-//! zero outside: the contracted shell beyond `‖x‖∞ = 2`, contracted radius 1.5–2, is not
-//! rendered). nerfacto has no occupancy grid, so one is computed at load: `64³` cells over
-//! the bounds; the density is sampled at every cell corner and centre; a cell is occupied
-//! when `max σ · cell diagonal ≥ 10⁻³` (an opacity of about 10⁻³ across it), and the
-//! occupied set is then dilated by one cell (26-neighbourhood). This is conservative in
-//! practice, not by proof (a peak narrower than half a cell between samples could be
-//! missed); so that the [`Field`] contract holds exactly, the density is set to zero in
-//! empty cells. The grid is cached next to the run (`nerfx_occupancy.bin`, keyed by the
-//! checkpoint, `config.yml` and the grid settings; see `nerfacto/occupancy.rs`).
+//! **Bounds and occupancy.** The contraction maps all of space into the hash grid, so the
+//! field is defined everywhere: the sky and the distant scene of an outdoor capture live in
+//! the shell `‖x‖∞ > 1`. As `ns-render` does, a ray is integrated from the camera to
+//! `far_plane` (`config.yml`, 1000 by default), a distance along it in the field's units
+//! (nerfstudio's collider starts rays at 0 at inference; `near_plane` applies in training);
+//! the bounds are the cube `‖x‖∞ ≤ far_plane` (density zero beyond).
+//! The field says it is [unbounded](Field::unbounded) with the unit cube as its core: there
+//! the marcher steps as for any field; beyond it its steps grow as `‖x‖∞²` (a constant step
+//! in contracted coordinates, where the hash grid's cells are). Empty space is skipped with
+//! the marcher's occupancy grid within `[−2, 2]³`, beyond it through
+//! [`Field::may_be_occupied`]. Depth of far content is thus
+//! finite (at most `far_plane` field units). nerfacto has no occupancy grid, so one is
+//! computed at load: `64³` cells over the *contracted* cube `[−2, 2]³`; the density is
+//! sampled at every cell corner and centre; a cell is occupied when `max σ · L ≥ 10⁻³`,
+//! `L` the cell's diagonal in field units (an opacity of about 10⁻³ across it; far cells
+//! are long, so their threshold is low), and the occupied set is then dilated by one cell
+//! (26-neighbourhood). This is conservative in practice, not by proof (a peak narrower than
+//! half a cell between samples could be missed); so that the [`Field`] contract holds
+//! exactly, the density is set to zero in empty cells. The grid is cached
+//! (`nerfx_occupancy.bin` in the run directory, or when that cannot be written a per-user
+//! cache directory; keyed by the checkpoint, `config.yml` and the grid settings; never
+//! trusted beyond its key and checksum; see `nerfacto/occupancy.rs`).
 
 use std::path::{Path, PathBuf};
 
@@ -43,11 +55,13 @@ use half::f16;
 
 use super::container::{Checkpoint, DType};
 use super::network::{non_finite, sh4, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage};
-use super::{Aabb, ColorSpace, Field};
+use super::{Aabb, ColorSpace, Field, Unbounded};
 use crate::error::{Error, Result};
 use config::{RunSettings, SamplerSettings};
 use density_field::DensityField;
-use occupancy::{cache_key, GridSettings, OccupancyGrid, Source, CACHE_FILE};
+use occupancy::{
+    cache_key, cache_paths, contract, GridSettings, OccupancyGrid, Source, CACHE_FILE,
+};
 use proposal::ProposalSampler;
 use torch::{torch_sh4, BiasedMlp, TorchHashGrid};
 
@@ -68,15 +82,15 @@ pub use proposal::{
 const CHUNK: usize = 512;
 /// Largest exponent fed to `exp` for the density (keeps σ finite).
 const MAX_LOG_DENSITY: f32 = 80.0;
-/// Half the side of the field's bounds, scene units.
-const HALF_EXTENT: f32 = 2.0;
-/// The occupancy grid's settings: `64³` cells over the bounds, occupied at an opacity of
-/// 10⁻³ across a cell.
-const OCCUPANCY: GridSettings = GridSettings {
-    n: 64,
-    opacity: 1e-3,
-    half_extent: HALF_EXTENT,
-};
+/// The occupancy grid's cells per axis over the contracted cube…
+const OCCUPANCY_CELLS: usize = 64;
+/// …and the opacity across a cell above which it is occupied.
+const OCCUPANCY_OPACITY: f32 = 1e-3;
+/// The marcher's finest empty-space step beyond the unit cube, in contracted units: a
+/// quarter of a cell of the occupancy grid (4/64), so that the segments it marches begin
+/// close to where the occupied cells do (with a whole cell, 30 % more samples on the far
+/// shell of `tests/nerfacto_far.rs` at Final, in cells the mask empties).
+const FAR_SKIP: f32 = 1.0 / 64.0;
 
 /// The networks, in one of the two layouts.
 #[derive(Clone, Debug)]
@@ -139,6 +153,11 @@ impl NerfactoField {
             )));
         }
         let dataparser = DataparserTransform::read(run.join("dataparser_transforms.json"))?;
+        let grid = GridSettings {
+            n: OCCUPANCY_CELLS,
+            opacity: OCCUPANCY_OPACITY,
+            far: settings.far_plane,
+        };
         let (checkpoint, step) = latest_checkpoint(&run.join("nerfstudio_models"))?;
         let ckpt = Checkpoint::open(&checkpoint)?;
         let keys = Keys::find(&ckpt)?;
@@ -163,13 +182,14 @@ impl NerfactoField {
             n_params: n_params + appearance.len() * n_images,
             appearance,
             n_images,
-            occupancy: OccupancyGrid::full(&OCCUPANCY),
+            occupancy: OccupancyGrid::full(&grid),
             proposal,
         };
         let config = run.join("config.yml");
-        let key = cache_key(&OCCUPANCY, &field.checkpoint, &config);
-        field.occupancy = OccupancyGrid::load_or_build(&OCCUPANCY, run, key.as_deref(), |p, s| {
-            field.density_unmasked(p, s)
+        let key = cache_key(&grid, &field.checkpoint, &config);
+        let caches = cache_paths(run);
+        field.occupancy = OccupancyGrid::load_or_build(&grid, &caches, key.as_deref(), |c, s| {
+            field.density_contracted(c, s)
         });
         Ok(field)
     }
@@ -256,8 +276,9 @@ impl NerfactoField {
              colour MLP: {head} (sigmoid, sRGB to linear); appearance: {} of {} embeddings of {}\n\
              scene contraction: L-infinity; dataparser scale {}\n\
              nerfacto's own sampler: {sampler}\n\
-             bounds (nerfstudio frame): [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]\n\
-             occupancy: {}^3 cells {}, fill ratio {:.4}",
+             bounds (nerfstudio frame): [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]; rays \
+             to far_plane {}\n\
+             occupancy: {}^3 cells over the contracted cube {}, fill ratio {:.4}",
             self.run.display(),
             if s.method_name.is_empty() {
                 "(unnamed method)"
@@ -283,10 +304,14 @@ impl NerfactoField {
             b.max.x,
             b.max.y,
             b.max.z,
+            s.far_plane,
             self.occupancy.resolution(),
             match self.occupancy.source() {
                 Source::Computed => "computed at load".to_string(),
-                Source::Cached => format!("read from {CACHE_FILE}"),
+                Source::Cached(path) if *path == self.run.join(CACHE_FILE) => {
+                    format!("read from {CACHE_FILE}")
+                }
+                Source::Cached(path) => format!("read from {}", path.display()),
             },
             self.occupancy.fill_ratio(),
         )
@@ -296,13 +321,7 @@ impl NerfactoField {
     /// then `(c + 2)/4`), or `None` outside nerfacto's selector `0 < u < 1`.
     #[inline]
     fn unit_from_field(p: Vec3) -> Option<Vec3> {
-        let mag = p.abs().max_element();
-        let c = if mag < 1.0 {
-            p
-        } else {
-            (p / mag) * (2.0 - 1.0 / mag)
-        };
-        let u = (c + Vec3::splat(2.0)) / 4.0;
+        let u = (contract(p) + Vec3::splat(2.0)) / 4.0;
         (u.cmpgt(Vec3::ZERO).all() && u.cmplt(Vec3::ONE).all()).then_some(u)
     }
 
@@ -323,6 +342,29 @@ impl NerfactoField {
                     grid.encode(*x, enc);
                     density.forward(enc, o, &mut scratch);
                 }
+            }
+        }
+    }
+
+    /// Densities without the occupancy mask at contracted points `c` (`‖c‖∞ < 2`; zero
+    /// outside nerfacto's selector).
+    fn density_contracted(&self, cs: &[Vec3], sigma: &mut [f32]) {
+        let (mut xs, mut idx) = (Vec::with_capacity(CHUNK), Vec::with_capacity(CHUNK));
+        let (mut enc, mut out) = (Vec::new(), Vec::new());
+        for (pts, sig) in cs.chunks(CHUNK).zip(sigma.chunks_mut(CHUNK)) {
+            xs.clear();
+            idx.clear();
+            for (i, c) in pts.iter().enumerate() {
+                sig[i] = 0.0;
+                let u = (*c + Vec3::splat(2.0)) / 4.0;
+                if u.cmpgt(Vec3::ZERO).all() && u.cmplt(Vec3::ONE).all() {
+                    xs.push(u);
+                    idx.push(i);
+                }
+            }
+            self.base(&xs, &mut enc, &mut out);
+            for (k, &i) in idx.iter().enumerate() {
+                sig[i] = self.sigma_from_raw(out[k * self.n_base]);
             }
         }
     }
@@ -813,8 +855,27 @@ fn read_linear_layers(
 }
 
 impl Field for NerfactoField {
+    /// The cube `‖x‖∞ ≤ far_plane`: a ray from a camera at the centre ends at the far plane
+    /// inside it.
     fn bounds(&self) -> Aabb {
-        Aabb::new(Vec3::splat(-HALF_EXTENT), Vec3::splat(HALF_EXTENT))
+        let far = self.settings.far_plane;
+        Aabb::new(Vec3::splat(-far), Vec3::splat(far))
+    }
+
+    /// The unit cube as the core (the contraction is the identity there); the marcher's
+    /// occupancy grid over `[−2, 2]³`, as when the field ended there (so a run whose content
+    /// is near is skipped through as before, and the coarse far-field test starts where its
+    /// boxes no longer reach the core's cells); the finest empty-space step beyond it a
+    /// quarter of an occupancy cell; rays from the camera (nerfstudio's near plane at
+    /// inference) to the run's far plane.
+    fn unbounded(&self) -> Option<Unbounded> {
+        Some(Unbounded {
+            core: 1.0,
+            grid: 2.0,
+            skip: FAR_SKIP,
+            near: 0.0,
+            far: self.settings.far_plane,
+        })
     }
 
     fn color_space(&self) -> ColorSpace {

@@ -1,21 +1,33 @@
 //! The occupancy grid a nerfacto run gets at load (nerfacto has none of its own), and its
 //! on-disk cache next to the run.
 //!
-//! **Grid.** `N³` cells over the field's bounds `[−h, h]³`; a cell is occupied when the
-//! largest density sampled at its corners and centre reaches `opacity / cell diagonal`, and
+//! **Grid.** `N³` cells over the *contracted* cube `[−2, 2]³` (nerfacto's L∞ contraction,
+//! `c = x` inside `‖x‖∞ < 1`, else `(2 − 1/‖x‖∞)·x/‖x‖∞`), so one grid covers all of space:
+//! the unit cube at the grid's resolution and the shell beyond it at the resolution the
+//! hash grid has there. A cell is occupied when the largest density sampled at its corners
+//! and centre (in contracted coordinates) reaches `opacity / L`, where `L` is the cell's
+//! diagonal in *field* units at its outer edge (the contracted diagonal times
+//! `max(1, r²)`, `r = 1/(2 − ‖c‖∞)` the field radius there, capped at the far plane), and
 //! the occupied set is dilated by one cell (26-neighbourhood). A bit per cell is kept as 3-D
-//! prefix sums, so a region's test is eight lookups.
+//! prefix sums, so a region's test is eight lookups. A field-space box is tested through
+//! the box of its contracted image: `c = x·g(‖x‖∞)` with `g` positive and non-increasing,
+//! so over the box `g` lies between its values at the box's largest and smallest `‖x‖∞`,
+//! and each `c_a` between the products of the interval bounds.
 //!
-//! **Cache** (`<run>/nerfx_occupancy.bin`). Computing the grid takes `(N + 1)²·2N + N³`
-//! density samples (~0.5 M for `N = 64`: about a second), so it is kept next to the run:
+//! **Cache.** Computing the grid takes `(N + 1)²·2N + N³` density samples (~0.5 M for
+//! `N = 64`: about a second), so it is kept: next to the run (`<run>/nerfx_occupancy.bin`)
+//! when the run directory can be written, else in the per-user cache directory
+//! (`$XDG_CACHE_HOME/nerfx`, else `~/.cache/nerfx`; `occupancy-<hash of the run's
+//! path>.bin`), else in memory only. Either file is read only when it is whole and its key
+//! matches, so it is never a correctness dependency. The file:
 //! `"NERFXOCC"`, format version (u32 LE), key length (u32 LE) and key, `N` (u32 LE), the cells
 //! as bits (x fastest, then y, then z; bit `i % 8` of byte `i / 8`), then an FNV-1a 64 hash
 //! of everything before it (u64 LE). The key names what the grid depends on: the grid
 //! settings, the checkpoint (path, size, modification time and a hash of its first and last
 //! 64 KiB) and `config.yml` (size, modification time). A cache that is missing, stale (another
-//! key), truncated or corrupt (hash) is recomputed and rewritten (through a temporary file
-//! and a rename, so a reader never sees half a file); one that cannot be written is not an
-//! error, the grid is simply not cached.
+//! key, another run's), truncated or corrupt (hash) is recomputed and rewritten (through a
+//! temporary file and a rename, so a reader never sees half a file); one that cannot be
+//! written anywhere is not an error, the grid is simply not cached.
 
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
@@ -27,37 +39,99 @@ use crate::field::Aabb;
 
 /// The cache file's name inside the run directory.
 pub(super) const CACHE_FILE: &str = "nerfx_occupancy.bin";
-/// Bumped whenever the grid rule or the file layout changes.
-const CACHE_VERSION: u32 = 1;
+/// Bumped whenever the grid rule or the file layout changes (2: cells in contracted
+/// coordinates).
+const CACHE_VERSION: u32 = 2;
 const MAGIC: &[u8; 8] = b"NERFXOCC";
 /// Bytes hashed at each end of the checkpoint for the key.
 const KEY_SAMPLE: u64 = 64 * 1024;
 
-/// How the grid is computed: cells per axis, the opacity rule and the bounds.
+/// Half the side of the contracted cube the grid covers.
+const CONTRACTED: f32 = 2.0;
+
+/// How the grid is computed: cells per axis and the opacity rule.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct GridSettings {
     /// Cells per axis `N`.
     pub n: usize,
     /// Opacity across a cell above which it is occupied.
     pub opacity: f32,
-    /// Half the side of the bounds `h`.
-    pub half_extent: f32,
+    /// The field radius `‖x‖∞` beyond which nothing is rendered (the far plane): caps the
+    /// outermost cells' extent in the opacity rule.
+    pub far: f32,
+}
+
+/// nerfacto's L∞ contraction of a field point (`(x/m)·(2 − 1/m)` beyond the unit cube, in
+/// that order, as nerfstudio computes it).
+#[inline]
+pub(super) fn contract(p: Vec3) -> Vec3 {
+    let m = p.abs().max_element();
+    if m < 1.0 {
+        p
+    } else {
+        (p / m) * (2.0 - 1.0 / m)
+    }
+}
+
+/// `g(m)`: the contraction is `c = x·g(‖x‖∞)`; 1 inside the unit cube, `(2 − 1/m)/m` beyond
+/// (positive, non-increasing, 0 at infinity).
+#[inline]
+fn shrink(m: f32) -> f32 {
+    if m < 1.0 {
+        1.0
+    } else if m.is_finite() {
+        (2.0 - 1.0 / m) / m
+    } else {
+        0.0
+    }
+}
+
+/// A box holding the contracted image of the field-space box `b` (see the module docs), and
+/// the least `‖c‖∞` of that image: `‖c‖∞ = h(‖x‖∞)` with `h(m) = m·g(m)` increasing, so the
+/// image lies outside the cube of half side `h` of the box's least `‖x‖∞`.
+fn contract_box(b: &Aabb) -> (Aabb, f32) {
+    let (lo, hi) = (b.min.to_array(), b.max.to_array());
+    let (mut near, mut far) = (0.0f32, 0.0f32);
+    for a in 0..3 {
+        let gap = if lo[a] > 0.0 {
+            lo[a]
+        } else if hi[a] < 0.0 {
+            -hi[a]
+        } else {
+            0.0
+        };
+        near = near.max(gap);
+        far = far.max(lo[a].abs()).max(hi[a].abs());
+    }
+    let (g_lo, g_hi) = (shrink(far), shrink(near));
+    let axis = |a: usize| {
+        let min = lo[a] * if lo[a] >= 0.0 { g_lo } else { g_hi };
+        let max = hi[a] * if hi[a] >= 0.0 { g_hi } else { g_lo };
+        // A few ulps of room for the f32 rounding of `contract`.
+        let pad = 4.0 * f32::EPSILON * CONTRACTED;
+        (min - pad, max + pad)
+    };
+    let [x, y, z] = [0, 1, 2].map(axis);
+    let inner = near * shrink(near) - 4.0 * f32::EPSILON * CONTRACTED;
+    (
+        Aabb::new(Vec3::new(x.0, y.0, z.0), Vec3::new(x.1, y.1, z.1)),
+        inner,
+    )
 }
 
 /// Where a grid came from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub(super) enum Source {
     /// Sampled from the field at this load.
     Computed,
-    /// Read from the cache file.
-    Cached,
+    /// Read from this cache file.
+    Cached(PathBuf),
 }
 
 /// A bit per cell, as prefix sums.
 #[derive(Clone, Debug)]
 pub(super) struct OccupancyGrid {
     n: usize,
-    half_extent: f32,
     /// `(n+1)³` prefix counts: `sums[(z·(n+1) + y)·(n+1) + x]` = occupied cells below.
     sums: Vec<u32>,
     source: Source,
@@ -88,37 +162,38 @@ impl OccupancyGrid {
                 }
             }
         }
-        OccupancyGrid {
-            n,
-            half_extent: settings.half_extent,
-            sums,
-            source,
-        }
+        OccupancyGrid { n, sums, source }
     }
 
-    /// The grid for a run: read from the cache in `run` when it is current for `key`,
-    /// otherwise computed from `density` (the field's unmasked density) and cached; with no
-    /// key (the checkpoint could not be examined), computed and not cached.
+    /// The grid for a run: read from the first of `caches` (see [`cache_paths`]) that is
+    /// current for `key`, otherwise computed from `density` (the field's unmasked density at
+    /// *contracted* points) and written to the first of `caches` that can be written; with
+    /// no key (the checkpoint could not be examined), computed and not cached.
     pub fn load_or_build(
         settings: &GridSettings,
-        run: &Path,
+        caches: &[PathBuf],
         key: Option<&str>,
         density: impl Fn(&[Vec3], &mut [f32]) + Sync,
     ) -> Self {
-        let path = run.join(CACHE_FILE);
-        if let Some(cells) = key.and_then(|k| read_cache(&path, k, settings.n)) {
-            return Self::from_cells(settings, &cells, Source::Cached);
+        if let Some(k) = key {
+            for path in caches {
+                if let Some(cells) = read_cache(path, k, settings.n) {
+                    return Self::from_cells(settings, &cells, Source::Cached(path.clone()));
+                }
+            }
         }
         let cells = compute_cells(settings, density);
         if let Some(k) = key {
-            write_cache(&path, k, settings.n, &cells);
+            let _ = caches
+                .iter()
+                .find(|path| write_cache(path, k, settings.n, &cells));
         }
         Self::from_cells(settings, &cells, Source::Computed)
     }
 
     /// Where the grid came from.
-    pub fn source(&self) -> Source {
-        self.source
+    pub fn source(&self) -> &Source {
+        &self.source
     }
 
     /// Cells per axis.
@@ -141,24 +216,43 @@ impl OccupancyGrid {
         v as u32
     }
 
-    /// Cell index range covering `[a, b]` along one axis (clamped to the grid).
+    /// Cell index range covering contracted `[a, b]` along one axis (clamped to the grid).
     fn range(&self, a: f32, b: f32) -> (usize, usize) {
-        let (n, h) = (self.n as f32, self.half_extent);
+        let (n, h) = (self.n as f32, CONTRACTED);
         let to = |v: f32| ((v + h) / (2.0 * h) * n).clamp(0.0, n);
         let lo = to(a).floor() as usize;
         let hi = (to(b).floor() as usize + 1).min(self.n);
         (lo.min(self.n - 1), hi)
     }
 
-    /// Whether any cell meeting `region` is occupied.
-    pub fn region(&self, region: &Aabb) -> bool {
-        let r = [0, 1, 2].map(|a| self.range(region.min[a], region.max[a]));
+    /// Whether any cell meeting the contracted box `c` is occupied.
+    fn contracted_region(&self, c: &Aabb) -> bool {
+        let r = [0, 1, 2].map(|a| self.range(c.min[a], c.max[a]));
         self.count([r[0].0, r[1].0, r[2].0], [r[0].1, r[1].1, r[2].1]) > 0
     }
 
-    /// Whether the cell of `p` is occupied.
+    /// Whether any cell meeting the contracted image of the field-space box `region` is
+    /// occupied: the cells of its contracted box (see [`contract_box`]) that lie outside the
+    /// cube its image cannot enter, as up to six boxes (one per face of that cube).
+    pub fn region(&self, region: &Aabb) -> bool {
+        let (c, inner) = contract_box(region);
+        if inner <= 0.0 {
+            return self.contracted_region(&c);
+        }
+        (0..3).any(|a| {
+            let (mut above, mut below) = (c, c);
+            above.min[a] = above.min[a].max(inner);
+            below.max[a] = below.max[a].min(-inner);
+            [above, below]
+                .iter()
+                .any(|b| !b.is_empty() && self.contracted_region(b))
+        })
+    }
+
+    /// Whether the cell of the field point `p` is occupied.
     pub fn point(&self, p: Vec3) -> bool {
-        self.region(&Aabb::new(p, p))
+        let c = contract(p);
+        self.contracted_region(&Aabb::new(c, c))
     }
 
     /// Occupied cells over all cells.
@@ -168,12 +262,23 @@ impl OccupancyGrid {
     }
 }
 
-/// Samples `density` and applies the rule of the module docs: the occupied cells (`n³`).
+/// Samples `density` (at contracted points) and applies the rule of the module docs: the
+/// occupied cells (`n³`).
 fn compute_cells(s: &GridSettings, density: impl Fn(&[Vec3], &mut [f32]) + Sync) -> Vec<bool> {
     let n = s.n;
-    let cell = 2.0 * s.half_extent / n as f32;
-    let threshold = s.opacity / (cell * 3f32.sqrt());
-    let at = |i: f32| -s.half_extent + i * cell;
+    let cell = 2.0 * CONTRACTED / n as f32;
+    let at = |i: f32| -CONTRACTED + i * cell;
+    // A cell's field-space diagonal at its outer edge: by its contracted radius there.
+    let threshold = |x: usize, y: usize, z: usize| {
+        let edge = |i: usize| at(i as f32).abs().max(at(i as f32 + 1.0).abs());
+        let outer = edge(x).max(edge(y)).max(edge(z));
+        let r = if outer < 2.0 {
+            (1.0 / (2.0 - outer)).min(s.far)
+        } else {
+            s.far
+        };
+        s.opacity / (cell * 3f32.sqrt() * r.max(1.0).powi(2))
+    };
     // Per z-slab of cells: the max density over its corners and centres.
     let slabs: Vec<Vec<f32>> = (0..n)
         .into_par_iter()
@@ -208,7 +313,12 @@ fn compute_cells(s: &GridSettings, density: impl Fn(&[Vec3], &mut [f32]) + Sync)
                 .collect()
         })
         .collect();
-    let hot: Vec<bool> = slabs.concat().iter().map(|&s| s >= threshold).collect();
+    let hot: Vec<bool> = slabs
+        .concat()
+        .iter()
+        .enumerate()
+        .map(|(i, &m)| m >= threshold(i % n, i / n % n, i / (n * n)))
+        .collect();
     let mut cells = vec![false; n * n * n];
     for z in 0..n {
         for y in 0..n {
@@ -253,11 +363,12 @@ pub(super) fn cache_key(
     }
     let path = std::fs::canonicalize(checkpoint).unwrap_or_else(|_| PathBuf::from(checkpoint));
     Some(format!(
-        "grid n={} opacity={:08x} half_extent={:08x} dilation=1; checkpoint {} size={size} \
-         mtime={mtime} ends={:016x}; config size={config_size} mtime={config_mtime}",
+        "grid n={} opacity={:08x} contracted far={:08x} dilation=1; checkpoint {} \
+         size={size} mtime={mtime} ends={:016x}; config size={config_size} \
+         mtime={config_mtime}",
         settings.n,
         settings.opacity.to_bits(),
-        settings.half_extent.to_bits(),
+        settings.far.to_bits(),
         path.display(),
         fnv1a(&ends),
     ))
@@ -321,17 +432,54 @@ fn decode(bytes: &[u8], key: &str, n: usize) -> Option<Vec<bool>> {
     )
 }
 
+/// Where a run's grid may be cached, in order: next to the run, then in the per-user cache
+/// directory (`$XDG_CACHE_HOME/nerfx` when that is an absolute path, else
+/// `$HOME/.cache/nerfx`) under a name from the run's path.
+pub(super) fn cache_paths(run: &Path) -> Vec<PathBuf> {
+    let mut paths = vec![run.join(CACHE_FILE)];
+    let absolute = |v: std::ffi::OsString| Some(PathBuf::from(v)).filter(|p| p.is_absolute());
+    let user = std::env::var_os("XDG_CACHE_HOME")
+        .and_then(absolute)
+        .or_else(|| {
+            std::env::var_os("HOME")
+                .and_then(absolute)
+                .map(|h| h.join(".cache"))
+        });
+    if let Some(dir) = user {
+        let run = std::fs::canonicalize(run).unwrap_or_else(|_| run.to_path_buf());
+        let name = format!(
+            "occupancy-{:016x}.bin",
+            fnv1a(run.as_os_str().as_encoded_bytes())
+        );
+        paths.push(dir.join("nerfx").join(name));
+    }
+    paths
+}
+
 fn read_cache(path: &Path, key: &str, n: usize) -> Option<Vec<bool>> {
+    // A cache is a few tens of KiB: anything much larger is not one (and is not read).
+    let len = std::fs::metadata(path).ok()?.len();
+    if len > 1 << 20 {
+        return None;
+    }
     decode(&std::fs::read(path).ok()?, key, n)
 }
 
-/// Writes the cache through a temporary file and a rename; failures leave no cache.
-fn write_cache(path: &Path, key: &str, n: usize, cells: &[bool]) {
+/// Writes the cache (creating its directory) through a temporary file and a rename;
+/// whether it was written. Failures leave no file behind.
+fn write_cache(path: &Path, key: &str, n: usize, cells: &[bool]) -> bool {
+    if let Some(dir) = path.parent() {
+        if std::fs::create_dir_all(dir).is_err() {
+            return false;
+        }
+    }
     let tmp = path.with_extension(format!("tmp-{}", std::process::id()));
     if std::fs::write(&tmp, encode(key, n, cells)).is_err() || std::fs::rename(&tmp, path).is_err()
     {
         let _ = std::fs::remove_file(&tmp);
+        return false;
     }
+    true
 }
 
 #[cfg(test)]
@@ -341,7 +489,7 @@ mod tests {
     const SETTINGS: GridSettings = GridSettings {
         n: 8,
         opacity: 1e-3,
-        half_extent: 2.0,
+        far: 1000.0,
     };
 
     #[test]
@@ -349,19 +497,79 @@ mod tests {
         let n = 64;
         let settings = GridSettings { n, ..SETTINGS };
         let mut cells = vec![false; n * n * n];
-        // One occupied cell at (10, 20, 30): x ∈ [−2 + 10·h, −2 + 11·h], h = 4/64.
+        // One occupied cell at (10, 20, 30): contracted x ∈ [−2 + 10·h, −2 + 11·h], h = 4/64.
         cells[(30 * n + 20) * n + 10] = true;
         let g = OccupancyGrid::from_cells(&settings, &cells, Source::Computed);
         let h = 4.0 / n as f32;
         let centre = Vec3::new(-2.0 + 10.5 * h, -2.0 + 20.5 * h, -2.0 + 30.5 * h);
-        assert!(g.point(centre));
-        assert!(!g.point(centre + Vec3::new(h, 0.0, 0.0)));
-        assert!(g.region(&Aabb::new(
+        let at = |c: Vec3| g.contracted_region(&Aabb::new(c, c));
+        assert!(at(centre));
+        assert!(!at(centre + Vec3::new(h, 0.0, 0.0)));
+        assert!(g.contracted_region(&Aabb::new(
             centre - Vec3::splat(2.0 * h),
             centre - Vec3::splat(0.4 * h)
         )));
-        assert!(!g.region(&Aabb::new(Vec3::splat(-2.0), Vec3::splat(-1.0))));
+        assert!(!g.contracted_region(&Aabb::new(Vec3::splat(-2.0), Vec3::splat(-1.0))));
         assert!((g.fill_ratio() - 1.0 / (n * n * n) as f64).abs() < 1e-12);
+        // The same cell from field space: contracted x = −1.34 is field x = −1/(2 − 1.34)
+        // scaled along its ray; the centre's field point lies in it.
+        let m = centre.abs().max_element();
+        let field_point = centre / m / (2.0 - m);
+        assert!((contract(field_point) - centre).length() < 1e-5);
+        assert!(g.point(field_point));
+        let (p, q) = (field_point, field_point * 1.001);
+        assert!(g.region(&Aabb::new(p.min(q), p.max(q))));
+        // A cell near the centre is not reached from a box out beyond ‖x‖∞ = 2, whose
+        // plain interval bound of the contraction would reach down to it.
+        let mut cells = vec![false; n * n * n];
+        cells[(32 * n + 32) * n + 40] = true; // contracted x ∈ [0.5, 0.5625], y, z ∈ [0, h]
+        let g = OccupancyGrid::from_cells(&settings, &cells, Source::Computed);
+        assert!(g.point(Vec3::new(0.53, 0.01, 0.01)));
+        let far = Aabb::new(Vec3::new(2.0, -0.5, -0.1), Vec3::new(10.0, 1.5, 0.1));
+        assert!(contract_box(&far).0.contains(Vec3::new(0.53, 0.01, 0.01)));
+        assert!(!g.region(&far));
+        assert!(g.region(&Aabb::new(
+            Vec3::new(0.3, -0.5, -0.1),
+            Vec3::new(10.0, 1.5, 0.1)
+        )));
+    }
+
+    #[test]
+    fn contracted_boxes_hold_the_contracted_points() {
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for k in 0..2000 {
+            // Boxes from the unit cube out to 500 units, some straddling the axes.
+            let scale = [0.5, 3.0, 40.0, 500.0][k % 4];
+            let a = Vec3::new(next(), next(), next()) * 2.0 - Vec3::ONE;
+            let b = Vec3::new(next(), next(), next()) * 2.0 - Vec3::ONE;
+            let (lo, hi) = (a.min(b) * scale, a.max(b) * scale);
+            let (c, inner) = contract_box(&Aabb::new(lo, hi));
+            for _ in 0..8 {
+                let t = Vec3::new(next(), next(), next());
+                let p = lo + t * (hi - lo);
+                let q = contract(p);
+                assert!(
+                    c.contains(q) && q.abs().max_element() >= inner,
+                    "box {lo}..{hi}: contracted {q} of {p} outside {:?}..{:?} or within {inner}",
+                    c.min,
+                    c.max
+                );
+            }
+        }
+        // Contraction at the formula's landmarks.
+        assert_eq!(
+            contract(Vec3::new(0.5, -0.25, 0.0)),
+            Vec3::new(0.5, -0.25, 0.0)
+        );
+        assert!(
+            (contract(Vec3::new(4.0, 2.0, -1.0)) - Vec3::new(1.75, 0.875, -0.4375)).length() < 1e-6
+        );
     }
 
     #[test]
@@ -419,18 +627,55 @@ mod tests {
                 *s = if p.x < 0.0 { 1.0 } else { 0.0 };
             }
         };
-        let a = OccupancyGrid::load_or_build(&SETTINGS, &dir, Some("k1"), density);
-        assert_eq!(a.source(), Source::Computed);
+        let caches = [dir.join(CACHE_FILE)];
+        let a = OccupancyGrid::load_or_build(&SETTINGS, &caches, Some("k1"), density);
+        assert_eq!(a.source(), &Source::Computed);
         let computed = calls.load(std::sync::atomic::Ordering::Relaxed);
         assert!(computed > 0);
-        let b = OccupancyGrid::load_or_build(&SETTINGS, &dir, Some("k1"), density);
-        assert_eq!(b.source(), Source::Cached);
+        let b = OccupancyGrid::load_or_build(&SETTINGS, &caches, Some("k1"), density);
+        assert_eq!(b.source(), &Source::Cached(caches[0].clone()));
         assert_eq!(calls.load(std::sync::atomic::Ordering::Relaxed), computed);
         assert_eq!(a.sums, b.sums);
         // Another key: recomputed (and the cache rewritten for it).
-        let c = OccupancyGrid::load_or_build(&SETTINGS, &dir, Some("k2"), density);
-        assert_eq!(c.source(), Source::Computed);
+        let c = OccupancyGrid::load_or_build(&SETTINGS, &caches, Some("k2"), density);
+        assert_eq!(c.source(), &Source::Computed);
         assert_eq!(a.sums, c.sums);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_cache_that_cannot_be_written_falls_back_and_garbage_is_ignored() {
+        let dir = std::env::temp_dir().join(format!("nerfx-occ-fallback-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        // The first place is taken by a directory: the grid goes to the second, whose
+        // folder is created.
+        let caches = [
+            dir.join("run").join(CACHE_FILE),
+            dir.join("user/nerfx/x.bin"),
+        ];
+        std::fs::create_dir_all(&caches[0]).unwrap();
+        let density = |pts: &[Vec3], sigma: &mut [f32]| {
+            for (p, s) in pts.iter().zip(sigma.iter_mut()) {
+                *s = if p.y > 0.5 { 1.0 } else { 0.0 };
+            }
+        };
+        let a = OccupancyGrid::load_or_build(&SETTINGS, &caches, Some("k"), density);
+        assert_eq!(a.source(), &Source::Computed);
+        assert!(caches[1].is_file());
+        let b = OccupancyGrid::load_or_build(&SETTINGS, &caches, Some("k"), density);
+        assert_eq!(b.source(), &Source::Cached(caches[1].clone()));
+        assert_eq!(a.sums, b.sums);
+        // Garbage in the first place (now a file) is passed over for the second.
+        std::fs::remove_dir(&caches[0]).unwrap();
+        std::fs::write(&caches[0], b"NERFXOCC garbage, not a grid").unwrap();
+        let c = OccupancyGrid::load_or_build(&SETTINGS, &caches, Some("k"), density);
+        assert_eq!(c.source(), &Source::Cached(caches[1].clone()));
+        // With nowhere to write, the grid is computed and kept in memory only.
+        let nowhere = [dir.join("run").join(CACHE_FILE).join("below-a-file.bin")];
+        let d = OccupancyGrid::load_or_build(&SETTINGS, &nowhere, Some("k"), density);
+        assert_eq!(d.source(), &Source::Computed);
+        assert_eq!(a.sums, d.sums);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -1,6 +1,7 @@
 """Compares nerfx's render of a nerfacto run with nerfstudio's, and both with the truth.
 
     python compare.py FIXTURE [--nerfx target/release/nerfx] [--quality final]
+                              [--sampler proposal|occupancy]
 
 FIXTURE is tests/data/nerfstudio/: run/, camera_path.json, truth_shot.json, scene.json (the
 analytic scene the run was trained on, in the dataset's frame) and render/ (render.py's
@@ -60,14 +61,17 @@ def main():
     ap.add_argument("fixture", type=Path)
     ap.add_argument("--nerfx", default="target/release/nerfx")
     ap.add_argument("--quality", default="final", help="nerfx's preset for the run")
+    ap.add_argument("--sampler", default="proposal", choices=["proposal", "occupancy"],
+                    help="how nerfx samples the run: nerfacto's proposal networks, or its own "
+                    "occupancy marcher")
     args = ap.parse_args()
     fx = args.fixture
     scale = json.loads((fx / "run" / "dataparser_transforms.json").read_text())["scale"]
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         shutil.copytree(fx / "run", tmp / "run")
-        scene = {"instances": [{"name": "run", "field": {"nerfacto": {"path": "run"}},
-                                "object": "NeRF"}]}
+        field = {"nerfacto": {"path": "run", "sampler": args.sampler}}
+        scene = {"instances": [{"name": "run", "field": field, "object": "NeRF"}]}
         (tmp / "scene.json").write_text(json.dumps(scene))
         (tmp / "nerfx").mkdir()
         (tmp / "truth").mkdir()

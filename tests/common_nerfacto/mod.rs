@@ -54,7 +54,7 @@ pub struct Spec {
     /// over the output row's weights), shifting their density.
     pub proposal_offset: f32,
     pub density: Density,
-    /// `far_plane` written into `config.yml` (nerfacto's default, 1000, when absent).
+    /// `far_plane` written into `config.yml` (`None`: nerfacto's default, 1000).
     pub far_plane: Option<f32>,
 }
 
@@ -649,7 +649,7 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
     log2_hashmap_size: {}
     max_res: 2048
     num_levels: {LEVELS}
-    far_plane: 1000.0
+    far_plane: {far:?}
     near_plane: 0.05
     num_nerf_samples_per_ray: 48
     num_proposal_iterations: 2
@@ -670,12 +670,11 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
       use_linear: false
     use_average_appearance_embedding: true
     use_same_proposal_network: false
-{}",
+",
         s.average_init_density,
         if s.torch { "torch" } else { "tcnn" },
         s.log2_table_size,
-        s.far_plane
-            .map_or(String::new(), |far| format!("    far_plane: {far:?}\n")),
+        far = s.far_plane.unwrap_or(1000.0),
         p_log2 = s.proposal.map_or(17, |p| p.0),
         p0 = s.proposal.map_or(128, |p| p.1[0]),
         p1 = s.proposal.map_or(256, |p| p.1[1]),

@@ -106,8 +106,12 @@ impl TorchHashGrid {
 /// A torch MLP: `nn.Linear` layers with biases, ReLU between them.
 #[derive(Clone, Debug)]
 pub(crate) struct BiasedMlp {
-    /// Per layer: `(n_in, n_out, W [out][in], b [out])`.
+    /// Per layer: `(n_in, n_out, Wᵀ [in][out], b [out])`. The weights are kept transposed so
+    /// that a layer adds each input times its row of weights to all outputs at once (a loop
+    /// over contiguous outputs that vectorises).
     layers: Vec<(usize, usize, Vec<f32>, Vec<f32>)>,
+    /// The widest layer's outputs.
+    widest: usize,
 }
 
 impl BiasedMlp {
@@ -121,10 +125,20 @@ impl BiasedMlp {
             if n_out == 0 || w.len() != n_in * n_out {
                 return None;
             }
-            out.push((n_in, n_out, w, b));
+            let mut w_t = vec![0.0; w.len()];
+            for (o, row) in w.chunks_exact(n_in).enumerate() {
+                for (i, &v) in row.iter().enumerate() {
+                    w_t[i * n_out + o] = v;
+                }
+            }
+            out.push((n_in, n_out, w_t, b));
             n_in = n_out;
         }
-        (!out.is_empty()).then_some(BiasedMlp { layers: out })
+        let widest = out.iter().map(|l| l.1).max()?;
+        Some(BiasedMlp {
+            layers: out,
+            widest,
+        })
     }
 
     /// Inputs of the first layer.
@@ -147,31 +161,30 @@ impl BiasedMlp {
         self.layers.len()
     }
 
-    /// `y = MLP(x)` for one input; `scratch` holds the hidden activations.
+    /// `y = MLP(x)` for one input; `scratch` holds the hidden activations (no allocation
+    /// once it has grown).
     pub(crate) fn forward(&self, x: &[f32], y: &mut [f32], scratch: &mut Vec<f32>) {
-        scratch.clear();
-        scratch.extend_from_slice(x);
+        let width = self.widest.max(x.len());
+        scratch.resize(2 * width, 0.0);
+        let (mut cur, mut next) = scratch.split_at_mut(width);
+        cur[..x.len()].copy_from_slice(x);
         let last = self.layers.len() - 1;
-        let mut next = Vec::new();
-        for (k, (n_in, n_out, w, b)) in self.layers.iter().enumerate() {
-            next.clear();
-            next.extend((0..*n_out).map(|o| {
-                let row = &w[o * n_in..(o + 1) * n_in];
-                let s = row
-                    .iter()
-                    .zip(scratch.iter())
-                    .map(|(a, b)| a * b)
-                    .sum::<f32>()
-                    + b[o];
-                if k < last {
-                    s.max(0.0)
-                } else {
-                    s
+        for (k, (n_in, n_out, w_t, b)) in self.layers.iter().enumerate() {
+            let out = &mut next[..*n_out];
+            out.copy_from_slice(b);
+            for (&xi, row) in cur[..*n_in].iter().zip(w_t.chunks_exact(*n_out)) {
+                for (o, &w) in out.iter_mut().zip(row) {
+                    *o += xi * w;
                 }
-            }));
-            std::mem::swap(scratch, &mut next);
+            }
+            if k < last {
+                for o in out.iter_mut() {
+                    *o = o.max(0.0);
+                }
+            }
+            std::mem::swap(&mut cur, &mut next);
         }
-        y.copy_from_slice(&scratch[..y.len()]);
+        y.copy_from_slice(&cur[..y.len()]);
     }
 }
 

@@ -74,12 +74,16 @@ impl TorchHashGrid {
     /// Encodes `x` (unit cube) into `out` (`L·F` values).
     pub(crate) fn encode(&self, x: Vec3, out: &mut [f32]) {
         let nf = self.n_features;
+        // Rows per level are a power of two: the hash's modulo is a mask.
+        let mask = self.table_size - 1;
         for (l, (&s, dst)) in self.scales.iter().zip(out.chunks_exact_mut(nf)).enumerate() {
             let p = x.to_array().map(|v| v * s);
-            let f = p.map(f32::floor);
-            let w = [0, 1, 2].map(|a| p[a] - f[a]);
-            let lo = f.map(|v| v as i32 as u32);
-            let hi = p.map(|v| v.ceil() as i32 as u32);
+            // `p ≥ 0` in the unit cube: truncation is the floor, and the upper corner is the
+            // ceiling (the same corner as the lower one where `p` is a whole number), without
+            // libm's floor and ceil calls on CPUs the build does not assume SSE4.1 of.
+            let lo = p.map(|v| v as u32);
+            let w = [0, 1, 2].map(|a| p[a] - lo[a] as f32);
+            let hi = [0, 1, 2].map(|a| lo[a] + u32::from(w[a] > 0.0));
             dst.fill(0.0);
             for corner in 0..8u32 {
                 let mut weight = 1.0f32;
@@ -94,7 +98,7 @@ impl TorchHashGrid {
                     }
                 }
                 let h = k[0] ^ k[1].wrapping_mul(2_654_435_761) ^ k[2].wrapping_mul(805_459_861);
-                let row = (h % self.table_size) as usize + l * self.table_size as usize;
+                let row = (h & mask) as usize + l * self.table_size as usize;
                 for (d, v) in dst.iter_mut().zip(&self.table[row * nf..(row + 1) * nf]) {
                     *d += weight * v;
                 }

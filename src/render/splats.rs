@@ -51,9 +51,7 @@ impl Splatting {
     ) {
         match self {
             Splatting::Tiles(layer) => {
-                z_per_t.clear();
-                z_per_t.extend(rays.iter().map(|r| r.map_or(f64::NAN, |r| r.z_per_t)));
-                layer.fill(window, z_per_t, sink);
+                layer.fill(window, z_per_t_of(rays, z_per_t), sink);
             }
             Splatting::Rays(layer) => {
                 for (i, ray) in rays.iter().enumerate() {
@@ -85,11 +83,16 @@ impl Splatting {
         let Splatting::Tiles(layer) = self else {
             return None;
         };
-        z_per_t.clear();
-        z_per_t.extend(rays.iter().map(|r| r.map_or(f64::NAN, |r| r.z_per_t)));
         out.resize(rays.len(), SplatPixel::default());
-        Some(layer.composite(window, z_per_t, out))
+        Some(layer.composite(window, z_per_t_of(rays, z_per_t), out))
     }
+}
+
+/// Each ray's camera z per unit distance (NaN for a pixel without a ray), into `out`.
+fn z_per_t_of<'a>(rays: &[Option<Ray>], out: &'a mut Vec<f64>) -> &'a [f64] {
+    out.clear();
+    out.extend(rays.iter().map(|r| r.map_or(f64::NAN, |r| r.z_per_t)));
+    out
 }
 
 /// The splats of `scene` seen by `camera` over `window`, or `None` when the scene holds

@@ -20,8 +20,8 @@ use glam::Vec3;
 use super::config::ProposalNetSettings;
 use super::torch::{BiasedMlp, TorchHashGrid};
 use super::{
-    read_linear_layers, read_params, read_weights, tcnn_grid, tcnn_grid_config, Keys,
-    NerfactoField, MAX_LOG_DENSITY,
+    read_linear_layers, read_params, read_torch_grid, read_weights, tcnn_grid, tcnn_grid_config,
+    Keys, NerfactoField, MAX_LOG_DENSITY,
 };
 use crate::error::Result;
 use crate::field::container::Checkpoint;
@@ -97,23 +97,15 @@ impl DensityField {
             let grid = tcnn_grid(ckpt, &keys, &name, config, params)?;
             (Grid::Tcnn(grid), config.n_outputs(), n)
         } else if let Some(name) = keys.first(&["mlp_base.0.hash_table", "encoding.hash_table"]) {
-            let table = read_weights(ckpt, &name)?;
-            let n = table.len();
-            let grid = TorchHashGrid::new(
-                s.num_levels,
-                nf,
-                s.log2_hashmap_size,
-                s.base_res,
-                s.max_res,
-                table,
-            )
-            .ok_or_else(|| {
-                keys.err(
-                    &name,
-                    format!(
-                        "{n} values are not {} levels x 2^{} rows x {nf} features",
-                        s.num_levels, s.log2_hashmap_size
-                    ),
+            let shape = [s.num_levels, s.log2_hashmap_size];
+            let (grid, n) = read_torch_grid(ckpt, &keys, &name, shape, nf, |table| {
+                TorchHashGrid::new(
+                    s.num_levels,
+                    nf,
+                    s.log2_hashmap_size,
+                    s.base_res,
+                    s.max_res,
+                    table,
                 )
             })?;
             (Grid::Torch(grid), n_levels * nf, n)

@@ -749,6 +749,31 @@ fn tcnn_grid(
     .ok_or_else(|| keys.err(name, "hash grid parameters do not match the config"))
 }
 
+/// nerfstudio's torch hash grid of `levels` levels of `2^log2` rows of `nf` features from
+/// the table tensor `name`, built by `make`; refused naming the tensor and its shape when `make` finds the
+/// table the wrong size. Also gives the number of values read.
+fn read_torch_grid(
+    ckpt: &Checkpoint,
+    keys: &Keys,
+    name: &str,
+    [levels, log2]: [u32; 2],
+    nf: usize,
+    make: impl FnOnce(Vec<f32>) -> Option<TorchHashGrid>,
+) -> Result<(TorchHashGrid, usize)> {
+    let table = read_weights(ckpt, name)?;
+    let n = table.len();
+    let grid = make(table).ok_or_else(|| {
+        keys.err(
+            name,
+            format!(
+                "shape {:?} ({n} values) is not {levels} levels x 2^{log2} rows x {nf} features",
+                keys.shape(name)
+            ),
+        )
+    })?;
+    Ok((grid, n))
+}
+
 /// A flat parameter tensor of exactly `count` values.
 fn read_params(ckpt: &Checkpoint, keys: &Keys, name: &str, count: usize) -> Result<Vec<f32>> {
     let p = read_weights(ckpt, name)?;
@@ -784,25 +809,16 @@ fn read_torch(
         ));
     };
     let table_name = keys.name(table_name);
-    let table = read_weights(ckpt, &table_name)?;
     let nf = s.features_per_level as usize;
-    let grid = TorchHashGrid::new(
-        s.num_levels,
-        nf,
-        s.log2_hashmap_size,
-        s.base_res,
-        s.max_res,
-        table,
-    )
-    .ok_or_else(|| {
-        keys.err(
-            &table_name,
-            format!(
-                "shape {:?} is not [{} levels x 2^{}, {nf}]",
-                keys.shape(&table_name),
-                s.num_levels,
-                s.log2_hashmap_size
-            ),
+    let shape = [s.num_levels, s.log2_hashmap_size];
+    let (grid, _) = read_torch_grid(ckpt, keys, &table_name, shape, nf, |table| {
+        TorchHashGrid::new(
+            s.num_levels,
+            nf,
+            s.log2_hashmap_size,
+            s.base_res,
+            s.max_res,
+            table,
         )
     })?;
     let (density, nd) = read_linear_layers(ckpt, keys, mlp_prefix, grid.n_outputs())?;

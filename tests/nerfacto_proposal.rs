@@ -293,7 +293,7 @@ fn a_proposal_sampled_run_occludes_and_is_occluded_by_other_instances() {
 }
 
 #[test]
-fn the_occupancy_sampler_is_chosen_per_instance_and_runs_without_proposals_say_so() {
+fn the_occupancy_sampler_is_chosen_per_instance_and_runs_without_proposals_are_marched() {
     let dir = scratch("proposal-choice");
     write_run(&dir, &Spec::tcnn());
     let scene = placed(&dir, "occupancy").unwrap();
@@ -313,6 +313,24 @@ fn the_occupancy_sampler_is_chosen_per_instance_and_runs_without_proposals_say_s
         "{e}"
     );
     assert_eq!(placed(&dir, "occupancy").unwrap().instances.len(), 1);
+    // Without a sampler named, such a run is marched, from a scene file or on its own.
+    let scene_file = dir.join("bare.json");
+    std::fs::write(
+        &scene_file,
+        r#"{"instances": [{"name": "run", "field": {"nerfacto": {"path": "run"}}}]}"#,
+    )
+    .unwrap();
+    for desc in [
+        SceneDesc::read(&scene_file).unwrap(),
+        SceneDesc::for_path(&dir.join("run")).unwrap(),
+    ] {
+        let scene = desc
+            .load()
+            .unwrap()
+            .place(DMat4::IDENTITY, &|_| Ok(DMat4::IDENTITY))
+            .unwrap();
+        assert_eq!((scene.instances.len(), scene.proposal.len()), (1, 0));
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

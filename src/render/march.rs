@@ -807,8 +807,8 @@ fn composite_fragments(state: &mut RayState, t_end: f64, outputs: &Outputs) -> b
     true
 }
 
-/// Composites a volume fragment (a proposal sample): no floor, as nerfstudio composites
-/// every sample.
+/// Composites a fragment with no floor (a proposal sample: nerfstudio composites every
+/// sample; a splat fragment once it has passed the floor).
 #[inline]
 fn composite_volume_fragment(state: &mut RayState, f: Fragment, outputs: &Outputs) {
     let alpha = f64::from(f.alpha);
@@ -824,16 +824,10 @@ fn composite_volume_fragment(state: &mut RayState, f: Fragment, outputs: &Output
 /// bring the ray's transmittance to the splats' floor: the ray is done.
 #[inline]
 fn composite_fragment(state: &mut RayState, f: Fragment, outputs: &Outputs) -> bool {
-    let alpha = f64::from(f.alpha);
-    let t_enter = state.pieces.transmittance();
-    if t_enter * (1.0 - alpha) <= SPLAT_MIN_TRANSMITTANCE {
+    if state.pieces.transmittance() * (1.0 - f64::from(f.alpha)) <= SPLAT_MIN_TRANSMITTANCE {
         return false;
     }
-    let w = state.pieces.add_fragment(f.t, alpha);
-    state.rgb += Vec3::from_array(f.rgb).as_dvec3() * w;
-    if outputs.depth_median {
-        state.log.push([f.t, 0.0, -(-alpha).ln_1p(), t_enter]);
-    }
+    composite_volume_fragment(state, f, outputs);
     true
 }
 

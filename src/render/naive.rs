@@ -25,9 +25,11 @@ pub fn render_naive(
     if !(step > 0.0 && step.is_finite()) {
         return Err(Error::invalid("naive step", format!("{step} is not > 0")));
     }
-    if !scene.splats.is_empty() {
+    if !scene.splats.is_empty() || !scene.proposal.is_empty() {
         return Err(Error::Unsupported(
-            "the uniform-step baseline marches fields only; this scene holds splats".into(),
+            "the uniform-step baseline marches fields only; this scene holds splats or a \
+             nerfacto run sampled by its proposal networks"
+                .into(),
         ));
     }
     let window = camera.clamp_window(window)?;

@@ -15,7 +15,8 @@
 //! `object` is given, by that object's `matrix_world` in the shot, read per frame.
 //! A nerfacto instance is sampled by its own proposal networks (`"sampler": "proposal"`, the
 //! default: what nerfstudio shows) or marched by nerfx's occupancy estimator
-//! (`"occupancy"`). Field files named by a relative path are found next to the scene file (the path is made
+//! (`"occupancy"`, the default for a run whose checkpoint holds no proposal networks). Field
+//! files named by a relative path are found next to the scene file (the path is made
 //! absolute when the scene file is read).
 
 use std::path::{Path, PathBuf};
@@ -46,9 +47,10 @@ pub enum FieldSource {
     Nerfacto {
         /// The run directory (relative paths: from the scene file's folder).
         path: PathBuf,
-        /// Where the field is sampled along each ray.
+        /// Where the field is sampled along each ray; absent: by its proposal networks when
+        /// the checkpoint holds them, else by the occupancy marcher.
         #[serde(default)]
-        sampler: NerfactoSampler,
+        sampler: Option<NerfactoSampler>,
     },
     /// 3D Gaussian splats (an INRIA-layout `.ply`), in the frame of their file.
     Splats {
@@ -62,12 +64,12 @@ pub enum FieldSource {
 }
 
 /// How a nerfacto instance is sampled along each ray.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum NerfactoSampler {
     /// nerfacto's own proposal networks, as nerfstudio's viewer and `ns-render` sample it:
-    /// what the artist approved (the main field is trained only where they sample).
-    #[default]
+    /// what the artist approved (the main field is trained only where they sample). The
+    /// default for a run whose checkpoint holds them.
     Proposal,
     /// nerfx's occupancy marcher, jointly with the other instances (error-targeted
     /// quality presets; may show density nerfacto never learned to suppress).
@@ -145,7 +147,7 @@ impl SceneDesc {
         } else if path.is_dir() {
             FieldSource::Nerfacto {
                 path: file,
-                sampler: NerfactoSampler::default(),
+                sampler: None,
             }
         } else {
             match ext.as_deref() {
@@ -248,7 +250,12 @@ impl SceneDesc {
                     FieldSource::Ingp { path } => field(Arc::new(IngpField::load(path)?)),
                     FieldSource::Nerfacto { path, sampler } => {
                         let run = Arc::new(NerfactoField::load(path)?);
-                        match sampler {
+                        let by_default = if run.has_proposal_sampler() {
+                            NerfactoSampler::Proposal
+                        } else {
+                            NerfactoSampler::Occupancy
+                        };
+                        match sampler.unwrap_or(by_default) {
                             NerfactoSampler::Proposal => Contents::Proposal(run),
                             NerfactoSampler::Occupancy => field(run),
                         }

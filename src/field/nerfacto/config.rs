@@ -245,9 +245,6 @@ pub(crate) struct ProposalNetSettings {
 /// How nerfacto samples a ray at inference (`ProposalNetworkSampler`'s settings).
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct SamplerSettings {
-    /// Where sampling ends, in the normalised frame's units (`far_plane`; the near plane is
-    /// reset to 0 at inference).
-    pub far_plane: f32,
     /// Samples per ray of each proposal iteration (`num_proposal_samples_per_ray`).
     pub proposal_samples: Vec<usize>,
     /// Samples per ray of the main field (`num_nerf_samples_per_ray`).
@@ -312,10 +309,6 @@ impl SamplerSettings {
                 ))
             }
         };
-        let far_plane: f32 = parsed(text, "far_plane", 1000.0, file)?;
-        if !(far_plane.is_finite() && far_plane > 0.0) {
-            return Err(bad("far_plane", "must be a positive number".into()));
-        }
         let key = "pipeline.model.proposal_net_args_list";
         let args = scan_items(text, key, file)?.unwrap_or_else(|| {
             [128, 256]
@@ -344,7 +337,6 @@ impl SamplerSettings {
             .map(|i| net_settings(&args[i.min(args.len() - 1)], i, file))
             .collect::<Result<Vec<_>>>()?;
         Ok(SamplerSettings {
-            far_plane,
             proposal_samples: proposal_samples[..iterations].to_vec(),
             nerf_samples,
             same_network,
@@ -524,7 +516,6 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
             (s.proposal_samples.clone(), s.nerf_samples),
             (vec![128, 64], 32)
         );
-        assert_eq!(s.far_plane, 1000.0);
         assert!(!s.same_network && !s.uniform_initial);
         assert_eq!(s.nets.len(), 2);
         assert_eq!((s.nets[0].max_res, s.nets[0].log2_hashmap_size), (128, 17));

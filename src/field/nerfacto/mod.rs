@@ -262,7 +262,7 @@ impl NerfactoField {
                     } else {
                         "piecewise"
                     },
-                    ps.far_plane
+                    self.settings.far_plane
                 )
             }
             None => "none (no proposal networks in the checkpoint)".into(),
@@ -455,12 +455,9 @@ impl NerfactoField {
         });
     }
 
-    /// Where nerfacto's sampler stops, field units from the camera (`far_plane`; 1000 for a
-    /// run without proposal networks).
+    /// Where nerfacto's sampling stops, field units from the camera (`far_plane`).
     pub fn far_plane(&self) -> f32 {
-        self.proposal
-            .as_ref()
-            .map_or(1000.0, |p| p.settings().far_plane)
+        self.settings.far_plane
     }
 
     /// Whether the run holds nerfacto's proposal networks (so [`Self::sample_rays`] works).

@@ -97,17 +97,8 @@ impl DensityField {
             let grid = tcnn_grid(ckpt, &keys, &name, config, params)?;
             (Grid::Tcnn(grid), config.n_outputs(), n)
         } else if let Some(name) = keys.first(&["mlp_base.0.hash_table", "encoding.hash_table"]) {
-            let shape = [s.num_levels, s.log2_hashmap_size];
-            let (grid, n) = read_torch_grid(ckpt, &keys, &name, shape, nf, |table| {
-                TorchHashGrid::new(
-                    s.num_levels,
-                    nf,
-                    s.log2_hashmap_size,
-                    s.base_res,
-                    s.max_res,
-                    table,
-                )
-            })?;
+            let shape = [s.num_levels, s.log2_hashmap_size, s.base_res, s.max_res];
+            let (grid, n) = read_torch_grid(ckpt, &keys, &name, shape, nf)?;
             (Grid::Torch(grid), n_levels * nf, n)
         } else {
             return Err(keys.err(

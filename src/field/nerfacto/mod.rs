@@ -746,20 +746,19 @@ fn tcnn_grid(
     .ok_or_else(|| keys.err(name, "hash grid parameters do not match the config"))
 }
 
-/// nerfstudio's torch hash grid of `levels` levels of `2^log2` rows of `nf` features from
-/// the table tensor `name`, built by `make`; refused naming the tensor and its shape when `make` finds the
-/// table the wrong size. Also gives the number of values read.
+/// nerfstudio's torch hash grid from the table tensor `name`: `levels` levels of `2^log2`
+/// rows of `nf` features, resolutions `base_res` to `max_res`; refused naming the tensor and
+/// its shape when the table is the wrong size. Also gives the number of values read.
 fn read_torch_grid(
     ckpt: &Checkpoint,
     keys: &Keys,
     name: &str,
-    [levels, log2]: [u32; 2],
+    [levels, log2, base_res, max_res]: [u32; 4],
     nf: usize,
-    make: impl FnOnce(Vec<f32>) -> Option<TorchHashGrid>,
 ) -> Result<(TorchHashGrid, usize)> {
     let table = read_weights(ckpt, name)?;
     let n = table.len();
-    let grid = make(table).ok_or_else(|| {
+    let grid = TorchHashGrid::new(levels, nf, log2, base_res, max_res, table).ok_or_else(|| {
         keys.err(
             name,
             format!(
@@ -807,17 +806,8 @@ fn read_torch(
     };
     let table_name = keys.name(table_name);
     let nf = s.features_per_level as usize;
-    let shape = [s.num_levels, s.log2_hashmap_size];
-    let (grid, _) = read_torch_grid(ckpt, keys, &table_name, shape, nf, |table| {
-        TorchHashGrid::new(
-            s.num_levels,
-            nf,
-            s.log2_hashmap_size,
-            s.base_res,
-            s.max_res,
-            table,
-        )
-    })?;
+    let shape = [s.num_levels, s.log2_hashmap_size, s.base_res, s.max_res];
+    let (grid, _) = read_torch_grid(ckpt, keys, &table_name, shape, nf)?;
     let (density, nd) = read_linear_layers(ckpt, keys, mlp_prefix, grid.n_outputs())?;
     let n_base = density.n_outputs();
     if n_base < 2 {

@@ -86,31 +86,32 @@ trait Feature: Copy + Default + FeatureLoad {
     /// The `N ≤ 8` values of one entry, widened (exactly).
     fn widen<const N: usize>(e: &[Self; N]) -> [f32; N];
 
-    /// `out[f] = Σ_k w_k·e_k[f]` over the 8 corners (entries `ix` of `table`, `N` values
-    /// each), left to right from zero, each product rounded then added: the same bits
-    /// whichever way it runs. `AVX`: with one vector of features per corner, loaded and
-    /// (f16) widened by the F16C instructions straight from the table (only instantiated
-    /// from code compiled for, and run on, CPUs with AVX2 and F16C).
+    /// `out[f] = Σ_k w_k·e_k[f]` over the 8 corners of lane `p` of a block (entry
+    /// `ix[k·BLOCK + p]` of `table`, `N` values, weight `w[k·BLOCK + p]`), left to right from
+    /// zero, each product rounded then added: the same bits whichever way it runs. `AVX`:
+    /// with one vector of features per corner, loaded and (f16) widened by the F16C
+    /// instructions straight from the table (only instantiated from code compiled for, and
+    /// run on, CPUs with AVX2 and F16C).
     #[inline(always)]
     fn blend<const N: usize, const AVX: bool>(
         table: &[Self],
         ix: &[u32],
         w: &[f32],
+        p: usize,
         out: &mut [f32],
     ) {
         #[cfg(target_arch = "x86_64")]
         if AVX {
             // SAFETY: `AVX` is set only under `HashGrid::encode_avx2`, which runs where the
             // CPU has AVX2 and F16C.
-            return unsafe { simd::blend::<Self, N>(table, ix, w, out) };
+            return unsafe { simd::blend::<Self, N>(table, ix, w, p, out) };
         }
         let mut acc = [0.0f32; N];
-        for (&wc, &i) in w.iter().zip(ix) {
-            let e: &[Self; N] = table[i as usize * N..][..N]
-                .try_into()
-                .expect("a slice of N values");
+        for k in 0..8 {
+            let i = ix[k * BLOCK + p] as usize;
+            let e: &[Self; N] = table[i * N..][..N].try_into().expect("a slice of N values");
             for (a, f) in acc.iter_mut().zip(Self::widen::<N>(e)) {
-                *a += wc * f;
+                *a += w[k * BLOCK + p] * f;
             }
         }
         out[..N].copy_from_slice(&acc);
@@ -260,28 +261,28 @@ impl HashGrid {
 
     /// Picks the table type and the feature count once for the batch.
     #[inline(always)]
-    fn encode_by_shape<const F16C: bool>(&self, xs: &[Vec3], out: &mut [f32]) {
+    fn encode_by_shape<const AVX: bool>(&self, xs: &[Vec3], out: &mut [f32]) {
         match (&self.tables, self.config.n_features) {
-            (Tables::F16(t), 1) => self.encode_with::<f16, 1, F16C>(t, xs, out),
-            (Tables::F16(t), 2) => self.encode_with::<f16, 2, F16C>(t, xs, out),
-            (Tables::F16(t), 4) => self.encode_with::<f16, 4, F16C>(t, xs, out),
-            (Tables::F16(t), _) => self.encode_with::<f16, 8, F16C>(t, xs, out),
-            (Tables::F32(t), 1) => self.encode_with::<f32, 1, F16C>(t, xs, out),
-            (Tables::F32(t), 2) => self.encode_with::<f32, 2, F16C>(t, xs, out),
-            (Tables::F32(t), 4) => self.encode_with::<f32, 4, F16C>(t, xs, out),
-            (Tables::F32(t), _) => self.encode_with::<f32, 8, F16C>(t, xs, out),
+            (Tables::F16(t), 1) => self.encode_with::<f16, 1, AVX>(t, xs, out),
+            (Tables::F16(t), 2) => self.encode_with::<f16, 2, AVX>(t, xs, out),
+            (Tables::F16(t), 4) => self.encode_with::<f16, 4, AVX>(t, xs, out),
+            (Tables::F16(t), _) => self.encode_with::<f16, 8, AVX>(t, xs, out),
+            (Tables::F32(t), 1) => self.encode_with::<f32, 1, AVX>(t, xs, out),
+            (Tables::F32(t), 2) => self.encode_with::<f32, 2, AVX>(t, xs, out),
+            (Tables::F32(t), 4) => self.encode_with::<f32, 4, AVX>(t, xs, out),
+            (Tables::F32(t), _) => self.encode_with::<f32, 8, AVX>(t, xs, out),
         }
     }
 
     /// Level by level over the whole batch, in blocks of [`BLOCK`] points: a block's 8
-    /// corners' indices and weights, each entry prefetched as soon as its index is known
-    /// (x86-64) so the cache misses overlap, [`AHEAD`] blocks before that block's blend of
-    /// the 8 entries, corner after corner (the same sums as one point at a time:
-    /// `f = Σ_k w_k·e_k` left to right, each product rounded). Prefetching a whole level of
-    /// the batch first (4096 lines for 512 points) overflowed the 32 KiB first-level cache
-    /// before the blend came to them.
+    /// corners' indices and weights (eight points at once, in vectors, where the CPU has
+    /// AVX2), each entry prefetched as soon as its index is known (x86-64) so the cache
+    /// misses overlap, [`AHEAD`] blocks before that block's blend of the 8 entries, corner
+    /// after corner (the same sums as one point at a time: `f = Σ_k w_k·e_k` left to right,
+    /// each product rounded). Prefetching a whole level of the batch first (4096 lines for
+    /// 512 points) overflowed the 32 KiB first-level cache before the blend came to them.
     #[inline(always)]
-    fn encode_with<T: Feature, const NF: usize, const F16C: bool>(
+    fn encode_with<T: Feature, const NF: usize, const AVX: bool>(
         &self,
         table: &[T],
         xs: &[Vec3],
@@ -290,39 +291,43 @@ impl HashGrid {
         let width = self.config.n_outputs();
         debug_assert_eq!(out.len(), xs.len() * width);
         let n = xs.len();
-        let mut index = vec![0u32; n * 8];
-        let mut weight = vec![0.0f32; n * 8];
         let blocks = n.div_ceil(BLOCK);
+        // The coordinates axis by axis, padded to whole blocks with points that are located
+        // but never blended.
+        let mut axes = vec![0.0f32; 3 * blocks * BLOCK];
+        let (ax, ayz) = axes.split_at_mut(blocks * BLOCK);
+        let (ay, az) = ayz.split_at_mut(blocks * BLOCK);
+        for (i, x) in xs.iter().enumerate() {
+            (ax[i], ay[i], az[i]) = (x.x, x.y, x.z);
+        }
+        // Per block, corner-major: corner `k` of lane `p` at `k·BLOCK + p`.
+        let mut index = vec![0u32; blocks * CORNERS];
+        let mut weight = vec![0.0f32; blocks * CORNERS];
         for (l, level) in self.levels.iter().enumerate() {
             let t = &table[level.offset * NF..(level.offset + level.entries as usize) * NF];
             // Block `b`'s corners (and prefetches) are laid `AHEAD` blocks before its blend.
             for b in 0..blocks + AHEAD {
                 if b < blocks {
-                    let r = b * BLOCK..(n.min((b + 1) * BLOCK));
-                    let corners = index[r.start * 8..r.end * 8]
-                        .chunks_exact_mut(8)
-                        .zip(weight[r.start * 8..r.end * 8].chunks_exact_mut(8));
-                    if level.dense {
-                        for (x, (ix, wx)) in xs[r.clone()].iter().zip(corners) {
-                            level.corners::<true>(*x, ix, wx);
-                            prefetch(t, NF, ix);
-                        }
-                    } else {
-                        for (x, (ix, wx)) in xs[r.clone()].iter().zip(corners) {
-                            level.corners::<false>(*x, ix, wx);
-                            prefetch(t, NF, ix);
-                        }
+                    let lanes = b * BLOCK..(b + 1) * BLOCK;
+                    let coords = [&ax[lanes.clone()], &ay[lanes.clone()], &az[lanes]];
+                    let ix = &mut index[b * CORNERS..(b + 1) * CORNERS];
+                    let wx = &mut weight[b * CORNERS..(b + 1) * CORNERS];
+                    level.block_corners::<AVX>(coords, ix, wx);
+                    let m = n.min((b + 1) * BLOCK) - b * BLOCK;
+                    for corner in ix.chunks_exact(BLOCK) {
+                        prefetch(t, NF, &corner[..m]);
                     }
                 }
                 if b >= AHEAD {
                     let a = b - AHEAD;
                     let r = a * BLOCK..(n.min((a + 1) * BLOCK));
-                    for ((row, w), ix) in out[r.start * width..r.end * width]
+                    let ix = &index[a * CORNERS..(a + 1) * CORNERS];
+                    let wx = &weight[a * CORNERS..(a + 1) * CORNERS];
+                    for (p, row) in out[r.start * width..r.end * width]
                         .chunks_exact_mut(width)
-                        .zip(weight[r.start * 8..r.end * 8].chunks_exact(8))
-                        .zip(index[r.start * 8..r.end * 8].chunks_exact(8))
+                        .enumerate()
                     {
-                        T::blend::<NF, F16C>(t, ix, w, &mut row[l * NF..(l + 1) * NF]);
+                        T::blend::<NF, AVX>(t, ix, wx, p, &mut row[l * NF..(l + 1) * NF]);
                     }
                 }
             }
@@ -330,8 +335,10 @@ impl HashGrid {
     }
 }
 
-/// Points whose corners are located (and their entries prefetched) together.
+/// Points whose corners are located (and their entries prefetched) together: one vector.
 const BLOCK: usize = 8;
+/// Corners of a block.
+const CORNERS: usize = 8 * BLOCK;
 /// How many blocks ahead of the blend the corners are located: far enough for the entries
 /// to arrive, near enough for them to still be in the first-level cache.
 const AHEAD: usize = 4;
@@ -406,28 +413,68 @@ impl Level {
         }
     }
 
-    /// The table entries (`index`) and trilinear weights (`weight`) of the 8 corners of
-    /// `x`'s cell (`DENSE`: this level is dense); corner `k` adds bit `a` of `k` along axis
-    /// `a`, its weight is the product over the axes of `w` or `1 − w` (in axis order). The
-    /// index is a sum (dense: `k.x + k.y·r + k.z·r²`) or an exclusive or (hashed) of one
-    /// term per axis, each term computed once for both of the axis's grid coordinates.
+    /// The axis multipliers of the index terms: the grid's strides (dense) or the hash's
+    /// primes.
     #[inline(always)]
-    fn corners<const DENSE: bool>(&self, x: Vec3, index: &mut [u32], weight: &mut [f32]) {
-        let (c, w) = self.locate(x);
+    fn multipliers<const DENSE: bool>(&self) -> [u32; 3] {
         let r = self.resolution;
-        let mul = if DENSE {
+        if DENSE {
             [1, r, r.wrapping_mul(r)]
         } else {
             PRIMES
-        };
+        }
+    }
+
+    /// The table entries (`index`) and trilinear weights (`weight`) of the 8 corners of each
+    /// of a block's points (`coords`: x, y and z of its [`BLOCK`] lanes), corner-major (corner
+    /// `k` of lane `p` at `k·BLOCK + p`). `AVX`: all lanes at once in vectors, with the same
+    /// arithmetic in the same order (only from code compiled for, and run on, CPUs with
+    /// AVX2).
+    #[inline(always)]
+    fn block_corners<const AVX: bool>(
+        &self,
+        coords: [&[f32]; 3],
+        index: &mut [u32],
+        weight: &mut [f32],
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: `AVX` is set only under `HashGrid::encode_avx2`, which runs where the
+            // CPU has AVX2 and F16C.
+            unsafe {
+                if self.dense {
+                    simd::corners::<true>(self, coords, index, weight)
+                } else {
+                    simd::corners::<false>(self, coords, index, weight)
+                }
+            }
+            return;
+        }
+        for p in 0..BLOCK {
+            let x = Vec3::new(coords[0][p], coords[1][p], coords[2][p]);
+            if self.dense {
+                self.corners::<true>(x, p, index, weight);
+            } else {
+                self.corners::<false>(x, p, index, weight);
+            }
+        }
+    }
+
+    /// [`Self::block_corners`] for lane `p` alone (`DENSE`: this level is dense); corner `k`
+    /// adds bit `a` of `k` along axis `a`, its weight is the product over the axes of `w` or
+    /// `1 − w` (in axis order). The index is a sum (dense: `k.x + k.y·r + k.z·r²`) or an
+    /// exclusive or (hashed) of one term per axis, each term computed once for both of the
+    /// axis's grid coordinates.
+    #[inline(always)]
+    fn corners<const DENSE: bool>(&self, x: Vec3, p: usize, index: &mut [u32], weight: &mut [f32]) {
+        let (c, w) = self.locate(x);
+        let mul = self.multipliers::<DENSE>();
         let term: [[u32; 2]; 3] = [0, 1, 2].map(|a| {
-            [
-                c[a].wrapping_mul(mul[a]),
-                c[a].wrapping_add(1).wrapping_mul(mul[a]),
-            ]
+            let t = c[a].wrapping_mul(mul[a]);
+            [t, t.wrapping_add(mul[a])]
         });
         let wa: [[f32; 2]; 3] = [0, 1, 2].map(|a| [1.0 - w[a], w[a]]);
-        for (corner, (ix, wx)) in index.iter_mut().zip(weight.iter_mut()).enumerate() {
+        for corner in 0..8 {
             let b = [corner & 1, corner >> 1 & 1, corner >> 2 & 1];
             let i = if DENSE {
                 term[0][b[0]]
@@ -436,8 +483,8 @@ impl Level {
             } else {
                 term[0][b[0]] ^ term[1][b[1]] ^ term[2][b[2]]
             };
-            *ix = self.entry(i);
-            *wx = wa[0][b[0]] * wa[1][b[1]] * wa[2][b[2]];
+            index[corner * BLOCK + p] = self.entry(i);
+            weight[corner * BLOCK + p] = wa[0][b[0]] * wa[1][b[1]] * wa[2][b[2]];
         }
     }
 }
@@ -445,6 +492,7 @@ impl Level {
 /// The x86-64 kernels' pieces.
 #[cfg(target_arch = "x86_64")]
 mod simd {
+    use super::{Level, BLOCK};
     use half::f16;
     use std::arch::x86_64::*;
 
@@ -506,14 +554,15 @@ mod simd {
         table: &[T],
         ix: &[u32],
         w: &[f32],
+        p: usize,
         out: &mut [f32],
     ) {
         let mut acc = _mm256_setzero_ps();
-        for (&wc, &i) in w.iter().zip(ix) {
-            let e = &table[i as usize * N..][..N];
+        for k in 0..8 {
+            let e = &table[ix[k * BLOCK + p] as usize * N..][..N];
             // SAFETY: `e` holds `N` values.
             let v = unsafe { T::load::<N>(e.as_ptr()) };
-            acc = _mm256_add_ps(acc, _mm256_mul_ps(_mm256_set1_ps(wc), v));
+            acc = _mm256_add_ps(acc, _mm256_mul_ps(_mm256_set1_ps(w[k * BLOCK + p]), v));
         }
         let out = &mut out[..N];
         // SAFETY: each store writes exactly `N` floats of `out`.
@@ -526,6 +575,82 @@ mod simd {
                 ),
                 4 => _mm_storeu_ps(out.as_mut_ptr(), _mm256_castps256_ps128(acc)),
                 _ => _mm256_storeu_ps(out.as_mut_ptr(), acc),
+            }
+        }
+    }
+
+    /// [`Level::block_corners`] in vectors of the block's 8 lanes: `p = s·x + 0.5`, its
+    /// floor and fraction, the index terms and the weights, each operation the scalar code's
+    /// (products rounded, never fused; the cell converted by truncation, which is the
+    /// scalar conversion wherever `|p| < 2³¹`, i.e. for every point of the unit cube).
+    /// Entries of a level that is not a power of two in size are reduced lane by lane where
+    /// the index reaches past the table (outside the unit cube only).
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn corners<const DENSE: bool>(
+        level: &Level,
+        coords: [&[f32]; 3],
+        index: &mut [u32],
+        weight: &mut [f32],
+    ) {
+        let mul = level.multipliers::<DENSE>();
+        let (scale, half, one) = (
+            _mm256_set1_ps(level.scale),
+            _mm256_set1_ps(0.5),
+            _mm256_set1_ps(1.0),
+        );
+        let mut term = [[_mm256_setzero_si256(); 2]; 3];
+        let mut wa = [[_mm256_setzero_ps(); 2]; 3];
+        for a in 0..3 {
+            let x = &coords[a][..BLOCK];
+            // SAFETY: `x` holds a vector's 8 values.
+            let x = unsafe { _mm256_loadu_ps(x.as_ptr()) };
+            let p = _mm256_add_ps(_mm256_mul_ps(scale, x), half);
+            let c = _mm256_floor_ps(p);
+            let m = _mm256_set1_epi32(mul[a] as i32);
+            let t = _mm256_mullo_epi32(_mm256_cvttps_epi32(c), m);
+            term[a] = [t, _mm256_add_epi32(t, m)];
+            let w = _mm256_sub_ps(p, c);
+            wa[a] = [_mm256_sub_ps(one, w), w];
+        }
+        let pow2 = level.entries.is_power_of_two();
+        let mask = _mm256_set1_epi32(level.entries.wrapping_sub(1) as i32);
+        for k in 0..8 {
+            let b = [k & 1, k >> 1 & 1, k >> 2 & 1];
+            let i = if DENSE {
+                _mm256_add_epi32(
+                    _mm256_add_epi32(term[0][b[0]], term[1][b[1]]),
+                    term[2][b[2]],
+                )
+            } else {
+                _mm256_xor_si256(
+                    _mm256_xor_si256(term[0][b[0]], term[1][b[1]]),
+                    term[2][b[2]],
+                )
+            };
+            let w = _mm256_mul_ps(_mm256_mul_ps(wa[0][b[0]], wa[1][b[1]]), wa[2][b[2]]);
+            let (ix, wx) = (
+                &mut index[k * BLOCK..][..BLOCK],
+                &mut weight[k * BLOCK..][..BLOCK],
+            );
+            // SAFETY: `ix` and `wx` hold a vector's 8 values each.
+            unsafe {
+                if pow2 {
+                    _mm256_storeu_si256(ix.as_mut_ptr().cast(), _mm256_and_si256(i, mask));
+                } else {
+                    _mm256_storeu_si256(ix.as_mut_ptr().cast(), i);
+                    // Lanes past the table (unsigned `i > T − 1`) wrap; none inside the cube.
+                    let inside = _mm256_cmpeq_epi32(_mm256_max_epu32(i, mask), mask);
+                    if _mm256_movemask_epi8(inside) != -1 {
+                        for v in ix.iter_mut() {
+                            *v = level.entry(*v);
+                        }
+                    }
+                }
+                _mm256_storeu_ps(wx.as_mut_ptr(), w);
             }
         }
     }
@@ -657,6 +782,43 @@ mod tests {
                         assert!((a - b).abs() <= 1e-6 * (1.0 + b.abs()), "{a} vs {b}");
                     }
                 }
+            }
+        }
+    }
+
+    /// The vector kernels give the scalar code's bits, inside the unit cube and out of it
+    /// (where indices wrap), on dense levels whose size is not a power of two and on hashed
+    /// ones, for batches that do not fill their last block.
+    #[test]
+    fn vector_and_scalar_encodings_agree_bit_for_bit() {
+        for (nf, levels, log2t, base) in [(4, 6, 12, 5), (2, 8, 14, 16), (1, 3, 19, 7)] {
+            let c = HashGridConfig {
+                base_resolution: base,
+                ..config(levels, nf, log2t, 1.6)
+            };
+            let p = params(c.n_params(), 11);
+            let pts: Vec<Vec3> = (0..61)
+                .map(|i| {
+                    let t = i as f32 * 0.618_034;
+                    Vec3::new(
+                        t.fract() * 1.4 - 0.2,
+                        (t * 1.3).fract(),
+                        (t * 2.7).fract() - 0.5,
+                    )
+                })
+                .collect();
+            for storage in [TableStorage::F16, TableStorage::F32] {
+                let g = HashGrid::new(c, &p, storage).unwrap();
+                let w = c.n_outputs();
+                let (mut fast, mut plain) = (vec![0.0; pts.len() * w], vec![0.0; pts.len() * w]);
+                g.encode(&pts, &mut fast);
+                g.encode_by_shape::<false>(&pts, &mut plain);
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(
+                    bits(&fast),
+                    bits(&plain),
+                    "{nf}x{levels}, 2^{log2t}, {storage:?}"
+                );
             }
         }
     }

@@ -450,8 +450,9 @@ impl Level {
             }
             return;
         }
-        for p in 0..BLOCK {
-            let x = Vec3::new(coords[0][p], coords[1][p], coords[2][p]);
+        let lanes = coords[0].iter().zip(coords[1]).zip(coords[2]);
+        for (p, ((&x, &y), &z)) in lanes.take(BLOCK).enumerate() {
+            let x = Vec3::new(x, y, z);
             if self.dense {
                 self.corners::<true>(x, p, index, weight);
             } else {

@@ -118,7 +118,8 @@ def sh16(d):
 def occupancy(values, n_cascades):
     """Per cascade a boolean [z, y, x] grid; values are in Morton order (x lowest bit)."""
     n3 = GRID ** 3
-    thr = F32(min(0.01, float(np.mean(values[:n3].astype(np.float64)))))
+    # Unseen cells (negative) count as empty in the mean, as in instant-ngp.
+    thr = F32(min(0.01, float(np.mean(np.maximum(values[:n3].astype(np.float64), 0.0)))))
     r = np.arange(GRID)
     z, y, x = np.meshgrid(r, r, r, indexing="ij")
     morton = np.zeros_like(x)

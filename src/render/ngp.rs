@@ -12,7 +12,9 @@
 
 use super::RenderStats;
 use crate::camera::Ray;
-use crate::field::{linear_to_srgb, ColorSpace, Field, Fragment, NgpRay, NgpSample, NgpScratch};
+use crate::field::{
+    linear_to_srgb, ColorSpace, Field, Fragment, NgpRay, NgpSample, NgpScratch, NGP_MAX_STEPS,
+};
 use crate::scene::Scene;
 
 /// Per-thread buffers.
@@ -52,7 +54,7 @@ pub(super) fn fill(
         }
         let field = inst.field();
         let samples = &mut s.samples[..s.rays.len()];
-        let done = field.march_rays(&s.rays, samples, &mut s.marcher);
+        let done = field.march_rays(&s.rays, NGP_MAX_STEPS, samples, &mut s.marcher);
         stats.density_samples += done.samples;
         stats.color_samples += done.color_queries;
         let encode = space == ColorSpace::Srgb && field.color_space() == ColorSpace::Linear;

@@ -109,7 +109,7 @@ pub struct NgpStats {
     pub color_queries: u64,
     /// Rays that stopped at 99 % accumulation.
     pub opaque: u64,
-    /// Rays that reached the step cap ([`NGP_MAX_STEPS`]).
+    /// Rays that reached the step cap.
     pub capped: u64,
 }
 
@@ -275,25 +275,16 @@ impl IngpField {
         }
     }
 
-    /// Marches `rays` as instant-ngp's viewer does (see the module doc): `out[i]` (cleared)
+    /// Marches `rays` as instant-ngp's viewer does (see the module doc), each for at most
+    /// `max_steps` steps (the renderer passes [`NGP_MAX_STEPS`]): `out[i]` (cleared)
     /// receives ray `i`'s samples front to back. Field queries are batched across the rays,
     /// a round of steps at a time.
     pub fn march_rays(
         &self,
         rays: &[NgpRay],
+        max_steps: usize,
         out: &mut [Vec<NgpSample>],
         s: &mut NgpScratch,
-    ) -> NgpStats {
-        self.march_rays_capped(rays, out, s, NGP_MAX_STEPS)
-    }
-
-    /// [`Self::march_rays`] ending each ray after `cap` steps.
-    fn march_rays_capped(
-        &self,
-        rays: &[NgpRay],
-        out: &mut [Vec<NgpSample>],
-        s: &mut NgpScratch,
-        cap: usize,
     ) -> NgpStats {
         let stepping = Stepping::new(self.cone_angle());
         let scale = f64::from(self.scale);
@@ -326,7 +317,7 @@ impl IngpField {
             for &i in &s.live {
                 let r = &mut s.rays[i as usize];
                 for _ in 0..ROUND {
-                    if r.steps >= cap {
+                    if r.steps >= max_steps {
                         r.done = true;
                         stats.capped += 1;
                         break;

@@ -289,3 +289,227 @@ fn aabb_scale_4_with_cone_growth_and_three_cascades_renders_as_a_numpy_march() {
     assert!(outer > 0.1, "{outer} of the samples outside cascade 0");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn the_sampler_is_chosen_per_instance_and_refused_where_it_does_not_apply() {
+    let dir = scratch("ngp-option");
+    let balls = [Ball {
+        centre: [0.5, 0.5, 0.5],
+        radius: 0.3,
+    }];
+    let path = snapshot(&dir, &Spec::small_8x4(), &balls, 1.0);
+    let count = |s: &Scene| (s.instances.len(), s.ngp.len(), s.proposal.len());
+    assert_eq!(count(&placed(&dir, &path, Some("ngp")).unwrap()), (0, 1, 0));
+    assert_eq!(
+        count(&placed(&dir, &path, Some("occupancy")).unwrap()),
+        (1, 0, 0)
+    );
+    // The default: nerfx's marcher, from a scene file or the snapshot on its own.
+    assert_eq!(count(&placed(&dir, &path, None).unwrap()), (1, 0, 0));
+    let alone = SceneDesc::for_path(&path).unwrap().load().unwrap();
+    let alone = alone.place(DMat4::IDENTITY, &|_| Ok(DMat4::IDENTITY));
+    assert_eq!(count(&alone.unwrap()), (1, 0, 0));
+    // nerfacto's sampler on a snapshot, instant-ngp's on a nerfacto run, any on splats.
+    let e = placed(&dir, &path, Some("proposal"))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("instances[0] ('blob').field.ingp.sampler") && e.contains("\"ngp\""),
+        "{e}"
+    );
+    let refused = |json: &str| {
+        SceneDesc::from_json_str(json, &dir.join("scene.json"))
+            .err()
+            .unwrap()
+            .to_string()
+    };
+    let e = refused(
+        r#"{"instances": [{"name": "run", "field": {"nerfacto": {"path": "run",
+            "sampler": "ngp"}}}]}"#,
+    );
+    assert!(
+        e.contains("field.nerfacto.sampler") && e.contains("instant-ngp snapshots"),
+        "{e}"
+    );
+    let e = refused(
+        r#"{"instances": [{"name": "scan", "field": {"splats": {"path": "scan.ply",
+            "sampler": "ngp"}}}]}"#,
+    );
+    assert!(e.contains("sampler"), "{e}");
+    let e = refused(
+        r#"{"instances": [{"name": "blob", "field": {"ingp": {"path": "blob.ingp",
+            "sampler": "nearest"}}}]}"#,
+    );
+    assert!(e.contains("nearest") && e.contains("ngp"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// An opaque white slab `y ∈ [y0, y1]`, `|x|, |z| ≤ half`, as an analytic instance. (The
+/// marcher finds its face to a fraction of its base step, itself a fraction of the slab's
+/// size: samples of another instance closer to the face than that may composite on either
+/// side of it, so the slab is no larger than the view needs.)
+fn slab(y0: f32, y1: f32, half: f32) -> nerfx::scene::Instance {
+    use glam::Vec3;
+    use nerfx::field::{Analytic, Primitive, ShColor, Shape};
+    let field = Analytic {
+        primitives: vec![Primitive {
+            shape: Shape::Box {
+                min: Vec3::new(-half, y0, -half),
+                max: Vec3::new(half, y1, half),
+            },
+            density: 1e4,
+            color: ShColor::constant(Vec3::ONE),
+        }],
+    };
+    let handle = nerfx::scene::FieldHandle::analytic(field);
+    nerfx::scene::Instance::new("slab", handle, DMat4::IDENTITY, None).unwrap()
+}
+
+#[test]
+fn an_ngp_marched_snapshot_occludes_and_is_occluded_by_other_instances() {
+    let dir = scratch("ngp-joint");
+    let balls = [Ball {
+        centre: [0.5, 0.5, 0.5],
+        radius: 0.35,
+    }];
+    let path = snapshot(&dir, &Spec::small_8x4(), &balls, 1.2);
+    let (w, h) = (24u32, 16u32);
+    let camera = camera(w, h, 40.0, DVec3::new(0.5, -3.0, 1.0), DVec3::ZERO);
+    let mut settings = RenderSettings::new(Quality::Final.params(), Outputs::rgba());
+    settings.color = ColorOutput::AsTrained;
+    // The marcher's own bounded errors: the transmittance it stops at, and the weight whose
+    // colour it may leave unshaded.
+    let tolerance =
+        f64::from(settings.march.min_transmittance + settings.march.color_skip_budget) + 1e-5;
+    let alone = placed(&dir, &path, Some("ngp")).unwrap();
+    let nerf = render(&alone, &camera, camera.full_window(), &settings).unwrap();
+    let rays = march_rays(&alone, &camera);
+    let hit: Vec<NgpRay> = rays.iter().flatten().copied().collect();
+    let (samples, _) = samples_of(alone.ngp[0].field(), &hit, NGP_MAX_STEPS);
+    // An opaque white slab through the middle of the blob (y = 0 in the field's frame, the
+    // world's here): the blob shows only in front of it.
+    let mut front = alone.clone();
+    front.instances.push(slab(0.0, 0.1, 4.0));
+    let got = render(&front, &camera, camera.full_window(), &settings).unwrap();
+    // A slab far behind the blob: the blob over it.
+    let mut behind = alone.clone();
+    behind.instances.push(slab(30.0, 40.0, 40.0));
+    let over = render(&behind, &camera, camera.full_window(), &settings).unwrap();
+    let (mut seen, mut hidden, mut worst, mut at) = (0.0f64, 0.0f64, 0.0f64, 0);
+    let pixel = |planes: &nerfx::image::Planes, x: u32, y: u32| {
+        let rgb = planes.rgb.as_ref().unwrap();
+        [0, 1, 2].map(|c| f64::from(rgb[c].get(x, y)))
+    };
+    for (i, ray) in rays.iter().enumerate() {
+        let (x, y) = (i as u32 % w, i as u32 / w);
+        let fragments: &[NgpSample] = match ray {
+            Some(_) => {
+                at += 1;
+                &samples[at - 1]
+            }
+            None => &[],
+        };
+        let world = camera.ray(f64::from(x) + 0.5, f64::from(y) + 0.5).unwrap();
+        let entry = (0.0 - world.origin.y) / world.dir.y;
+        // By hand: the blob's samples (with the early stop folded in) before the slab, then
+        // the slab's white; and all of them alone.
+        let composite = |until: f64| {
+            let (mut rgb, mut t) = ([0.0f64; 3], 1.0f64);
+            for f in fragments.iter().filter(|f| f.t < until) {
+                let a = f64::from(f.alpha);
+                for (acc, v) in rgb.iter_mut().zip(f.rgb) {
+                    *acc += t * a * f64::from(v);
+                }
+                t *= 1.0 - a;
+            }
+            (rgb, t)
+        };
+        // The marcher places the slab's face to within a small fraction of its step; a
+        // sample closer to the face than `FACE` may composite on either side of it (or
+        // partly), so the front render must lie between the two cuts.
+        const FACE: f64 = 1e-3;
+        let (before, t) = composite(entry - FACE);
+        let (before_late, t_late) = composite(entry + FACE);
+        let (all, t_all) = composite(f64::INFINITY);
+        let a = f64::from(nerf.alpha.as_ref().unwrap().get(x, y));
+        seen += a;
+        hidden += t;
+        worst = worst.max((a - (1.0 - t_all)).abs());
+        assert!((f64::from(got.alpha.as_ref().unwrap().get(x, y)) - 1.0).abs() < tolerance);
+        assert!((f64::from(over.alpha.as_ref().unwrap().get(x, y)) - 1.0).abs() < tolerance);
+        for c in 0..3 {
+            let (lo, hi) = (before[c] + t, before_late[c] + t_late);
+            let front = pixel(&got, x, y)[c];
+            let e = [
+                (pixel(&nerf, x, y)[c] - all[c]).abs(),
+                (front - front.clamp(lo.min(hi), lo.max(hi))).abs(),
+                (pixel(&over, x, y)[c] - (all[c] + (1.0 - a))).abs(),
+            ];
+            worst = worst.max(e[0].max(e[1]).max(e[2]));
+        }
+    }
+    println!("joint renders within {worst:.1e} of the samples composited by hand");
+    assert!(worst < tolerance, "joint renders off by {worst}");
+    let pixels = f64::from(w * h);
+    assert!(
+        seen > 0.25 * pixels,
+        "the blob shows too little to test ({seen})"
+    );
+    assert!(
+        hidden > 0.25 * pixels,
+        "the slab hides too little to test ({hidden})"
+    );
+    assert!(
+        hidden < pixels - 0.1 * seen,
+        "the blob in front of the slab shows too little ({hidden})"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A fog filling the unit cube (every cell occupied, σ = 1 per instant-ngp unit): a ray
+/// along the cube's diagonal takes instant-ngp's 1024 finest steps (`NERF_STEPS` per √3) and
+/// never reaches 99 %; a cap below that ends it early, counted, as in NumPy.
+#[test]
+fn a_fog_takes_1024_steps_along_the_diagonal_and_a_lower_cap_is_counted() {
+    let dir = scratch("ngp-fog");
+    let spec = Spec {
+        aabb_scale: 1,
+        n_cascades: 1,
+        ..Spec::small_8x4()
+    };
+    let fog = [Ball {
+        centre: [0.5, 0.5, 0.5],
+        radius: 10.0,
+    }];
+    // Gain 0: the density network's σ output is exp(0) = 1.
+    let path = snapshot(&dir, &spec, &fog, 0.0);
+    let scene = placed(&dir, &path, Some("ngp")).unwrap();
+    // In the field's frame the cube is 0.5 ± 0.5 of instant-ngp's unit over s = 0.33, its
+    // diagonal still along (1, 1, 1).
+    let corner = DVec3::splat(-0.5 / 0.33);
+    let world = nerfx::camera::Ray {
+        origin: corner - DVec3::splat(1.0),
+        dir: DVec3::ONE.normalize(),
+        z_per_t: 1.0,
+        near: 0.0,
+        far: f64::INFINITY,
+    };
+    let (ray, k) = scene.ngp[0].march_ray(&world).unwrap();
+    assert!((k - 1.0).abs() < 1e-12);
+    let field = scene.ngp[0].field();
+    let (full, stats) = samples_of(field, &[ray], NGP_MAX_STEPS);
+    assert_eq!((stats.samples, stats.capped, stats.opaque), (1024, 0, 0));
+    assert_eq!(full[0].len(), 1024);
+    let alpha = |s: &[NgpSample]| 1.0 - s.iter().map(|f| 1.0 - f64::from(f.alpha)).product::<f64>();
+    // σ·√3 of optical depth.
+    assert!((alpha(&full[0]) - (1.0 - (-(3f64.sqrt())).exp())).abs() < 1e-3);
+    let (capped, stats) = samples_of(field, &[ray], 1000);
+    assert_eq!((stats.samples, stats.capped), (1000, 1));
+    assert_eq!(capped[0][..], full[0][..1000]);
+    if let Some(want) = numpy_march(&path, &[ray], 1000) {
+        assert_eq!(want[0][5], 1000.0);
+        assert!((alpha(&capped[0]) - want[0][3]).abs() < 1e-6, "{want:?}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -26,7 +26,10 @@
 //!   direction, the smallest), and jumps a whole number of steps in stepping space:
 //!   `t ← t(n + ⌈max(n(t + δ) − n, ½)⌉)` (`advance_to_next_voxel`), so samples stay on the
 //!   ray's grid of steps. The march ends when `t` reaches 16384 (`MAX_DEPTH`) or the point
-//!   leaves the render box.
+//!   leaves the render box. Those jumps reach the first step whose point is occupied (every
+//!   step they pass lies in an empty cell), so where the cascades' OR pyramid proves a long
+//!   stretch empty nerfx jumps straight to the first step past it: the same samples, in
+//!   fewer moves.
 //! - **Alpha.** `α = 1 − exp(−σ·dt)` with σ the density network's `exp` output per
 //!   instant-ngp unit and `dt` in instant-ngp units (the same optical depth as the field's
 //!   `σ_field·dt/s`), composited front to back: `w = α·T`, `T = 1 − Σw`. Colours composite
@@ -72,6 +75,8 @@ const COLOR_MIN_WEIGHT: f64 = 1e-6;
 const ROUND: usize = 16;
 /// Cells per axis of a cascade.
 const GRID: f64 = 128.0;
+/// The first stretch the empty-space skip tries, in cells of the coarsest empty cascade.
+const SKIP_CELLS: f64 = 8.0;
 
 /// A ray to march, in the field's frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -271,8 +276,37 @@ impl IngpField {
             while mip < max_mip && !self.cascades.march_occupied(q, mip + 1) {
                 mip += 1;
             }
-            t = stepping.past_cell(t, pos, r.dir, mip);
+            let cell = f64::from(1u32 << mip.min(31)) / GRID;
+            t = match self.empty_until(r, t, SKIP_CELLS * cell) {
+                // Every step point before `end` is empty: the first at or past it, as
+                // instant-ngp's jumps from empty cell to empty cell would reach.
+                Some(end) => {
+                    let (n, m) = (stepping.steps(t), stepping.steps(end));
+                    stepping.distance(n + (m - n).max(0.5).ceil())
+                }
+                None => stepping.past_cell(t, pos, r.dir, mip),
+            };
         }
+    }
+
+    /// Where a stretch of the ray from `t` that the occupancy pyramid proves empty ends,
+    /// trying `len` first and doubling while the next stretch is empty too; `None` when the
+    /// first is not. (A speed-up only: instant-ngp walks the same stretch one coarsest empty
+    /// cell at a time, and lands on the same step.)
+    fn empty_until(&self, r: &RayMarch, t: f64, mut len: f64) -> Option<f64> {
+        let mut end = t;
+        while end <= r.far {
+            let (a, b) = (r.origin + r.dir * end, r.origin + r.dir * (end + len));
+            if self
+                .cascades
+                .may_be_occupied(a.min(b).as_vec3(), a.max(b).as_vec3())
+            {
+                break;
+            }
+            end += len;
+            len *= 2.0;
+        }
+        (end > t).then_some(end)
     }
 
     /// Marches `rays` as instant-ngp's viewer does (see the module doc), each for at most

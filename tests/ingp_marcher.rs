@@ -123,9 +123,9 @@ fn samples_of(
     (out, stats)
 }
 
-/// Renders `snapshot` with the ngp sampler and checks it against the NumPy march; returns
-/// the fraction of composited samples outside cascade 0.
-fn check_against_numpy(name: &str, snapshot: &Path, camera: &Camera) -> f64 {
+/// Renders `snapshot` (written from `spec`) with the ngp sampler and checks it against the
+/// NumPy march; returns the fraction of composited samples outside cascade 0.
+fn check_against_numpy(name: &str, spec: &Spec, snapshot: &Path, camera: &Camera) -> f64 {
     let dir = snapshot.parent().unwrap();
     let scene = placed(dir, snapshot, Some("ngp")).unwrap();
     assert_eq!((scene.instances.len(), scene.ngp.len()), (0, 1));
@@ -136,12 +136,13 @@ fn check_against_numpy(name: &str, snapshot: &Path, camera: &Camera) -> f64 {
     let hit: Vec<NgpRay> = rays.iter().flatten().copied().collect();
     let field = scene.ngp[0].field();
     let (samples, stats) = samples_of(field, &hit, NGP_MAX_STEPS);
-    // Where the samples lie: instant-ngp coordinates from the snapshot's default transform.
+    // Where the samples lie, in instant-ngp coordinates.
     let (mut outer, mut all) = (0usize, 0usize);
+    let (scale, offset) = (f64::from(spec.scale), spec.offset.map(f64::from));
     for (r, s) in hit.iter().zip(&samples) {
         for f in s {
             let p = r.origin + r.dir * f.t;
-            let q = DVec3::new(p.y, p.z, p.x) * 0.33 + 0.5;
+            let q = DVec3::new(p.y, p.z, p.x) * scale + DVec3::new(offset[1], offset[2], offset[0]);
             outer += usize::from((q - 0.5).abs().max_element() >= 0.5);
             all += 1;
         }
@@ -249,7 +250,7 @@ fn aabb_scale_1_renders_as_a_numpy_march() {
     ];
     let path = snapshot(&dir, &spec, &balls, 1.6);
     let camera = camera(48, 36, 30.0, DVec3::new(2.0, -2.5, 0.9), DVec3::ZERO);
-    let outer = check_against_numpy("aabb_scale 1", &path, &camera);
+    let outer = check_against_numpy("aabb_scale 1", &spec, &path, &camera);
     assert_eq!(outer, 0.0);
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -285,7 +286,30 @@ fn aabb_scale_4_with_cone_growth_and_three_cascades_renders_as_a_numpy_march() {
         DVec3::new(7.0, -5.0, 1.0),
         DVec3::new(-0.1, 0.9, -1.3),
     );
-    let outer = check_against_numpy("aabb_scale 4", &path, &camera);
+    let outer = check_against_numpy("aabb_scale 4", &spec, &path, &camera);
+    assert!(outer > 0.1, "{outer} of the samples outside cascade 0");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The older layout: 16×2 levels, float parameters, CutlassMLP padding, an HDR (linear)
+/// snapshot, a dataset scale 0.5 and offset (0.4, 0.6, 0.45), `aabb_scale` 4.
+#[test]
+fn an_hdr_snapshot_with_its_own_dataset_transform_renders_as_a_numpy_march() {
+    let dir = scratch("ngp-numpy-hdr");
+    let spec = Spec::old_16x2();
+    let balls = [
+        Ball {
+            centre: [0.5, 0.5, 0.5],
+            radius: 0.3,
+        },
+        Ball {
+            centre: [0.5, 0.5, 1.3],
+            radius: 0.3,
+        },
+    ];
+    let path = snapshot(&dir, &spec, &balls, 1.4);
+    let camera = camera(48, 36, 40.0, DVec3::new(2.5, -3.0, 1.5), DVec3::ZERO);
+    let outer = check_against_numpy("HDR", &spec, &path, &camera);
     assert!(outer > 0.1, "{outer} of the samples outside cascade 0");
     let _ = std::fs::remove_dir_all(&dir);
 }

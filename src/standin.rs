@@ -13,7 +13,7 @@ use glam::{DMat4, Vec3};
 
 use crate::error::{Error, Result};
 use crate::field::{Aabb, ColorSpace, Field, SplatColor, Splats};
-use crate::scene::{Instance, Scene};
+use crate::scene::Scene;
 
 /// Grid cells per side at most, which bounds time and memory.
 pub const MAX_GRID: u32 = 256;
@@ -27,19 +27,11 @@ pub struct Point {
     pub rgb: [u8; 3],
 }
 
-/// Every field instance of a scene, however it is sampled when rendered.
-fn field_instances(scene: &Scene) -> impl Iterator<Item = &Instance> {
-    scene
-        .instances
-        .iter()
-        .chain(scene.proposal.iter().map(|p| p.instance()))
-}
-
 /// Stand-in points for every instance of a scene, mapped by its `world_from_field`, at most
 /// `budget` of them (a deterministic stride over the kept points).
 pub fn points(scene: &Scene, resolution: u32, threshold: f32, budget: usize) -> Vec<Point> {
     let mut out = Vec::new();
-    for inst in field_instances(scene) {
+    for inst in scene.field_instances() {
         let m = inst.world_from_field();
         out.extend(
             field_points(inst.field(), resolution, threshold)
@@ -249,7 +241,7 @@ pub struct Mesh {
 /// The meshes of every field instance of a scene, joined (splats have no density grid).
 pub fn mesh(scene: &Scene, resolution: u32, threshold: f32) -> Mesh {
     let mut out = Mesh::default();
-    for inst in field_instances(scene) {
+    for inst in scene.field_instances() {
         let m = field_mesh(inst.field(), inst.world_from_field(), resolution, threshold);
         let base = out.vertices.len() as u32;
         out.vertices.extend(m.vertices);

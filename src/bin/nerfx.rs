@@ -344,7 +344,7 @@ fn run(cli: Cli) -> Result<()> {
                 output.display()
             );
             if let Some(mesh_path) = mesh {
-                if scene.instances.is_empty() && scene.proposal.is_empty() {
+                if scene.field_instances().next().is_none() {
                     return Err(Error::invalid(
                         field.display().to_string(),
                         "splats have no density grid to mesh; use the point stand-in",

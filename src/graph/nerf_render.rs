@@ -384,6 +384,11 @@ fn placed_scene(values: &ParamValues, shot: &Shot, at: &ShotFrame) -> Result<Sce
         .iter()
         .map(|p| p.with_crop(Some(crop)))
         .collect::<Result<Vec<_>>>()?;
+    cropped.ngp = scene
+        .ngp
+        .iter()
+        .map(|p| p.with_crop(Some(crop)))
+        .collect::<Result<Vec<_>>>()?;
     Ok(cropped)
 }
 

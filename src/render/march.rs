@@ -15,6 +15,7 @@ use std::sync::Arc;
 use glam::{DVec3, Vec3};
 
 use super::composite::{crossing_depth, Pieces};
+use super::ngp::{self, NgpFill};
 use super::proposal::{self, ProposalScratch};
 use super::splats::Splatting;
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
@@ -127,8 +128,8 @@ struct RayState {
     /// The pixel's splat fragments, front to back, and the next one to composite.
     fragments: Vec<Fragment>,
     next_fragment: usize,
-    /// The pixel's proposal-sampled volume fragments (module `proposal`), front to back,
-    /// and the next one to composite.
+    /// The pixel's volume fragments of sampled instances (modules `proposal`, `ngp`),
+    /// front to back, and the next one to composite.
     volume: Vec<Fragment>,
     next_volume: usize,
 }
@@ -180,9 +181,10 @@ pub(super) struct Scratch {
     z_per_t: Vec<f64>,
     along: Vec<Fragment>,
     splat_pixels: Vec<SplatPixel>,
-    /// Per pixel of the tile: its proposal-sampled fragments.
+    /// Per pixel of the tile: its sampled instances' fragments.
     volume: Vec<Vec<Fragment>>,
     proposal: ProposalScratch,
+    ngp: NgpFill,
     stats: RenderStats,
 }
 
@@ -302,20 +304,26 @@ fn setup_rays(
     s.world_rays.clear();
     s.world_rays
         .extend(s.rays[..n_rays].iter().map(|state| state.ray));
-    if !scene.proposal.is_empty() {
+    if scene.has_sampled() {
         s.volume.resize_with(n_rays, Vec::new);
         for f in &mut s.volume[..n_rays] {
             f.clear();
         }
         let volume = &mut s.volume[..n_rays];
         proposal::fill(scene, &s.world_rays, &mut s.proposal, volume, &mut s.stats);
+        ngp::fill(scene, &s.world_rays, &mut s.ngp, volume, &mut s.stats);
+        if scene.proposal.len() + scene.ngp.len() > 1 {
+            for f in volume.iter_mut() {
+                f.sort_by(|a, b| a.t.total_cmp(&b.t));
+            }
+        }
         for (state, volume) in s.rays[..n_rays].iter_mut().zip(&mut s.volume) {
             std::mem::swap(&mut state.volume, volume);
         }
     }
     if let Some(layer) = splats {
         // A tile of splats alone is composited sixteen pixels at once.
-        if s.active.is_empty() && scene.proposal.is_empty() && !outputs.depth_median {
+        if s.active.is_empty() && !scene.has_sampled() && !outputs.depth_median {
             let composited =
                 layer.composite(tile, &s.world_rays, &mut s.z_per_t, &mut s.splat_pixels);
             if let Some(fragments) = composited {

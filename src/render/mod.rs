@@ -8,6 +8,7 @@
 mod composite;
 mod march;
 mod naive;
+mod ngp;
 mod proposal;
 mod quality;
 mod splats;

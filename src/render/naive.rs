@@ -25,10 +25,10 @@ pub fn render_naive(
     if !(step > 0.0 && step.is_finite()) {
         return Err(Error::invalid("naive step", format!("{step} is not > 0")));
     }
-    if !scene.splats.is_empty() || !scene.proposal.is_empty() {
+    if !scene.splats.is_empty() || scene.has_sampled() {
         return Err(Error::Unsupported(
-            "the uniform-step baseline marches fields only; this scene holds splats or a \
-             nerfacto run sampled by its proposal networks"
+            "the uniform-step baseline marches fields only; this scene holds splats or an \
+             instance sampled by its trainer's own sampler"
                 .into(),
         ));
     }

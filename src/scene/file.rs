@@ -6,7 +6,7 @@
 //!     { "name": "statue", "field": { "analytic": { "primitives": [] } },
 //!       "object": "NeRF",
 //!       "crop": { "center": [0, 0, 0], "scale": [2, 2, 2], "rotation": [0, 0, 0] } },
-//!     { "name": "garden", "field": { "ingp": { "path": "garden.ingp" } } },
+//!     { "name": "garden", "field": { "ingp": { "path": "garden.ingp", "sampler": "ngp" } } },
 //!     { "name": "poster", "field": { "nerfacto": { "path": "outputs/poster/nerfacto/run1",
 //!                                                "sampler": "proposal" } } },
 //!     { "name": "scan", "field": { "splats": { "path": "scan.ply", "antialiased": false } } } ] }
@@ -15,7 +15,9 @@
 //! `object` is given, by that object's `matrix_world` in the shot, read per frame.
 //! A nerfacto instance is sampled by its own proposal networks (`"sampler": "proposal"`, the
 //! default: what nerfstudio shows) or marched by nerfx's occupancy estimator
-//! (`"occupancy"`, the default for a run whose checkpoint holds no proposal networks). Field
+//! (`"occupancy"`, the default for a run whose checkpoint holds no proposal networks). An
+//! instant-ngp instance is marched by nerfx's occupancy estimator (`"occupancy"`, the
+//! default) or by instant-ngp's own marcher (`"ngp"`: what its viewer shows). Field
 //! files named by a relative path are found next to the scene file (the path is made
 //! absolute when the scene file is read).
 
@@ -26,7 +28,7 @@ use glam::DMat4;
 use serde::{Deserialize, Serialize};
 
 use super::instance::FieldHandle;
-use super::{CropBox, Instance, ProposalInstance, Scene, SplatInstance};
+use super::{CropBox, Instance, NgpInstance, ProposalInstance, Scene, SplatInstance};
 use crate::error::{Error, Result};
 use crate::field::{Analytic, IngpField, NerfactoField, Splats};
 
@@ -41,16 +43,21 @@ pub enum FieldSource {
     Ingp {
         /// The snapshot file (relative paths: from the scene file's folder).
         path: PathBuf,
+        /// Where the field is sampled along each ray: `ngp` or `occupancy` (absent: the
+        /// occupancy marcher).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        sampler: Option<Sampler>,
     },
     /// A nerfstudio nerfacto run directory (`config.yml`, `dataparser_transforms.json`,
     /// `nerfstudio_models/step-*.ckpt`), queried in nerfstudio's normalised frame.
     Nerfacto {
         /// The run directory (relative paths: from the scene file's folder).
         path: PathBuf,
-        /// Where the field is sampled along each ray; absent: by its proposal networks when
-        /// the checkpoint holds them, else by the occupancy marcher.
+        /// Where the field is sampled along each ray: `proposal` or `occupancy` (absent: by
+        /// its proposal networks when the checkpoint holds them, else by the occupancy
+        /// marcher).
         #[serde(default)]
-        sampler: Option<NerfactoSampler>,
+        sampler: Option<Sampler>,
     },
     /// 3D Gaussian splats (an INRIA-layout `.ply`), in the frame of their file.
     Splats {
@@ -63,17 +70,32 @@ pub enum FieldSource {
     },
 }
 
-/// How a nerfacto instance is sampled along each ray.
+/// How a trained field's instance is sampled along each ray: by its trainer's own
+/// estimator, or by nerfx's marcher.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
-pub enum NerfactoSampler {
+pub enum Sampler {
     /// nerfacto's own proposal networks, as nerfstudio's viewer and `ns-render` sample it:
     /// what the artist approved (the main field is trained only where they sample). The
-    /// default for a run whose checkpoint holds them.
+    /// default for a nerfacto run whose checkpoint holds them.
     Proposal,
+    /// instant-ngp's own marcher, as its viewer renders a snapshot: its steps, occupancy
+    /// cascades and early stop (no quality dial).
+    Ngp,
     /// nerfx's occupancy marcher, jointly with the other instances (error-targeted
-    /// quality presets; may show density nerfacto never learned to suppress).
+    /// quality presets; may show density the trainer's sampler never reaches).
     Occupancy,
+}
+
+impl Sampler {
+    /// The name in scene files.
+    fn name(self) -> &'static str {
+        match self {
+            Sampler::Proposal => "proposal",
+            Sampler::Ngp => "ngp",
+            Sampler::Occupancy => "occupancy",
+        }
+    }
 }
 
 /// One instance in a scene file.
@@ -116,6 +138,7 @@ enum Contents {
     Field(FieldHandle),
     Splats(Arc<Splats>),
     Proposal(Arc<NerfactoField>),
+    Ngp(Arc<IngpField>),
 }
 
 /// A row-major nested 4×4 as a matrix.
@@ -151,7 +174,10 @@ impl SceneDesc {
             }
         } else {
             match ext.as_deref() {
-                Some("ingp" | "msgpack") => FieldSource::Ingp { path: file },
+                Some("ingp" | "msgpack") => FieldSource::Ingp {
+                    path: file,
+                    sampler: None,
+                },
                 Some("ply") => FieldSource::Splats {
                     path: file,
                     antialiased: false,
@@ -184,7 +210,7 @@ impl SceneDesc {
                 FieldSource::Analytic(a) => a
                     .validate()
                     .map_err(|e| Error::format(path, format!("{at}.field"), e.to_string()))?,
-                FieldSource::Ingp { path: file } if file.as_os_str().is_empty() => {
+                FieldSource::Ingp { path: file, .. } if file.as_os_str().is_empty() => {
                     return Err(Error::format(
                         path,
                         format!("{at}.field.ingp.path"),
@@ -205,6 +231,35 @@ impl SceneDesc {
                         "is empty",
                     ))
                 }
+                FieldSource::Ingp {
+                    sampler: Some(sampler @ Sampler::Proposal),
+                    ..
+                } => {
+                    return Err(Error::format(
+                        path,
+                        format!("{at}.field.ingp.sampler"),
+                        format!(
+                            "\"{}\" samples nerfacto runs; an instant-ngp snapshot is marched \
+                             by \"ngp\" (instant-ngp's own marcher) or \"occupancy\" (nerfx's)",
+                            sampler.name()
+                        ),
+                    ))
+                }
+                FieldSource::Nerfacto {
+                    sampler: Some(sampler @ Sampler::Ngp),
+                    ..
+                } => {
+                    return Err(Error::format(
+                        path,
+                        format!("{at}.field.nerfacto.sampler"),
+                        format!(
+                            "\"{}\" is instant-ngp's marcher, for instant-ngp snapshots; a \
+                             nerfacto run is sampled by \"proposal\" (its proposal networks) \
+                             or \"occupancy\" (nerfx's marcher)",
+                            sampler.name()
+                        ),
+                    ))
+                }
                 FieldSource::Ingp { .. }
                 | FieldSource::Nerfacto { .. }
                 | FieldSource::Splats { .. } => {}
@@ -219,7 +274,7 @@ impl SceneDesc {
         }
         let base = path.parent().unwrap_or(Path::new(""));
         for inst in &mut desc.instances {
-            if let FieldSource::Ingp { path: file }
+            if let FieldSource::Ingp { path: file, .. }
             | FieldSource::Nerfacto { path: file, .. }
             | FieldSource::Splats { path: file, .. } = &mut inst.field
             {
@@ -247,17 +302,25 @@ impl SceneDesc {
                 let field = |f: Arc<dyn crate::field::Field>| Contents::Field(FieldHandle::new(f));
                 Ok(match &inst.field {
                     FieldSource::Analytic(a) => Contents::Field(FieldHandle::analytic(a.clone())),
-                    FieldSource::Ingp { path } => field(Arc::new(IngpField::load(path)?)),
+                    FieldSource::Ingp { path, sampler } => {
+                        let snapshot = Arc::new(IngpField::load(path)?);
+                        match sampler.unwrap_or(Sampler::Occupancy) {
+                            Sampler::Ngp => Contents::Ngp(snapshot),
+                            // `from_json_str` refuses the proposal sampler here.
+                            Sampler::Occupancy | Sampler::Proposal => field(snapshot),
+                        }
+                    }
                     FieldSource::Nerfacto { path, sampler } => {
                         let run = Arc::new(NerfactoField::load(path)?);
                         let by_default = if run.has_proposal_sampler() {
-                            NerfactoSampler::Proposal
+                            Sampler::Proposal
                         } else {
-                            NerfactoSampler::Occupancy
+                            Sampler::Occupancy
                         };
                         match sampler.unwrap_or(by_default) {
-                            NerfactoSampler::Proposal => Contents::Proposal(run),
-                            NerfactoSampler::Occupancy => field(run),
+                            Sampler::Proposal => Contents::Proposal(run),
+                            // `from_json_str` refuses instant-ngp's marcher here.
+                            Sampler::Occupancy | Sampler::Ngp => field(run),
                         }
                     }
                     FieldSource::Splats { path, .. } => {
@@ -326,6 +389,12 @@ impl LoadedScene {
                 Contents::Proposal(run) => scene.proposal.push(ProposalInstance::new(
                     inst.name.clone(),
                     run.clone(),
+                    m,
+                    inst.crop,
+                )?),
+                Contents::Ngp(snapshot) => scene.ngp.push(NgpInstance::new(
+                    inst.name.clone(),
+                    snapshot.clone(),
                     m,
                     inst.crop,
                 )?),

@@ -15,12 +15,14 @@
 mod crop;
 mod file;
 mod instance;
+mod ngp;
 mod proposal;
 mod splats;
 
 pub use crop::CropBox;
-pub use file::{FieldSource, InstanceDesc, LoadedScene, NerfactoSampler, SceneDesc};
+pub use file::{FieldSource, InstanceDesc, LoadedScene, Sampler, SceneDesc};
 pub use instance::{FieldHandle, Instance, LocalRay};
+pub use ngp::NgpInstance;
 pub use proposal::ProposalInstance;
 pub use splats::SplatInstance;
 
@@ -36,6 +38,8 @@ pub struct Scene {
     /// The nerfacto instances sampled by their own proposal networks, their samples merged
     /// with the march as the splats' fragments are.
     pub proposal: Vec<ProposalInstance>,
+    /// The instant-ngp instances marched by instant-ngp's own marcher, merged likewise.
+    pub ngp: Vec<NgpInstance>,
 }
 
 impl Scene {
@@ -45,6 +49,7 @@ impl Scene {
             instances,
             splats: Vec::new(),
             proposal: Vec::new(),
+            ngp: Vec::new(),
         }
     }
 
@@ -52,6 +57,20 @@ impl Scene {
     pub fn with_splats(mut self, splats: Vec<SplatInstance>) -> Self {
         self.splats = splats;
         self
+    }
+
+    /// Whether any instance is sampled by its trainer's own estimator (its samples merged
+    /// with the march as fragments): nerfacto's proposal sampler, instant-ngp's marcher.
+    pub fn has_sampled(&self) -> bool {
+        !self.proposal.is_empty() || !self.ngp.is_empty()
+    }
+
+    /// Every field instance, however it is sampled.
+    pub fn field_instances(&self) -> impl Iterator<Item = &Instance> {
+        self.instances
+            .iter()
+            .chain(self.proposal.iter().map(|p| p.instance()))
+            .chain(self.ngp.iter().map(|p| p.instance()))
     }
 
     /// The space colours are composited in: sRGB-encoded when any instance was trained on
@@ -63,6 +82,7 @@ impl Scene {
             || self
                 .instances
                 .iter()
+                .chain(self.ngp.iter().map(|n| n.instance()))
                 .any(|i| i.field().color_space() == ColorSpace::Srgb)
         {
             ColorSpace::Srgb

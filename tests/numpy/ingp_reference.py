@@ -118,7 +118,8 @@ def sh16(d):
 def occupancy(values, n_cascades):
     """Per cascade a boolean [z, y, x] grid; values are in Morton order (x lowest bit)."""
     n3 = GRID ** 3
-    thr = F32(min(0.01, float(np.mean(values[:n3].astype(np.float64)))))
+    # Unseen cells (negative) count as empty in the mean, as in instant-ngp.
+    thr = F32(min(0.01, float(np.mean(np.maximum(values[:n3].astype(np.float64), 0.0)))))
     r = np.arange(GRID)
     z, y, x = np.meshgrid(r, r, r, indexing="ij")
     morton = np.zeros_like(x)
@@ -191,14 +192,16 @@ def field(snap_path):
     o = np.array(ds.get("offset", [0.5, 0.5, 0.5]), dtype=F32)
     hdr = bool(ds.get("is_hdr", False))
 
-    def evaluate(pts, dirs):
-        return evaluate_at(pts, dirs, s, o, aabb_scale, levels, table, n_feat, dmats, rmats, grids, hdr)
+    def evaluate(pts, dirs, masked=True):
+        return evaluate_at(pts, dirs, s, o, aabb_scale, levels, table, n_feat, dmats, rmats,
+                           grids if masked else None, hdr)
 
     evaluate.is_hdr = hdr
     return evaluate
 
 
 def evaluate_at(pts, dirs, s, o, aabb_scale, levels, table, n_feat, dmats, rmats, grids, hdr):
+    """grids None: the density network's value everywhere, unmasked by occupancy."""
     # NeRF world -> instant-ngp: scale, offset, then cycle (x, y, z) <- (y, z, x).
     q = np.stack([pts[:, 1] * s + o[1], pts[:, 2] * s + o[2], pts[:, 0] * s + o[0]], axis=1).astype(F32)
     half = F32(0.5 * min(aabb_scale, 128.0))
@@ -206,7 +209,8 @@ def evaluate_at(pts, dirs, s, o, aabb_scale, levels, table, n_feat, dmats, rmats
     x = ((q - lo) / (hi - lo)).astype(F32)
 
     dens_out = mlp(encode(x, levels, table, n_feat), dmats)
-    sigma = np.where(occupied(q, grids), s * np.exp(dens_out[:, 0]), F32(0.0)).astype(F32)
+    keep = occupied(q, grids) if grids is not None else np.ones(q.shape[0], dtype=bool)
+    sigma = np.where(keep, s * np.exp(dens_out[:, 0]), F32(0.0)).astype(F32)
 
     dn = np.stack([dirs[:, 1], dirs[:, 2], dirs[:, 0]], axis=1).astype(F32)
     dn = ((dn + F32(1)) / F32(2)) * F32(2) - F32(1)

@@ -5,12 +5,20 @@
 //! strictly — the smallest `c` with `max|q − 0.5| < 2^(c−1)` — and lies in its cell
 //! `⌊128·((q − 0.5)/2^c + 0.5)⌋`. The snapshot stores one fp16 density per cell, cascade
 //! after cascade, each cascade in Morton order (bit `3k` of the index is bit `k` of x, then
-//! y, then z); a cell is occupied where its value exceeds `min(0.01, mean of cascade 0)`.
+//! y, then z); a cell is occupied where its value exceeds `min(0.01, mean)`, the mean taken
+//! over cascade 0 with negative values (cells no training camera saw) counted as zero
+//! (instant-ngp's `update_density_grid_mean_and_bitfield` and `grid_to_bitfield`).
 //! Instant-ngp marches only occupied cells, so the field's density is zero elsewhere.
 //!
 //! For region queries each cascade also keeps an OR pyramid (128³, 64³, …, 1³). Cells are
 //! stored as bits (64 to a word): five cascades take 1.5 MB instead of 12 MB of `bool`s,
 //! so the marcher's per-sample occupancy test stays within the CPU's second-level cache.
+//!
+//! Instant-ngp's own marcher reads a different bitfield ([`Cascades::march_occupied`]): each
+//! cascade `c ≥ 1` has the occupancy of cascade `c − 1`, max-pooled over 2×2×2 cells, OR-ed
+//! into its central cells `[32, 96)³`, which cover cascade `c − 1` (`bitfield_max_pool`,
+//! applied from cascade 1 outwards), so a coarse cell is empty only where every finer cell
+//! inside it is. Its marcher climbs to the coarsest empty cell around a point to skip it.
 
 use glam::Vec3;
 
@@ -24,6 +32,9 @@ const MIN_THICKNESS: f32 = 0.01;
 pub(crate) struct Cascades {
     /// Per cascade, per pyramid level `m` (`GRID >> m` cells per axis, x fastest).
     mips: Vec<Vec<Bits>>,
+    /// Instant-ngp's marching bitfield: per cascade, 128³ bits in Morton order (bit `i % 8`
+    /// of byte `i / 8`), finer cascades max-pooled into the centre.
+    march: Vec<Vec<u8>>,
     occupied: u64,
 }
 
@@ -55,9 +66,24 @@ fn pow2(e: i32) -> f32 {
 }
 
 /// Morton index (x in the lowest bit) of a cell of a 128³ grid.
+#[inline]
 fn morton(x: usize, y: usize, z: usize) -> usize {
-    let spread = |v: usize| (0..7).fold(0, |acc, k| acc | ((v >> k) & 1) << (3 * k));
     spread(x) | spread(y) << 1 | spread(z) << 2
+}
+
+/// The 7 low bits of `v` moved to bits 0, 3, 6, …, 18.
+#[inline]
+fn spread(v: usize) -> usize {
+    let mut v = v & 0x7f;
+    v = (v | v << 8) & 0x0f00f;
+    v = (v | v << 4) & 0x0c30c3;
+    (v | v << 2) & 0x249249
+}
+
+/// The cell coordinates of a Morton index (the inverse of [`morton`]).
+fn unmorton(i: usize) -> [usize; 3] {
+    let gather = |v: usize| (0..7).fold(0, |acc, k| acc | ((v >> (3 * k)) & 1) << k);
+    [gather(i), gather(i >> 1), gather(i >> 2)]
 }
 
 impl Cascades {
@@ -67,8 +93,13 @@ impl Cascades {
         if values.is_empty() || values.len() % n3 != 0 {
             return None;
         }
-        let mean = values[..n3].iter().map(|&v| f64::from(v)).sum::<f64>() / n3 as f64;
+        let mean = values[..n3]
+            .iter()
+            .map(|&v| f64::from(v.max(0.0)))
+            .sum::<f64>()
+            / n3 as f64;
         let threshold = MIN_THICKNESS.min(mean as f32);
+        let march = march_bitfield(values, threshold);
         let mut occupied = 0;
         let mips = values
             .chunks_exact(n3)
@@ -87,7 +118,11 @@ impl Cascades {
                 pyramid(base)
             })
             .collect();
-        Some(Cascades { mips, occupied })
+        Some(Cascades {
+            mips,
+            march,
+            occupied,
+        })
     }
 
     /// Number of cascades.
@@ -123,6 +158,30 @@ impl Cascades {
     pub(crate) fn occupied_at(&self, q: Vec3) -> bool {
         self.cell(q)
             .is_some_and(|(c, [x, y, z])| self.mips[c][0].get((z * GRID + y) * GRID + x))
+    }
+
+    /// Whether instant-ngp's marching bitfield has the cell of cascade `mip` holding `q`
+    /// occupied: `q` is carried into the cascade's unit cube, `(q − 0.5)·2^−mip + 0.5`, and
+    /// its cell is that times 128 truncated toward zero (so a point less than one cell below
+    /// the cube still reads cell 0, as in instant-ngp); a cell outside the grid, or a
+    /// cascade the snapshot lacks, is empty.
+    #[inline]
+    pub(crate) fn march_occupied(&self, q: [f64; 3], mip: usize) -> bool {
+        let Some(bits) = self.march.get(mip) else {
+            return false;
+        };
+        let scale = f64::from(pow2(-(mip as i32)));
+        let mut cell = [0usize; 3];
+        for (c, v) in cell.iter_mut().zip(q) {
+            let u = ((v - 0.5) * scale + 0.5) * GRID as f64;
+            // Truncation toward zero; NaN fails the test.
+            if !(u > -1.0 && u < GRID as f64) {
+                return false;
+            }
+            *c = u as usize;
+        }
+        let i = morton(cell[0], cell[1], cell[2]);
+        bits[i >> 3] >> (i & 7) & 1 != 0
     }
 
     /// Whether any point of the box `[lo, hi]` may lie in an occupied cell (conservative).
@@ -170,6 +229,37 @@ impl Cascades {
         }
         false
     }
+}
+
+/// Instant-ngp's marching bitfield (see the module doc): per cascade, bit `i` set where the
+/// Morton-ordered value `i` exceeds `threshold`; then from cascade 1 outwards each
+/// cascade's central cells OR-ed with the 2×2×2 max-pool of the cascade inside it.
+fn march_bitfield(values: &[f32], threshold: f32) -> Vec<Vec<u8>> {
+    let n3 = GRID * GRID * GRID;
+    let mut levels: Vec<Vec<u8>> = values
+        .chunks_exact(n3)
+        .map(|cascade| {
+            cascade
+                .chunks_exact(8)
+                .map(|v| (0..8).fold(0u8, |b, j| b | u8::from(v[j] > threshold) << j))
+                .collect()
+        })
+        .collect();
+    for c in 1..levels.len() {
+        let (inner, outer) = levels.split_at_mut(c);
+        let (fine, coarse) = (&inner[c - 1], &mut outer[0]);
+        // A byte of the finer cascade holds a 2×2×2 block (Morton order): its OR is one
+        // coarse cell. Coarse cell (x, y, z) of the block at Morton index i lies at
+        // GRID/4 + (x, y, z) in the coarser cascade.
+        for (i, &byte) in fine.iter().enumerate() {
+            if byte != 0 {
+                let [x, y, z] = unmorton(i);
+                let at = morton(x + GRID / 4, y + GRID / 4, z + GRID / 4);
+                coarse[at >> 3] |= 1 << (at & 7);
+            }
+        }
+    }
+    levels
 }
 
 /// The OR pyramid of a cubic grid of side `GRID`: level `m + 1` cell is occupied where any
@@ -258,6 +348,53 @@ mod tests {
         assert!(!c.may_be_occupied(Vec3::splat(0.5), Vec3::splat(0.9)));
         // The cascade-1 cell is found from a box that reaches it.
         assert!(c.may_be_occupied(Vec3::new(1.4, -0.5, 0.4), Vec3::new(1.5, -0.4, 0.6)));
+    }
+
+    #[test]
+    fn unseen_cells_count_as_empty_in_the_mean() {
+        // Cascade 0 mostly unseen (−1), with one cell in 32 at 0.008 and one in 32 at
+        // 0.0002: the raw mean is negative (every seen cell would pass), the clamped one is
+        // 0.0082/32 = 0.000256, which 0.008 exceeds and 0.0002 does not.
+        let n3 = GRID * GRID * GRID;
+        let mut v = vec![-1.0f32; n3];
+        for x in v.iter_mut().skip(n3 / 2).step_by(16) {
+            *x = 0.008;
+        }
+        for x in v.iter_mut().skip(n3 / 2 + 1).step_by(16) {
+            *x = 0.0002;
+        }
+        let c = Cascades::from_densities(&v).unwrap();
+        assert!(
+            (c.fill_ratio() - 1.0 / 32.0).abs() < 1e-12,
+            "{}",
+            c.fill_ratio()
+        );
+    }
+
+    #[test]
+    fn the_marching_bitfield_pools_finer_cascades_into_the_centre() {
+        let c = two_cascades();
+        let centre = |k: [usize; 3], c: i32| {
+            k.map(|v| ((v as f64 + 0.5) / 128.0 - 0.5) * 2f64.powi(c) + 0.5)
+        };
+        // Cascade 0's cell (5, 6, 7) as itself, and inside cascade 1's cell
+        // (32 + 2, 32 + 3, 32 + 3) that holds it.
+        assert!(c.march_occupied(centre([5, 6, 7], 0), 0));
+        assert!(c.march_occupied(centre([34, 35, 35], 1), 1));
+        assert!(!c.march_occupied(centre([34, 35, 36], 1), 1));
+        // The plain lookup keeps the smallest cascade's own cells.
+        assert!(c.march_occupied(centre([127, 0, 64], 1), 1));
+        // Outside the grid, or a cascade the snapshot lacks.
+        assert!(!c.march_occupied([1.6, 0.5, 0.5], 1));
+        assert!(!c.march_occupied([0.5, 0.5, 0.5], 2));
+        // Less than a cell below the cube truncates to cell 0 (instant-ngp's int cast).
+        let mut v = vec![0.0f32; GRID * GRID * GRID];
+        v[0] = 1.0;
+        let c = Cascades::from_densities(&v).unwrap();
+        assert!(c.march_occupied([-0.004, 0.001, 0.001], 0));
+        assert!(!c.march_occupied([-0.008, 0.001, 0.001], 0));
+        assert_eq!(unmorton(morton(5, 6, 7)), [5, 6, 7]);
+        assert_eq!(spread(0x7f), 0x49249);
     }
 
     #[test]

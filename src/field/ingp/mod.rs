@@ -27,6 +27,7 @@ use half::f16;
 use rmpv::Value;
 
 mod cascades;
+mod marcher;
 
 use super::container::{read_document, Doc};
 use super::network::{
@@ -35,6 +36,7 @@ use super::network::{
 use super::{Aabb, ColorSpace, Field};
 use crate::error::{Error, Result};
 use cascades::Cascades;
+pub use marcher::{NgpRay, NgpSample, NgpScratch, NgpStats, NGP_MAX_STEPS};
 
 /// Points per batch inside one density or radiance call (bounds the scratch memory).
 const CHUNK: usize = 512;

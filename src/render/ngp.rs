@@ -1,0 +1,73 @@
+//! The samples of the scene's instant-ngp instances marched by instant-ngp's own marcher,
+//! delivered per pixel as fragments that the marcher merges front to back with its own
+//! pieces and the other fragments (module `march`), as the proposal-sampled instances'
+//! are (module `proposal`).
+//!
+//! Each sample becomes a fragment at its position (world distance `t/k`) with the opacity
+//! and colour instant-ngp composites it with, the early stop's renormalisation folded in
+//! (see [`crate::field::NgpSample`]): composited alone they give instant-ngp's pixel. Where
+//! another instance's volume overlaps a sample's step, the sample counts as all at its
+//! position. Colours are in the field's trained space, encoded to sRGB when the scene
+//! composites in sRGB and the snapshot is HDR (linear).
+
+use super::RenderStats;
+use crate::camera::Ray;
+use crate::field::{
+    linear_to_srgb, ColorSpace, Field, Fragment, NgpRay, NgpSample, NgpScratch, NGP_MAX_STEPS,
+};
+use crate::scene::Scene;
+
+/// Per-thread buffers.
+#[derive(Default)]
+pub(super) struct NgpFill {
+    rays: Vec<NgpRay>,
+    /// Per marched ray: the pixel and field units per world unit.
+    owners: Vec<(u32, f64)>,
+    samples: Vec<Vec<NgpSample>>,
+    marcher: NgpScratch,
+}
+
+/// Appends to `out[i]` the fragments of the instant-ngp-marched instances along `rays[i]`,
+/// front to back per instance (the caller sorts when fragments of several sources meet).
+pub(super) fn fill(
+    scene: &Scene,
+    rays: &[Option<Ray>],
+    s: &mut NgpFill,
+    out: &mut [Vec<Fragment>],
+    stats: &mut RenderStats,
+) {
+    let space = scene.composite_space();
+    for inst in &scene.ngp {
+        s.rays.clear();
+        s.owners.clear();
+        for (i, ray) in rays.iter().enumerate() {
+            if let Some((r, k)) = ray.as_ref().and_then(|r| inst.march_ray(r)) {
+                s.rays.push(r);
+                s.owners.push((i as u32, k));
+            }
+        }
+        if s.rays.is_empty() {
+            continue;
+        }
+        if s.samples.len() < s.rays.len() {
+            s.samples.resize_with(s.rays.len(), Vec::new);
+        }
+        let field = inst.field();
+        let samples = &mut s.samples[..s.rays.len()];
+        let done = field.march_rays(&s.rays, NGP_MAX_STEPS, samples, &mut s.marcher);
+        stats.density_samples += done.samples;
+        stats.color_samples += done.color_queries;
+        let encode = space == ColorSpace::Srgb && field.color_space() == ColorSpace::Linear;
+        for (&(i, k), samples) in s.owners.iter().zip(samples.iter()) {
+            out[i as usize].extend(samples.iter().filter(|f| f.alpha > 0.0).map(|f| Fragment {
+                t: f.t / k,
+                alpha: f.alpha,
+                rgb: if encode {
+                    f.rgb.map(linear_to_srgb)
+                } else {
+                    f.rgb
+                },
+            }));
+        }
+    }
+}

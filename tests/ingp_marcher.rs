@@ -1,0 +1,669 @@
+//! instant-ngp's own marcher (`"sampler": "ngp"`) against an independent NumPy implementation
+//! of instant-ngp's inference march (`tests/numpy/ingp_marcher_reference.py`) on generated
+//! snapshots, with and without cone growth and outer cascades; how such an instance joins
+//! other instances; the scene option; the step count on a fog.
+//!
+//! The NumPy check needs `python3` with `numpy` and `msgpack`; without them it fails with a
+//! message saying so, unless `NERFX_SKIP_NUMPY=1` (then it prints a skip line).
+
+mod common_fields;
+#[allow(dead_code)] // the snapshot writers this test does not use
+mod common_ingp;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use common_ingp::{scratch, write_blob_snapshot, Ball, Spec};
+use glam::{DMat4, DVec3};
+use nerfx::camera::{Camera, Perspective, Projection};
+use nerfx::field::{IngpField, NgpRay, NgpSample, NgpScratch, NGP_MAX_STEPS};
+use nerfx::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
+use nerfx::scene::{Scene, SceneDesc};
+
+/// The snapshot at `snapshot` (in `dir`) as the one instance of a scene, at the identity,
+/// with `"sampler": sampler` when given.
+fn placed(dir: &Path, snapshot: &Path, sampler: Option<&str>) -> nerfx::Result<Scene> {
+    let scene_file = dir.join("scene.json");
+    let sampler = sampler.map_or(String::new(), |s| format!(r#", "sampler": "{s}""#));
+    std::fs::write(
+        &scene_file,
+        format!(
+            r#"{{"instances": [{{"name": "blob", "field": {{"ingp": {{"path": "{}"{sampler}}}}}}}]}}"#,
+            snapshot.file_name().unwrap().to_string_lossy()
+        ),
+    )
+    .unwrap();
+    SceneDesc::read(&scene_file)?
+        .load()?
+        .place(DMat4::IDENTITY, &|_| Ok(DMat4::IDENTITY))
+}
+
+/// Per ray: r, g, b, alpha, expected depth, steps taken, first and last composited sample.
+fn numpy_march(snapshot: &Path, rays: &[NgpRay], max_steps: usize) -> Option<Vec<[f64; 8]>> {
+    if std::env::var("NERFX_SKIP_NUMPY").as_deref() == Ok("1") {
+        println!("skipped: NumPy cross-check (NERFX_SKIP_NUMPY=1)");
+        return None;
+    }
+    let dir = snapshot.parent().unwrap();
+    let (input, output) = (dir.join("rays.bin"), dir.join("numpy_out.bin"));
+    let bytes: Vec<u8> = rays
+        .iter()
+        .flat_map(|r| {
+            [
+                r.origin.x, r.origin.y, r.origin.z, r.dir.x, r.dir.y, r.dir.z, r.near, r.far,
+            ]
+        })
+        .flat_map(f64::to_le_bytes)
+        .collect();
+    std::fs::write(&input, bytes).unwrap();
+    let script =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/numpy/ingp_marcher_reference.py");
+    let out = Command::new("python3")
+        .arg(&script)
+        .arg(snapshot)
+        .arg(&input)
+        .arg(&output)
+        .arg(max_steps.to_string())
+        .output()
+        .unwrap_or_else(|e| {
+            panic!(
+                "the NumPy cross-check needs python3 with numpy and msgpack ({e}); \
+                 NERFX_SKIP_NUMPY=1 skips it"
+            )
+        });
+    assert!(
+        out.status.success(),
+        "the NumPy reference failed (it needs numpy and msgpack; NERFX_SKIP_NUMPY=1 skips \
+         it):\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let values: Vec<f64> = std::fs::read(&output)
+        .unwrap()
+        .chunks_exact(8)
+        .map(|b| f64::from_le_bytes(b.try_into().unwrap()))
+        .collect();
+    Some(
+        values
+            .chunks_exact(8)
+            .map(|c| c.try_into().unwrap())
+            .collect(),
+    )
+}
+
+fn camera(w: u32, h: u32, fov: f64, eye: DVec3, target: DVec3) -> Camera {
+    let p = Perspective::from_vertical_fov(w, h, fov).unwrap();
+    Camera::new(
+        nerfx::demo::look_at(eye, target),
+        Projection::Perspective(p),
+    )
+    .unwrap()
+}
+
+/// Every pixel's ray as the instance's marcher sees it (`None` where it misses the box).
+fn march_rays(scene: &Scene, camera: &Camera) -> Vec<Option<NgpRay>> {
+    let window = camera.full_window();
+    let (w, h) = (window.width(), window.height());
+    (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            let ray = camera.ray(f64::from(x) + 0.5, f64::from(y) + 0.5)?;
+            scene.ngp[0].march_ray(&ray).map(|(r, _)| r)
+        })
+        .collect()
+}
+
+/// The samples of `rays` marched by `field`, each ray for at most `max_steps` steps.
+fn samples_of(
+    field: &IngpField,
+    rays: &[NgpRay],
+    max_steps: usize,
+) -> (Vec<Vec<NgpSample>>, nerfx::field::NgpStats) {
+    let mut out = vec![Vec::new(); rays.len()];
+    let stats = field.march_rays(rays, max_steps, &mut out, &mut NgpScratch::default());
+    (out, stats)
+}
+
+/// Renders `snapshot` (written from `spec`) with the ngp sampler and checks it against the
+/// NumPy march; returns the fraction of composited samples outside cascade 0.
+fn check_against_numpy(name: &str, spec: &Spec, snapshot: &Path, camera: &Camera) -> f64 {
+    let dir = snapshot.parent().unwrap();
+    let scene = placed(dir, snapshot, Some("ngp")).unwrap();
+    assert_eq!((scene.instances.len(), scene.ngp.len()), (0, 1));
+    let mut settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
+    settings.color = ColorOutput::AsTrained;
+    let planes = render(&scene, camera, camera.full_window(), &settings).unwrap();
+    let rays = march_rays(&scene, camera);
+    let hit: Vec<NgpRay> = rays.iter().flatten().copied().collect();
+    let field = scene.ngp[0].field();
+    let (samples, stats) = samples_of(field, &hit, NGP_MAX_STEPS);
+    // Where the samples lie, in instant-ngp coordinates.
+    let (mut outer, mut all) = (0usize, 0usize);
+    let (scale, offset) = (f64::from(spec.scale), spec.offset.map(f64::from));
+    for (r, s) in hit.iter().zip(&samples) {
+        for f in s {
+            let p = r.origin + r.dir * f.t;
+            let q = DVec3::new(p.y, p.z, p.x) * scale + DVec3::new(offset[1], offset[2], offset[0]);
+            outer += usize::from((q - 0.5).abs().max_element() >= 0.5);
+            all += 1;
+        }
+    }
+    let Some(want) = numpy_march(snapshot, &hit, NGP_MAX_STEPS) else {
+        return outer as f64 / all.max(1) as f64;
+    };
+    let (rgb, alpha, depth) = (
+        planes.rgb.as_ref().unwrap(),
+        planes.alpha.as_ref().unwrap(),
+        planes.depth_ray.as_ref().unwrap(),
+    );
+    let (mut sq, mut worst_alpha, mut worst_depth, mut worst_t) = (0.0, 0.0f64, 0.0f64, 0.0f64);
+    let (mut opaque, mut partial, mut n) = (0, 0, 0);
+    let mut at = 0;
+    for (i, ray) in rays.iter().enumerate() {
+        let w = camera.full_window().width();
+        let (x, y) = (i as u32 % w, i as u32 / w);
+        let px = match ray {
+            Some(_) => {
+                at += 1;
+                want[at - 1]
+            }
+            None => [0.0; 8],
+        };
+        n += 1;
+        for c in 0..3 {
+            sq += (f64::from(rgb[c].get(x, y)) - px[c]).powi(2);
+        }
+        worst_alpha = worst_alpha.max((f64::from(alpha.get(x, y)) - px[3]).abs());
+        opaque += usize::from(px[3] == 1.0);
+        partial += usize::from(px[3] > 0.05 && px[3] < 0.99);
+        if px[3] > 0.05 {
+            // The renormalised weights put the last (1 − A) ≤ 1 % at the last sample in
+            // nerfx, spread over all samples in NumPy: at most 1 % of the span apart.
+            let bound = 0.01 * (px[7] - px[6]) + 1e-5 * px[4];
+            let e = (f64::from(depth.get(x, y)) - px[4]).abs();
+            assert!(
+                e <= bound,
+                "{name}: pixel ({x}, {y}) depth {} vs NumPy {} (bound {bound})",
+                depth.get(x, y),
+                px[4]
+            );
+            worst_depth = worst_depth.max(e / px[4]);
+        }
+        // The march's positions: the first and last composited samples.
+        if let Some(s) = ray
+            .and_then(|_| samples.get(at - 1))
+            .filter(|s| !s.is_empty())
+        {
+            let last = s.iter().rposition(|f| f.alpha > 0.0).unwrap_or(s.len() - 1);
+            for (got, want) in [(s[0].t, px[6]), (s[last].t, px[7])] {
+                let e = (got - want).abs() / want.abs().max(1e-3);
+                assert!(
+                    e < 1e-9,
+                    "{name}: pixel ({x}, {y}) sample at {got}, NumPy {want}"
+                );
+                worst_t = worst_t.max(e);
+            }
+        }
+    }
+    let psnr = 10.0 * (3.0 * n as f64 / sq.max(1e-30)).log10();
+    println!(
+        "{name}: {n} pixels ({opaque} stopped at 99 %, {partial} partly covered), {} samples \
+         ({:.0} % outside cascade 0); RGB PSNR {psnr:.1} dB, alpha within {worst_alpha:.1e}, \
+         depth within {worst_depth:.1e} relative, sample positions within {worst_t:.1e}",
+        stats.samples,
+        100.0 * outer as f64 / all.max(1) as f64,
+    );
+    assert!(psnr >= 60.0, "{name}: PSNR {psnr:.1} dB");
+    assert!(worst_alpha < 1e-4, "{name}: alpha off by {worst_alpha}");
+    // The fixture exercises the early stop and partial coverage.
+    assert!(
+        opaque >= 50 && partial >= 50,
+        "{name}: {opaque} opaque and {partial} partial pixels of {n}"
+    );
+    assert_eq!(
+        stats.opaque as usize, opaque,
+        "{name}: rays stopped at 99 %"
+    );
+    outer as f64 / all.max(1) as f64
+}
+
+fn snapshot(dir: &Path, spec: &Spec, balls: &[Ball], gain: f32) -> PathBuf {
+    write_blob_snapshot(dir, "blob", spec, balls, gain).0
+}
+
+#[test]
+fn aabb_scale_1_renders_as_a_numpy_march() {
+    let dir = scratch("ngp-numpy-1");
+    let spec = Spec {
+        aabb_scale: 1,
+        n_cascades: 1,
+        ..Spec::small_8x4()
+    };
+    let balls = [
+        Ball {
+            centre: [0.5, 0.5, 0.5],
+            radius: 0.3,
+        },
+        Ball {
+            centre: [0.68, 0.55, 0.42],
+            radius: 0.15,
+        },
+    ];
+    let path = snapshot(&dir, &spec, &balls, 1.6);
+    let camera = camera(48, 36, 30.0, DVec3::new(2.0, -2.5, 0.9), DVec3::ZERO);
+    let outer = check_against_numpy("aabb_scale 1", &spec, &path, &camera);
+    assert_eq!(outer, 0.0);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn aabb_scale_4_with_cone_growth_and_three_cascades_renders_as_a_numpy_march() {
+    let dir = scratch("ngp-numpy-4");
+    let spec = Spec {
+        aabb_scale: 4,
+        n_cascades: 3,
+        ..Spec::small_8x4()
+    };
+    // One ball in each cascade.
+    let balls = [
+        Ball {
+            centre: [0.5, 0.5, 0.5],
+            radius: 0.3,
+        },
+        Ball {
+            centre: [1.4, 0.6, 0.5],
+            radius: 0.35,
+        },
+        Ball {
+            centre: [0.5, -0.9, 0.4],
+            radius: 0.45,
+        },
+    ];
+    let path = snapshot(&dir, &spec, &balls, 1.4);
+    let camera = camera(
+        48,
+        36,
+        40.0,
+        DVec3::new(7.0, -5.0, 1.0),
+        DVec3::new(-0.1, 0.9, -1.3),
+    );
+    let outer = check_against_numpy("aabb_scale 4", &spec, &path, &camera);
+    assert!(outer > 0.1, "{outer} of the samples outside cascade 0");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The older layout: 16×2 levels, float parameters, CutlassMLP padding, an HDR (linear)
+/// snapshot, a dataset scale 0.5 and offset (0.4, 0.6, 0.45), `aabb_scale` 4.
+#[test]
+fn an_hdr_snapshot_with_its_own_dataset_transform_renders_as_a_numpy_march() {
+    let dir = scratch("ngp-numpy-hdr");
+    let spec = Spec::old_16x2();
+    let balls = [
+        Ball {
+            centre: [0.5, 0.5, 0.5],
+            radius: 0.3,
+        },
+        Ball {
+            centre: [0.5, 0.5, 1.3],
+            radius: 0.3,
+        },
+    ];
+    let path = snapshot(&dir, &spec, &balls, 1.4);
+    let camera = camera(48, 36, 40.0, DVec3::new(2.5, -3.0, 1.5), DVec3::ZERO);
+    let outer = check_against_numpy("HDR", &spec, &path, &camera);
+    assert!(outer > 0.1, "{outer} of the samples outside cascade 0");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_sampler_is_chosen_per_instance_and_refused_where_it_does_not_apply() {
+    let dir = scratch("ngp-option");
+    let balls = [Ball {
+        centre: [0.5, 0.5, 0.5],
+        radius: 0.3,
+    }];
+    let path = snapshot(&dir, &Spec::small_8x4(), &balls, 1.0);
+    let count = |s: &Scene| (s.instances.len(), s.ngp.len(), s.proposal.len());
+    assert_eq!(count(&placed(&dir, &path, Some("ngp")).unwrap()), (0, 1, 0));
+    assert_eq!(
+        count(&placed(&dir, &path, Some("occupancy")).unwrap()),
+        (1, 0, 0)
+    );
+    // The default: nerfx's marcher, from a scene file or the snapshot on its own.
+    assert_eq!(count(&placed(&dir, &path, None).unwrap()), (1, 0, 0));
+    let alone = SceneDesc::for_path(&path).unwrap().load().unwrap();
+    let alone = alone.place(DMat4::IDENTITY, &|_| Ok(DMat4::IDENTITY));
+    assert_eq!(count(&alone.unwrap()), (1, 0, 0));
+    // nerfacto's sampler on a snapshot, instant-ngp's on a nerfacto run, any on splats.
+    let e = placed(&dir, &path, Some("proposal"))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("instances[0] ('blob').field.ingp.sampler") && e.contains("\"ngp\""),
+        "{e}"
+    );
+    let refused = |json: &str| {
+        SceneDesc::from_json_str(json, &dir.join("scene.json"))
+            .err()
+            .unwrap()
+            .to_string()
+    };
+    let e = refused(
+        r#"{"instances": [{"name": "run", "field": {"nerfacto": {"path": "run",
+            "sampler": "ngp"}}}]}"#,
+    );
+    assert!(
+        e.contains("field.nerfacto.sampler") && e.contains("instant-ngp snapshots"),
+        "{e}"
+    );
+    let e = refused(
+        r#"{"instances": [{"name": "scan", "field": {"splats": {"path": "scan.ply",
+            "sampler": "ngp"}}}]}"#,
+    );
+    assert!(e.contains("sampler"), "{e}");
+    let e = refused(
+        r#"{"instances": [{"name": "blob", "field": {"ingp": {"path": "blob.ingp",
+            "sampler": "nearest"}}}]}"#,
+    );
+    assert!(e.contains("nearest") && e.contains("ngp"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// An opaque white slab `y ∈ [y0, y1]`, `|x|, |z| ≤ half`, as an analytic instance. (The
+/// marcher finds its face to a fraction of its base step, itself a fraction of the slab's
+/// size: samples of another instance closer to the face than that may composite on either
+/// side of it, so the slab is no larger than the view needs.)
+fn slab(y0: f32, y1: f32, half: f32) -> nerfx::scene::Instance {
+    use glam::Vec3;
+    use nerfx::field::{Analytic, Primitive, ShColor, Shape};
+    let field = Analytic {
+        primitives: vec![Primitive {
+            shape: Shape::Box {
+                min: Vec3::new(-half, y0, -half),
+                max: Vec3::new(half, y1, half),
+            },
+            density: 1e4,
+            color: ShColor::constant(Vec3::ONE),
+        }],
+    };
+    let handle = nerfx::scene::FieldHandle::analytic(field);
+    nerfx::scene::Instance::new("slab", handle, DMat4::IDENTITY, None).unwrap()
+}
+
+#[test]
+fn an_ngp_marched_snapshot_occludes_and_is_occluded_by_other_instances() {
+    let dir = scratch("ngp-joint");
+    let balls = [Ball {
+        centre: [0.5, 0.5, 0.5],
+        radius: 0.35,
+    }];
+    let path = snapshot(&dir, &Spec::small_8x4(), &balls, 1.2);
+    let (w, h) = (24u32, 16u32);
+    let camera = camera(w, h, 40.0, DVec3::new(0.5, -3.0, 1.0), DVec3::ZERO);
+    let mut settings = RenderSettings::new(Quality::Final.params(), Outputs::rgba());
+    settings.color = ColorOutput::AsTrained;
+    // The marcher's own bounded errors: the transmittance it stops at, and the weight whose
+    // colour it may leave unshaded.
+    let tolerance =
+        f64::from(settings.march.min_transmittance + settings.march.color_skip_budget) + 1e-5;
+    let alone = placed(&dir, &path, Some("ngp")).unwrap();
+    let nerf = render(&alone, &camera, camera.full_window(), &settings).unwrap();
+    let rays = march_rays(&alone, &camera);
+    let hit: Vec<NgpRay> = rays.iter().flatten().copied().collect();
+    let (samples, _) = samples_of(alone.ngp[0].field(), &hit, NGP_MAX_STEPS);
+    // An opaque white slab through the middle of the blob (y = 0 in the field's frame, the
+    // world's here): the blob shows only in front of it.
+    let mut front = alone.clone();
+    front.instances.push(slab(0.0, 0.1, 4.0));
+    let got = render(&front, &camera, camera.full_window(), &settings).unwrap();
+    // A slab far behind the blob: the blob over it.
+    let mut behind = alone.clone();
+    behind.instances.push(slab(30.0, 40.0, 40.0));
+    let over = render(&behind, &camera, camera.full_window(), &settings).unwrap();
+    let (mut seen, mut hidden, mut worst, mut at) = (0.0f64, 0.0f64, 0.0f64, 0);
+    let pixel = |planes: &nerfx::image::Planes, x: u32, y: u32| {
+        let rgb = planes.rgb.as_ref().unwrap();
+        [0, 1, 2].map(|c| f64::from(rgb[c].get(x, y)))
+    };
+    for (i, ray) in rays.iter().enumerate() {
+        let (x, y) = (i as u32 % w, i as u32 / w);
+        let fragments: &[NgpSample] = match ray {
+            Some(_) => {
+                at += 1;
+                &samples[at - 1]
+            }
+            None => &[],
+        };
+        let world = camera.ray(f64::from(x) + 0.5, f64::from(y) + 0.5).unwrap();
+        let entry = (0.0 - world.origin.y) / world.dir.y;
+        // By hand: the blob's samples (with the early stop folded in) before the slab, then
+        // the slab's white; and all of them alone.
+        let composite = |until: f64| {
+            let (mut rgb, mut t) = ([0.0f64; 3], 1.0f64);
+            for f in fragments.iter().filter(|f| f.t < until) {
+                let a = f64::from(f.alpha);
+                for (acc, v) in rgb.iter_mut().zip(f.rgb) {
+                    *acc += t * a * f64::from(v);
+                }
+                t *= 1.0 - a;
+            }
+            (rgb, t)
+        };
+        // The marcher places the slab's face to within a small fraction of its step; a
+        // sample closer to the face than `FACE` may composite on either side of it (or
+        // partly), so the front render must lie between the two cuts.
+        const FACE: f64 = 1e-3;
+        let (before, t) = composite(entry - FACE);
+        let (before_late, t_late) = composite(entry + FACE);
+        let (all, t_all) = composite(f64::INFINITY);
+        let a = f64::from(nerf.alpha.as_ref().unwrap().get(x, y));
+        seen += a;
+        hidden += t;
+        worst = worst.max((a - (1.0 - t_all)).abs());
+        assert!((f64::from(got.alpha.as_ref().unwrap().get(x, y)) - 1.0).abs() < tolerance);
+        assert!((f64::from(over.alpha.as_ref().unwrap().get(x, y)) - 1.0).abs() < tolerance);
+        for c in 0..3 {
+            let (lo, hi) = (before[c] + t, before_late[c] + t_late);
+            let front = pixel(&got, x, y)[c];
+            let e = [
+                (pixel(&nerf, x, y)[c] - all[c]).abs(),
+                (front - front.clamp(lo.min(hi), lo.max(hi))).abs(),
+                (pixel(&over, x, y)[c] - (all[c] + (1.0 - a))).abs(),
+            ];
+            worst = worst.max(e[0].max(e[1]).max(e[2]));
+        }
+    }
+    println!("joint renders within {worst:.1e} of the samples composited by hand");
+    assert!(worst < tolerance, "joint renders off by {worst}");
+    let pixels = f64::from(w * h);
+    assert!(
+        seen > 0.25 * pixels,
+        "the blob shows too little to test ({seen})"
+    );
+    assert!(
+        hidden > 0.25 * pixels,
+        "the slab hides too little to test ({hidden})"
+    );
+    assert!(
+        hidden < pixels - 0.1 * seen,
+        "the blob in front of the slab shows too little ({hidden})"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A fog filling the unit cube (every cell occupied, σ = 1 per instant-ngp unit): a ray
+/// along the cube's diagonal takes instant-ngp's 1024 finest steps (`NERF_STEPS` per √3) and
+/// never reaches 99 %; a cap below that ends it early, counted, as in NumPy.
+#[test]
+fn a_fog_takes_1024_steps_along_the_diagonal_and_a_lower_cap_is_counted() {
+    let dir = scratch("ngp-fog");
+    let spec = Spec {
+        aabb_scale: 1,
+        n_cascades: 1,
+        ..Spec::small_8x4()
+    };
+    let fog = [Ball {
+        centre: [0.5, 0.5, 0.5],
+        radius: 10.0,
+    }];
+    // Gain 0: the density network's σ output is exp(0) = 1.
+    let path = snapshot(&dir, &spec, &fog, 0.0);
+    let scene = placed(&dir, &path, Some("ngp")).unwrap();
+    // In the field's frame the cube is 0.5 ± 0.5 of instant-ngp's unit over s = 0.33, its
+    // diagonal still along (1, 1, 1).
+    let corner = DVec3::splat(-0.5 / 0.33);
+    let world = nerfx::camera::Ray {
+        origin: corner - DVec3::splat(1.0),
+        dir: DVec3::ONE.normalize(),
+        z_per_t: 1.0,
+        near: 0.0,
+        far: f64::INFINITY,
+    };
+    let (ray, k) = scene.ngp[0].march_ray(&world).unwrap();
+    assert!((k - 1.0).abs() < 1e-12);
+    let field = scene.ngp[0].field();
+    let (full, stats) = samples_of(field, &[ray], NGP_MAX_STEPS);
+    assert_eq!((stats.samples, stats.capped, stats.opaque), (1024, 0, 0));
+    assert_eq!(full[0].len(), 1024);
+    let alpha = |s: &[NgpSample]| 1.0 - s.iter().map(|f| 1.0 - f64::from(f.alpha)).product::<f64>();
+    // σ·√3 of optical depth.
+    assert!((alpha(&full[0]) - (1.0 - (-(3f64.sqrt())).exp())).abs() < 1e-3);
+    let (capped, stats) = samples_of(field, &[ray], 1000);
+    assert_eq!((stats.samples, stats.capped), (1000, 1));
+    assert_eq!(capped[0][..], full[0][..1000]);
+    if let Some(want) = numpy_march(&path, &[ray], 1000) {
+        assert_eq!(want[0][5], 1000.0);
+        assert!((alpha(&capped[0]) - want[0][3]).abs() < 1e-6, "{want:?}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Process CPU seconds (all threads), from `/proc/self/stat` (Linux; `None` elsewhere).
+fn cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
+}
+
+/// instant-ngp's marcher against nerfx's `Final` occupancy march on trained-like snapshots
+/// (the current default architecture, 8 levels × 4 features, `2^19` rows, fp16;
+/// `aabb_scale` 4 with three cascades, one blob in each): dense surfaces (gain 3, rays stop
+/// at 99 %) and soft ones (gain 1.4), 320×180 unless `NERFX_BENCH_SIZE=WxH`:
+/// `cargo test --release --test ingp_marcher -- --ignored --nocapture bench`. Each
+/// sampler renders twice, in alternation; the faster of each is printed with the process
+/// CPU time, the PSNR between the two (linear RGBA) and the queries per pixel. Timing is
+/// never asserted.
+#[test]
+#[ignore = "benchmark"]
+fn bench_ngp_sampler_against_final() {
+    use nerfx::reference::metrics::psnr;
+    use nerfx::render::render_with_progress;
+    use std::time::Instant;
+
+    let (w, h) = std::env::var("NERFX_BENCH_SIZE")
+        .ok()
+        .and_then(|s| {
+            let (a, b) = s.split_once('x')?;
+            Some((a.parse().ok()?, b.parse().ok()?))
+        })
+        .unwrap_or((320u32, 180u32));
+    let dir = scratch("ngp-bench");
+    let spec = Spec {
+        log2_table_size: 19,
+        aabb_scale: 4,
+        n_cascades: 3,
+        ..Spec::small_8x4()
+    };
+    let balls = [
+        Ball {
+            centre: [0.5, 0.5, 0.5],
+            radius: 0.3,
+        },
+        Ball {
+            centre: [1.4, 0.6, 0.5],
+            radius: 0.35,
+        },
+        Ball {
+            centre: [0.5, -0.9, 0.4],
+            radius: 0.45,
+        },
+    ];
+    let camera = camera(
+        w,
+        h,
+        40.0,
+        DVec3::new(7.0, -5.0, 1.0),
+        DVec3::new(-0.1, 0.9, -1.3),
+    );
+    let settings = RenderSettings::new(Quality::Final.params(), Outputs::rgba());
+    for (name, gain) in [("dense", 3.0), ("soft", 1.4)] {
+        let path = snapshot(&dir, &spec, &balls, gain);
+        let scenes = [
+            ("ngp", placed(&dir, &path, Some("ngp")).unwrap()),
+            ("final", placed(&dir, &path, Some("occupancy")).unwrap()),
+        ];
+        let mut best = [(f64::INFINITY, 0.0); 2];
+        let mut planes = Vec::new();
+        let mut queries = [(0.0, 0.0); 2];
+        for round in 0..2 {
+            for (k, (_, scene)) in scenes.iter().enumerate() {
+                let (t, c) = (Instant::now(), cpu_seconds().unwrap_or(0.0));
+                let (p, stats) =
+                    render_with_progress(scene, &camera, camera.full_window(), &settings, &|_| {})
+                        .unwrap();
+                let wall = t.elapsed().as_secs_f64();
+                let cpu = cpu_seconds().unwrap_or(0.0) - c;
+                if wall < best[k].0 {
+                    best[k] = (wall, cpu);
+                }
+                let n = f64::from(w * h);
+                queries[k] = (
+                    stats.density_samples as f64 / n,
+                    stats.color_samples as f64 / n,
+                );
+                if round == 0 {
+                    planes.push(p);
+                }
+            }
+        }
+        let alpha = |p: &nerfx::image::Planes| {
+            p.alpha
+                .as_ref()
+                .unwrap()
+                .data
+                .iter()
+                .map(|&a| f64::from(a))
+                .sum::<f64>()
+                / f64::from(w * h)
+        };
+        let max_alpha = planes[0]
+            .alpha
+            .as_ref()
+            .unwrap()
+            .data
+            .iter()
+            .zip(&planes[1].alpha.as_ref().unwrap().data)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        println!(
+            "{name} ({w}x{h}, {} rayon threads): ngp {:.2} s wall / {:.2} s CPU, {:.1} density \
+             + {:.1} colour queries/pixel; Final {:.2} s wall / {:.2} s CPU, {:.1} + {:.1}; \
+             PSNR between them {:.1} dB, max alpha difference {max_alpha:.3}, mean alpha \
+             {:.3} / {:.3}",
+            rayon::current_num_threads(),
+            best[0].0,
+            best[0].1,
+            queries[0].0,
+            queries[0].1,
+            best[1].0,
+            best[1].1,
+            queries[1].0,
+            queries[1].1,
+            psnr(&planes[1], &planes[0]),
+            alpha(&planes[0]),
+            alpha(&planes[1]),
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

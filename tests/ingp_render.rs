@@ -189,4 +189,5 @@ fn linear_output_is_the_as_trained_composite_decoded() {
         }
     }
     assert!(partly > 10, "only {partly} partly covered pixels");
+    let _ = std::fs::remove_dir_all(&dir);
 }

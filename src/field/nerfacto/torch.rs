@@ -10,7 +10,8 @@
 //!   `(k.x·1 ⊕ k.y·2654435761 ⊕ k.z·805459861) mod 2^log2T + l·2^log2T` (torch multiplies in
 //!   int64; modulo a power of two that equals tcnn's u32 wrap).
 //! - **MLP** (`MLP.pytorch_fwd`): `nn.Linear` layers *with biases*, `y = W·x + b`, `W`
-//!   `[out][in]`, ReLU between layers, none after the last.
+//!   `[out][in]`, ReLU between layers, none after the last (evaluated in batches by the
+//!   shared MLP kernel, [`Mlp::with_biases`](crate::field::network::Mlp::with_biases)).
 //! - **SH** (`components_from_spherical_harmonics`): fed `(d + 1)/2` *as is* (no mapping
 //!   back to `[−1, 1]`), with all-positive signs: `0.2821; 0.4886y, 0.4886z, 0.4886x;
 //!   1.0925xy, 1.0925yz, 0.9462z² − 0.3154, 1.0925xz, 0.5463(x² − y²); 0.5900y(3x² − y²),
@@ -107,91 +108,6 @@ impl TorchHashGrid {
     }
 }
 
-/// A torch MLP: `nn.Linear` layers with biases, ReLU between them.
-#[derive(Clone, Debug)]
-pub(crate) struct BiasedMlp {
-    /// Per layer: `(n_in, n_out, Wᵀ [in][out], b [out])`. The weights are kept transposed so
-    /// that a layer adds each input times its row of weights to all outputs at once (a loop
-    /// over contiguous outputs that vectorises).
-    layers: Vec<(usize, usize, Vec<f32>, Vec<f32>)>,
-    /// The widest layer's outputs.
-    widest: usize,
-}
-
-impl BiasedMlp {
-    /// From `(W, b)` per layer with `W` row-major `[out][in]`; `None` when the shapes do not
-    /// chain from `n_inputs`.
-    pub(crate) fn new(n_inputs: usize, layers: Vec<(Vec<f32>, Vec<f32>)>) -> Option<Self> {
-        let mut n_in = n_inputs;
-        let mut out = Vec::with_capacity(layers.len());
-        for (w, b) in layers {
-            let n_out = b.len();
-            if n_out == 0 || w.len() != n_in * n_out {
-                return None;
-            }
-            let mut w_t = vec![0.0; w.len()];
-            for (o, row) in w.chunks_exact(n_in).enumerate() {
-                for (i, &v) in row.iter().enumerate() {
-                    w_t[i * n_out + o] = v;
-                }
-            }
-            out.push((n_in, n_out, w_t, b));
-            n_in = n_out;
-        }
-        let widest = out.iter().map(|l| l.1).max()?;
-        Some(BiasedMlp {
-            layers: out,
-            widest,
-        })
-    }
-
-    /// Inputs of the first layer.
-    pub(crate) fn n_inputs(&self) -> usize {
-        self.layers.first().map_or(0, |l| l.0)
-    }
-
-    /// Outputs of the last layer.
-    pub(crate) fn n_outputs(&self) -> usize {
-        self.layers.last().map_or(0, |l| l.1)
-    }
-
-    /// Width of the first hidden layer (for descriptions).
-    pub(crate) fn width(&self) -> usize {
-        self.layers.first().map_or(0, |l| l.1)
-    }
-
-    /// Number of layers.
-    pub(crate) fn n_layers(&self) -> usize {
-        self.layers.len()
-    }
-
-    /// `y = MLP(x)` for one input; `scratch` holds the hidden activations (no allocation
-    /// once it has grown).
-    pub(crate) fn forward(&self, x: &[f32], y: &mut [f32], scratch: &mut Vec<f32>) {
-        let width = self.widest.max(x.len());
-        scratch.resize(2 * width, 0.0);
-        let (mut cur, mut next) = scratch.split_at_mut(width);
-        cur[..x.len()].copy_from_slice(x);
-        let last = self.layers.len() - 1;
-        for (k, (n_in, n_out, w_t, b)) in self.layers.iter().enumerate() {
-            let out = &mut next[..*n_out];
-            out.copy_from_slice(b);
-            for (&xi, row) in cur[..*n_in].iter().zip(w_t.chunks_exact(*n_out)) {
-                for (o, &w) in out.iter_mut().zip(row) {
-                    *o += xi * w;
-                }
-            }
-            if k < last {
-                for o in out.iter_mut() {
-                    *o = o.max(0.0);
-                }
-            }
-            std::mem::swap(&mut cur, &mut next);
-        }
-        y.copy_from_slice(&cur[..y.len()]);
-    }
-}
-
 /// nerfstudio's torch SH components of degree 4 for the vector `v` as given (nerfacto
 /// passes `(d + 1)/2`).
 pub(crate) fn torch_sh4(v: Vec3) -> [f32; 16] {
@@ -251,24 +167,6 @@ mod tests {
         let h = (1u64 ^ (3 * 2_654_435_761u64) ^ (2 * 805_459_861u64)) % 64;
         assert_eq!(k[0], 1);
         assert_eq!(out, [2.0 * h as f32, 2.0 * h as f32 + 1.0]);
-    }
-
-    #[test]
-    fn biased_mlp_is_affine_with_relu() {
-        // 2 → 2 → 1: W0 = [[1, −1], [2, 0]], b0 = [0, −1]; W1 = [[1, 1]], b1 = [0.5].
-        let m = BiasedMlp::new(
-            2,
-            vec![
-                (vec![1.0, -1.0, 2.0, 0.0], vec![0.0, -1.0]),
-                (vec![1.0, 1.0], vec![0.5]),
-            ],
-        )
-        .unwrap();
-        let mut y = [0.0];
-        // x = (1, 3): h = relu(−2, 1) = (0, 1); y = 1.5.
-        m.forward(&[1.0, 3.0], &mut y, &mut Vec::new());
-        assert_eq!(y, [1.5]);
-        assert!(BiasedMlp::new(3, vec![(vec![0.0; 4], vec![0.0; 2])]).is_none());
     }
 
     #[test]

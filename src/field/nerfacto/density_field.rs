@@ -169,11 +169,7 @@ impl DensityField {
         s.encoded.resize(n * width, 0.0);
         match &self.grid {
             Grid::Tcnn(g) => g.encode(&s.units, &mut s.encoded),
-            Grid::Torch(g) => {
-                for (u, e) in s.units.iter().zip(s.encoded.chunks_exact_mut(width)) {
-                    g.encode(*u, e);
-                }
-            }
+            Grid::Torch(g) => g.encode(&s.units, &mut s.encoded),
         }
         s.raw.resize(n, 0.0);
         self.head.forward(&s.encoded, &mut s.raw);

@@ -342,11 +342,8 @@ impl NerfactoField {
                 density.forward(enc, out);
             }
             Net::Torch { grid, density, .. } => {
-                let w = grid.n_outputs();
-                enc.resize(xs.len() * w, 0.0);
-                for (x, e) in xs.iter().zip(enc.chunks_exact_mut(w)) {
-                    grid.encode(*x, e);
-                }
+                enc.resize(xs.len() * grid.n_outputs(), 0.0);
+                grid.encode(xs, enc);
                 density.forward(enc, out);
             }
         }

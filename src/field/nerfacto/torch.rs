@@ -72,36 +72,52 @@ impl TorchHashGrid {
         self.scales.len() * self.n_features
     }
 
-    /// Encodes `x` (unit cube) into `out` (`L·F` values).
-    pub(crate) fn encode(&self, x: Vec3, out: &mut [f32]) {
-        let nf = self.n_features;
+    /// Encodes the points `xs` (unit cube) into `out` (`L·F` values each, point after
+    /// point). Level by level, so that one level's rows stay in cache across the batch;
+    /// the two features of nerfstudio's default get a loop of their own width.
+    pub(crate) fn encode(&self, xs: &[Vec3], out: &mut [f32]) {
+        match self.n_features {
+            2 => self.encode_features(2, xs, out),
+            nf => self.encode_features(nf, xs, out),
+        }
+    }
+
+    /// [`Self::encode`] for `nf` features per level (a constant once inlined). Per point
+    /// and level: `p = s_l·x`; per axis the lower corner `⌊p⌋` with weight `1 − w`, the
+    /// upper `⌈p⌉` with `w = p − ⌊p⌋`; the 8 corners in the order of their bits (x, then y,
+    /// then z), each weight `w_x·w_y·w_z` and each feature summed from zero in that order.
+    #[inline(always)]
+    fn encode_features(&self, nf: usize, xs: &[Vec3], out: &mut [f32]) {
+        let width = self.scales.len() * nf;
         // Rows per level are a power of two: the hash's modulo is a mask.
+        let rows = self.table_size as usize;
         let mask = self.table_size - 1;
-        for (l, (&s, dst)) in self.scales.iter().zip(out.chunks_exact_mut(nf)).enumerate() {
-            let p = x.to_array().map(|v| v * s);
-            // `p ≥ 0` in the unit cube: truncation is the floor, and the upper corner is the
-            // ceiling (the same corner as the lower one where `p` is a whole number), without
-            // libm's floor and ceil calls on CPUs the build does not assume SSE4.1 of.
-            let lo = p.map(|v| v as u32);
-            let w = [0, 1, 2].map(|a| p[a] - lo[a] as f32);
-            let hi = [0, 1, 2].map(|a| lo[a] + u32::from(w[a] > 0.0));
-            dst.fill(0.0);
-            for corner in 0..8u32 {
-                let mut weight = 1.0f32;
-                let mut k = [0u32; 3];
-                for a in 0..3 {
-                    if corner >> a & 1 == 1 {
-                        weight *= w[a];
-                        k[a] = hi[a];
-                    } else {
-                        weight *= 1.0 - w[a];
-                        k[a] = lo[a];
+        let levels = self.scales.iter().zip(self.table.chunks_exact(rows * nf));
+        for (l, (&s, table)) in levels.enumerate() {
+            for (x, dst) in xs.iter().zip(out.chunks_exact_mut(width)) {
+                let dst = &mut dst[l * nf..(l + 1) * nf];
+                let p = x.to_array().map(|v| v * s);
+                // `p ≥ 0` in the unit cube: truncation is the floor, and the upper corner is
+                // the ceiling (the same corner as the lower one where `p` is a whole
+                // number), without libm's floor and ceil calls on CPUs the build does not
+                // assume SSE4.1 of.
+                let lo = p.map(|v| v as u32);
+                let w = [0, 1, 2].map(|a| p[a] - lo[a] as f32);
+                let hi = [0, 1, 2].map(|a| lo[a] + u32::from(w[a] > 0.0));
+                let hx = [lo[0], hi[0]];
+                let hy = [lo[1], hi[1]].map(|k| k.wrapping_mul(2_654_435_761));
+                let hz = [lo[2], hi[2]].map(|k| k.wrapping_mul(805_459_861));
+                let wx = [1.0 - w[0], w[0]];
+                let wy = [1.0 - w[1], w[1]];
+                let wz = [1.0 - w[2], w[2]];
+                dst.fill(0.0);
+                for corner in 0..8 {
+                    let (a, b, c) = (corner & 1, corner >> 1 & 1, corner >> 2);
+                    let weight = wx[a] * wy[b] * wz[c];
+                    let row = ((hx[a] ^ hy[b] ^ hz[c]) & mask) as usize;
+                    for (d, v) in dst.iter_mut().zip(&table[row * nf..row * nf + nf]) {
+                        *d += weight * v;
                     }
-                }
-                let h = k[0] ^ k[1].wrapping_mul(2_654_435_761) ^ k[2].wrapping_mul(805_459_861);
-                let row = (h & mask) as usize + l * self.table_size as usize;
-                for (d, v) in dst.iter_mut().zip(&self.table[row * nf..(row + 1) * nf]) {
-                    *d += weight * v;
                 }
             }
         }
@@ -163,10 +179,62 @@ mod tests {
         let g = TorchHashGrid::new(1, 2, 6, 4, 4, table).unwrap();
         let k = [1u32, 3, 2];
         let mut out = [0.0; 2];
-        g.encode(Vec3::new(0.25, 0.75, 0.5), &mut out);
+        g.encode(&[Vec3::new(0.25, 0.75, 0.5)], &mut out);
         let h = (1u64 ^ (3 * 2_654_435_761u64) ^ (2 * 805_459_861u64)) % 64;
         assert_eq!(k[0], 1);
         assert_eq!(out, [2.0 * h as f32, 2.0 * h as f32 + 1.0]);
+    }
+
+    #[test]
+    fn batches_match_the_trilinear_formula() {
+        // A slow f64 reference of the module's formula (torch's int64 hash, modulo the rows)
+        // on seeded points, for the default 2 features and an odd 3, several levels.
+        for nf in [2usize, 3] {
+            let (levels, log2) = (4u32, 6u32);
+            let rows = 1usize << log2;
+            let table: Vec<f32> = (0..levels as usize * rows * nf)
+                .map(|i| ((i * 7919 % 1000) as f32 / 500.0) - 1.0)
+                .collect();
+            let g = TorchHashGrid::new(levels, nf, log2, 3, 40, table.clone()).unwrap();
+            let mut seed = 5u64;
+            let mut next = || {
+                seed = seed
+                    .wrapping_mul(6_364_136_223_846_793_005)
+                    .wrapping_add(1_442_695_040_888_963_407);
+                (seed >> 40) as f32 / (1u64 << 24) as f32
+            };
+            // Random points, and one on grid lines of every level (x = 0.5·k).
+            let mut xs: Vec<Vec3> = (0..50).map(|_| Vec3::new(next(), next(), next())).collect();
+            xs.push(Vec3::new(0.5, 0.0, 0.25));
+            let mut out = vec![f32::NAN; xs.len() * g.n_outputs()];
+            g.encode(&xs, &mut out);
+            for (x, got) in xs.iter().zip(out.chunks_exact(g.n_outputs())) {
+                for (l, &s) in g.scales.iter().enumerate() {
+                    let p = x.to_array().map(|v| f64::from(v * s));
+                    for f in 0..nf {
+                        let mut want = 0.0f64;
+                        for corner in 0..8 {
+                            let (mut weight, mut k) = (1.0f64, [0u64; 3]);
+                            for a in 0..3 {
+                                let up = corner >> a & 1 == 1;
+                                k[a] = if up { p[a].ceil() } else { p[a].floor() } as u64;
+                                let w = p[a] - p[a].floor();
+                                weight *= if up { w } else { 1.0 - w };
+                            }
+                            let h = (k[0] ^ (k[1] * 2_654_435_761) ^ (k[2] * 805_459_861))
+                                % rows as u64;
+                            let row = h as usize + l * rows;
+                            want += weight * f64::from(table[row * nf + f]);
+                        }
+                        let ours = f64::from(got[l * nf + f]);
+                        assert!(
+                            (ours - want).abs() < 1e-5,
+                            "{nf} {x} level {l}: {ours} {want}"
+                        );
+                    }
+                }
+            }
+        }
     }
 
     #[test]

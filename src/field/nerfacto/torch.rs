@@ -20,6 +20,16 @@
 
 use glam::Vec3;
 
+/// Which loop encodes a batch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kernel {
+    /// Point by point: the reference.
+    Plain,
+    /// Eight points at a time (two features per level).
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+}
+
 /// The torch fallback's hash encoding.
 #[derive(Clone, Debug)]
 pub(crate) struct TorchHashGrid {
@@ -73,13 +83,116 @@ impl TorchHashGrid {
     }
 
     /// Encodes the points `xs` (unit cube) into `out` (`L·F` values each, point after
-    /// point). Level by level, so that one level's rows stay in cache across the batch;
-    /// the two features of nerfstudio's default get a loop of their own width.
+    /// point). Level by level, so that one level's rows stay in cache across the batch.
     pub(crate) fn encode(&self, xs: &[Vec3], out: &mut [f32]) {
-        match self.n_features {
-            2 => self.encode_features(2, xs, out),
-            nf => self.encode_features(nf, xs, out),
+        self.encode_with(self.kernel(), xs, out);
+    }
+
+    /// The fastest encoder for this grid on this CPU: eight points at a time with AVX2
+    /// for nerfstudio's two features per level (and gather offsets that fit `i32`).
+    fn kernel(&self) -> Kernel {
+        #[cfg(target_arch = "x86_64")]
+        if self.n_features == 2 && self.table_size <= 1 << 29 && is_x86_feature_detected!("avx2") {
+            return Kernel::Avx2;
         }
+        Kernel::Plain
+    }
+
+    fn encode_with(&self, kernel: Kernel, xs: &[Vec3], out: &mut [f32]) {
+        match kernel {
+            // Two features get a loop of their own width.
+            Kernel::Plain if self.n_features == 2 => self.encode_features(2, xs, out),
+            Kernel::Plain => self.encode_features(self.n_features, xs, out),
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: `kernel` chose AVX2 only where the CPU has it, for two features and
+            // tables whose offsets fit the gathers' `i32`.
+            Kernel::Avx2 => unsafe { self.encode_pairs_avx2(xs, out) },
+        }
+    }
+
+    /// [`Self::encode_features`] for two features, eight points per step with the same
+    /// operations in the same order (so the same bits): the corners' hashes and weights as
+    /// vectors, the rows gathered. The last `len mod 8` points go through the plain loop.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn encode_pairs_avx2(&self, xs: &[Vec3], out: &mut [f32]) {
+        use std::arch::x86_64::*;
+        let width = self.scales.len() * 2;
+        let rows = self.table_size as usize;
+        let n8 = xs.len() / 8 * 8;
+        // The coordinates axis-major, for vector loads.
+        let mut axes = vec![0.0f32; 3 * n8];
+        for (i, x) in xs[..n8].iter().enumerate() {
+            for (a, v) in x.to_array().into_iter().enumerate() {
+                axes[a * n8 + i] = v;
+            }
+        }
+        let mask = _mm256_set1_epi32((self.table_size - 1) as i32);
+        let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
+        // The hash's primes as i32 bit patterns (the products wrap as the u32 ones do).
+        let primes = [1u32, 2_654_435_761, 805_459_861].map(|p| _mm256_set1_epi32(p as i32));
+        let pairs = [
+            _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3),
+            _mm256_setr_epi32(4, 4, 5, 5, 6, 6, 7, 7),
+        ];
+        let levels = self.scales.iter().zip(self.table.chunks_exact(rows * 2));
+        for (l, (&s, table)) in levels.enumerate() {
+            let scale = _mm256_set1_ps(s);
+            for g in (0..n8).step_by(8) {
+                let mut h = [[_mm256_setzero_si256(); 2]; 3];
+                let mut w = [[zero; 2]; 3];
+                for a in 0..3 {
+                    // SAFETY: `axes` holds `n8` values per axis and `g + 8 ≤ n8`.
+                    let x = unsafe { _mm256_loadu_ps(axes[a * n8 + g..].as_ptr()) };
+                    let p = _mm256_mul_ps(x, scale);
+                    let lo = _mm256_cvttps_epi32(p);
+                    let frac = _mm256_sub_ps(p, _mm256_cvtepi32_ps(lo));
+                    // `hi = lo + (frac > 0)`: the comparison's mask is −1 where true.
+                    let up = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_GT_OQ>(frac, zero));
+                    let hi = _mm256_sub_epi32(lo, up);
+                    h[a] = [lo, hi].map(|k| _mm256_mullo_epi32(k, primes[a]));
+                    w[a] = [_mm256_sub_ps(one, frac), frac];
+                }
+                // Per half of the points, their two features interleaved as in `out`.
+                let mut acc = [zero; 2];
+                for corner in 0..8 {
+                    let (a, b, c) = (corner & 1, corner >> 1 & 1, corner >> 2);
+                    let weight = _mm256_mul_ps(_mm256_mul_ps(w[0][a], w[1][b]), w[2][c]);
+                    let hash = _mm256_xor_si256(_mm256_xor_si256(h[0][a], h[1][b]), h[2][c]);
+                    let row = _mm256_and_si256(hash, mask);
+                    let halves = [
+                        _mm256_castsi256_si128(row),
+                        _mm256_extracti128_si256::<1>(row),
+                    ];
+                    for (half, (sum, rows)) in acc.iter_mut().zip(halves).enumerate() {
+                        // Each point's weight twice, for its two features.
+                        let twice = _mm256_permutevar8x32_ps(weight, pairs[half]);
+                        // A row's two features as one 64-bit element.
+                        // SAFETY: `row < rows`, and the level's table has `2·rows` values.
+                        let v = unsafe {
+                            _mm256_castsi256_ps(_mm256_i32gather_epi64::<8>(
+                                table.as_ptr().cast::<i64>(),
+                                rows,
+                            ))
+                        };
+                        *sum = _mm256_add_ps(*sum, _mm256_mul_ps(twice, v));
+                    }
+                }
+                for (half, v) in acc.into_iter().enumerate() {
+                    let mut lanes = [0.0f32; 8];
+                    // SAFETY: `lanes` has 8 values.
+                    unsafe { _mm256_storeu_ps(lanes.as_mut_ptr(), v) };
+                    let first = g + 4 * half;
+                    for (o, pair) in out[first * width..(first + 4) * width]
+                        .chunks_exact_mut(width)
+                        .zip(lanes.chunks_exact(2))
+                    {
+                        o[2 * l..2 * l + 2].copy_from_slice(pair);
+                    }
+                }
+            }
+        }
+        self.encode_features(2, &xs[n8..], &mut out[n8 * width..]);
     }
 
     /// [`Self::encode`] for `nf` features per level (a constant once inlined). Per point
@@ -234,6 +347,39 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    #[test]
+    fn every_kernel_gives_the_plain_loop_bits() {
+        // nerfstudio's proposal-network shape (5 levels × 2, 2^12 rows), batches that are
+        // not multiples of 8, points on cell faces.
+        let rows = 1usize << 12;
+        let table: Vec<f32> = (0..5 * rows * 2)
+            .map(|i| ((i * 7919 % 1999) as f32 / 999.0) - 1.0)
+            .collect();
+        let g = TorchHashGrid::new(5, 2, 12, 16, 256, table).unwrap();
+        let mut seed = 9u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for n in [0, 1, 8, 37] {
+            let mut xs: Vec<Vec3> = (0..n).map(|_| Vec3::new(next(), next(), next())).collect();
+            if n > 1 {
+                xs[1] = Vec3::new(0.5, 0.25, 0.0);
+            }
+            let mut plain = vec![f32::NAN; n * g.n_outputs()];
+            g.encode_with(Kernel::Plain, &xs, &mut plain);
+            let mut fast = vec![f32::NAN; n * g.n_outputs()];
+            g.encode_with(g.kernel(), &xs, &mut fast);
+            assert_eq!(
+                fast.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                plain.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                "{n} points"
+            );
         }
     }
 

@@ -165,11 +165,21 @@ impl NerfactoField {
         if !settings.use_average_appearance_embedding {
             appearance.fill(0.0);
         }
-        let (net, n_base, n_params) = if keys.has("mlp_head.tcnn_encoding.params") {
+        let (mut net, n_base, n_params) = if keys.has("mlp_head.tcnn_encoding.params") {
             read_tcnn(&ckpt, &keys, &settings, appearance.len())?
         } else {
             read_torch(&ckpt, &keys, &settings, appearance.len())?
         };
+        // The appearance is the same for every sample: folded into the colour MLP's first
+        // biases, so that it reads the direction's SH and the geometry features only.
+        let (Net::Tcnn { head, .. } | Net::Torch { head, .. }) = &mut net;
+        *head = head.with_last_inputs(&appearance).ok_or_else(|| {
+            Error::format(
+                &checkpoint,
+                "mlp_head",
+                "the colour MLP has fewer inputs than the appearance embedding",
+            )
+        })?;
         let proposal = read_proposal(&ckpt, &config_text, &config_file, &settings)?;
         let mut field = NerfactoField {
             run: run.to_path_buf(),
@@ -218,7 +228,12 @@ impl NerfactoField {
                         g.per_level_scale, grid.storage()
                     ),
                     format!("{} -> {}x{} -> {}", d.n_inputs, d.n_hidden_layers, d.width, d.n_outputs),
-                    format!("{} -> {}x{} -> 3", h.n_inputs, h.n_hidden_layers, h.width),
+                    format!(
+                        "{} -> {}x{} -> 3",
+                        h.n_inputs + self.appearance.len(),
+                        h.n_hidden_layers,
+                        h.width
+                    ),
                 )
             }
             Net::Torch { density, head, .. } => {
@@ -242,7 +257,7 @@ impl NerfactoField {
                     ),
                     format!(
                         "{} -> {} layers of {} -> 3",
-                        h.n_inputs,
+                        h.n_inputs + self.appearance.len(),
                         h.n_hidden_layers + 1,
                         h.width
                     ),
@@ -412,7 +427,8 @@ impl NerfactoField {
     /// Colours from the geometry features (`n_base − 1` per point) and directions.
     fn colour(&self, geo: &[f32], dirs: &[Vec3], rgb: &mut [Vec3]) {
         let n_geo = self.n_base - 1;
-        let width = 16 + n_geo + self.appearance.len();
+        // The appearance is folded into the MLP (see `load`).
+        let width = 16 + n_geo;
         let (mut input, mut colour) = (Vec::new(), Vec::new());
         let parts = geo.chunks(CHUNK * n_geo).zip(dirs.chunks(CHUNK));
         for ((g, ds), dst) in parts.zip(rgb.chunks_mut(CHUNK)) {
@@ -426,8 +442,7 @@ impl NerfactoField {
                     Net::Tcnn { .. } => sh4(*d),
                     Net::Torch { .. } => torch_sh4((*d + Vec3::ONE) * 0.5),
                 });
-                row[16..16 + n_geo].copy_from_slice(o);
-                row[16 + n_geo..].copy_from_slice(&self.appearance);
+                row[16..].copy_from_slice(o);
             }
             colour.resize(ds.len() * 3, 0.0);
             match &self.net {

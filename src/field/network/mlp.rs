@@ -180,6 +180,27 @@ impl Mlp {
         })
     }
 
+    /// The MLP with its last `values.len()` inputs fixed at `values`: their products with
+    /// the first layer's weights are summed (in f64) into its biases once, so that a batch
+    /// carries only the inputs that vary. `None` when there are fewer inputs than values.
+    pub fn with_last_inputs(&self, values: &[f32]) -> Option<Mlp> {
+        let mut m = self.clone();
+        let first = m.layers.first_mut()?;
+        let keep = first.n_in.checked_sub(values.len())?;
+        for o in 0..first.n_out {
+            let fixed: f64 = values
+                .iter()
+                .enumerate()
+                .map(|(k, &v)| f64::from(first.w[(keep + k) * first.stride + o]) * f64::from(v))
+                .sum();
+            first.bias[o] = (f64::from(first.bias[o]) + fixed) as f32;
+        }
+        first.w.truncate(keep * first.stride);
+        first.n_in = keep;
+        m.config.n_inputs = keep;
+        Some(m)
+    }
+
     /// The configuration.
     pub fn config(&self) -> &MlpConfig {
         &self.config
@@ -552,6 +573,44 @@ mod tests {
             let mut fast = vec![f32::NAN; n * no];
             mlp.forward_with(Kernel::detect(), &x, &mut fast);
             assert_close(&fast, &plain, scale);
+        }
+    }
+
+    #[test]
+    fn fixed_inputs_fold_into_the_first_biases() {
+        // tiny-cuda-nn's 63 → 64 → 64 → 3 colour MLP and a torch one, the last 32 inputs
+        // fixed: the same outputs as passing them every time, up to f32 rounding.
+        let tcnn = MlpConfig {
+            n_inputs: 63,
+            width: 64,
+            n_hidden_layers: 2,
+            n_outputs: 3,
+            output_alignment: 16,
+        };
+        let torch_layers = [
+            (seeded(64 * 63, 1), seeded(64, 2)),
+            (seeded(64 * 64, 3), seeded(64, 4)),
+            (seeded(3 * 64, 5), seeded(3, 6)),
+        ];
+        let fixed = seeded(32, 8);
+        for mlp in [
+            Mlp::new(tcnn, &seeded(tcnn.n_params(), 7)).unwrap(),
+            Mlp::with_biases(63, &torch_layers).unwrap(),
+        ] {
+            let folded = mlp.with_last_inputs(&fixed).unwrap();
+            assert_eq!(folded.config().n_inputs, 31);
+            let n = 19;
+            let varying = seeded(n * 31, 9);
+            let full: Vec<f32> = varying
+                .chunks_exact(31)
+                .flat_map(|v| v.iter().chain(&fixed).copied())
+                .collect();
+            let (mut want, mut got) = (vec![0.0; n * 3], vec![0.0; n * 3]);
+            mlp.forward_with(Kernel::Plain, &full, &mut want);
+            folded.forward_with(Kernel::Plain, &varying, &mut got);
+            let scale = want.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+            assert_close(&got, &want, scale);
+            assert!(mlp.with_last_inputs(&[0.0; 64]).is_none());
         }
     }
 

@@ -319,28 +319,32 @@ impl NerfactoField {
         let mut first = 0;
         while !s.live.is_empty() && first < n {
             let last = (first + ROUND).min(n);
+            // The live rays' samples `first..last`, ray after ray.
             s.points.clear();
-            s.owners.clear();
             for &r in &s.live {
                 let ray = &rays[r as usize];
-                for j in first..last {
-                    let (t0, t1) = Self::interval(s, r as usize, j, n);
-                    s.points
-                        .push((ray.origin + ray.dir * (0.5 * (t0 + t1))).as_vec3());
-                    s.owners.push((r, j as u32));
-                }
+                let t = &s.distances[r as usize * (n + 1)..][first..=last];
+                s.points.extend(
+                    t.windows(2)
+                        .map(|t| (ray.origin + ray.dir * (0.5 * (t[0] + t[1]))).as_vec3()),
+                );
             }
             s.sigma.resize(s.points.len(), 0.0);
             net.density(&s.points, &mut s.sigma, &mut s.density);
             queries += s.points.len() as u64;
-            for (&(r, j), &sigma) in s.owners.iter().zip(&s.sigma) {
-                let (r, j) = (r as usize, j as usize);
-                let (t0, t1) = Self::interval(s, r, j, n);
-                // `α = 1 − e^{−σδ}` (as `−expm1`, exact for thin samples); the
-                // transmittance carried as a product (`e^{−Σσδ}`, one exponential per sample).
-                let e = (-sanitised(sigma) * (t1 - t0)).exp_m1();
-                s.weights[r * n + j] = -e * s.transmittance[r];
-                s.transmittance[r] *= 1.0 + e;
+            for (&r, sigma) in s.live.iter().zip(s.sigma.chunks_exact(last - first)) {
+                let r = r as usize;
+                let t = &s.distances[r * (n + 1)..][first..=last];
+                let weights = &mut s.weights[r * n + first..r * n + last];
+                let transmittance = &mut s.transmittance[r];
+                for ((w, t), &sigma) in weights.iter_mut().zip(t.windows(2)).zip(sigma) {
+                    // `α = 1 − e^{−σδ}` (as `−expm1`, exact for thin samples); the
+                    // transmittance carried as a product (`e^{−Σσδ}`, one exponential per
+                    // sample).
+                    let e = (-sanitised(sigma) * (t[1] - t[0])).exp_m1();
+                    *w = -e * *transmittance;
+                    *transmittance *= 1.0 + e;
+                }
             }
             let transmittance = &s.transmittance;
             s.live

@@ -13,7 +13,7 @@ mod common_nerfacto;
 use std::path::Path;
 use std::process::Command;
 
-use common_nerfacto::{scratch, write_run, Spec};
+use common_nerfacto::{sampler_split, scratch, write_run, Spec};
 use glam::{DMat4, DVec3};
 use nerfx::camera::{Camera, Perspective, Projection, Ray};
 use nerfx::field::{NerfactoField, Piece, SamplerRay, SamplerScratch};
@@ -345,9 +345,7 @@ fn the_occupancy_sampler_is_chosen_per_instance_and_runs_without_proposals_are_m
 #[test]
 #[ignore = "benchmark"]
 fn bench_proposal_render_1080p_final() {
-    use nerfx::field::SamplerStats;
     use nerfx::render::render_with_progress;
-    use rayon::prelude::*;
     use std::time::Instant;
 
     let (w, h) = std::env::var("NERFX_BENCH_SIZE")
@@ -398,34 +396,6 @@ fn bench_proposal_render_1080p_final() {
         .filter_map(|(x, y)| camera.ray(f64::from(x) + 0.5, f64::from(y) + 0.5))
         .filter_map(|r| scene.proposal[0].sampler_ray(&r).map(|(s, _)| s))
         .collect();
-    let t = Instant::now();
-    let split = rays
-        .par_chunks(256)
-        .map_init(
-            || (SamplerScratch::default(), Vec::new()),
-            |(s, pieces), batch| {
-                pieces.clear();
-                field.sample_rays(batch, pieces, s).unwrap()
-            },
-        )
-        .reduce(SamplerStats::default, |mut a, b| {
-            a += b;
-            a
-        });
-    let (prop, main) = (
-        split.proposal_time.as_secs_f64(),
-        split.main_time.as_secs_f64(),
-    );
-    println!(
-        "sampling alone: {:.0} ms wall; thread-seconds: proposal networks {prop:.1} s ({:.0} %, \
-         {:.1} queries/pixel), main field {main:.1} s ({:.0} %, {:.1} density and {:.1} colour \
-         queries/pixel)",
-        t.elapsed().as_secs_f64() * 1e3,
-        100.0 * prop / (prop + main),
-        split.proposal_queries as f64 / n,
-        100.0 * main / (prop + main),
-        split.main_queries as f64 / n,
-        split.color_queries as f64 / n,
-    );
+    println!("{}", sampler_split(field, &rays, n));
     let _ = std::fs::remove_dir_all(&dir);
 }

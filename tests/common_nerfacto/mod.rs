@@ -681,6 +681,47 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
     )
 }
 
+/// Samples `rays` (an image's, `pixels` of them) again outside the renderer, in 256-ray
+/// batches on rayon's threads, and says where the sampler's time goes: thread-seconds in the
+/// proposal networks and in the main field, and each one's queries per pixel.
+pub fn sampler_split(
+    field: &nerfx::field::NerfactoField,
+    rays: &[nerfx::field::SamplerRay],
+    pixels: f64,
+) -> String {
+    use nerfx::field::{SamplerScratch, SamplerStats};
+    use rayon::prelude::*;
+    let t = std::time::Instant::now();
+    let split = rays
+        .par_chunks(256)
+        .map_init(
+            || (SamplerScratch::default(), Vec::new()),
+            |(s, pieces), batch| {
+                pieces.clear();
+                field.sample_rays(batch, pieces, s).unwrap()
+            },
+        )
+        .reduce(SamplerStats::default, |mut a, b| {
+            a += b;
+            a
+        });
+    let (prop, main) = (
+        split.proposal_time.as_secs_f64(),
+        split.main_time.as_secs_f64(),
+    );
+    format!(
+        "sampling alone: {:.0} ms wall; thread-seconds: proposal networks {prop:.2} s ({:.0} %, \
+         {:.1} queries/pixel), main field {main:.2} s ({:.0} %, {:.1} density and {:.1} colour \
+         queries/pixel)",
+        t.elapsed().as_secs_f64() * 1e3,
+        100.0 * prop / (prop + main),
+        split.proposal_queries as f64 / pixels,
+        100.0 * main / (prop + main),
+        split.main_queries as f64 / pixels,
+        split.color_queries as f64 / pixels,
+    )
+}
+
 /// A fresh scratch folder for one test.
 pub fn scratch(name: &str) -> PathBuf {
     let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))

@@ -18,7 +18,7 @@
 use glam::Vec3;
 
 use super::config::ProposalNetSettings;
-use super::torch::{BiasedMlp, TorchHashGrid};
+use super::torch::TorchHashGrid;
 use super::{
     read_linear_layers, read_params, read_torch_grid, read_weights, tcnn_grid, tcnn_grid_config,
     Keys, NerfactoField, MAX_LOG_DENSITY,
@@ -34,20 +34,13 @@ enum Grid {
     Torch(TorchHashGrid),
 }
 
-/// What turns the encoding into `raw`.
-#[derive(Clone, Debug)]
-enum Head {
-    /// tiny-cuda-nn's MLP (no biases).
-    Tcnn(Mlp),
-    /// torch `nn.Linear` layers with biases (the torch MLP, or `use_linear`'s one layer).
-    Biased(BiasedMlp),
-}
-
 /// One proposal density field.
 #[derive(Clone, Debug)]
 pub(crate) struct DensityField {
     grid: Grid,
-    head: Head,
+    /// What turns the encoding into `raw`: tiny-cuda-nn's MLP (no biases), or torch
+    /// `nn.Linear` layers with biases (the torch MLP, or `use_linear`'s one layer).
+    head: Mlp,
     average_init_density: f32,
     n_params: usize,
 }
@@ -59,7 +52,6 @@ pub(crate) struct DensityScratch {
     index: Vec<u32>,
     encoded: Vec<f32>,
     raw: Vec<f32>,
-    hidden: Vec<f32>,
 }
 
 impl DensityField {
@@ -107,8 +99,7 @@ impl DensityField {
             ));
         };
         let (head, n_head) = if s.use_linear {
-            let (m, n) = read_linear_layers(ckpt, &keys, "linear", grid_outputs)?;
-            (Head::Biased(m), n)
+            read_linear_layers(ckpt, &keys, "linear", grid_outputs)?
         } else if let Some(name) = keys.first(&["mlp_base.1.tcnn_encoding.params"]) {
             let p = read_weights(ckpt, &name)?;
             let config = [16, 8]
@@ -136,18 +127,15 @@ impl DensityField {
                 })?;
             let mlp = Mlp::new(config, &p)
                 .ok_or_else(|| keys.err(&name, "MLP parameters do not match"))?;
-            (Head::Tcnn(mlp), p.len())
+            (mlp, p.len())
         } else {
-            let (m, n) = read_linear_layers(ckpt, &keys, "mlp_base.1.layers", grid_outputs)?;
-            (Head::Biased(m), n)
+            read_linear_layers(ckpt, &keys, "mlp_base.1.layers", grid_outputs)?
         };
-        if let Head::Biased(m) = &head {
-            if m.n_outputs() != 1 {
-                return Err(keys.err(
-                    &keys.name("mlp_base.1"),
-                    format!("{} outputs; a density field has 1", m.n_outputs()),
-                ));
-            }
+        if head.config().n_outputs != 1 {
+            return Err(keys.err(
+                &keys.name("mlp_base.1"),
+                format!("{} outputs; a density field has 1", head.config().n_outputs),
+            ));
         }
         Ok(DensityField {
             grid,
@@ -181,21 +169,10 @@ impl DensityField {
         s.encoded.resize(n * width, 0.0);
         match &self.grid {
             Grid::Tcnn(g) => g.encode(&s.units, &mut s.encoded),
-            Grid::Torch(g) => {
-                for (u, e) in s.units.iter().zip(s.encoded.chunks_exact_mut(width)) {
-                    g.encode(*u, e);
-                }
-            }
+            Grid::Torch(g) => g.encode(&s.units, &mut s.encoded),
         }
         s.raw.resize(n, 0.0);
-        match &self.head {
-            Head::Tcnn(m) => m.forward(&s.encoded, &mut s.raw),
-            Head::Biased(m) => {
-                for (e, r) in s.encoded.chunks_exact(width).zip(s.raw.chunks_exact_mut(1)) {
-                    m.forward(e, r, &mut s.hidden);
-                }
-            }
-        }
+        self.head.forward(&s.encoded, &mut s.raw);
         for (&i, &raw) in s.index.iter().zip(&s.raw) {
             sigma[i as usize] = self.average_init_density * raw.min(MAX_LOG_DENSITY).exp();
         }

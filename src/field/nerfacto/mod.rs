@@ -63,7 +63,7 @@ use occupancy::{
     cache_key, cache_paths, contract, GridSettings, OccupancyGrid, Source, CACHE_FILE,
 };
 use proposal::ProposalSampler;
-use torch::{torch_sh4, BiasedMlp, TorchHashGrid};
+use torch::{torch_sh4, TorchHashGrid};
 
 mod config;
 mod dataparser;
@@ -102,8 +102,8 @@ enum Net {
     },
     Torch {
         grid: TorchHashGrid,
-        density: BiasedMlp,
-        head: BiasedMlp,
+        density: Mlp,
+        head: Mlp,
     },
 }
 
@@ -165,11 +165,21 @@ impl NerfactoField {
         if !settings.use_average_appearance_embedding {
             appearance.fill(0.0);
         }
-        let (net, n_base, n_params) = if keys.has("mlp_head.tcnn_encoding.params") {
+        let (mut net, n_base, n_params) = if keys.has("mlp_head.tcnn_encoding.params") {
             read_tcnn(&ckpt, &keys, &settings, appearance.len())?
         } else {
             read_torch(&ckpt, &keys, &settings, appearance.len())?
         };
+        // The appearance is the same for every sample: folded into the colour MLP's first
+        // biases, so that it reads the direction's SH and the geometry features only.
+        let (Net::Tcnn { head, .. } | Net::Torch { head, .. }) = &mut net;
+        *head = head.with_last_inputs(&appearance).ok_or_else(|| {
+            Error::format(
+                &checkpoint,
+                "mlp_head",
+                "the colour MLP has fewer inputs than the appearance embedding",
+            )
+        })?;
         let proposal = read_proposal(&ckpt, &config_text, &config_file, &settings)?;
         let mut field = NerfactoField {
             run: run.to_path_buf(),
@@ -218,29 +228,41 @@ impl NerfactoField {
                         g.per_level_scale, grid.storage()
                     ),
                     format!("{} -> {}x{} -> {}", d.n_inputs, d.n_hidden_layers, d.width, d.n_outputs),
-                    format!("{} -> {}x{} -> 3", h.n_inputs, h.n_hidden_layers, h.width),
+                    format!(
+                        "{} -> {}x{} -> 3",
+                        h.n_inputs + self.appearance.len(),
+                        h.n_hidden_layers,
+                        h.width
+                    ),
                 )
             }
-            Net::Torch { density, head, .. } => (
-                "torch fallback (biases, every level hashed)",
-                format!(
-                    "{} levels x {} features, 2^{} rows per level, N_min {}, N_max {}",
-                    s.num_levels, s.features_per_level, s.log2_hashmap_size, s.base_res, s.max_res
-                ),
-                format!(
-                    "{} -> {} layers of {} -> {}",
-                    density.n_inputs(),
-                    density.n_layers(),
-                    density.width(),
-                    density.n_outputs()
-                ),
-                format!(
-                    "{} -> {} layers of {} -> 3",
-                    head.n_inputs(),
-                    head.n_layers(),
-                    head.width()
-                ),
-            ),
+            Net::Torch { density, head, .. } => {
+                let (d, h) = (density.config(), head.config());
+                (
+                    "torch fallback (biases, every level hashed)",
+                    format!(
+                        "{} levels x {} features, 2^{} rows per level, N_min {}, N_max {}",
+                        s.num_levels,
+                        s.features_per_level,
+                        s.log2_hashmap_size,
+                        s.base_res,
+                        s.max_res
+                    ),
+                    format!(
+                        "{} -> {} layers of {} -> {}",
+                        d.n_inputs,
+                        d.n_hidden_layers + 1,
+                        d.width,
+                        d.n_outputs
+                    ),
+                    format!(
+                        "{} -> {} layers of {} -> 3",
+                        h.n_inputs + self.appearance.len(),
+                        h.n_hidden_layers + 1,
+                        h.width
+                    ),
+                )
+            }
         };
         let sampler = match &self.proposal {
             Some(p) => {
@@ -335,13 +357,9 @@ impl NerfactoField {
                 density.forward(enc, out);
             }
             Net::Torch { grid, density, .. } => {
-                let w = grid.n_outputs();
-                enc.resize(w, 0.0);
-                let mut scratch = Vec::new();
-                for (x, o) in xs.iter().zip(out.chunks_exact_mut(self.n_base)) {
-                    grid.encode(*x, enc);
-                    density.forward(enc, o, &mut scratch);
-                }
+                enc.resize(xs.len() * grid.n_outputs(), 0.0);
+                grid.encode(xs, enc);
+                density.forward(enc, out);
             }
         }
     }
@@ -409,8 +427,9 @@ impl NerfactoField {
     /// Colours from the geometry features (`n_base − 1` per point) and directions.
     fn colour(&self, geo: &[f32], dirs: &[Vec3], rgb: &mut [Vec3]) {
         let n_geo = self.n_base - 1;
-        let width = 16 + n_geo + self.appearance.len();
-        let (mut input, mut colour, mut scratch) = (Vec::new(), Vec::new(), Vec::new());
+        // The appearance is folded into the MLP (see `load`).
+        let width = 16 + n_geo;
+        let (mut input, mut colour) = (Vec::new(), Vec::new());
         let parts = geo.chunks(CHUNK * n_geo).zip(dirs.chunks(CHUNK));
         for ((g, ds), dst) in parts.zip(rgb.chunks_mut(CHUNK)) {
             input.resize(ds.len() * width, 0.0);
@@ -423,16 +442,12 @@ impl NerfactoField {
                     Net::Tcnn { .. } => sh4(*d),
                     Net::Torch { .. } => torch_sh4((*d + Vec3::ONE) * 0.5),
                 });
-                row[16..16 + n_geo].copy_from_slice(o);
-                row[16 + n_geo..].copy_from_slice(&self.appearance);
+                row[16..].copy_from_slice(o);
             }
             colour.resize(ds.len() * 3, 0.0);
             match &self.net {
-                Net::Tcnn { head, .. } => head.forward(&input, &mut colour),
-                Net::Torch { head, .. } => {
-                    for (x, y) in input.chunks_exact(width).zip(colour.chunks_exact_mut(3)) {
-                        head.forward(x, y, &mut scratch);
-                    }
+                Net::Tcnn { head, .. } | Net::Torch { head, .. } => {
+                    head.forward(&input, &mut colour)
                 }
             }
             for (c, v) in dst.iter_mut().zip(colour.chunks_exact(3)) {
@@ -809,13 +824,13 @@ fn read_torch(
     let shape = [s.num_levels, s.log2_hashmap_size, s.base_res, s.max_res];
     let (grid, _) = read_torch_grid(ckpt, keys, &table_name, shape, nf)?;
     let (density, nd) = read_linear_layers(ckpt, keys, mlp_prefix, grid.n_outputs())?;
-    let n_base = density.n_outputs();
+    let n_base = density.config().n_outputs;
     if n_base < 2 {
         return Err(keys.err(mlp_prefix, "the density MLP has no geometry features"));
     }
     let head_inputs = 16 + (n_base - 1) + n_appearance;
     let (head, nh) = read_linear_layers(ckpt, keys, "mlp_head.layers", head_inputs)?;
-    if head.n_outputs() != 3 {
+    if head.config().n_outputs != 3 {
         return Err(keys.err("mlp_head.layers", "the colour MLP does not give 3 outputs"));
     }
     let n_params = s.num_levels as usize * (1 << s.log2_hashmap_size) * nf + nd + nh;
@@ -830,13 +845,14 @@ fn read_torch(
     ))
 }
 
-/// `<prefix>.<i>.weight|bias` for `i = 0, 1, …` as a [`BiasedMlp`], and its parameter count.
+/// `<prefix>.<i>.weight|bias` for `i = 0, 1, …` as a torch [`Mlp`] (with biases), and its
+/// parameter count.
 fn read_linear_layers(
     ckpt: &Checkpoint,
     keys: &Keys,
     prefix: &str,
     n_inputs: usize,
-) -> Result<(BiasedMlp, usize)> {
+) -> Result<(Mlp, usize)> {
     let mut layers = Vec::new();
     let mut count = 0;
     while keys.has(&format!("{prefix}.{}.weight", layers.len())) {
@@ -848,7 +864,7 @@ fn read_linear_layers(
         count += w.len() + b.len();
         layers.push((w, b));
     }
-    let mlp = BiasedMlp::new(n_inputs, layers).ok_or_else(|| {
+    let mlp = Mlp::with_biases(n_inputs, &layers).ok_or_else(|| {
         keys.err(
             &keys.name(prefix),
             format!("layers missing or not chaining from {n_inputs} inputs"),

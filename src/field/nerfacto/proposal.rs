@@ -103,13 +103,14 @@ pub struct SamplerScratch {
     /// Spacing edges per ray (`n + 1` each) of this iteration and the last.
     edges: Vec<f64>,
     prev_edges: Vec<f64>,
-    /// Weights per ray (`n` each) of the last evaluated iteration.
+    /// Weights per ray (`n` each) of the last evaluated iteration, and one ray's CDF of them.
     weights: Vec<f64>,
+    cdf: Vec<f64>,
     /// `(g(near), g(far))` per ray, and the distances of this iteration's edges.
     span: Vec<[f64; 2]>,
     distances: Vec<f64>,
-    /// Optical depth so far, per ray; rays still being evaluated.
-    tau: Vec<f64>,
+    /// Transmittance so far, per ray; rays still being evaluated.
+    transmittance: Vec<f64>,
     live: Vec<u32>,
     points: Vec<Vec3>,
     owners: Vec<(u32, u32)>,
@@ -178,16 +179,22 @@ impl ProposalSampler {
     }
 }
 
-/// `B` edges resampled by inverse CDF from `edges` (`n + 1`) and their `weights` (`n`);
-/// see the module's step 3.
-pub(crate) fn resample(edges: &[f64], weights: &[f64], b: usize, out: &mut Vec<f64>) {
+/// `B` edges resampled by inverse CDF from `edges` (`n + 1`) and their `weights` (`n`),
+/// appended to `out`; see the module's step 3. `cdf` is scratch.
+pub(crate) fn resample(
+    edges: &[f64],
+    weights: &[f64],
+    b: usize,
+    cdf: &mut Vec<f64>,
+    out: &mut Vec<f64>,
+) {
     let n = weights.len();
     let mut sum: f64 = weights.iter().map(|w| w + HISTOGRAM_PADDING).sum();
     let pad = (PDF_EPS - sum).max(0.0);
     sum += pad;
     let pad = pad / n as f64;
     // The CDF, with its leading 0: c[0] = 0, c[i] = min(1, Σ_{j<i} p_j).
-    let mut cdf = Vec::with_capacity(n + 1);
+    cdf.clear();
     cdf.push(0.0);
     let mut acc = 0.0;
     for w in weights {
@@ -256,6 +263,7 @@ impl NerfactoField {
                         &s.prev_edges[r * (n + 1)..(r + 1) * (n + 1)],
                         &s.weights[r * n..(r + 1) * n],
                         b,
+                        &mut s.cdf,
                         &mut s.edges,
                     );
                 }
@@ -304,37 +312,43 @@ impl NerfactoField {
         let mut queries = 0;
         s.weights.clear();
         s.weights.resize(rays.len() * n, 0.0);
-        s.tau.clear();
-        s.tau.resize(rays.len(), 0.0);
+        s.transmittance.clear();
+        s.transmittance.resize(rays.len(), 1.0);
         s.live.clear();
         s.live.extend(0..rays.len() as u32);
         let mut first = 0;
         while !s.live.is_empty() && first < n {
             let last = (first + ROUND).min(n);
+            // The live rays' samples `first..last`, ray after ray.
             s.points.clear();
-            s.owners.clear();
             for &r in &s.live {
                 let ray = &rays[r as usize];
-                for j in first..last {
-                    let (t0, t1) = Self::interval(s, r as usize, j, n);
-                    s.points
-                        .push((ray.origin + ray.dir * (0.5 * (t0 + t1))).as_vec3());
-                    s.owners.push((r, j as u32));
-                }
+                let t = &s.distances[r as usize * (n + 1)..][first..=last];
+                s.points.extend(
+                    t.windows(2)
+                        .map(|t| (ray.origin + ray.dir * (0.5 * (t[0] + t[1]))).as_vec3()),
+                );
             }
             s.sigma.resize(s.points.len(), 0.0);
             net.density(&s.points, &mut s.sigma, &mut s.density);
             queries += s.points.len() as u64;
-            for (&(r, j), &sigma) in s.owners.iter().zip(&s.sigma) {
-                let (r, j) = (r as usize, j as usize);
-                let (t0, t1) = Self::interval(s, r, j, n);
-                let x = sanitised(sigma) * (t1 - t0);
-                s.weights[r * n + j] = -(-x).exp_m1() * (-s.tau[r]).exp();
-                s.tau[r] += x;
+            for (&r, sigma) in s.live.iter().zip(s.sigma.chunks_exact(last - first)) {
+                let r = r as usize;
+                let t = &s.distances[r * (n + 1)..][first..=last];
+                let weights = &mut s.weights[r * n + first..r * n + last];
+                let transmittance = &mut s.transmittance[r];
+                for ((w, t), &sigma) in weights.iter_mut().zip(t.windows(2)).zip(sigma) {
+                    // `α = 1 − e^{−σδ}` (as `−expm1`, exact for thin samples); the
+                    // transmittance carried as a product (`e^{−Σσδ}`, one exponential per
+                    // sample).
+                    let e = (-sanitised(sigma) * (t[1] - t[0])).exp_m1();
+                    *w = -e * *transmittance;
+                    *transmittance *= 1.0 + e;
+                }
             }
-            let tau = &s.tau;
+            let transmittance = &s.transmittance;
             s.live
-                .retain(|&r| (-tau[r as usize]).exp() >= STOP_TRANSMITTANCE);
+                .retain(|&r| transmittance[r as usize] >= STOP_TRANSMITTANCE);
             first = last;
         }
         queries
@@ -363,8 +377,8 @@ impl NerfactoField {
                 };
             }
         }
-        s.tau.clear();
-        s.tau.resize(rays.len(), 0.0);
+        s.transmittance.clear();
+        s.transmittance.resize(rays.len(), 1.0);
         s.live.clear();
         s.live.extend(0..rays.len() as u32);
         s.shade.clear();
@@ -392,9 +406,9 @@ impl NerfactoField {
                 let (r, j) = (r as usize, j as usize);
                 let p = &mut pieces[base + r * n + j];
                 p.sigma = sanitised(sigma) as f32;
-                let x = f64::from(p.sigma) * (p.t1 - p.t0);
-                let w = -(-x).exp_m1() * (-s.tau[r]).exp();
-                s.tau[r] += x;
+                let e = (-f64::from(p.sigma) * (p.t1 - p.t0)).exp_m1();
+                let w = -e * s.transmittance[r];
+                s.transmittance[r] *= 1.0 + e;
                 if w >= COLOR_MIN_WEIGHT {
                     s.shade.push((r as u32, j as u32));
                     s.shade_features
@@ -402,9 +416,9 @@ impl NerfactoField {
                     s.dirs.push(rays[r].dir.as_vec3());
                 }
             }
-            let tau = &s.tau;
+            let transmittance = &s.transmittance;
             s.live
-                .retain(|&r| (-tau[r as usize]).exp() >= STOP_TRANSMITTANCE);
+                .retain(|&r| transmittance[r as usize] >= STOP_TRANSMITTANCE);
             first = last;
         }
         s.rgb.clear();
@@ -436,7 +450,7 @@ mod tests {
         // Equal weights: the CDF is linear, so B edges land at (k + ½)/B of the span.
         let edges: Vec<f64> = (0..=4).map(|j| j as f64 / 4.0).collect();
         let mut out = Vec::new();
-        resample(&edges, &[0.25; 4], 5, &mut out);
+        resample(&edges, &[0.25; 4], 5, &mut Vec::new(), &mut out);
         for (k, e) in out.iter().enumerate() {
             assert!((e - (k as f64 + 0.5) / 5.0).abs() < 1e-12, "{k}: {e}");
         }
@@ -448,7 +462,7 @@ mod tests {
         // 0.01)/1.04; the 9 edges at u = (k + ½)/9 from k = 1 to 7 fall inside [0.5, 0.75].
         let edges: Vec<f64> = (0..=4).map(|j| j as f64 / 4.0).collect();
         let mut out = Vec::new();
-        resample(&edges, &[0.0, 0.0, 1.0, 0.0], 9, &mut out);
+        resample(&edges, &[0.0, 0.0, 1.0, 0.0], 9, &mut Vec::new(), &mut out);
         let c1 = 0.02 / 1.04;
         // u = 1/18 lies in bin 2: 0.5 + 0.25·(u − c1)/(1.01/1.04).
         let want = 0.5 + 0.25 * (1.0 / 18.0 - c1) / (1.01 / 1.04);

@@ -1,6 +1,7 @@
-//! tiny-cuda-nn's bias-free MLPs (FullyFusedMLP / CutlassMLP), evaluated in f32 on batches.
+//! tiny-cuda-nn's bias-free MLPs (FullyFusedMLP / CutlassMLP), and torch's `nn.Linear`
+//! stacks with biases (nerfstudio's fallback layout), evaluated in f32 on batches.
 //!
-//! Layers `y = W·x` without biases, ReLU between them and none after the last. The flat
+//! tiny-cuda-nn: layers `y = W·x` without biases, ReLU between them and none after the last. The flat
 //! parameters hold the layers one after the other, each row-major `[out][in]`; the first
 //! layer's input is padded to a multiple of 16 and the last layer's output to a multiple of
 //! 16 (FullyFusedMLP) or 8 (CutlassMLP before September 2022). Padding inputs are zero;
@@ -8,13 +9,16 @@
 //!
 //! Example: 32 → 64 → 16 with one hidden layer has `64·32 + 16·64 = 3072` parameters.
 //!
+//! torch ([`Mlp::with_biases`]): layers `y = W·x + b` (`W` `[out][in]`, no padding), ReLU
+//! between them and none after the last; one layer alone is a linear map.
+//!
 //! **Kernel.** The weights are widened to f32 once and stored transposed (`[in][out]`, each
 //! row padded with zeros to a multiple of [`PAD`]). The batch is cut into blocks of `B`
 //! samples whose activations are kept feature-major (`act[i][b]`), so a layer is, per tile
 //! of `T` outputs, `acc[o][·] += W[i][o]·act[i][·]` over the inputs `i`: one broadcast weight
-//! times a vector of `B` samples, `T·B` accumulators held in registers. The sum over `i` runs
-//! in input order, so the plain kernel gives the same bits as `y[o] = Σᵢ x[i]·W[o][i]`
-//! summed left to right. The fast kernel (AVX2 with FMA, chosen once per call at run time;
+//! times a vector of `B` samples, `T·B` accumulators held in registers, starting from the
+//! bias (zero without one). The sum over `i` runs in input order, so the plain kernel gives
+//! the same bits as `y[o] = b[o] + Σᵢ x[i]·W[o][i]` summed left to right. The fast kernel (AVX2 with FMA, chosen once per call at run time;
 //! 16 samples × 4 outputs per tile) fuses each multiply-add, so it differs from the plain
 //! one by f32 rounding only.
 
@@ -55,13 +59,39 @@ impl MlpConfig {
 /// Weight rows are padded with zeros to a multiple of this (every kernel's tile divides it).
 const PAD: usize = 16;
 
-/// One layer: `n_in` inputs, `n_out` outputs kept, weights `[n_in][stride]`.
+/// One layer: `n_in` inputs, `n_out` outputs kept, weights `[n_in][stride]`, biases
+/// `[stride]` (zeros for tiny-cuda-nn's layers and the padding).
 #[derive(Clone, Debug)]
 struct Layer {
     n_in: usize,
     n_out: usize,
     stride: usize,
     w: Vec<f32>,
+    bias: Vec<f32>,
+}
+
+impl Layer {
+    /// From `w` row-major `[n_out][row]` (the first `n_in` of each row used) and the biases.
+    fn new(n_in: usize, n_out: usize, row: usize, w: &[f32], b: Option<&[f32]>) -> Self {
+        let stride = n_out.next_multiple_of(PAD);
+        let mut t = vec![0.0f32; n_in * stride];
+        for o in 0..n_out {
+            for i in 0..n_in {
+                t[i * stride + o] = w[o * row + i];
+            }
+        }
+        let mut bias = vec![0.0f32; stride];
+        if let Some(b) = b {
+            bias[..n_out].copy_from_slice(&b[..n_out]);
+        }
+        Layer {
+            n_in,
+            n_out,
+            stride,
+            w: t,
+            bias,
+        }
+    }
 }
 
 /// An MLP with f32 weights.
@@ -116,22 +146,59 @@ impl Mlp {
                 // last only.
                 let used_in = if k == 0 { config.n_inputs } else { n_in };
                 let kept = if k == last { config.n_outputs } else { n_out };
-                let stride = kept.next_multiple_of(PAD);
-                let mut t = vec![0.0f32; used_in * stride];
-                for o in 0..kept {
-                    for i in 0..used_in {
-                        t[i * stride + o] = w[o * n_in + i];
-                    }
-                }
-                Layer {
-                    n_in: used_in,
-                    n_out: kept,
-                    stride,
-                    w: t,
-                }
+                Layer::new(used_in, kept, n_in, w, None)
             })
             .collect();
         Some(Mlp { config, layers })
+    }
+
+    /// A torch MLP from `(W, b)` per layer, `W` row-major `[out][in]`, the first reading
+    /// `n_inputs`; `None` when there is no layer or the shapes do not chain. Its
+    /// configuration gives the inputs, the first layer's width, the layers after the first
+    /// as hidden ones (0 for one linear layer) and the outputs, unpadded.
+    pub fn with_biases(n_inputs: usize, layers: &[(Vec<f32>, Vec<f32>)]) -> Option<Self> {
+        let mut n_in = n_inputs;
+        let mut out = Vec::with_capacity(layers.len());
+        for (w, b) in layers {
+            let n_out = b.len();
+            if n_out == 0 || w.len() != n_in * n_out {
+                return None;
+            }
+            out.push(Layer::new(n_in, n_out, n_in, w, Some(b)));
+            n_in = n_out;
+        }
+        let config = MlpConfig {
+            n_inputs,
+            width: out.first()?.n_out,
+            n_hidden_layers: out.len() - 1,
+            n_outputs: n_in,
+            output_alignment: 1,
+        };
+        Some(Mlp {
+            config,
+            layers: out,
+        })
+    }
+
+    /// The MLP with its last `values.len()` inputs fixed at `values`: their products with
+    /// the first layer's weights are summed (in f64) into its biases once, so that a batch
+    /// carries only the inputs that vary. `None` when there are fewer inputs than values.
+    pub fn with_last_inputs(&self, values: &[f32]) -> Option<Mlp> {
+        let mut m = self.clone();
+        let first = m.layers.first_mut()?;
+        let keep = first.n_in.checked_sub(values.len())?;
+        for o in 0..first.n_out {
+            let fixed: f64 = values
+                .iter()
+                .enumerate()
+                .map(|(k, &v)| f64::from(first.w[(keep + k) * first.stride + o]) * f64::from(v))
+                .sum();
+            first.bias[o] = (f64::from(first.bias[o]) + fixed) as f32;
+        }
+        first.w.truncate(keep * first.stride);
+        first.n_in = keep;
+        m.config.n_inputs = keep;
+        Some(m)
     }
 
     /// The configuration.
@@ -188,26 +255,29 @@ impl Mlp {
             for i in 0..ni {
                 x[i * B + m..(i + 1) * B].fill(0.0);
             }
-            let (first, rest) = self.layers.split_first().expect("at least two layers");
-            layer::<FMA, B, T>(first, &x, &mut a, true);
-            let (last, hidden) = rest.split_last().expect("at least two layers");
-            for l in hidden {
-                layer::<FMA, B, T>(l, &a, &mut b, true);
-                std::mem::swap(&mut a, &mut b);
+            // ReLU after every layer but the last.
+            let n_layers = self.layers.len();
+            for (k, l) in self.layers.iter().enumerate() {
+                let relu = k + 1 < n_layers;
+                if k == 0 {
+                    layer::<FMA, B, T>(l, &x, &mut a, relu);
+                } else {
+                    layer::<FMA, B, T>(l, &a, &mut b, relu);
+                    std::mem::swap(&mut a, &mut b);
+                }
             }
-            layer::<FMA, B, T>(last, &a, &mut b, false);
             for (k, y) in ys.chunks_exact_mut(no).enumerate() {
                 for (o, v) in y.iter_mut().enumerate() {
-                    *v = b[o * B + k];
+                    *v = a[o * B + k];
                 }
             }
         }
     }
 }
 
-/// One layer on a block of `B` samples: `y[o][b] = Σ_i W[i][o]·x[i][b]` summed in input
-/// order (fused, with explicit vectors, when `FMA`), then ReLU when `relu`. `x` holds `l.n_in` rows of `B`, `y` at
-/// least `n_out` rounded up to `T` rows.
+/// One layer on a block of `B` samples: `y[o][b] = bias[o] + Σ_i W[i][o]·x[i][b]` summed in
+/// input order (fused, with explicit vectors, when `FMA`), then ReLU when `relu`. `x` holds
+/// `l.n_in` rows of `B`, `y` at least `n_out` rounded up to `T` rows.
 #[inline(always)]
 fn layer<const FMA: bool, const B: usize, const T: usize>(
     l: &Layer,
@@ -225,6 +295,9 @@ fn layer<const FMA: bool, const B: usize, const T: usize>(
             continue;
         }
         let mut acc = [[0.0f32; B]; T];
+        for (acc_o, &b) in acc.iter_mut().zip(&l.bias[o0..o0 + T]) {
+            acc_o.fill(b);
+        }
         for (i, xi) in x.chunks_exact(B).enumerate() {
             let w = &l.w[i * l.stride + o0..][..T];
             for (acc_o, &wo) in acc.iter_mut().zip(w) {
@@ -264,6 +337,9 @@ mod simd {
         relu: bool,
     ) {
         let mut acc = [[_mm256_setzero_ps(); 2]; T];
+        for (a, &b) in acc.iter_mut().zip(&l.bias[o0..o0 + T]) {
+            *a = [_mm256_set1_ps(b); 2];
+        }
         for (i, xi) in x.chunks_exact(16).enumerate() {
             let w = &l.w[i * l.stride + o0..][..T];
             // SAFETY: `xi` has 16 values.
@@ -417,6 +493,124 @@ mod tests {
                 mlp.forward_with(Kernel::Avx2, &x, &mut avx2);
                 assert_close(&avx2, &plain, scale);
             }
+        }
+    }
+
+    #[test]
+    fn biased_layers_are_affine_with_relu_between() {
+        // 2 → 2 → 1: W0 = [[1, −1], [2, 0]], b0 = [0, −1]; W1 = [[1, 1]], b1 = [0.5].
+        // x = (1, 3): h = relu(−2, 1) = (0, 1); y = 1.5. x = (2, 0): h = (2, 3); y = 5.5.
+        let layers = [
+            (vec![1.0, -1.0, 2.0, 0.0], vec![0.0, -1.0]),
+            (vec![1.0, 1.0], vec![0.5]),
+        ];
+        let m = Mlp::with_biases(2, &layers).unwrap();
+        for kernel in [Kernel::Plain, Kernel::detect()] {
+            let mut y = [0.0; 2];
+            m.forward_with(kernel, &[1.0, 3.0, 2.0, 0.0], &mut y);
+            assert_eq!(y, [1.5, 5.5], "{kernel:?}");
+        }
+        // One layer is linear: no ReLU on its output.
+        let linear = Mlp::with_biases(2, &layers[..1]).unwrap();
+        let mut y = [0.0; 2];
+        linear.forward(&[1.0, 3.0], &mut y);
+        assert_eq!(y, [-2.0, 1.0]);
+        assert_eq!(linear.config().n_hidden_layers, 0);
+        // Shapes that do not chain.
+        assert!(Mlp::with_biases(3, &layers).is_none());
+        assert!(Mlp::with_biases(2, &[]).is_none());
+    }
+
+    #[test]
+    fn biased_kernels_agree_with_the_plain_reference() {
+        // nerfstudio's torch shapes: proposal 10 → 16 → 1, density 32 → 64 → 16, colour
+        // 63 → 64 → 64 → 3; batches that are not multiples of a block.
+        for (ni, widths, n) in [
+            (10, vec![16, 1], 37),
+            (32, vec![64, 16], 100),
+            (63, vec![64, 64, 3], 21),
+        ] {
+            let mut fan_in = ni;
+            let layers: Vec<(Vec<f32>, Vec<f32>)> = widths
+                .iter()
+                .enumerate()
+                .map(|(k, &w)| {
+                    let l = (seeded(w * fan_in, 7 + k as u64), seeded(w, 70 + k as u64));
+                    fan_in = w;
+                    l
+                })
+                .collect();
+            let mlp = Mlp::with_biases(ni, &layers).unwrap();
+            let no = *widths.last().unwrap();
+            let x: Vec<f32> = seeded(n * ni, 5).into_iter().map(|v| 4.0 * v).collect();
+            // Reference: y = W·x + b per layer, f64.
+            let mut want = Vec::new();
+            for row in x.chunks_exact(ni) {
+                let mut v: Vec<f64> = row.iter().map(|&a| f64::from(a)).collect();
+                for (k, (w, b)) in layers.iter().enumerate() {
+                    v = b
+                        .iter()
+                        .enumerate()
+                        .map(|(o, &bo)| {
+                            let s = f64::from(bo)
+                                + (0..v.len())
+                                    .map(|i| f64::from(w[o * v.len() + i]) * v[i])
+                                    .sum::<f64>();
+                            if k + 1 < layers.len() {
+                                s.max(0.0)
+                            } else {
+                                s
+                            }
+                        })
+                        .collect();
+                }
+                want.extend(v.iter().map(|&a| a as f32));
+            }
+            let scale = want.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+            let mut plain = vec![f32::NAN; n * no];
+            mlp.forward_with(Kernel::Plain, &x, &mut plain);
+            assert_close(&plain, &want, scale);
+            let mut fast = vec![f32::NAN; n * no];
+            mlp.forward_with(Kernel::detect(), &x, &mut fast);
+            assert_close(&fast, &plain, scale);
+        }
+    }
+
+    #[test]
+    fn fixed_inputs_fold_into_the_first_biases() {
+        // tiny-cuda-nn's 63 → 64 → 64 → 3 colour MLP and a torch one, the last 32 inputs
+        // fixed: the same outputs as passing them every time, up to f32 rounding.
+        let tcnn = MlpConfig {
+            n_inputs: 63,
+            width: 64,
+            n_hidden_layers: 2,
+            n_outputs: 3,
+            output_alignment: 16,
+        };
+        let torch_layers = [
+            (seeded(64 * 63, 1), seeded(64, 2)),
+            (seeded(64 * 64, 3), seeded(64, 4)),
+            (seeded(3 * 64, 5), seeded(3, 6)),
+        ];
+        let fixed = seeded(32, 8);
+        for mlp in [
+            Mlp::new(tcnn, &seeded(tcnn.n_params(), 7)).unwrap(),
+            Mlp::with_biases(63, &torch_layers).unwrap(),
+        ] {
+            let folded = mlp.with_last_inputs(&fixed).unwrap();
+            assert_eq!(folded.config().n_inputs, 31);
+            let n = 19;
+            let varying = seeded(n * 31, 9);
+            let full: Vec<f32> = varying
+                .chunks_exact(31)
+                .flat_map(|v| v.iter().chain(&fixed).copied())
+                .collect();
+            let (mut want, mut got) = (vec![0.0; n * 3], vec![0.0; n * 3]);
+            mlp.forward_with(Kernel::Plain, &full, &mut want);
+            folded.forward_with(Kernel::Plain, &varying, &mut got);
+            let scale = want.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+            assert_close(&got, &want, scale);
+            assert!(mlp.with_last_inputs(&[0.0; 64]).is_none());
         }
     }
 

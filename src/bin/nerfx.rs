@@ -19,6 +19,11 @@ use nerfx::render::{ColorOutput, Outputs, Quality, RenderSettings};
 use nerfx::scene::SceneDesc;
 use nerfx::{bench, demo, Error, Result};
 
+/// Counts heap bytes for `nerfx bench`'s peak-memory figures (off, one relaxed load per
+/// allocation, outside a measurement).
+#[global_allocator]
+static HEAP: bench::memory::CountingAllocator = bench::memory::CountingAllocator;
+
 #[derive(Parser)]
 #[command(
     name = "nerfx",
@@ -145,9 +150,10 @@ enum Command {
         #[arg(long)]
         mesh: Option<PathBuf>,
     },
-    /// Measure run time against error for each preset and a naive marcher.
+    /// Measure run time, work, error and heap of each preset and a naive marcher on a suite
+    /// of scenes (analytic, trained fog, trained blob, thin sheets, splats).
     Bench {
-        /// Output folder for the table (Markdown) and the plot (PNG).
+        /// Output folder for the table (Markdown) and the plots (PNG).
         #[arg(short, long, default_value = "bench-out")]
         out: PathBuf,
         /// Image width.
@@ -157,13 +163,17 @@ enum Command {
         #[arg(long, default_value_t = 1080)]
         height: u32,
         /// Timed repetitions per configuration (the median is reported).
-        #[arg(long, default_value_t = 3)]
+        #[arg(long, default_value_t = 1)]
         repeats: u32,
+        /// The scenes to run (default: all), comma-separated.
+        #[arg(long, value_enum, value_delimiter = ',')]
+        scene: Vec<bench::SceneKind>,
         /// Time splat rasterisation instead: a generated scene of this many splats (SH degree
         /// 3), and each `--ply` file, one RGBA frame each (best of `repeats`).
         #[arg(long)]
         splats: Option<usize>,
-        /// Splat files to time with `--splats`.
+        /// Splat files to time with `--splats`; the first is also the suite's splat scene
+        /// (else generated splats).
         #[arg(long)]
         ply: Vec<PathBuf>,
         /// Time what extra passes of one field cost instead: NeRF Render nodes asking RGBA
@@ -437,10 +447,23 @@ fn run(cli: Cli) -> Result<()> {
             width,
             height,
             repeats,
+            scene,
+            ply,
             ..
         } => {
             create_dir(&out)?;
-            let report = bench::run(width, height, repeats.max(1), &|line| eprintln!("{line}"))?;
+            let options = bench::SuiteOptions {
+                width,
+                height,
+                repeats,
+                scenes: if scene.is_empty() {
+                    bench::SceneKind::ALL.to_vec()
+                } else {
+                    scene
+                },
+                splats: ply.into_iter().next(),
+            };
+            let report = bench::run(&options, &out, &|line| eprintln!("{line}"))?;
             report.write(&out)?;
             println!("{}", report.markdown());
             println!("wrote {}", out.display());

@@ -5,7 +5,8 @@
 //! with the naive uniform-step marcher, compares every image with the scene's reference
 //! (exact for analytic scenes, a much finer march for trained fields) and reports ms/frame,
 //! CPU time, samples per pixel, PSNR, the largest alpha and depth errors and peak heap
-//! ([`memory`]), as Markdown and as plots of time against PSNR ([`report`]). [`snapshot`]
+//! ([`memory`]), as Markdown and as plots of time against PSNR ([`report`]); [`scaling`]
+//! measures how cost grows with resolution, instances and occupied space. [`snapshot`]
 //! generates the trained fields (and the tests' snapshot fixtures); [`splats`], [`passes`]
 //! and [`field`] time splat rasterisation, extra passes and field throughput.
 
@@ -14,6 +15,7 @@ pub mod memory;
 pub mod passes;
 pub mod plot;
 pub mod report;
+pub mod scaling;
 pub mod scenes;
 pub mod snapshot;
 pub mod splats;

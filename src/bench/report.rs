@@ -5,6 +5,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use super::plot::{plot_png, Series};
+use super::scaling;
 use super::suite::{Report, Row, SceneReport};
 use crate::error::{Error, Result};
 
@@ -34,11 +35,14 @@ impl Report {
         for scene in &self.scenes {
             s += &scene_markdown(scene);
         }
+        if !self.growth.is_empty() {
+            s += &scaling::markdown(&self.growth);
+        }
         s
     }
 
-    /// Writes `report.md` and, per scene with a reference, `time_vs_psnr_<scene>.png` into
-    /// `dir`.
+    /// Writes `report.md`, per scene with a reference `time_vs_psnr_<scene>.png`, and with
+    /// the growth series `cost_vs_content.png` into `dir`.
     pub fn write(&self, dir: &Path) -> Result<()> {
         let md = dir.join("report.md");
         std::fs::write(&md, self.markdown()).map_err(|e| Error::io(&md, e))?;
@@ -72,6 +76,9 @@ impl Report {
                 &series,
                 true,
             )?;
+        }
+        if !self.growth.is_empty() {
+            scaling::write_plot(&self.growth, dir)?;
         }
         Ok(())
     }

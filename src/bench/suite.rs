@@ -7,8 +7,9 @@
 //! [`ROW_STRIDE`]-th row of the frame (a full fine frame would take longer than the rest of
 //! the suite), and renders are compared on those rows. The naive marcher, which neither skips
 //! empty space nor stops early, is timed on the same rows of trained scenes and its time
-//! scaled to a frame. Splats are rasterised, not marched: they have neither reference nor
-//! naive row.
+//! scaled to a frame (`baseline_row`; a second reference for trained fields, such as
+//! instant-ngp's own marcher, is one more such row, compared on the same rows). Splats are
+//! rasterised, not marched: they have neither reference nor naive row.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -17,6 +18,7 @@ use rayon::prelude::*;
 
 use super::field::process_cpu_seconds;
 use super::memory::{peak_during, HeapUse};
+use super::scaling::{self, Growth};
 use super::scenes::{build, BenchScene, SceneKind, Truth};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -48,6 +50,8 @@ pub struct SuiteOptions {
     pub scenes: Vec<SceneKind>,
     /// The splat scene's PLY (else generated splats).
     pub splats: Option<PathBuf>,
+    /// Also measure how cost grows with content ([`super::scaling`]).
+    pub scaling: bool,
 }
 
 /// One measured configuration of a scene.
@@ -108,19 +112,24 @@ pub struct Report {
     pub load: Option<[f64; 3]>,
     /// The scenes.
     pub scenes: Vec<SceneReport>,
+    /// How cost grows with content (empty when not asked for).
+    pub growth: Vec<Growth>,
 }
 
-/// The reference march for trained fields: Final's dials with 4× finer base steps, a 100×
-/// lower stop threshold, 10× tighter refinement and every sample shaded.
+/// The reference march for trained fields, fixed whatever the presets become: 32 base steps
+/// per feature (4× Final's today), a stop at transmittance 1e-6, refinement to 1e-4 of
+/// optical depth and 14 bisections, every sample shaded, the finest occupancy grid, no
+/// step growth.
 pub fn fine_params() -> MarchParams {
-    let f = Quality::Final.params();
     MarchParams {
-        steps_per_feature: 4.0 * f.steps_per_feature,
-        min_transmittance: f.min_transmittance / 100.0,
-        refine_tolerance: f.refine_tolerance / 10.0,
-        refine_depth: f.refine_depth + 3,
+        steps_per_feature: 32.0,
+        cone: 0.0,
+        max_step_factor: 1.0,
+        min_transmittance: 1e-6,
+        occupancy_resolution: 256,
+        refine_tolerance: 1e-4,
+        refine_depth: 14,
         color_skip_budget: 0.0,
-        ..f
     }
 }
 
@@ -146,12 +155,18 @@ pub fn run(options: &SuiteOptions, dir: &Path, log: &dyn Fn(&str)) -> Result<Rep
         let report = measure_scene(&built?, heap, options.repeats, log)?;
         scenes.push(report);
     }
+    let growth = if options.scaling {
+        scaling::run(options.width, options.height, dir, log)?
+    } else {
+        Vec::new()
+    };
     Ok(Report {
         width: options.width,
         height: options.height,
         threads: rayon::current_num_threads(),
         load: load_average(),
         scenes,
+        growth,
     })
 }
 
@@ -267,37 +282,18 @@ fn measure_scene(
         .iter()
         .map(|i| i.field().bounds().diagonal() as f64)
         .fold(0.0, f64::max);
+    // Baselines and further references (such as instant-ngp's own marcher on trained
+    // fields) are taken like the reference: on its rows where it has rows.
+    let on_rows = matches!(truth, Reference::Rows(_));
     for &steps in naive_steps {
         let step = diagonal / steps;
-        let on_rows = b.truth == Truth::FineMarch;
-        let naive = |w: Window| render_naive(scene, camera, w, step, &outputs);
-        let (t, cpu) = (Instant::now(), process_cpu_seconds());
-        let (planes, stats) = if on_rows {
-            let parts = render_rows(camera, &rows, naive)?;
-            let stats = parts.iter().fold(RenderStats::default(), |s, p| s + p.1 .1);
-            (
-                Reference::Rows(parts.into_iter().map(|(y, (p, _))| (y, p)).collect()),
-                stats,
-            )
-        } else {
-            let (p, s) = naive(full)?;
-            (Reference::Frame(Box::new(p)), s)
-        };
-        let scale = if on_rows {
-            f64::from(full.height()) / rows.len().max(1) as f64
-        } else {
-            1.0
-        };
-        let cpu = cpu.zip(process_cpu_seconds()).map(|(a, b)| (b - a) * scale);
-        let row = Row {
-            name: format!("naive (step diag/{steps})"),
-            ms_per_frame: t.elapsed().as_secs_f64() * 1e3 * scale,
-            cpu_s_per_frame: cpu,
-            error: compare_references(&truth, &planes)?,
-            peak_heap: None,
-            on_rows,
-            ..counts(&stats)
-        };
+        let row = baseline_row(
+            format!("naive (step diag/{steps})"),
+            &truth,
+            camera,
+            on_rows.then_some(&rows[..]),
+            |w| render_naive(scene, camera, w, step, &outputs),
+        )?;
         log(&format!("{}: {}", b.kind.name(), row_line(&row)));
         report_rows.push(row);
     }
@@ -310,6 +306,43 @@ fn measure_scene(
         scene_heap,
         tile_heap: tile_heap.map(|h| h.peak),
         rows: report_rows,
+    })
+}
+
+/// A row of `render` measured against `truth`: on `rows` (each a one-row window, its time
+/// scaled to the frame) or, without, on the full frame.
+fn baseline_row(
+    name: String,
+    truth: &Reference,
+    camera: &Camera,
+    rows: Option<&[u32]>,
+    render: impl Fn(Window) -> Result<(Planes, RenderStats)> + Sync,
+) -> Result<Row> {
+    let full = camera.full_window();
+    let (t, cpu) = (Instant::now(), process_cpu_seconds());
+    let (planes, stats, scale) = match rows {
+        Some(rows) => {
+            let parts = render_rows(camera, rows, render)?;
+            let stats = parts.iter().fold(RenderStats::default(), |s, p| s + p.1 .1);
+            let planes = Reference::Rows(parts.into_iter().map(|(y, (p, _))| (y, p)).collect());
+            let scale = f64::from(full.height()) / rows.len().max(1) as f64;
+            (planes, stats, scale)
+        }
+        None => {
+            let (p, s) = render(full)?;
+            (Reference::Frame(Box::new(p)), s, 1.0)
+        }
+    };
+    let ms = t.elapsed().as_secs_f64() * 1e3 * scale;
+    let cpu = cpu.zip(process_cpu_seconds()).map(|(a, b)| (b - a) * scale);
+    Ok(Row {
+        name,
+        ms_per_frame: ms,
+        cpu_s_per_frame: cpu,
+        error: compare_references(truth, &planes)?,
+        peak_heap: None,
+        on_rows: rows.is_some(),
+        ..counts(&stats)
     })
 }
 
@@ -457,4 +490,62 @@ fn load_average() -> Option<[f64; 3]> {
     let text = std::fs::read_to_string("/proc/loadavg").ok()?;
     let mut v = text.split_whitespace().map(|s| s.parse::<f64>().ok());
     Some([v.next()??, v.next()??, v.next()??])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::Plane;
+
+    /// Seeded planes: `width × height`, every plane present.
+    fn planes(width: u32, height: u32, seed: u32) -> Planes {
+        let plane = |k: u32| Plane {
+            width,
+            height,
+            data: (0..width * height)
+                .map(|i| ((i * 7919 + seed * 104_729 + k * 31) % 1000) as f32 / 1000.0 + 0.5)
+                .collect(),
+        };
+        Planes {
+            width,
+            height,
+            rgb: Some([plane(0), plane(1), plane(2)]),
+            alpha: Some(plane(3)),
+            depth_z: Some(plane(4)),
+            depth_ray: Some(plane(5)),
+            depth_median: Some(plane(6)),
+        }
+    }
+
+    #[test]
+    fn errors_over_rows_combine_as_over_their_union() {
+        let (a, b) = (planes(7, 5, 1), planes(7, 5, 2));
+        let whole = ErrorReport::compare(&a, &b);
+        let rows = (0..5).map(|y| {
+            let row = Window::new(0, y, 7, y + 1);
+            ErrorReport::compare(&a.crop(row).unwrap(), &b.crop(row).unwrap())
+        });
+        let combined = combine(rows);
+        assert!(
+            (combined.psnr - whole.psnr).abs() < 1e-9,
+            "{combined} vs {whole}"
+        );
+        assert_eq!(combined.max_alpha_error, whole.max_alpha_error);
+        assert_eq!(combined.max_depth_rel_error, whole.max_depth_rel_error);
+        // Compared on sampled rows, a frame is measured on exactly those rows.
+        let truth = Reference::Rows(vec![(1, a.crop(Window::new(0, 1, 7, 2)).unwrap())]);
+        let on_row = compare(&truth, &b).unwrap().unwrap();
+        let want = ErrorReport::compare(
+            &a.crop(Window::new(0, 1, 7, 2)).unwrap(),
+            &b.crop(Window::new(0, 1, 7, 2)).unwrap(),
+        );
+        assert_eq!(on_row, want);
+    }
+
+    #[test]
+    fn sampled_rows_are_the_middles_of_bands_within_the_image() {
+        assert_eq!(sampled_rows(40), vec![8, 24, 39]);
+        assert_eq!(sampled_rows(1), vec![0]);
+        assert_eq!(sampled_rows(1080).len(), 68);
+    }
 }

@@ -165,9 +165,13 @@ enum Command {
         /// Timed repetitions per configuration (the median is reported).
         #[arg(long, default_value_t = 1)]
         repeats: u32,
-        /// The scenes to run (default: all), comma-separated.
+        /// The scenes to run (default: all, and the cost-growth series), comma-separated.
         #[arg(long, value_enum, value_delimiter = ',')]
         scene: Vec<bench::SceneKind>,
+        /// Also run the cost-growth series (resolution, instances, occupancy fill) when
+        /// `--scene` selects scenes.
+        #[arg(long)]
+        scaling: bool,
         /// Time splat rasterisation instead: a generated scene of this many splats (SH degree
         /// 3), and each `--ply` file, one RGBA frame each (best of `repeats`).
         #[arg(long)]
@@ -449,6 +453,7 @@ fn run(cli: Cli) -> Result<()> {
             repeats,
             scene,
             ply,
+            scaling,
             ..
         } => {
             create_dir(&out)?;
@@ -456,6 +461,7 @@ fn run(cli: Cli) -> Result<()> {
                 width,
                 height,
                 repeats,
+                scaling: scaling || scene.is_empty(),
                 scenes: if scene.is_empty() {
                     bench::SceneKind::ALL.to_vec()
                 } else {

@@ -83,11 +83,11 @@ pub fn run(width: u32, height: u32, dir: &Path, log: &dyn Fn(&str)) -> Result<Ve
     for side in [1u32, 2, 4, 8] {
         let scene = ball_grid(side)?;
         let camera = front_camera(quarter.0, quarter.1)?;
-        points.push(measure(
-            &scene,
-            &camera,
-            format!("{} instances", side * side),
-        )?);
+        let label = match side * side {
+            1 => "1 instance".to_string(),
+            n => format!("{n} instances"),
+        };
+        points.push(measure(&scene, &camera, label)?);
     }
     out.push(Growth {
         title: format!(

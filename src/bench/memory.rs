@@ -87,7 +87,8 @@ pub struct HeapUse {
 }
 
 /// Runs `f`, and where [`CountingAllocator`] is the global allocator, says how much heap it
-/// used; `None` elsewhere. Measurements are serialised (a second caller waits).
+/// used; `None` elsewhere. Measurements are serialised (a second caller waits; `f` itself
+/// must not measure).
 pub fn peak_during<T>(f: impl FnOnce() -> T) -> (T, Option<HeapUse>) {
     let _one = MEASURING.lock().unwrap_or_else(|e| e.into_inner());
     LIVE.store(0, Ordering::Relaxed);

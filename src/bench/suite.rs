@@ -116,10 +116,10 @@ pub struct Report {
     pub growth: Vec<Growth>,
 }
 
-/// The reference march for trained fields, fixed whatever the presets become: 32 base steps
-/// per feature (4× Final's today), a stop at transmittance 1e-6, refinement to 1e-4 of
-/// optical depth and 14 bisections, every sample shaded, the finest occupancy grid, no
-/// step growth.
+/// The reference march for trained fields, fixed whatever the presets' steps become: 32
+/// base steps per feature (4× Final's today) that never grow, a stop at transmittance 1e-6,
+/// 14 bisections, every sample shaded, the finest occupancy grid; its refinement threshold
+/// is Final's.
 pub fn fine_params() -> MarchParams {
     MarchParams {
         steps_per_feature: 32.0,
@@ -127,9 +127,9 @@ pub fn fine_params() -> MarchParams {
         max_step_factor: 1.0,
         min_transmittance: 1e-6,
         occupancy_resolution: 256,
-        refine_tolerance: 1e-4,
         refine_depth: 14,
         color_skip_budget: 0.0,
+        ..Quality::Final.params()
     }
 }
 

@@ -130,3 +130,53 @@ fn bad_input_fails_with_a_message_naming_the_file() {
     assert!(String::from_utf8_lossy(&frames.stderr).contains("frames '9-1'"));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `nerfx bench` on a tiny frame of an analytic and a trained scene: the report has a table
+/// per scene with measured errors (the exact reference for the demo, the finer march on
+/// sampled rows for the blob), heap figures from the binary's counting allocator (not
+/// `n/a`), and a plot per scene; the generated snapshot is gone from the output folder.
+#[test]
+fn bench_reports_errors_heap_and_plots_per_scene() {
+    let dir = scratch_dir("bench");
+    let run = nerfx(&[
+        "bench",
+        "-o",
+        &dir.to_string_lossy(),
+        "--width",
+        "48",
+        "--height",
+        "32",
+        "--scene",
+        "demo,blob",
+    ]);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    let report = std::fs::read_to_string(dir.join("report.md")).expect("report.md");
+    for scene in ["### demo", "### blob"] {
+        assert!(report.contains(scene), "{report}");
+    }
+    assert!(report.contains("every 16th row (2 of 32)"), "{report}");
+    let final_rows: Vec<&str> = report
+        .lines()
+        .filter(|l| l.starts_with("| final |"))
+        .collect();
+    assert_eq!(final_rows.len(), 2, "{report}");
+    for row in final_rows {
+        let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+        // | final | ms | CPU | density | colour | fragments | PSNR | alpha | depth | heap |
+        let psnr: f64 = cells[7].parse().expect("a PSNR");
+        assert!(psnr > 40.0, "{row}");
+        let heap: f64 = cells[10].parse().expect("a measured peak heap");
+        assert!(heap > 0.0, "{row}");
+    }
+    for png in ["time_vs_psnr_demo.png", "time_vs_psnr_blob.png"] {
+        assert!(dir.join(png).is_file(), "{png}");
+    }
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .expect("out dir")
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains("nerfx-bench"))
+        .collect();
+    assert!(left.is_empty(), "generated files left behind: {left:?}");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -5,6 +5,7 @@
 //! message saying so, unless `NERFX_SKIP_NUMPY=1` (then it prints a skip line).
 
 mod common_fields;
+#[allow(dead_code)] // the blob writer this test does not use
 mod common_ingp;
 
 use std::process::Command;
@@ -334,32 +335,17 @@ fn nerfx_info_describes_a_snapshot_and_names_a_corrupt_one() {
 /// overlapping balls and whose σ row is scaled so rays terminate inside them (instant-ngp
 /// coordinates: the unit cube is cascade 0; s = 0.33, o = 0.5). Prints what it is.
 fn blob_bench_scene(dir: &std::path::Path) -> nerfx::scene::Scene {
-    use common_ingp::{write_blob_snapshot, Ball};
     use glam::DMat4;
+    use nerfx::bench::snapshot::occupied_fraction;
     use nerfx::render::Quality;
     use nerfx::scene::{FieldHandle, Instance, Scene};
     use std::sync::Arc;
 
-    let spec = Spec {
-        log2_table_size: 19,
-        ..Spec::small_8x4()
-    };
-    let balls = [
-        Ball {
-            centre: [0.5, 0.5, 0.5],
-            radius: 0.25,
-        },
-        Ball {
-            centre: [0.7, 0.55, 0.42],
-            radius: 0.16,
-        },
-        Ball {
-            centre: [0.33, 0.45, 0.62],
-            radius: 0.13,
-        },
-    ];
-    let gain = 4.0;
-    let (path, cascade0) = write_blob_snapshot(dir, "blob", &spec, &balls, gain);
+    // The benchmark suite's blob scene (`nerfx bench --scene blob`).
+    let spec = Spec::dense_blob();
+    let gain = spec.sigma_gain.unwrap_or(1.0);
+    let path = write_snapshot(dir, "blob", &spec);
+    let cascade0 = occupied_fraction(&spec);
     let field = IngpField::load(&path).unwrap();
     let fill = field
         .describe()

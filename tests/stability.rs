@@ -1,9 +1,10 @@
 //! The marcher at the edges of its input range: far from the origin, at tiny and huge
-//! scales, with extreme densities and steps, grazing rays, cameras inside fields, invalid
-//! matrices and degenerate or absurd windows. Every render must satisfy `assert_sane` (alpha
-//! in [0, 1], RGB finite and ≥ 0, depth finite wherever alpha > 0) and agree with the exact
-//! reference where that is meaningful; invalid input must be an error that says what is
-//! wrong, never a panic.
+//! scales, with extreme densities (σ up to 1e9, transmittance underflowing) and steps (down
+//! to 1e-9), rays grazing surfaces and lying on occupancy cell planes, fields answering NaN
+//! or infinity, cameras inside fields, invalid matrices and degenerate or absurd windows.
+//! Every render must satisfy `assert_sane` (alpha in [0, 1], RGB finite and ≥ 0, depth
+//! finite wherever alpha > 0) and agree with the exact reference where that is meaningful;
+//! invalid input must be an error that says what is wrong, never a panic.
 
 mod common;
 
@@ -570,4 +571,216 @@ fn an_absurd_window_is_refused() {
     )
     .expect("a 16 × 16 window of a huge image");
     assert_sane("16 × 16 window of a 65536² image", &small);
+}
+
+/// σ = 1e9 per unit, with the early stop switched off (`min_transmittance` 0), so every ray
+/// through the boxes marches on after its transmittance has underflowed to exactly 0 (one
+/// step inside is `e^{−1e9·δ}`, far below f32's and f64's smallest numbers): the weights
+/// behind must come out 0, not `0·∞` or `0/0`. A second box behind the first and a sphere
+/// of the same density add more underflowed steps. Every preset must give alpha exactly 1,
+/// the first face's depth (camera Z 4, within 1e-4 relative) and its colour, and agree with
+/// the reference.
+#[test]
+fn a_density_of_1e9_underflows_transmittance_cleanly() {
+    let camera = axis_camera(DVec3::new(0.0, 0.0, 5.0), 33, 25, 40.0);
+    let scene = Scene::new(vec![instance(
+        "stack",
+        vec![
+            prim(
+                cube([-1.0, -1.0, 0.0], [1.0, 1.0, 1.0]),
+                1e9,
+                [0.3, 0.6, 0.9],
+            ),
+            prim(
+                cube([-1.0, -1.0, -1.0], [1.0, 1.0, -0.5]),
+                1e9,
+                [0.9, 0.1, 0.1],
+            ),
+            prim(sphere([0.0, 0.0, -2.0], 0.8), 1e9, [0.1, 0.9, 0.1]),
+        ],
+        DMat4::IDENTITY,
+        None,
+    )]);
+    let want = reference_full(&scene, &camera);
+    let want_alpha = want.alpha.as_ref().expect("alpha");
+    for quality in Quality::ALL {
+        let params = MarchParams {
+            min_transmittance: 0.0,
+            ..quality.params()
+        };
+        let got = render_full(&scene, &camera, params);
+        let what = format!("σ = 1e9, no early stop, {quality:?}");
+        assert_sane(&what, &got);
+        let (alpha, z, rgb) = (
+            got.alpha.as_ref().expect("alpha"),
+            got.depth_z.as_ref().expect("z"),
+            got.rgb.as_ref().expect("rgb"),
+        );
+        let mut hits = 0;
+        for i in (0..alpha.data.len()).filter(|&i| want_alpha.data[i] == 1.0) {
+            hits += 1;
+            assert_eq!(alpha.data[i], 1.0, "{what}: alpha at pixel {i}");
+            let e = (z.data[i] - 4.0).abs() / 4.0;
+            assert!(e <= 1e-4, "{what}: depth {} at pixel {i}", z.data[i]);
+            for (k, c) in [0.3f32, 0.6, 0.9].iter().enumerate() {
+                let v = rgb[k].data[i];
+                assert!((v - c).abs() < 1e-5, "{what}: rgb[{k}] {v} at pixel {i}");
+            }
+        }
+        assert!(hits > 100, "{what}: the box must fill the middle");
+    }
+}
+
+/// A field a tenth of a micrometre across: a ball of radius 1e-7 field units, so Final's
+/// step is ~1.4e-9 (Draft's ~1.1e-8); σ = 5e6 per unit gives it an optical depth of 1
+/// across. Seen from 5e-7 away, every preset must be sane and Final
+/// must agree with the reference at its usual tolerance: nothing in the marcher may assume a
+/// step, a distance or a cell is larger than f32's resolution at 1.
+#[test]
+fn a_tenth_of_a_micrometre_field_marches_with_nanometre_steps() {
+    let camera = axis_camera(DVec3::new(0.0, 0.0, 5e-7), 33, 25, 40.0);
+    let scene = single(prim(sphere([0.0; 3], 1e-7), 5e6, [0.8, 0.4, 0.2]));
+    let field = scene.instances[0].field();
+    let step = field.feature_size() / Quality::Final.params().steps_per_feature;
+    assert!(step < 2e-9, "set-up: Final's step {step:e}");
+    let want = reference_full(&scene, &camera);
+    assert!(
+        want.alpha
+            .as_ref()
+            .is_some_and(|a| a.data.iter().any(|&v| v > 0.5)),
+        "set-up: the ball must be seen"
+    );
+    for quality in Quality::ALL {
+        let got = render_full(&scene, &camera, quality.params());
+        assert_sane(&format!("a 1e-7 ball, {quality:?}"), &got);
+        if quality == Quality::Final {
+            assert_close("a 1e-7 ball, Final", &got, &want, FINAL);
+        }
+    }
+}
+
+/// Rays lying exactly on the occupancy grid's cell planes: the field's bounds are the cube
+/// ±1, so at every grid resolution the planes `x = 0` and `y = 0` are cell faces, and an
+/// unrotated camera on the z axis puts the middle row and column of an odd-sized image in
+/// them. A box with a corner at the origin is occupied on one side of those planes only,
+/// so a traversal that rounds a ray into the wrong cell skips it (or the ball around it).
+/// Every preset must be sane, Final must match the reference (with the f32 allowance of
+/// [`grazing_rays_match_the_reference`] for rays in a face's plane).
+#[test]
+fn rays_along_occupancy_cell_planes_match_the_reference() {
+    let camera = axis_camera(DVec3::new(0.0, 0.0, 5.0), 33, 25, 40.0);
+    let scene = Scene::new(vec![instance(
+        "corner",
+        vec![
+            prim(sphere([0.0; 3], 1.0), 0.5, [0.2, 0.4, 0.8]),
+            prim(cube([0.0; 3], [0.5; 3]), 40.0, [0.9, 0.6, 0.1]),
+        ],
+        DMat4::IDENTITY,
+        None,
+    )]);
+    let ray = camera.ray(16.5, 12.5).expect("a ray");
+    assert_eq!((ray.dir.x, ray.dir.y), (0.0, 0.0), "set-up");
+    let grazing = Tol {
+        alpha: FINAL.alpha + 40.0 * 4.9e-4,
+        rgb: FINAL.rgb + 40.0 * 4.9e-4,
+        ..FINAL
+    };
+    let want = reference_full(&scene, &camera);
+    for quality in Quality::ALL {
+        let got = render_full(&scene, &camera, quality.params());
+        assert_sane(&format!("on cell planes, {quality:?}"), &got);
+        if quality == Quality::Final {
+            assert_close("on cell planes, Final", &got, &want, grazing);
+        }
+    }
+}
+
+/// What a [`Broken`] field gets wrong.
+#[derive(Clone, Copy, Debug)]
+enum Fault {
+    NanDensity,
+    InfiniteDensity,
+    NegativeDensity,
+    NanRadiance,
+    InfiniteRadiance,
+}
+
+/// A ball of radius 1 (σ = 2, grey) whose half `x < 0` answers with `fault`: a trained
+/// field with corrupt weights or an overflowing network, as the marcher could meet it.
+struct Broken(Fault);
+
+impl nerfx::field::Field for Broken {
+    fn bounds(&self) -> nerfx::field::Aabb {
+        nerfx::field::Aabb::new(glam::Vec3::splat(-1.0), glam::Vec3::splat(1.0))
+    }
+
+    fn density(&self, points: &[glam::Vec3], sigma: &mut [f32]) {
+        for (p, s) in points.iter().zip(sigma) {
+            *s = match (p.length() <= 1.0, p.x < 0.0, self.0) {
+                (false, ..) => 0.0,
+                (true, true, Fault::NanDensity) => f32::NAN,
+                (true, true, Fault::InfiniteDensity) => f32::INFINITY,
+                (true, true, Fault::NegativeDensity) => -3.0,
+                _ => 2.0,
+            };
+        }
+    }
+
+    fn radiance(&self, points: &[glam::Vec3], _dirs: &[glam::Vec3], rgb: &mut [glam::Vec3]) {
+        for (p, c) in points.iter().zip(rgb) {
+            *c = match (p.x < 0.0, self.0) {
+                (true, Fault::NanRadiance) => glam::Vec3::NAN,
+                (true, Fault::InfiniteRadiance) => glam::Vec3::INFINITY,
+                _ => glam::Vec3::splat(0.5),
+            };
+        }
+    }
+
+    fn may_be_occupied(&self, region: &nerfx::field::Aabb) -> bool {
+        !region.is_empty()
+    }
+}
+
+/// A field answering NaN, ±∞ or negative densities, or NaN or infinite colours, in half of
+/// its support: every preset and the naive baseline must either refuse the render with an
+/// error that says what was wrong, or treat the bad samples as empty — never a NaN, an
+/// infinite colour or an alpha outside [0, 1] in the image. The healthy half (x > 0, the
+/// right of the image) must still render: some pixel there has alpha above 0.5.
+#[test]
+fn non_finite_fields_give_an_error_or_empty_samples_never_nan() {
+    let camera = axis_camera(DVec3::new(0.0, 0.0, 5.0), 33, 25, 40.0);
+    for fault in [
+        Fault::NanDensity,
+        Fault::InfiniteDensity,
+        Fault::NegativeDensity,
+        Fault::NanRadiance,
+        Fault::InfiniteRadiance,
+    ] {
+        let handle = nerfx::scene::FieldHandle::new(std::sync::Arc::new(Broken(fault)));
+        let scene = Scene::new(vec![
+            Instance::new("broken", handle, DMat4::IDENTITY, None).expect("an instance")
+        ]);
+        let check = |what: String, result: nerfx::Result<Planes>| match result {
+            Err(e) => {
+                let m = e.to_string();
+                assert!(
+                    m.contains("broken") || m.to_lowercase().contains("finite"),
+                    "{what}: the error must name the instance or the fault: {m}"
+                );
+            }
+            Ok(planes) => {
+                assert_sane(&what, &planes);
+                let alpha = planes.alpha.as_ref().expect("alpha");
+                let seen = (17..33).any(|x| (0..25).any(|y| alpha.get(x, y) > 0.5));
+                assert!(seen, "{what}: the healthy half must still render");
+            }
+        };
+        for quality in Quality::ALL {
+            let settings = RenderSettings::new(quality.params(), Outputs::all());
+            let got = render(&scene, &camera, camera.full_window(), &settings);
+            check(format!("{fault:?}, {quality:?}"), got);
+        }
+        let naive = render_naive(&scene, &camera, camera.full_window(), 0.01, &Outputs::all());
+        check(format!("{fault:?}, naive"), naive.map(|(p, _)| p));
+    }
 }

@@ -98,26 +98,7 @@ pub fn time_splats(
     height: u32,
     repeats: u32,
 ) -> Result<SplatTiming> {
-    // Framed on the middle half of the splats (trained scenes carry far outliers).
-    let quantile = |axis: usize, q: f64| {
-        let mut v: Vec<f32> = splats.means.iter().map(|m| m[axis]).collect();
-        let k = ((v.len().max(1) - 1) as f64 * q) as usize;
-        v.select_nth_unstable_by(k, f32::total_cmp);
-        f64::from(v.get(k).copied().unwrap_or(0.0))
-    };
-    let centre = DVec3::new(quantile(0, 0.5), quantile(1, 0.5), quantile(2, 0.5));
-    let extent = (0..3)
-        .map(|a| quantile(a, 0.75) - quantile(a, 0.25))
-        .fold(1e-3, f64::max);
-    let eye = centre + DVec3::new(0.0, -3.0, 0.4) * extent;
-    let camera = Camera::new(
-        look_at(eye, centre),
-        Projection::Perspective(Perspective::from_blender(&BlenderIntrinsics {
-            resolution_x: width,
-            resolution_y: height,
-            ..BlenderIntrinsics::default()
-        })?),
-    )?;
+    let camera = framing_camera(&splats, width, height)?;
     let memory_bytes = splats.memory_bytes();
     let count = splats.len();
     let scene = Scene::default().with_splats(vec![SplatInstance::new(
@@ -151,4 +132,28 @@ pub fn time_splats(
         fragments_per_pixel: fragments as f64 / f64::from(width * height),
         memory_bytes,
     })
+}
+
+/// A camera at `width × height` looking at the middle half of `splats` (trained scenes carry
+/// far outliers) from three times its extent.
+pub fn framing_camera(splats: &Splats, width: u32, height: u32) -> Result<Camera> {
+    let quantile = |axis: usize, q: f64| {
+        let mut v: Vec<f32> = splats.means.iter().map(|m| m[axis]).collect();
+        let k = ((v.len().max(1) - 1) as f64 * q) as usize;
+        v.select_nth_unstable_by(k, f32::total_cmp);
+        f64::from(v.get(k).copied().unwrap_or(0.0))
+    };
+    let centre = DVec3::new(quantile(0, 0.5), quantile(1, 0.5), quantile(2, 0.5));
+    let extent = (0..3)
+        .map(|a| quantile(a, 0.75) - quantile(a, 0.25))
+        .fold(1e-3, f64::max);
+    let eye = centre + DVec3::new(0.0, -3.0, 0.4) * extent;
+    Camera::new(
+        look_at(eye, centre),
+        Projection::Perspective(Perspective::from_blender(&BlenderIntrinsics {
+            resolution_x: width,
+            resolution_y: height,
+            ..BlenderIntrinsics::default()
+        })?),
+    )
 }

@@ -19,6 +19,11 @@ use nerfx::render::{ColorOutput, Outputs, Quality, RenderSettings};
 use nerfx::scene::SceneDesc;
 use nerfx::{bench, demo, Error, Result};
 
+/// Counts heap bytes for `nerfx bench`'s peak-memory figures (off, one relaxed load per
+/// allocation, outside a measurement).
+#[global_allocator]
+static HEAP: bench::memory::CountingAllocator = bench::memory::CountingAllocator;
+
 #[derive(Parser)]
 #[command(
     name = "nerfx",
@@ -145,9 +150,10 @@ enum Command {
         #[arg(long)]
         mesh: Option<PathBuf>,
     },
-    /// Measure run time against error for each preset and a naive marcher.
+    /// Measure run time, work, error and heap of each preset and a naive marcher on a suite
+    /// of scenes (analytic, trained fog, trained blob, thin sheets, splats).
     Bench {
-        /// Output folder for the table (Markdown) and the plot (PNG).
+        /// Output folder for the table (Markdown) and the plots (PNG).
         #[arg(short, long, default_value = "bench-out")]
         out: PathBuf,
         /// Image width.
@@ -156,14 +162,23 @@ enum Command {
         /// Image height.
         #[arg(long, default_value_t = 1080)]
         height: u32,
-        /// Timed repetitions per configuration (the median is reported).
-        #[arg(long, default_value_t = 3)]
-        repeats: u32,
+        /// Timed repetitions per configuration: the suite reports the median (default 1),
+        /// `--splats` and `--passes` the best (default 3).
+        #[arg(long)]
+        repeats: Option<u32>,
+        /// The scenes to run (default: all, and the cost-growth series), comma-separated.
+        #[arg(long, value_enum, value_delimiter = ',')]
+        scene: Vec<bench::SceneKind>,
+        /// Also run the cost-growth series (resolution, instances, occupancy fill) when
+        /// `--scene` selects scenes.
+        #[arg(long)]
+        scaling: bool,
         /// Time splat rasterisation instead: a generated scene of this many splats (SH degree
         /// 3), and each `--ply` file, one RGBA frame each (best of `repeats`).
         #[arg(long)]
         splats: Option<usize>,
-        /// Splat files to time with `--splats`.
+        /// Splat files to time with `--splats`; the first is also the suite's splat scene
+        /// (else generated splats).
         #[arg(long)]
         ply: Vec<PathBuf>,
         /// Time what extra passes of one field cost instead: NeRF Render nodes asking RGBA
@@ -372,7 +387,8 @@ fn run(cli: Cli) -> Result<()> {
         } => {
             create_dir(&out)?;
             let preset = quality.name();
-            let timings = bench::passes::time_passes(&out, width, height, quality, repeats)?;
+            let timings =
+                bench::passes::time_passes(&out, width, height, quality, repeats.unwrap_or(3))?;
             println!("| outputs ({preset}, {width}×{height}) | ms | marches | × RGBA |");
             println!("|---|---:|---:|---:|");
             let alone = timings.first().map_or(f64::NAN, |t| t.ms);
@@ -417,7 +433,12 @@ fn run(cli: Cli) -> Result<()> {
             );
             println!("|---|---:|---:|---:|---:|---:|---:|");
             for (name, splats) in sets {
-                let t = time_splats(std::sync::Arc::new(splats), width, height, repeats)?;
+                let t = time_splats(
+                    std::sync::Arc::new(splats),
+                    width,
+                    height,
+                    repeats.unwrap_or(3),
+                )?;
                 let blending = t.frame_ms - t.projection_ms - t.binning_ms;
                 println!(
                     "| {name} ({}) at {width}×{height} | {:.0} | {:.0} | {:.0} | {blending:.0} | \
@@ -437,10 +458,25 @@ fn run(cli: Cli) -> Result<()> {
             width,
             height,
             repeats,
+            scene,
+            ply,
+            scaling,
             ..
         } => {
             create_dir(&out)?;
-            let report = bench::run(width, height, repeats.max(1), &|line| eprintln!("{line}"))?;
+            let options = bench::SuiteOptions {
+                width,
+                height,
+                repeats: repeats.unwrap_or(1),
+                scaling: scaling || scene.is_empty(),
+                scenes: if scene.is_empty() {
+                    bench::SceneKind::ALL.to_vec()
+                } else {
+                    scene
+                },
+                splats: ply.into_iter().next(),
+            };
+            let report = bench::run(&options, &out, &|line| eprintln!("{line}"))?;
             report.write(&out)?;
             println!("{}", report.markdown());
             println!("wrote {}", out.display());

@@ -113,6 +113,9 @@ fn naive_pixel(
         // Colour only where there is density: elsewhere it is weighed by zero.
         lit.clear();
         lit_points.clear();
+        // As the marcher takes them: a NaN density is empty, an infinite one opaque.
+        dens.iter_mut()
+            .for_each(|d| *d = if *d > 0.0 { d.min(f32::MAX) } else { 0.0 });
         for (k, (&j, &d)) in idx.iter().zip(&dens).enumerate() {
             if d > 0.0 {
                 sigma[j] += d as f64 * lr.units_per_world as f64;
@@ -134,7 +137,11 @@ fn naive_pixel(
         }
         for (&k, c) in lit.iter().zip(&cols) {
             let s = dens[k] as f64 * lr.units_per_world as f64;
-            rgb[idx[k]] += c.as_dvec3() * s;
+            // A non-finite colour adds nothing, as in the marcher.
+            let c = c.as_dvec3().max(DVec3::ZERO);
+            if c.is_finite() {
+                rgb[idx[k]] += c * s;
+            }
         }
     }
     let mut pieces = Pieces::new();

@@ -1,0 +1,145 @@
+//! The suite's report: a Markdown table per scene, and per scene a plot of time against
+//! PSNR, written into the output folder.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use super::plot::{plot_png, Series};
+use super::scaling;
+use super::suite::{Report, Row, SceneReport};
+use crate::error::{Error, Result};
+
+/// Bytes as MiB with one decimal, or `n/a`.
+fn mib(bytes: Option<usize>) -> String {
+    bytes.map_or("n/a".into(), |b| {
+        format!("{:.1}", b as f64 / (1 << 20) as f64)
+    })
+}
+
+impl Report {
+    /// The report, as Markdown: a heading and a table per scene.
+    pub fn markdown(&self) -> String {
+        let mut s = format!(
+            "{}×{}, {} threads{}. Times are the median of the timed frames; CPU is user + \
+             system time of all threads for that frame. Heap: peak bytes allocated during \
+             the frame above those live before it (a counting allocator in the `nerfx` \
+             binary); n/a where it is not installed.\n",
+            self.width,
+            self.height,
+            self.threads,
+            self.load.map_or(String::new(), |l| format!(
+                ", load average {:.1} {:.1} {:.1} at the end",
+                l[0], l[1], l[2]
+            )),
+        );
+        for scene in &self.scenes {
+            s += &scene_markdown(scene);
+        }
+        if !self.growth.is_empty() {
+            s += &scaling::markdown(&self.growth);
+        }
+        s
+    }
+
+    /// Writes `report.md`, per scene with a reference `time_vs_psnr_<scene>.png`, and with
+    /// the growth series `cost_vs_content.png` into `dir`.
+    pub fn write(&self, dir: &Path) -> Result<()> {
+        let md = dir.join("report.md");
+        std::fs::write(&md, self.markdown()).map_err(|e| Error::io(&md, e))?;
+        for scene in &self.scenes {
+            let series = |label: &str, naive: bool| Series {
+                label: label.into(),
+                points: scene
+                    .rows
+                    .iter()
+                    .filter(|r| r.name.starts_with("naive") == naive)
+                    .filter_map(|r| r.error.map(|e| (r.ms_per_frame, e.psnr)))
+                    .collect(),
+            };
+            let series = [
+                series("nerfx presets", false),
+                series("naive uniform steps", true),
+            ];
+            if series.iter().all(|s| s.points.is_empty()) {
+                continue;
+            }
+            plot_png(
+                &dir.join(format!("time_vs_psnr_{}.png", scene.kind.name())),
+                &format!(
+                    "{}: run time against error, {}x{}",
+                    scene.kind.name(),
+                    self.width,
+                    self.height
+                ),
+                "ms per frame",
+                "PSNR (dB)",
+                &series,
+                true,
+            )?;
+        }
+        if !self.growth.is_empty() {
+            scaling::write_plot(&self.growth, dir)?;
+        }
+        Ok(())
+    }
+}
+
+fn scene_markdown(scene: &SceneReport) -> String {
+    let budget = scene.rows.iter().any(|r| r.budget_hits.is_some());
+    let mut s = format!(
+        "\n### {}\n\n{}. Reference: {} ({:.0} ms). Scene and occupancy heap: {} MiB; one \
+         16×16 Final tile: {} MiB.\n\n",
+        scene.kind.name(),
+        scene.description,
+        scene.truth,
+        scene.reference_ms,
+        mib(scene.scene_heap),
+        mib(scene.tile_heap),
+    );
+    s += "| configuration | ms/frame | CPU s/frame | density samples/px | colour samples/px | \
+          splat fragments/px | PSNR (dB) | max alpha error | max depth error (rel.) |";
+    s += if budget { " rays at budget |" } else { "" };
+    s += " peak heap (MiB) |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|";
+    s += if budget { "---:|" } else { "" };
+    s += "---:|\n";
+    for r in &scene.rows {
+        s += &row_markdown(r, budget);
+    }
+    if scene.rows.iter().any(|r| r.on_rows) {
+        s += "\n¹ timed on the reference rows only, scaled to a frame.\n";
+    }
+    s
+}
+
+fn row_markdown(r: &Row, budget: bool) -> String {
+    let mut s = format!(
+        "| {}{} | {:.0} | {} | {:.1} | {:.1} | {:.1} |",
+        r.name,
+        if r.on_rows { " ¹" } else { "" },
+        r.ms_per_frame,
+        r.cpu_s_per_frame
+            .map_or("n/a".into(), |c| format!("{c:.2}")),
+        r.samples_per_pixel,
+        r.color_samples_per_pixel,
+        r.fragments_per_pixel,
+    );
+    match r.error {
+        Some(e) => {
+            let _ = write!(
+                s,
+                " {:.2} | {:.2e} | {:.2e} |",
+                e.psnr, e.max_alpha_error, e.max_depth_rel_error
+            );
+        }
+        None => s += " — | — | — |",
+    }
+    if budget {
+        let _ = write!(
+            s,
+            " {} |",
+            r.budget_hits.map_or("n/a".into(), |n| n.to_string())
+        );
+    }
+    let _ = writeln!(s, " {} |", mib(r.peak_heap));
+    s
+}

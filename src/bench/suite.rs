@@ -1,0 +1,551 @@
+//! The scene suite: every [`SceneKind`] rendered with each preset and with the naive
+//! uniform-step marcher, measured for time, work, error against the scene's reference and
+//! heap.
+//!
+//! References: analytic scenes have the exact closed form for every pixel. Trained fields
+//! have none; their reference is a much finer nerfx march ([`fine_params`]) of every
+//! [`ROW_STRIDE`]-th row of the frame (a full fine frame would take longer than the rest of
+//! the suite), and renders are compared on those rows. The naive marcher, which neither skips
+//! empty space nor stops early, is timed on the same rows of trained scenes and its time
+//! scaled to a frame (`baseline_row`; a second reference for trained fields, such as
+//! instant-ngp's own marcher, is one more such row, compared on the same rows). Splats are
+//! rasterised, not marched: they have neither reference nor naive row.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use super::field::process_cpu_seconds;
+use super::memory::{peak_during, HeapUse};
+use super::scaling::{self, Growth};
+use super::scenes::{build, BenchScene, SceneKind, Truth};
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::image::{Planes, Window};
+use crate::reference::{self, ErrorReport};
+use crate::render::{
+    render_naive, render_with_progress, MarchParams, Outputs, Quality, RenderSettings, RenderStats,
+};
+use crate::scene::Scene;
+
+/// Trained scenes are compared on every this many rows (starting at the middle of the
+/// first band).
+pub const ROW_STRIDE: u32 = 16;
+
+/// Naive step sizes, as fractions of the scene's largest bounding-box diagonal: analytic
+/// scenes, then trained ones (whose naive run only covers the reference rows).
+const NAIVE_STEPS_PER_DIAGONAL: [[f64; 2]; 2] = [[384.0, 1536.0], [256.0, 1024.0]];
+
+/// What to run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SuiteOptions {
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Timed frames per preset (the median is reported).
+    pub repeats: u32,
+    /// The scenes, in order.
+    pub scenes: Vec<SceneKind>,
+    /// The splat scene's PLY (else generated splats).
+    pub splats: Option<PathBuf>,
+    /// Also measure how cost grows with content ([`super::scaling`]).
+    pub scaling: bool,
+}
+
+/// One measured configuration of a scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    /// `draft`, `preview`, `final` or `naive (step …)`.
+    pub name: String,
+    /// Median wall time of a frame, milliseconds.
+    pub ms_per_frame: f64,
+    /// CPU time of that frame (user + system, all threads), seconds, where the system says.
+    pub cpu_s_per_frame: Option<f64>,
+    /// Density queries per pixel.
+    pub samples_per_pixel: f64,
+    /// Radiance queries per pixel.
+    pub color_samples_per_pixel: f64,
+    /// Splat fragments per pixel.
+    pub fragments_per_pixel: f64,
+    /// Errors against the reference (`None` where there is none).
+    pub error: Option<ErrorReport>,
+    /// Rays that ran out of their sample budget, where the renderer counts them.
+    pub budget_hits: Option<u64>,
+    /// Peak heap of the frame above what was live before it, where measured.
+    pub peak_heap: Option<usize>,
+    /// The run covered only the reference rows; its time is scaled to the frame.
+    pub on_rows: bool,
+}
+
+/// One scene's measurements.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneReport {
+    /// Which scene.
+    pub kind: SceneKind,
+    /// What it holds.
+    pub description: String,
+    /// What the errors are measured against.
+    pub truth: String,
+    /// Time of the reference, milliseconds (0 when there is none).
+    pub reference_ms: f64,
+    /// Heap the loaded scene and its occupancy grids hold, where measured.
+    pub scene_heap: Option<usize>,
+    /// Peak heap of a one-tile (16×16) Final render once the occupancy is built: the tile's
+    /// scratch and the render's fixed setup, where measured.
+    pub tile_heap: Option<usize>,
+    /// The presets, then the naive runs.
+    pub rows: Vec<Row>,
+}
+
+/// A suite run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Report {
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Worker threads.
+    pub threads: usize,
+    /// Load average (1, 5, 15 minutes) when the run ended, where the system says.
+    pub load: Option<[f64; 3]>,
+    /// The scenes.
+    pub scenes: Vec<SceneReport>,
+    /// How cost grows with content (empty when not asked for).
+    pub growth: Vec<Growth>,
+}
+
+/// The reference march for trained fields, fixed whatever the presets' steps become: 32
+/// base steps per feature (4× Final's today) that never grow, a stop at transmittance 1e-6,
+/// 14 bisections, every sample shaded, the finest occupancy grid; its refinement threshold
+/// is Final's.
+pub fn fine_params() -> MarchParams {
+    MarchParams {
+        steps_per_feature: 32.0,
+        cone: 0.0,
+        max_step_factor: 1.0,
+        min_transmittance: 1e-6,
+        occupancy_resolution: 256,
+        refine_depth: 14,
+        color_skip_budget: 0.0,
+        ..Quality::Final.params()
+    }
+}
+
+/// Runs the suite; `dir` takes generated files while they load, `log` progress lines.
+pub fn run(options: &SuiteOptions, dir: &Path, log: &dyn Fn(&str)) -> Result<Report> {
+    let mut scenes = Vec::new();
+    for &kind in &options.scenes {
+        log(&format!(
+            "{}: building at {}×{} …",
+            kind.name(),
+            options.width,
+            options.height
+        ));
+        let (built, heap) = peak_during(|| {
+            build(
+                kind,
+                options.width,
+                options.height,
+                dir,
+                options.splats.as_deref(),
+            )
+        });
+        let report = measure_scene(&built?, heap, options.repeats, log)?;
+        scenes.push(report);
+    }
+    let growth = if options.scaling {
+        scaling::run(options.width, options.height, dir, log)?
+    } else {
+        Vec::new()
+    };
+    Ok(Report {
+        width: options.width,
+        height: options.height,
+        threads: rayon::current_num_threads(),
+        load: load_average(),
+        scenes,
+        growth,
+    })
+}
+
+/// The reference of a scene: every pixel, or the sampled rows.
+enum Reference {
+    Frame(Box<Planes>),
+    Rows(Vec<(u32, Planes)>),
+    None,
+}
+
+fn measure_scene(
+    b: &BenchScene,
+    built: Option<HeapUse>,
+    repeats: u32,
+    log: &dyn Fn(&str),
+) -> Result<SceneReport> {
+    let (scene, camera) = (&b.scene, &b.camera);
+    let outputs = Outputs::all();
+    let full = camera.full_window();
+    let rows = sampled_rows(full.height());
+
+    // Occupancy grids are built on first use: a small render per preset builds them, so
+    // the timed frames measure rendering alone.
+    let (warm, occupancy) = peak_during(|| -> Result<()> {
+        for q in Quality::ALL {
+            render_frame(
+                scene,
+                camera,
+                centre_window(camera, 32),
+                q.params(),
+                outputs,
+            )?;
+        }
+        Ok(())
+    });
+    warm?;
+    let scene_heap = built
+        .zip(occupancy)
+        .map(|(a, b)| (a.kept + b.kept).max(0) as usize);
+    let (tile, tile_heap) = peak_during(|| {
+        let params = Quality::Final.params();
+        render_frame(scene, camera, centre_window(camera, 16), params, outputs)
+    });
+    tile?;
+
+    let started = Instant::now();
+    let (truth, reference_note) = match b.truth {
+        Truth::Exact => (
+            Reference::Frame(Box::new(reference::render(scene, camera, full)?)),
+            "the exact closed-form integral of every pixel".to_string(),
+        ),
+        Truth::FineMarch => {
+            let fine = render_rows(camera, &rows, |w| {
+                render_frame(scene, camera, w, fine_params(), outputs).map(|(p, _)| p)
+            })?;
+            let p = fine_params();
+            (
+                Reference::Rows(fine),
+                format!(
+                    "a finer nerfx march ({} steps per feature, stop at transmittance {:.0e}, \
+                     every sample shaded) of every {ROW_STRIDE}th row ({} of {}); all errors \
+                     are over those rows",
+                    p.steps_per_feature,
+                    p.min_transmittance,
+                    rows.len(),
+                    full.height()
+                ),
+            )
+        }
+        Truth::Rasterised => (
+            Reference::None,
+            "none: splats are rasterised exactly as gsplat's classic mode (checked against \
+             NumPy in tests/splat_numpy.rs); presets change only marched content"
+                .to_string(),
+        ),
+    };
+    let reference_ms = started.elapsed().as_secs_f64() * 1e3;
+    log(&format!(
+        "{}: reference {reference_ms:.0} ms",
+        b.kind.name()
+    ));
+
+    let mut report_rows = Vec::new();
+    for quality in Quality::ALL {
+        let mut timed = Vec::new();
+        for _ in 0..repeats.max(1) {
+            let (out, heap) = peak_during(|| timed_frame(scene, camera, quality.params()));
+            let (planes, stats, ms, cpu) = out?;
+            timed.push((ms, cpu, planes, stats, heap));
+        }
+        timed.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let (ms, cpu, planes, stats, heap) = timed.swap_remove(timed.len() / 2);
+        let row = Row {
+            name: quality.name().to_string(),
+            ms_per_frame: ms,
+            cpu_s_per_frame: cpu,
+            error: compare(&truth, &planes)?,
+            peak_heap: heap.map(|h| h.peak),
+            on_rows: false,
+            ..counts(&stats)
+        };
+        log(&format!("{}: {}", b.kind.name(), row_line(&row)));
+        report_rows.push(row);
+    }
+
+    let naive_steps: &[f64] = match b.truth {
+        Truth::Exact => &NAIVE_STEPS_PER_DIAGONAL[0],
+        Truth::FineMarch => &NAIVE_STEPS_PER_DIAGONAL[1],
+        Truth::Rasterised => &[],
+    };
+    let diagonal = scene
+        .instances
+        .iter()
+        .map(|i| i.field().bounds().diagonal() as f64)
+        .fold(0.0, f64::max);
+    // Baselines and further references (such as instant-ngp's own marcher on trained
+    // fields) are taken like the reference: on its rows where it has rows.
+    let on_rows = matches!(truth, Reference::Rows(_));
+    for &steps in naive_steps {
+        let step = diagonal / steps;
+        let row = baseline_row(
+            format!("naive (step diag/{steps})"),
+            &truth,
+            camera,
+            on_rows.then_some(&rows[..]),
+            |w| render_naive(scene, camera, w, step, &outputs),
+        )?;
+        log(&format!("{}: {}", b.kind.name(), row_line(&row)));
+        report_rows.push(row);
+    }
+
+    Ok(SceneReport {
+        kind: b.kind,
+        description: b.description.clone(),
+        truth: reference_note,
+        reference_ms,
+        scene_heap,
+        tile_heap: tile_heap.map(|h| h.peak),
+        rows: report_rows,
+    })
+}
+
+/// A row of `render` measured against `truth`: on `rows` (each a one-row window, its time
+/// scaled to the frame) or, without, on the full frame.
+fn baseline_row(
+    name: String,
+    truth: &Reference,
+    camera: &Camera,
+    rows: Option<&[u32]>,
+    render: impl Fn(Window) -> Result<(Planes, RenderStats)> + Sync,
+) -> Result<Row> {
+    let full = camera.full_window();
+    let (t, cpu) = (Instant::now(), process_cpu_seconds());
+    let (planes, stats, scale) = match rows {
+        Some(rows) => {
+            let parts = render_rows(camera, rows, render)?;
+            let stats = parts.iter().fold(RenderStats::default(), |s, p| s + p.1 .1);
+            let planes = Reference::Rows(parts.into_iter().map(|(y, (p, _))| (y, p)).collect());
+            let scale = f64::from(full.height()) / rows.len().max(1) as f64;
+            (planes, stats, scale)
+        }
+        None => {
+            let (p, s) = render(full)?;
+            (Reference::Frame(Box::new(p)), s, 1.0)
+        }
+    };
+    let ms = t.elapsed().as_secs_f64() * 1e3 * scale;
+    let cpu = cpu.zip(process_cpu_seconds()).map(|(a, b)| (b - a) * scale);
+    Ok(Row {
+        name,
+        ms_per_frame: ms,
+        cpu_s_per_frame: cpu,
+        error: compare_references(truth, &planes)?,
+        peak_heap: None,
+        on_rows: rows.is_some(),
+        ..counts(&stats)
+    })
+}
+
+/// A frame's planes, counts, wall milliseconds and CPU seconds.
+fn timed_frame(
+    scene: &Scene,
+    camera: &Camera,
+    params: MarchParams,
+) -> Result<(Planes, RenderStats, f64, Option<f64>)> {
+    let (t, cpu) = (Instant::now(), process_cpu_seconds());
+    let (planes, stats) =
+        render_frame(scene, camera, camera.full_window(), params, Outputs::all())?;
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    let cpu = cpu.zip(process_cpu_seconds()).map(|(a, b)| b - a);
+    Ok((planes, stats, ms, cpu))
+}
+
+fn render_frame(
+    scene: &Scene,
+    camera: &Camera,
+    window: Window,
+    params: MarchParams,
+    outputs: Outputs,
+) -> Result<(Planes, RenderStats)> {
+    let settings = RenderSettings::new(params, outputs);
+    render_with_progress(scene, camera, window, &settings, &|_| {})
+}
+
+/// The rows references are taken on: the middle row of each band of [`ROW_STRIDE`].
+fn sampled_rows(height: u32) -> Vec<u32> {
+    (0..height.div_ceil(ROW_STRIDE))
+        .map(|k| (k * ROW_STRIDE + ROW_STRIDE / 2).min(height - 1))
+        .collect()
+}
+
+/// A centred square window of side `side` (clamped to the image).
+fn centre_window(camera: &Camera, side: u32) -> Window {
+    let full = camera.full_window();
+    let (w, h) = (side.min(full.width()), side.min(full.height()));
+    let (x0, y0) = ((full.width() - w) / 2, (full.height() - h) / 2);
+    Window::new(x0, y0, x0 + w, y0 + h)
+}
+
+/// `render` of each row (a one-row window), the rows in parallel.
+fn render_rows<T: Send>(
+    camera: &Camera,
+    rows: &[u32],
+    render: impl Fn(Window) -> Result<T> + Sync,
+) -> Result<Vec<(u32, T)>> {
+    let width = camera.full_window().width();
+    rows.par_iter()
+        .map(|&y| render(Window::new(0, y, width, y + 1)).map(|out| (y, out)))
+        .collect()
+}
+
+/// A full frame's errors against the reference.
+fn compare(truth: &Reference, test: &Planes) -> Result<Option<ErrorReport>> {
+    Ok(match truth {
+        Reference::Frame(t) => Some(ErrorReport::compare(t, test)),
+        Reference::Rows(rows) => {
+            let pairs = rows
+                .iter()
+                .map(|(y, t)| Ok((t, test.crop(Window::new(0, *y, test.width, y + 1))?)))
+                .collect::<Result<Vec<_>>>()?;
+            Some(combine(
+                pairs.iter().map(|(t, p)| ErrorReport::compare(t, p)),
+            ))
+        }
+        Reference::None => None,
+    })
+}
+
+/// Errors of a render taken like the reference (the same rows, or a full frame).
+fn compare_references(truth: &Reference, test: &Reference) -> Result<Option<ErrorReport>> {
+    match (truth, test) {
+        (_, Reference::Frame(p)) => compare(truth, p),
+        (Reference::Rows(t), Reference::Rows(p)) if t.len() == p.len() => Ok(Some(combine(
+            t.iter()
+                .zip(p)
+                .map(|((_, t), (_, p))| ErrorReport::compare(t, p)),
+        ))),
+        _ => Err(Error::invalid(
+            "benchmark",
+            "a render on rows compared with a reference that is not",
+        )),
+    }
+}
+
+/// Errors over equally wide parts, as over their union: PSNR from the mean of the parts'
+/// squared errors, the largest of the other errors (NaN if any is NaN).
+fn combine(parts: impl Iterator<Item = ErrorReport>) -> ErrorReport {
+    let (mut mse, mut n) = (0.0, 0usize);
+    let mut worst = [0.0f64; 2];
+    let max = |a: f64, b: f64| {
+        if a.is_nan() || b.is_nan() {
+            f64::NAN
+        } else {
+            a.max(b)
+        }
+    };
+    for e in parts {
+        mse += 10f64.powf(-e.psnr / 10.0);
+        n += 1;
+        worst = [
+            max(worst[0], e.max_alpha_error),
+            max(worst[1], e.max_depth_rel_error),
+        ];
+    }
+    ErrorReport {
+        psnr: -10.0 * (mse / n.max(1) as f64).log10(),
+        max_alpha_error: worst[0],
+        max_depth_rel_error: worst[1],
+    }
+}
+
+/// A row's per-pixel counts (the rest left to fill).
+fn counts(stats: &RenderStats) -> Row {
+    let pixels = stats.pixels.max(1) as f64;
+    Row {
+        name: String::new(),
+        ms_per_frame: f64::NAN,
+        cpu_s_per_frame: None,
+        samples_per_pixel: stats.density_samples as f64 / pixels,
+        color_samples_per_pixel: stats.color_samples as f64 / pixels,
+        fragments_per_pixel: stats.splat_fragments as f64 / pixels,
+        error: None,
+        budget_hits: None,
+        peak_heap: None,
+        on_rows: false,
+    }
+}
+
+fn row_line(r: &Row) -> String {
+    let error = r
+        .error
+        .map_or("no reference".to_string(), |e| e.to_string());
+    format!(
+        "{}: {:.0} ms, {:.1} spp, {error}",
+        r.name, r.ms_per_frame, r.samples_per_pixel
+    )
+}
+
+/// The 1, 5 and 15 minute load averages (Linux `/proc/loadavg`).
+fn load_average() -> Option<[f64; 3]> {
+    let text = std::fs::read_to_string("/proc/loadavg").ok()?;
+    let mut v = text.split_whitespace().map(|s| s.parse::<f64>().ok());
+    Some([v.next()??, v.next()??, v.next()??])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::Plane;
+
+    /// Seeded planes: `width × height`, every plane present.
+    fn planes(width: u32, height: u32, seed: u32) -> Planes {
+        let plane = |k: u32| Plane {
+            width,
+            height,
+            data: (0..width * height)
+                .map(|i| ((i * 7919 + seed * 104_729 + k * 31) % 1000) as f32 / 1000.0 + 0.5)
+                .collect(),
+        };
+        Planes {
+            width,
+            height,
+            rgb: Some([plane(0), plane(1), plane(2)]),
+            alpha: Some(plane(3)),
+            depth_z: Some(plane(4)),
+            depth_ray: Some(plane(5)),
+            depth_median: Some(plane(6)),
+        }
+    }
+
+    #[test]
+    fn errors_over_rows_combine_as_over_their_union() {
+        let (a, b) = (planes(7, 5, 1), planes(7, 5, 2));
+        let whole = ErrorReport::compare(&a, &b);
+        let rows = (0..5).map(|y| {
+            let row = Window::new(0, y, 7, y + 1);
+            ErrorReport::compare(&a.crop(row).unwrap(), &b.crop(row).unwrap())
+        });
+        let combined = combine(rows);
+        assert!(
+            (combined.psnr - whole.psnr).abs() < 1e-9,
+            "{combined} vs {whole}"
+        );
+        assert_eq!(combined.max_alpha_error, whole.max_alpha_error);
+        assert_eq!(combined.max_depth_rel_error, whole.max_depth_rel_error);
+        // Compared on sampled rows, a frame is measured on exactly those rows.
+        let truth = Reference::Rows(vec![(1, a.crop(Window::new(0, 1, 7, 2)).unwrap())]);
+        let on_row = compare(&truth, &b).unwrap().unwrap();
+        let want = ErrorReport::compare(
+            &a.crop(Window::new(0, 1, 7, 2)).unwrap(),
+            &b.crop(Window::new(0, 1, 7, 2)).unwrap(),
+        );
+        assert_eq!(on_row, want);
+    }
+
+    #[test]
+    fn sampled_rows_are_the_middles_of_bands_within_the_image() {
+        assert_eq!(sampled_rows(40), vec![8, 24, 39]);
+        assert_eq!(sampled_rows(1), vec![0]);
+        assert_eq!(sampled_rows(1080).len(), 68);
+    }
+}

@@ -8,6 +8,7 @@ use super::plot::{plot_png, Series};
 use super::scaling;
 use super::suite::{Report, Row, SceneReport};
 use crate::error::{Error, Result};
+use crate::render::Quality;
 
 /// Bytes as MiB with one decimal, or `n/a`.
 fn mib(bytes: Option<usize>) -> String {
@@ -47,18 +48,21 @@ impl Report {
         let md = dir.join("report.md");
         std::fs::write(&md, self.markdown()).map_err(|e| Error::io(&md, e))?;
         for scene in &self.scenes {
-            let series = |label: &str, naive: bool| Series {
+            let series = |label: &str, keep: &dyn Fn(&str) -> bool| Series {
                 label: label.into(),
                 points: scene
                     .rows
                     .iter()
-                    .filter(|r| r.name.starts_with("naive") == naive)
+                    .filter(|r| keep(&r.name))
                     .filter_map(|r| r.error.map(|e| (r.ms_per_frame, e.psnr)))
                     .collect(),
             };
+            let preset = |name: &str| Quality::ALL.iter().any(|q| q.name() == name);
+            let naive = |name: &str| name.starts_with("naive");
             let series = [
-                series("nerfx presets", false),
-                series("naive uniform steps", true),
+                series("nerfx presets", &preset),
+                series("naive uniform steps", &naive),
+                series("trainer's own marcher", &|n| !preset(n) && !naive(n)),
             ];
             if series.iter().all(|s| s.points.is_empty()) {
                 continue;

@@ -14,7 +14,7 @@ use crate::camera::{Camera, Perspective, Projection};
 use crate::demo::{self, look_at};
 use crate::error::{Error, Result};
 use crate::field::{Analytic, IngpField, Primitive, ShColor, Shape, Splats};
-use crate::scene::{FieldHandle, Instance, Scene, SplatInstance};
+use crate::scene::{FieldHandle, Instance, NgpInstance, Scene, SplatInstance};
 
 /// A benchmark scene.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
@@ -77,6 +77,9 @@ pub struct BenchScene {
     pub camera: Camera,
     /// Its reference.
     pub truth: Truth,
+    /// A trained scene marched by its trainer's own marcher instead (instant-ngp's), as a
+    /// further reference row.
+    pub native: Option<Scene>,
 }
 
 /// Builds `kind` at `width × height`. Generated snapshot files are written into `dir` and
@@ -93,6 +96,7 @@ pub fn build(
         let p = Perspective::from_vertical_fov(width, height, 40.0)?;
         Camera::new(look_at(eye, DVec3::ZERO), Projection::Perspective(p))
     };
+    let mut native = None;
     let (description, scene, camera, truth) = match kind {
         SceneKind::Demo => {
             let (scene, camera) = demo::scene_and_camera(width, height)?;
@@ -109,7 +113,8 @@ pub fn build(
         ),
         SceneKind::Fog => {
             let spec = SnapshotSpec::fog_sphere();
-            let scene = trained(dir, "fog", &spec)?;
+            let (scene, ngp) = trained(dir, "fog", &spec)?;
+            native = Some(ngp);
             let d = "instant-ngp snapshot, 16×2 levels, 2^19 rows, fp16, weights of std 0.05, \
                      occupied in a ball of radius 0.35 (a smooth fog, σ ≈ 0.33/unit)";
             (
@@ -121,7 +126,8 @@ pub fn build(
         }
         SceneKind::Blob => {
             let spec = SnapshotSpec::dense_blob();
-            let scene = trained(dir, "blob", &spec)?;
+            let (scene, ngp) = trained(dir, "blob", &spec)?;
+            native = Some(ngp);
             let d = "instant-ngp snapshot, 8×4 levels, 2^19 rows, fp16, three balls occupied, \
                      σ's row scaled by 4 (rays stop inside)";
             (
@@ -153,21 +159,22 @@ pub fn build(
         scene,
         camera,
         truth,
+        native,
     })
 }
 
-/// A scene of one instant-ngp snapshot written from `spec` into `dir`, loaded, and removed.
-fn trained(dir: &Path, name: &str, spec: &SnapshotSpec) -> Result<Scene> {
+/// A scene of one instant-ngp snapshot written from `spec` into `dir`, loaded, and removed;
+/// and the same snapshot marched by instant-ngp's own marcher.
+fn trained(dir: &Path, name: &str, spec: &SnapshotSpec) -> Result<(Scene, Scene)> {
     let path = write_snapshot(dir, &format!("nerfx-bench-{name}"), spec)?;
     let field = IngpField::load(&path);
     std::fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
-    let handle = FieldHandle::new(Arc::new(field?));
-    Ok(Scene::new(vec![Instance::new(
-        name,
-        handle,
-        DMat4::IDENTITY,
-        None,
-    )?]))
+    let field = Arc::new(field?);
+    let handle = FieldHandle::new(field.clone());
+    let scene = Scene::new(vec![Instance::new(name, handle, DMat4::IDENTITY, None)?]);
+    let mut native = Scene::default();
+    native.ngp = vec![NgpInstance::new(name, field, DMat4::IDENTITY, None)?];
+    Ok((scene, native))
 }
 
 /// Four thin sheets (boxes flat along z, rotated by their instance) and a haze: surfaces far

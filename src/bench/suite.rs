@@ -298,6 +298,18 @@ fn measure_scene(
         report_rows.push(row);
     }
 
+    if let Some(native) = &b.native {
+        let row = baseline_row(
+            "instant-ngp's own marcher".to_string(),
+            &truth,
+            camera,
+            on_rows.then_some(&rows[..]),
+            |w| render_frame(native, camera, w, Quality::Final.params(), outputs),
+        )?;
+        log(&format!("{}: {}", b.kind.name(), row_line(&row)));
+        report_rows.push(row);
+    }
+
     Ok(SceneReport {
         kind: b.kind,
         description: b.description.clone(),

@@ -172,8 +172,10 @@ fn trained(dir: &Path, name: &str, spec: &SnapshotSpec) -> Result<(Scene, Scene)
     let field = Arc::new(field?);
     let handle = FieldHandle::new(field.clone());
     let scene = Scene::new(vec![Instance::new(name, handle, DMat4::IDENTITY, None)?]);
-    let mut native = Scene::default();
-    native.ngp = vec![NgpInstance::new(name, field, DMat4::IDENTITY, None)?];
+    let native = Scene {
+        ngp: vec![NgpInstance::new(name, field, DMat4::IDENTITY, None)?],
+        ..Scene::default()
+    };
     Ok((scene, native))
 }
 

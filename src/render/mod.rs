@@ -123,6 +123,11 @@ pub struct RenderStats {
     pub color_samples: u64,
     /// Splat fragments met by the pixels.
     pub splat_fragments: u64,
+    /// Rays that spent their whole sample budget ([`MarchParams::max_samples`]) before
+    /// reaching the preset's error target: their pixels may be off by more than it.
+    pub budget_limited_rays: u64,
+    /// Density samples a field answered with NaN or an infinity: each was taken as empty.
+    pub invalid_samples: u64,
 }
 
 /// Two renders' counts together.
@@ -134,6 +139,8 @@ impl std::ops::Add for RenderStats {
         self.density_samples += other.density_samples;
         self.color_samples += other.color_samples;
         self.splat_fragments += other.splat_fragments;
+        self.budget_limited_rays += other.budget_limited_rays;
+        self.invalid_samples += other.invalid_samples;
         self
     }
 }

@@ -1036,7 +1036,9 @@ mod tests {
 
     use glam::Vec3;
 
-    use super::super::{render, Outputs, Quality, RenderSettings};
+    use super::super::{
+        render, render_with_progress, MarchParams, Outputs, Quality, RenderSettings,
+    };
     use crate::field::{Aabb, Analytic, Field};
     use crate::scene::{FieldHandle, FieldSource, Instance, Scene};
 
@@ -1085,12 +1087,31 @@ mod tests {
         }
     }
 
-    #[test]
-    fn features_reach_the_colour_query_of_their_own_samples() {
+    /// A field that answers every third density sample with NaN, +inf or −inf in turn.
+    struct Poisoned(Analytic);
+
+    impl Field for Poisoned {
+        fn bounds(&self) -> Aabb {
+            self.0.bounds()
+        }
+        fn density(&self, points: &[Vec3], sigma: &mut [f32]) {
+            self.0.density(points, sigma);
+            let bad = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
+            for (i, s) in sigma.iter_mut().enumerate().filter(|(i, _)| i % 3 == 0) {
+                *s = bad[i / 3 % 3];
+            }
+        }
+        fn radiance(&self, points: &[Vec3], dirs: &[Vec3], rgb: &mut [Vec3]) {
+            self.0.radiance(points, dirs, rgb)
+        }
+        fn may_be_occupied(&self, region: &Aabb) -> bool {
+            self.0.may_be_occupied(region)
+        }
+    }
+
+    fn demo_with(object: impl Fn(Analytic) -> Arc<dyn Field>) -> (Scene, crate::camera::Camera) {
         let (plain, camera) = crate::demo::scene_and_camera(48, 27).unwrap();
         let desc = crate::demo::scene_desc();
-        // The object instance echoes its features, the environment does not: offsets into
-        // a node's features must keep them apart.
         let instances = plain
             .instances
             .iter()
@@ -1100,14 +1121,68 @@ mod tests {
                     unreachable!("the demo is analytic")
                 };
                 let handle = if inst.name == "object" {
-                    FieldHandle::new(Arc::new(Echo(a.clone())))
+                    FieldHandle::new(object(a.clone()))
                 } else {
                     inst.handle().clone()
                 };
                 Instance::new(inst.name.clone(), handle, inst.world_from_field(), None).unwrap()
             })
             .collect();
-        let echo = Scene::new(instances);
+        (Scene::new(instances), camera)
+    }
+
+    fn assert_finite(planes: &crate::image::Planes) {
+        let alpha = planes.alpha.as_ref().unwrap();
+        assert!(alpha.data.iter().all(|a| (0.0..=1.0).contains(a)));
+        for plane in planes.rgb.as_ref().unwrap() {
+            assert!(plane.data.iter().all(|c| c.is_finite() && *c >= 0.0));
+        }
+    }
+
+    #[test]
+    fn non_finite_densities_are_empty_and_counted() {
+        let (scene, camera) = demo_with(|a| Arc::new(Poisoned(a)));
+        let settings = RenderSettings::new(Quality::Preview.params(), Outputs::all());
+        let (planes, stats) =
+            render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {})
+                .unwrap();
+        assert_finite(&planes);
+        assert!(stats.invalid_samples > 0);
+        assert!(stats.warning().unwrap().contains("NaN or infinite"));
+    }
+
+    #[test]
+    fn rays_out_of_budget_stop_and_are_counted() {
+        let (scene, camera) = demo_with(|a| Arc::new(a));
+        let final_params = Quality::Final.params();
+        let render = |max_samples| {
+            let params = MarchParams {
+                max_samples,
+                ..final_params
+            };
+            let settings = RenderSettings::new(params, Outputs::all());
+            render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {}).unwrap()
+        };
+        let (planes, stats) = render(final_params.max_samples);
+        assert_finite(&planes);
+        assert_eq!(stats.budget_limited_rays, 0);
+        assert_eq!(stats.warning(), None);
+        let (short, stats) = render(6);
+        assert_finite(&short);
+        assert!(stats.budget_limited_rays > 0 && stats.budget_limited_rays <= stats.pixels);
+        assert!(stats.warning().unwrap().contains("sample budget"));
+        // A ray stopped early has composited less, never more.
+        let (a, b) = (short.alpha.unwrap(), planes.alpha.unwrap());
+        assert!(a.data.iter().zip(&b.data).all(|(s, f)| *s <= f + 1e-6));
+        assert!(a.data.iter().zip(&b.data).any(|(s, f)| *s < f - 1e-3));
+    }
+
+    #[test]
+    fn features_reach_the_colour_query_of_their_own_samples() {
+        let (plain, camera) = crate::demo::scene_and_camera(48, 27).unwrap();
+        // The object instance echoes its features, the environment does not: offsets into
+        // a node's features must keep them apart.
+        let (echo, _) = demo_with(|a| Arc::new(Echo(a)));
         let settings = RenderSettings::new(Quality::Preview.params(), Outputs::rgba());
         let want = render(&plain, &camera, camera.full_window(), &settings).unwrap();
         let got = render(&echo, &camera, camera.full_window(), &settings).unwrap();

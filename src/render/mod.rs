@@ -130,6 +130,28 @@ pub struct RenderStats {
     pub invalid_samples: u64,
 }
 
+impl RenderStats {
+    /// What a user should hear about this render, if anything: rays that stopped at their
+    /// sample budget and density samples a field answered with NaN or an infinity.
+    pub fn warning(&self) -> Option<String> {
+        let mut parts = Vec::new();
+        if self.budget_limited_rays > 0 {
+            parts.push(format!(
+                "{} of {} pixels stopped at the preset's sample budget and may miss its \
+                 error target",
+                self.budget_limited_rays, self.pixels
+            ));
+        }
+        if self.invalid_samples > 0 {
+            parts.push(format!(
+                "{} density samples were NaN or infinite and were taken as empty",
+                self.invalid_samples
+            ));
+        }
+        (!parts.is_empty()).then(|| parts.join("; "))
+    }
+}
+
 /// Two renders' counts together.
 impl std::ops::Add for RenderStats {
     type Output = RenderStats;

@@ -153,6 +153,10 @@ struct RayState {
     worst: f64,
     /// Nodes evaluated for this ray so far (its share of the sample budget).
     samples: u32,
+    /// The shortest step bisection may leave this round: the base step where the round's
+    /// nodes start, halved `refine_depth` times (a grown step may be bisected further than
+    /// its own `refine_depth` halvings, never below this).
+    finest: f64,
 }
 
 impl RayState {
@@ -526,6 +530,10 @@ fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scr
             // Density may begin where an occupied segment does: its first step is a base one.
             s.rays[r].scale = 1.0;
         }
+        if laid == 0 {
+            let base = step_at(r, t, 1.0, plans, params, s);
+            s.rays[r].finest = base * 0.5f64.powi(params.refine_depth.min(MAX_BISECTIONS) as i32);
+        }
         let next = if t >= b {
             None
         } else {
@@ -678,7 +686,7 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
     for &(r, i) in &s.candidates {
         let nodes = &s.nodes[r as usize];
         let (a, b) = (&nodes[i as usize], &nodes[i as usize + 1]);
-        if b.starts_run {
+        if b.starts_run || b.t - a.t <= 1.5 * s.rays[r as usize].finest {
             continue;
         }
         let weight = (b.t - a.t) * s.rays[r as usize].pieces.transmittance();

@@ -62,6 +62,10 @@ pub(super) struct InstancePlan {
     /// Whether the field bounds its density over a region ([`Field::density_bounds`]): only
     /// then can a step between two empty samples be known to hold nothing, and grow.
     bounded: bool,
+    /// The longest a grown step may be, field units: a field that cannot bound its density
+    /// may have gaps as small as an occupancy cell between two samples with density, so its
+    /// steps grow to one cell at most (unlimited for the others).
+    longest: f64,
 }
 
 impl InstancePlan {
@@ -74,8 +78,14 @@ impl InstancePlan {
             .map(|inst| {
                 let features = inst.field().feature_count();
                 feature_offset += features;
+                let occupancy = inst.handle().occupancy(params.occupancy_resolution);
+                let bounded = inst
+                    .field()
+                    .density_bounds(&[inst.field().bounds()], &mut [0.0]);
+                let cell = occupancy.bounds().size().min_element() as f64
+                    / f64::from(occupancy.resolution().max(1));
                 InstancePlan {
-                    occupancy: inst.handle().occupancy(params.occupancy_resolution),
+                    occupancy,
                     base_step: inst.field().feature_size() as f64
                         / params.steps_per_feature.max(1e-3) as f64,
                     features,
@@ -84,9 +94,8 @@ impl InstancePlan {
                     encode: space == ColorSpace::Srgb
                         && inst.field().color_space() == ColorSpace::Linear,
                     unbounded: inst.field().unbounded(),
-                    bounded: inst
-                        .field()
-                        .density_bounds(&[inst.field().bounds()], &mut [0.0]),
+                    bounded,
+                    longest: if bounded { f64::INFINITY } else { cell },
                 }
             })
             .collect()
@@ -488,19 +497,21 @@ fn step_at(
     s: &Scratch,
 ) -> f64 {
     let n_inst = plans.len();
-    let (mut here, mut anywhere) = (f64::INFINITY, f64::INFINITY);
+    let (mut here, mut anywhere, mut cap) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
     for (i, plan) in plans.iter().enumerate() {
         if let Some(lr) = &s.local[r * n_inst + i] {
             let step = plan.base_step / lr.units_per_world as f64;
             anywhere = anywhere.min(step);
             if t >= lr.t_near && t <= lr.t_far {
-                here = here.min(step * growth(plan, lr, t));
+                let g = growth(plan, lr, t);
+                here = here.min(step * g);
+                cap = cap.min(plan.longest * g / lr.units_per_world as f64);
             }
         }
     }
     // Segments lie inside instances, so `here` is finite but for rounding at their ends.
     let base = if here.is_finite() { here } else { anywhere };
-    let longest = base * params.max_step_factor.max(1.0) as f64;
+    let longest = (base * params.max_step_factor.max(1.0) as f64).min(cap);
     let grown = (params.cone as f64 * t).max(base * scale);
     grown.min(longest).max(base).max(f64::MIN_POSITIVE)
 }
@@ -678,6 +689,7 @@ fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut S
 /// what the step holds). Pairs that pass the cheap jump test ask the fields for a density
 /// bound over the step's box, one batch per instance.
 fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
+    let empty_is_known = plans.iter().all(|p| p.bounded);
     let n_inst = plans.len();
     let tolerance = params.error_target as f64;
     let any_smooth = plans.iter().any(|p| p.smooth > 0.0);
@@ -692,9 +704,11 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         let weight = (b.t - a.t) * s.rays[r as usize].pieces.transmittance();
         let smooth = any_smooth && smooth_step(r as usize, a, b, plans, s);
         // A grown step where density starts or ends is bisected back to an ungrown one
-        // whatever its weight, so faint content keeps the base step's edges.
-        let edge = (a.sigma > 0.0) != (b.sigma > 0.0)
-            && b.t - a.t > 1.5 * step_at(r as usize, a.t, 1.0, plans, params, s);
+        // whatever its weight, so faint content keeps the base step's edges; so is one
+        // between two empty samples of a field that cannot say what lies between.
+        let unknown =
+            (a.sigma > 0.0) != (b.sigma > 0.0) || (a.sigma + b.sigma == 0.0 && !empty_is_known);
+        let edge = unknown && b.t - a.t > 1.5 * step_at(r as usize, a.t, 1.0, plans, params, s);
         if edge || (!smooth && step_change(nodes, i as usize) * weight > tolerance) {
             s.rays[r as usize].refined = true;
             s.pending.push(Pending {

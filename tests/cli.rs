@@ -70,7 +70,8 @@ fn demo_then_render_a_frame_range_from_its_files() {
     );
     let alpha = |x: usize, y: usize| rgba[4 * (y * 48 + x) + 3];
     assert_eq!(alpha(47, 0), 0, "the sky top right");
-    assert_eq!(alpha(24, 26), 255, "the ground");
+    // Draft stops a ray once its transmittance is under 1 %: opaque is alpha ≥ 0.99.
+    assert!(alpha(24, 26) >= 253, "the ground: {}", alpha(24, 26));
 
     let pattern = dir.join("frames/f.####.exr");
     let render = nerfx(&[

@@ -426,7 +426,7 @@ fn finer_custom_params_converge_further() {
     let fine = MarchParams {
         steps_per_feature: 4.0 * Quality::Final.params().steps_per_feature,
         refine_depth: Quality::Final.params().refine_depth + 2,
-        refine_tolerance: Quality::Final.params().refine_tolerance / 10.0,
+        error_target: Quality::Final.params().error_target / 10.0,
         min_transmittance: 1e-6,
         color_skip_budget: 1e-7,
         ..Quality::Final.params()

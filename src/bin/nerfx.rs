@@ -266,7 +266,10 @@ fn run(cli: Cli) -> Result<()> {
                 if let Some(dir) = path.parent() {
                     create_dir(dir)?;
                 }
-                let (planes, _) = render_frame(&scene, &shot, frame, &settings, &|_| {})?;
+                let (planes, stats) = render_frame(&scene, &shot, frame, &settings, &|_| {})?;
+                if let Some(warning) = stats.warning() {
+                    bar.suspend(|| eprintln!("nerfx: warning: frame {frame}: {warning}"));
+                }
                 let pixel_aspect = shot.pixel_aspect_for(&shot.frame(frame)?.camera(&shot)?);
                 write_exr_layers(&path, &planes, &[], pixel_aspect)?;
                 if png {
@@ -325,11 +328,14 @@ fn run(cli: Cli) -> Result<()> {
             }
             let settings = RenderSettings::new(quality.params(), Outputs::all());
             let bar = progress_bar(2 * u64::from(height) * u64::from(height), "envmap");
-            let (planes, _) =
+            let (planes, stats) =
                 render_environment(&scene, &shot, frame, &origin, height, &settings, &|n| {
                     bar.inc(n)
                 })?;
             bar.finish_and_clear();
+            if let Some(warning) = stats.warning() {
+                eprintln!("nerfx: warning: envmap: {warning}");
+            }
             write_exr(&output, &planes)?;
             println!("envmap: frame {frame} → {}", output.display());
             Ok(())

@@ -156,20 +156,27 @@ impl Pieces {
     }
 }
 
-/// Where, inside a logged sequence of pieces `(t, δ, x, T_enter)` with optical thickness
-/// `x = σδ` (a splat fragment is a piece with `δ = 0` and `x = −ln(1 − α)`), the
-/// accumulation first reaches `target`: the exact position inside the crossing piece
-/// (`T_enter·e^{−x·s/δ} = 1 − target`). `inf` when it never does.
-pub fn crossing_depth(pieces: &[[f64; 4]], target: f64) -> f64 {
+/// Where, inside a logged sequence of pieces `(t, δ, x₀, x₁, T_enter)` whose density goes
+/// linearly from `σ₀ = x₀/δ` to `σ₁ = x₁/δ` (optical thickness `(x₀ + x₁)/2`; a constant
+/// piece has `x₀ = x₁`, a splat fragment `δ = 0` and `x₀ = x₁ = −ln(1 − α)`), the
+/// accumulation first reaches `target`: the exact position inside the crossing piece, where
+/// its optical depth `σ₀s + (σ₁ − σ₀)s²/2δ` reaches `ln(T_enter/(1 − target))`. `inf` when it
+/// never does.
+pub fn crossing_depth(pieces: &[[f64; 5]], target: f64) -> f64 {
     let t_star = 1.0 - target;
-    for &[t, delta, thickness, t_enter] in pieces {
-        let t_exit = t_enter * (-thickness).exp();
+    for &[t, delta, x0, x1, t_enter] in pieces {
+        let t_exit = t_enter * (-0.5 * (x0 + x1)).exp();
         if t_exit <= t_star && t_enter > 0.0 {
             if t_enter <= t_star || delta == 0.0 {
                 return t;
             }
-            let s = (t_enter / t_star).ln() / thickness * delta;
-            return t + s.clamp(0.0, delta);
+            // In units of the piece's length: x₀u + (x₁ − x₀)u²/2 = depth, solved in the form
+            // that does not cancel (x₀ ≥ 0, and the discriminant is ≥ x₁² ≥ 0 up to rounding).
+            let depth = (t_enter / t_star).ln();
+            let root = (x0 * x0 + 2.0 * (x1 - x0) * depth).max(0.0).sqrt();
+            let u = 2.0 * depth / (x0 + root);
+            let u = if u.is_finite() { u } else { 1.0 };
+            return t + (u * delta).clamp(0.0, delta);
         }
     }
     f64::INFINITY
@@ -256,11 +263,22 @@ mod tests {
     #[test]
     fn median_crossing_inside_a_piece() {
         // σ = 1 from t = 1: accumulation reaches 0.5 at 1 + ln 2.
-        let log = [[1.0, 10.0, 10.0, 1.0]];
+        let log = [[1.0, 10.0, 10.0, 10.0, 1.0]];
         assert!((crossing_depth(&log, 0.5) - (1.0 + 2f64.ln())).abs() < 1e-12);
         assert!(crossing_depth(&log, 0.9999).is_finite());
         assert!(crossing_depth(&log, 0.99999).is_infinite());
-        assert!(crossing_depth(&[[1.0, 0.1, 0.1, 1.0]], 0.5).is_infinite());
+        assert!(crossing_depth(&[[1.0, 0.1, 0.1, 0.1, 1.0]], 0.5).is_infinite());
+    }
+
+    #[test]
+    fn median_crossing_inside_a_linear_piece() {
+        // σ(t) = 2(t − 1) on [1, 2]: optical depth (t − 1)², accumulation 0.5 at 1 + √ln 2.
+        let log = [[1.0, 1.0, 0.0, 2.0, 1.0]];
+        assert!((crossing_depth(&log, 0.5) - (1.0 + 2f64.ln().sqrt())).abs() < 1e-12);
+        // Falling from σ = 2 to 0 on [1, 2]: optical depth 2s − s², so 0.5 at 1 + 1 − √(1 − ln 2).
+        let log = [[1.0, 1.0, 2.0, 0.0, 1.0]];
+        let want = 2.0 - (1.0 - 2f64.ln()).sqrt();
+        assert!((crossing_depth(&log, 0.5) - want).abs() < 1e-12);
     }
 
     #[test]
@@ -276,7 +294,10 @@ mod tests {
         let want = (0.5 * 2.0 + w * piece_mean) / (0.5 + w);
         assert!((p.expected_depth() - want).abs() < 1e-12);
         // The median: accumulation reaches 0.3 at the fragment, 0.75 at 3 + ln 2.
-        let log = [[2.0, 0.0, 2f64.ln(), 1.0], [3.0, 10.0, 10.0, 0.5]];
+        let log = [
+            [2.0, 0.0, 2f64.ln(), 2f64.ln(), 1.0],
+            [3.0, 10.0, 10.0, 10.0, 0.5],
+        ];
         assert_eq!(crossing_depth(&log, 0.3), 2.0);
         assert!((crossing_depth(&log, 0.75) - (3.0 + 2f64.ln())).abs() < 1e-12);
     }

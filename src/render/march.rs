@@ -31,6 +31,10 @@ use crate::scene::{LocalRay, Scene};
 /// samples past it (measured: 4 and 16 cost more samples or more rounds than 8).
 const CHUNK: usize = 8;
 
+/// Bisections of one step at most, whatever the dials say: 52 halvings take any step below
+/// the resolution of an `f64` distance.
+const MAX_BISECTIONS: u32 = 52;
+
 /// What one pixel ends up with.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(super) struct PixelResult {
@@ -56,6 +60,13 @@ pub(super) struct InstancePlan {
     encode: bool,
     /// How the field is marched beyond its core, when it is defined on all of space.
     unbounded: Option<Unbounded>,
+    /// Whether the field bounds its density over a region ([`Field::density_bounds`]): only
+    /// then can a step between two empty samples be known to hold nothing, and grow.
+    bounded: bool,
+    /// The longest a grown step may be, field units: a field that cannot bound its density
+    /// may have gaps as small as an occupancy cell between two samples with density, so its
+    /// steps grow to one cell at most (unlimited for the others).
+    longest: f64,
 }
 
 impl InstancePlan {
@@ -68,8 +79,14 @@ impl InstancePlan {
             .map(|inst| {
                 let features = inst.field().feature_count();
                 feature_offset += features;
+                let occupancy = inst.handle().occupancy(params.occupancy_resolution);
+                let bounded = inst
+                    .field()
+                    .density_bounds(&[inst.field().bounds()], &mut [0.0]);
+                let cell = occupancy.bounds().size().min_element() as f64
+                    / f64::from(occupancy.resolution().max(1));
                 InstancePlan {
-                    occupancy: inst.handle().occupancy(params.occupancy_resolution),
+                    occupancy,
                     base_step: inst.field().feature_size() as f64
                         / params.steps_per_feature.max(1e-3) as f64,
                     features,
@@ -78,6 +95,8 @@ impl InstancePlan {
                     encode: space == ColorSpace::Srgb
                         && inst.field().color_space() == ColorSpace::Linear,
                     unbounded: inst.field().unbounded(),
+                    bounded,
+                    longest: if bounded { f64::INFINITY } else { cell },
                 }
             })
             .collect()
@@ -123,8 +142,9 @@ struct RayState {
     live: bool,
     /// Weight whose colour was not evaluated.
     skipped_weight: f64,
-    /// The pieces `[t, δ, σδ, T_enter]` composited so far, kept only for the median depth.
-    log: Vec<[f64; 4]>,
+    /// The pieces `[t, δ, σ₀δ, σ₁δ, T_enter]` composited so far, kept only for the median
+    /// depth (see [`crossing_depth`]).
+    log: Vec<[f64; 5]>,
     /// The pixel's splat fragments, front to back, and the next one to composite.
     fragments: Vec<Fragment>,
     next_fragment: usize,
@@ -132,6 +152,21 @@ struct RayState {
     /// front to back, and the next one to composite.
     volume: Vec<Fragment>,
     next_volume: usize,
+    /// The next regular step as a multiple of the base step (see [`step_at`]), and whether
+    /// it doubles from node to node: the ray's last steps were all well within the error
+    /// target.
+    scale: f64,
+    growing: bool,
+    /// Whether a step of this round was bisected, and the largest weighted error estimate
+    /// of this round's steps.
+    refined: bool,
+    worst: f64,
+    /// Nodes evaluated for this ray so far (its share of the sample budget).
+    samples: u32,
+    /// The shortest step bisection may leave this round: the base step where the round's
+    /// nodes start, halved `refine_depth` times (a grown step may be bisected further than
+    /// its own `refine_depth` halvings, never below this).
+    finest: f64,
 }
 
 impl RayState {
@@ -205,6 +240,7 @@ pub(super) fn march_tile(
     let stride = feature_stride(plans);
     let n_rays = tile.area();
     setup_rays(scene, plans, splats, camera, tile, outputs, s);
+    let empty_is_known = plans.iter().all(|p| p.bounded);
 
     while !s.active.is_empty() {
         // Each live ray keeps its last node (the start of its next piece), then lays more.
@@ -237,7 +273,14 @@ pub(super) fn march_tile(
         // Integrate the pieces, in order.
         for &r in &s.active {
             let r = r as usize;
-            integrate(&mut s.rays[r], &mut s.nodes[r], params, outputs);
+            integrate(
+                &mut s.rays[r],
+                &mut s.nodes[r],
+                params,
+                outputs,
+                empty_is_known,
+                &mut s.stats.budget_limited_rays,
+            );
         }
 
         if outputs.rgb {
@@ -280,6 +323,11 @@ fn setup_rays(
         state.rgb = DVec3::ZERO;
         state.next_t = None;
         state.skipped_weight = 0.0;
+        state.scale = 1.0;
+        state.growing = false;
+        state.refined = false;
+        state.worst = 0.0;
+        state.samples = 0;
         state.log.clear();
         state.segments.clear();
         state.segment = 0;
@@ -446,23 +494,34 @@ fn union_in_place(segs: &mut Vec<[f64; 2]>) {
 }
 
 /// The step at world distance `t` on ray `r`: the finest base step among the instances the
-/// ray is inside at `t`, grown with distance by the cone.
-fn step_at(r: usize, t: f64, plans: &[InstancePlan], params: &MarchParams, s: &Scratch) -> f64 {
+/// ray is inside at `t`, times the ray's current growth `scale` (or grown with distance by
+/// the cone, whichever is longer), at most `max_step_factor` base steps.
+fn step_at(
+    r: usize,
+    t: f64,
+    scale: f64,
+    plans: &[InstancePlan],
+    params: &MarchParams,
+    s: &Scratch,
+) -> f64 {
     let n_inst = plans.len();
-    let (mut here, mut anywhere) = (f64::INFINITY, f64::INFINITY);
+    let (mut here, mut anywhere, mut cap) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
     for (i, plan) in plans.iter().enumerate() {
         if let Some(lr) = &s.local[r * n_inst + i] {
             let step = plan.base_step / lr.units_per_world as f64;
             anywhere = anywhere.min(step);
             if t >= lr.t_near && t <= lr.t_far {
-                here = here.min(step * growth(plan, lr, t));
+                let g = growth(plan, lr, t);
+                here = here.min(step * g);
+                cap = cap.min(plan.longest * g / lr.units_per_world as f64);
             }
         }
     }
     // Segments lie inside instances, so `here` is finite but for rounding at their ends.
     let base = if here.is_finite() { here } else { anywhere };
-    let grown = (params.cone as f64 * t).min(base * params.max_step_factor.max(1.0) as f64);
-    base.max(grown).max(f64::MIN_POSITIVE)
+    let longest = (base * params.max_step_factor.max(1.0) as f64).min(cap);
+    let grown = (params.cone as f64 * t).max(base * scale);
+    grown.min(longest).max(base).max(f64::MIN_POSITIVE)
 }
 
 /// How much an instance's step grows at world distance `t` (beyond an unbounded field's
@@ -486,10 +545,18 @@ fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scr
             Some(t) => (t, false),
             None => (a, true),
         };
+        if starts_run {
+            // Density may begin where an occupied segment does: its first step is a base one.
+            s.rays[r].scale = 1.0;
+        }
+        if laid == 0 {
+            let base = step_at(r, t, 1.0, plans, params, s);
+            s.rays[r].finest = base * 0.5f64.powi(params.refine_depth.min(MAX_BISECTIONS) as i32);
+        }
         let next = if t >= b {
             None
         } else {
-            Some((t + step_at(r, t, plans, params, s)).min(b))
+            Some((t + step_at(r, t, s.rays[r].scale, plans, params, s)).min(b))
         };
         let state = &mut s.rays[r];
         match next {
@@ -498,6 +565,9 @@ fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scr
                 state.segment += 1;
                 state.next_t = None;
             }
+        }
+        if state.growing {
+            state.scale = (2.0 * state.scale).min(params.max_step_factor.max(1.0) as f64);
         }
         s.pending.push(Pending {
             ray: r as u32,
@@ -547,14 +617,21 @@ fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
             s.features[at..at + f].copy_from_slice(&features[..f]);
         }
         for (&(p, k), &sigma) in s.owners.iter().zip(&s.field_out) {
-            // Sanitise: NaN or negative densities count as empty, infinities as huge.
-            let sigma = if sigma > 0.0 {
-                sigma.min(f32::MAX) as f64 * k
+            // Sanitise: negative densities count as empty, and so do NaN and infinite ones,
+            // which are counted.
+            let sigma = if !sigma.is_finite() {
+                s.stats.invalid_samples += 1;
+                0.0
+            } else if sigma > 0.0 {
+                sigma as f64 * k
             } else {
                 0.0
             };
             s.inst_sigma[first_slot + p as usize * n_inst + i] = sigma;
         }
+    }
+    for pending in &s.pending {
+        s.rays[pending.ray as usize].samples += 1;
     }
     for (p, pending) in s.pending.iter().enumerate() {
         let slot = first_slot + p * n_inst;
@@ -588,7 +665,10 @@ fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut S
             s.candidates.push((r, i as u32));
         }
     }
-    for level in 0..params.refine_depth {
+    // A step grown by 2^k needs k more bisections to reach a base step's bracket.
+    let grown_levels = params.max_step_factor.max(1.0).log2().ceil() as u32;
+    let levels = (params.refine_depth + grown_levels).min(MAX_BISECTIONS);
+    for level in 0..levels {
         if level > 0 {
             s.candidates.clear();
             for added in &s.pending {
@@ -617,20 +697,28 @@ fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut S
 /// what the step holds). Pairs that pass the cheap jump test ask the fields for a density
 /// bound over the step's box, one batch per instance.
 fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
+    let empty_is_known = plans.iter().all(|p| p.bounded);
     let n_inst = plans.len();
-    let tolerance = params.refine_tolerance as f64;
+    let tolerance = params.error_target as f64;
     let any_smooth = plans.iter().any(|p| p.smooth > 0.0);
     s.pending.clear();
     s.unsure.clear();
     for &(r, i) in &s.candidates {
         let nodes = &s.nodes[r as usize];
         let (a, b) = (&nodes[i as usize], &nodes[i as usize + 1]);
-        if b.starts_run {
+        if b.starts_run || b.t - a.t <= 1.5 * s.rays[r as usize].finest {
             continue;
         }
         let weight = (b.t - a.t) * s.rays[r as usize].pieces.transmittance();
         let smooth = any_smooth && smooth_step(r as usize, a, b, plans, s);
-        if !smooth && step_change(nodes, i as usize) * weight > tolerance {
+        // A grown step where density starts or ends is bisected back to an ungrown one
+        // whatever its weight, so faint content keeps the base step's edges; so is one
+        // between two empty samples of a field that cannot say what lies between.
+        let unknown =
+            (a.sigma > 0.0) != (b.sigma > 0.0) || (a.sigma + b.sigma == 0.0 && !empty_is_known);
+        let edge = unknown && b.t - a.t > 1.5 * step_at(r as usize, a.t, 1.0, plans, params, s);
+        if edge || (!smooth && step_change(nodes, i as usize) * weight > tolerance) {
+            s.rays[r as usize].refined = true;
             s.pending.push(Pending {
                 ray: r,
                 t: 0.5 * (a.t + b.t),
@@ -680,6 +768,7 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         let (a, b) = (&nodes[i as usize], &nodes[i as usize + 1]);
         let weight = (b.t - a.t) * s.rays[r as usize].pieces.transmittance();
         if (bound - a.sigma.max(b.sigma)) * weight > tolerance {
+            s.rays[r as usize].refined = true;
             s.pending.push(Pending {
                 ray: r,
                 t: 0.5 * (a.t + b.t),
@@ -711,29 +800,44 @@ fn smooth_step(r: usize, a: &Node, b: &Node, plans: &[InstancePlan], s: &Scratch
 }
 
 /// How much the density changes across the step from node `i` to `i + 1` in a way the
-/// trapezoid rule may get wrong: the jump `|σ_b − σ_a|`, unless the second differences through
-/// the step's ends and their outer neighbours say the density is (nearly) linear there, which
-/// the rule integrates exactly: the smaller of the jump and the larger second difference. An
-/// edge keeps its full jump; a steady slope of a smooth field is not bisected.
+/// trapezoid rule may get wrong: the jump `|σ_b − σ_a|`, unless the curvature through the
+/// step's ends and their outer neighbours says the density is (nearly) linear there, which
+/// the rule integrates exactly: the smaller of the jump and `δ²·|σ''|`, `σ''` estimated by
+/// the second divided differences on either side (the larger; steps may differ in length).
+/// An edge keeps its full jump; a steady slope of a smooth field is not bisected.
 #[inline]
 fn step_change(nodes: &[Node], i: usize) -> f64 {
     let (a, b) = (&nodes[i], &nodes[i + 1]);
     let jump = (b.sigma - a.sigma).abs();
-    let before = (i > 0 && !a.starts_run).then(|| nodes[i - 1].sigma);
-    let after = nodes.get(i + 2).filter(|n| !n.starts_run).map(|n| n.sigma);
-    match (before, after) {
-        (Some(p), Some(q)) => jump.min(
-            (p - 2.0 * a.sigma + b.sigma)
-                .abs()
-                .max((a.sigma - 2.0 * b.sigma + q).abs()),
-        ),
-        _ => jump,
-    }
+    let h = b.t - a.t;
+    let before = (i > 0 && !a.starts_run).then(|| &nodes[i - 1]);
+    let after = nodes.get(i + 2).filter(|n| !n.starts_run);
+    let (Some(p), Some(q)) = (before, after) else {
+        return jump;
+    };
+    // 2·f[x0, x1, x2]·h², which is `σ0 − 2σ1 + σ2` for equal steps of length `h`.
+    let curvature = |x: &Node, y: &Node, z: &Node| {
+        let (h0, h1) = (y.t - x.t, z.t - y.t);
+        if h0 > 0.0 && h1 > 0.0 {
+            let d = (z.sigma - y.sigma) / h1 - (y.sigma - x.sigma) / h0;
+            (2.0 * d / (h0 + h1) * h * h).abs()
+        } else {
+            f64::INFINITY
+        }
+    };
+    jump.min(curvature(p, a, b).max(curvature(a, b, q)))
 }
 
 /// Composites a ray's nodes, in order, until it is opaque enough; distributes each piece's
 /// weight to its two nodes in proportion to their densities (their share of its colour).
-fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, outputs: &Outputs) {
+fn integrate(
+    state: &mut RayState,
+    nodes: &mut [Node],
+    params: &MarchParams,
+    outputs: &Outputs,
+    empty_is_known: bool,
+    budget_limited: &mut u64,
+) {
     let min_t = params.min_transmittance as f64;
     for i in 1..nodes.len() {
         let (a, b) = (nodes[i - 1], nodes[i]);
@@ -741,6 +845,13 @@ fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, out
             continue;
         }
         let sum = a.sigma + b.sigma;
+        let error = if sum == 0.0 && !empty_is_known {
+            // Nothing seen at either end of a field that cannot say what lies between.
+            f64::INFINITY
+        } else {
+            (b.t - a.t) * state.pieces.transmittance() * step_change(nodes, i - 1)
+        };
+        state.worst = state.worst.max(error);
         // The piece, split at the splat fragments inside it (composited in between).
         let mut t0 = a.t;
         let mut stopped = false;
@@ -751,9 +862,15 @@ fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, out
             let w = state.pieces.add(t0, t1 - t0, 0.5 * sum);
             if w > 0.0 {
                 if outputs.depth_median {
-                    state
-                        .log
-                        .push([t0, t1 - t0, 0.5 * sum * (t1 - t0), t_enter]);
+                    // The density is linear between the nodes (the trapezoid rule's mean);
+                    // a piece cut by a fragment keeps that mean.
+                    let delta = t1 - t0;
+                    let (x0, x1) = if t0 == a.t && t1 == b.t {
+                        (a.sigma * delta, b.sigma * delta)
+                    } else {
+                        (0.5 * sum * delta, 0.5 * sum * delta)
+                    };
+                    state.log.push([t0, delta, x0, x1, t_enter]);
                 }
                 nodes[i - 1].weight += w * a.sigma / sum;
                 nodes[i].weight += w * b.sigma / sum;
@@ -779,7 +896,32 @@ fn integrate(state: &mut RayState, nodes: &mut [Node], params: &MarchParams, out
     if state.segment >= state.segments.len() {
         composite_fragments(state, f64::INFINITY, outputs);
         state.live = false;
+    } else if state.samples >= params.max_samples {
+        // Out of budget: what lies further is not marched (the caller counts the ray).
+        composite_fragments(state, f64::INFINITY, outputs);
+        state.live = false;
+        *budget_limited += 1;
     }
+    adapt_step(state, params);
+}
+
+/// After a round: back to the base step where a step was bisected (an edge is near); steps
+/// double from node to node while every step's weighted error estimate is under 1/64 of the
+/// target (the trapezoid rule's error grows as `δ³`, so a doubled step stays under an eighth
+/// of it), and are halved where one was over it.
+fn adapt_step(state: &mut RayState, params: &MarchParams) {
+    let target = params.error_target as f64;
+    if state.refined {
+        state.scale = 1.0;
+        state.growing = false;
+    } else {
+        state.growing = 64.0 * state.worst <= target;
+        if state.worst > target {
+            state.scale = (0.5 * state.scale).max(1.0);
+        }
+    }
+    state.refined = false;
+    state.worst = 0.0;
 }
 
 /// Composites the ray's fragments up to `t_end`, splat and volume ones merged in order.
@@ -824,7 +966,8 @@ fn composite_volume_fragment(state: &mut RayState, f: Fragment, outputs: &Output
     let w = state.pieces.add_fragment(f.t, alpha);
     state.rgb += Vec3::from_array(f.rgb).as_dvec3() * w;
     if outputs.depth_median && alpha > 0.0 {
-        state.log.push([f.t, 0.0, -(-alpha).ln_1p(), t_enter]);
+        let x = -(-alpha).ln_1p();
+        state.log.push([f.t, 0.0, x, x, t_enter]);
     }
 }
 
@@ -923,7 +1066,9 @@ mod tests {
 
     use glam::Vec3;
 
-    use super::super::{render, Outputs, Quality, RenderSettings};
+    use super::super::{
+        render, render_with_progress, MarchParams, Outputs, Quality, RenderSettings,
+    };
     use crate::field::{Aabb, Analytic, Field};
     use crate::scene::{FieldHandle, FieldSource, Instance, Scene};
 
@@ -972,12 +1117,31 @@ mod tests {
         }
     }
 
-    #[test]
-    fn features_reach_the_colour_query_of_their_own_samples() {
+    /// A field that answers every third density sample with NaN, +inf or −inf in turn.
+    struct Poisoned(Analytic);
+
+    impl Field for Poisoned {
+        fn bounds(&self) -> Aabb {
+            self.0.bounds()
+        }
+        fn density(&self, points: &[Vec3], sigma: &mut [f32]) {
+            self.0.density(points, sigma);
+            let bad = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
+            for (i, s) in sigma.iter_mut().enumerate().filter(|(i, _)| i % 3 == 0) {
+                *s = bad[i / 3 % 3];
+            }
+        }
+        fn radiance(&self, points: &[Vec3], dirs: &[Vec3], rgb: &mut [Vec3]) {
+            self.0.radiance(points, dirs, rgb)
+        }
+        fn may_be_occupied(&self, region: &Aabb) -> bool {
+            self.0.may_be_occupied(region)
+        }
+    }
+
+    fn demo_with(object: impl Fn(Analytic) -> Arc<dyn Field>) -> (Scene, crate::camera::Camera) {
         let (plain, camera) = crate::demo::scene_and_camera(48, 27).unwrap();
         let desc = crate::demo::scene_desc();
-        // The object instance echoes its features, the environment does not: offsets into
-        // a node's features must keep them apart.
         let instances = plain
             .instances
             .iter()
@@ -987,14 +1151,68 @@ mod tests {
                     unreachable!("the demo is analytic")
                 };
                 let handle = if inst.name == "object" {
-                    FieldHandle::new(Arc::new(Echo(a.clone())))
+                    FieldHandle::new(object(a.clone()))
                 } else {
                     inst.handle().clone()
                 };
                 Instance::new(inst.name.clone(), handle, inst.world_from_field(), None).unwrap()
             })
             .collect();
-        let echo = Scene::new(instances);
+        (Scene::new(instances), camera)
+    }
+
+    fn assert_finite(planes: &crate::image::Planes) {
+        let alpha = planes.alpha.as_ref().unwrap();
+        assert!(alpha.data.iter().all(|a| (0.0..=1.0).contains(a)));
+        for plane in planes.rgb.as_ref().unwrap() {
+            assert!(plane.data.iter().all(|c| c.is_finite() && *c >= 0.0));
+        }
+    }
+
+    #[test]
+    fn non_finite_densities_are_empty_and_counted() {
+        let (scene, camera) = demo_with(|a| Arc::new(Poisoned(a)));
+        let settings = RenderSettings::new(Quality::Preview.params(), Outputs::all());
+        let (planes, stats) =
+            render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {})
+                .unwrap();
+        assert_finite(&planes);
+        assert!(stats.invalid_samples > 0);
+        assert!(stats.warning().unwrap().contains("NaN or infinite"));
+    }
+
+    #[test]
+    fn rays_out_of_budget_stop_and_are_counted() {
+        let (scene, camera) = demo_with(|a| Arc::new(a));
+        let final_params = Quality::Final.params();
+        let render = |max_samples| {
+            let params = MarchParams {
+                max_samples,
+                ..final_params
+            };
+            let settings = RenderSettings::new(params, Outputs::all());
+            render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {}).unwrap()
+        };
+        let (planes, stats) = render(final_params.max_samples);
+        assert_finite(&planes);
+        assert_eq!(stats.budget_limited_rays, 0);
+        assert_eq!(stats.warning(), None);
+        let (short, stats) = render(6);
+        assert_finite(&short);
+        assert!(stats.budget_limited_rays > 0 && stats.budget_limited_rays <= stats.pixels);
+        assert!(stats.warning().unwrap().contains("sample budget"));
+        // A ray stopped early has composited less, never more.
+        let (a, b) = (short.alpha.unwrap(), planes.alpha.unwrap());
+        assert!(a.data.iter().zip(&b.data).all(|(s, f)| *s <= f + 1e-6));
+        assert!(a.data.iter().zip(&b.data).any(|(s, f)| *s < f - 1e-3));
+    }
+
+    #[test]
+    fn features_reach_the_colour_query_of_their_own_samples() {
+        let (plain, camera) = crate::demo::scene_and_camera(48, 27).unwrap();
+        // The object instance echoes its features, the environment does not: offsets into
+        // a node's features must keep them apart.
+        let (echo, _) = demo_with(|a| Arc::new(Echo(a)));
         let settings = RenderSettings::new(Quality::Preview.params(), Outputs::rgba());
         let want = render(&plain, &camera, camera.full_window(), &settings).unwrap();
         let got = render(&echo, &camera, camera.full_window(), &settings).unwrap();

@@ -124,6 +124,33 @@ pub struct RenderStats {
     pub color_samples: u64,
     /// Splat fragments met by the pixels.
     pub splat_fragments: u64,
+    /// Rays that spent their whole sample budget ([`MarchParams::max_samples`]) before
+    /// reaching the preset's error target: their pixels may be off by more than it.
+    pub budget_limited_rays: u64,
+    /// Density samples a field answered with NaN or an infinity: each was taken as empty.
+    pub invalid_samples: u64,
+}
+
+impl RenderStats {
+    /// What a user should hear about this render, if anything: rays that stopped at their
+    /// sample budget and density samples a field answered with NaN or an infinity.
+    pub fn warning(&self) -> Option<String> {
+        let mut parts = Vec::new();
+        if self.budget_limited_rays > 0 {
+            parts.push(format!(
+                "{} of {} pixels stopped at the preset's sample budget and may miss its \
+                 error target",
+                self.budget_limited_rays, self.pixels
+            ));
+        }
+        if self.invalid_samples > 0 {
+            parts.push(format!(
+                "{} density samples were NaN or infinite and were taken as empty",
+                self.invalid_samples
+            ));
+        }
+        (!parts.is_empty()).then(|| parts.join("; "))
+    }
 }
 
 /// Two renders' counts together.
@@ -135,6 +162,8 @@ impl std::ops::Add for RenderStats {
         self.density_samples += other.density_samples;
         self.color_samples += other.color_samples;
         self.splat_fragments += other.splat_fragments;
+        self.budget_limited_rays += other.budget_limited_rays;
+        self.invalid_samples += other.invalid_samples;
         self
     }
 }

@@ -48,7 +48,7 @@ pub fn render_naive(
         pixels: window.area() as u64,
         density_samples: rows.iter().map(|r| r.2[0]).sum(),
         color_samples: rows.iter().map(|r| r.2[1]).sum(),
-        splat_fragments: 0,
+        ..RenderStats::default()
     };
     let rows: Vec<_> = rows.into_iter().map(|(w, px, _)| (w, px)).collect();
     let decode = scene.composite_space() == ColorSpace::Srgb;
@@ -152,7 +152,8 @@ fn naive_pixel(
         let w = pieces.add(ts[j] - 0.5 * step, step, sigma[j]);
         if w > 0.0 {
             color += rgb[j] / sigma[j] * w;
-            log.push([ts[j] - 0.5 * step, step, sigma[j] * step, t_enter]);
+            let x = sigma[j] * step;
+            log.push([ts[j] - 0.5 * step, step, x, x, t_enter]);
         }
     }
     let alpha = pieces.accumulation();

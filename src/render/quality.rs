@@ -16,6 +16,12 @@ pub enum Quality {
 }
 
 /// The marcher's dials.
+///
+/// A preset is an **error target** first: [`error_target`](Self::error_target) is what a
+/// pixel may be off by (alpha, premultiplied colour), and the marcher spends samples where
+/// they change the pixel by more than that. The other dials bound the work: the base step
+/// (and how far it may grow where the content is smooth or hidden), the bisection depth, the
+/// transmittance at which a ray stops, and every ray's sample budget.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MarchParams {
     /// Base step: each field's [`feature_size`](crate::field::Field::feature_size) divided by
@@ -23,19 +29,32 @@ pub struct MarchParams {
     pub steps_per_feature: f32,
     /// Step growth with world distance from the camera: `δ = max(base, cone·t)`.
     pub cone: f32,
-    /// The step never exceeds `base · max_step_factor`.
+    /// The step never exceeds `base · max_step_factor`. Steps grow towards it (doubling
+    /// from node to node) where the last steps' error estimates are far below the target:
+    /// empty or evenly dense space, smooth fog, and wherever the transmittance left makes a
+    /// step's error irrelevant.
     pub max_step_factor: f32,
     /// A ray stops once its transmittance falls below this.
     pub min_transmittance: f32,
     /// Occupancy grid cells per side at the finest level.
     pub occupancy_resolution: u32,
-    /// A step whose density jump `|σ_b − σ_a|·δ` (optical depth) exceeds this is bisected…
-    pub refine_tolerance: f32,
-    /// …at most this many times.
+    /// What one step may change the pixel by: a step is bisected when its weight
+    /// (`δ·T`, length times the transmittance it is entered with) times its local error
+    /// estimate exceeds this. The estimate is the density jump `|σ_b − σ_a|` between its
+    /// ends, or the curvature through its neighbours (`δ²·|σ''|`) where that is smaller (a
+    /// smooth slope the trapezoid rule integrates well), or how far the field's density
+    /// bound over the step rises above both ends (a sheet thinner than the step).
+    pub error_target: f32,
+    /// Bisections of a base step at most (a step grown by `2^k` gets `k` more).
     pub refine_depth: u32,
     /// Per ray, the lightest samples go without a colour query while their weights add up
     /// to at most this (which bounds the colour error it causes).
     pub color_skip_budget: f32,
+    /// Density samples one ray may take at most (regular and refinement, over all
+    /// instances' shared nodes). A ray that reaches it stops where it is, and is counted in
+    /// [`RenderStats::budget_limited_rays`](super::RenderStats::budget_limited_rays): its
+    /// pixel may miss the target.
+    pub max_samples: u32,
 }
 
 impl Quality {
@@ -45,32 +64,35 @@ impl Quality {
             Quality::Draft => MarchParams {
                 steps_per_feature: 1.0,
                 cone: 1.0 / 256.0,
-                max_step_factor: 4.0,
+                max_step_factor: 64.0,
                 min_transmittance: 1e-2,
                 occupancy_resolution: 64,
-                refine_tolerance: 5e-2,
+                error_target: 5e-2,
                 refine_depth: 2,
                 color_skip_budget: 1e-3,
+                max_samples: 1024,
             },
             Quality::Preview => MarchParams {
                 steps_per_feature: 2.0,
                 cone: 1.0 / 512.0,
-                max_step_factor: 2.0,
+                max_step_factor: 64.0,
                 min_transmittance: 1e-3,
                 occupancy_resolution: 128,
-                refine_tolerance: 5e-3,
+                error_target: 5e-3,
                 refine_depth: 6,
                 color_skip_budget: 1e-4,
+                max_samples: 4096,
             },
             Quality::Final => MarchParams {
                 steps_per_feature: 8.0,
                 cone: 0.0,
-                max_step_factor: 1.0,
+                max_step_factor: 64.0,
                 min_transmittance: 1e-4,
                 occupancy_resolution: 256,
-                refine_tolerance: 1e-3,
+                error_target: 1e-3,
                 refine_depth: 11,
                 color_skip_budget: 1e-5,
+                max_samples: 16384,
             },
         }
     }

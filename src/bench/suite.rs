@@ -129,6 +129,7 @@ pub fn fine_params() -> MarchParams {
         occupancy_resolution: 256,
         refine_depth: 14,
         color_skip_budget: 0.0,
+        max_samples: u32::MAX,
         ..Quality::Final.params()
     }
 }
@@ -481,7 +482,7 @@ fn counts(stats: &RenderStats) -> Row {
         color_samples_per_pixel: stats.color_samples as f64 / pixels,
         fragments_per_pixel: stats.splat_fragments as f64 / pixels,
         error: None,
-        budget_hits: None,
+        budget_hits: Some(stats.budget_limited_rays),
         peak_heap: None,
         on_rows: false,
     }

@@ -113,9 +113,9 @@ fn naive_pixel(
         // Colour only where there is density: elsewhere it is weighed by zero.
         lit.clear();
         lit_points.clear();
-        // As the marcher takes them: a NaN density is empty, an infinite one opaque.
+        // As the marcher takes them: a NaN or infinite density is empty.
         dens.iter_mut()
-            .for_each(|d| *d = if *d > 0.0 { d.min(f32::MAX) } else { 0.0 });
+            .for_each(|d| *d = if d.is_finite() && *d > 0.0 { *d } else { 0.0 });
         for (k, (&j, &d)) in idx.iter().zip(&dens).enumerate() {
             if d > 0.0 {
                 sigma[j] += d as f64 * lr.units_per_world as f64;

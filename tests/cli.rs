@@ -157,6 +157,19 @@ fn bench_reports_errors_heap_and_plots_per_scene() {
         assert!(report.contains(scene), "{report}");
     }
     assert!(report.contains("every 16th row (2 of 32)"), "{report}");
+    let header: Vec<&str> = report
+        .lines()
+        .find(|l| l.starts_with("| configuration |"))
+        .expect("a table")
+        .split('|')
+        .map(str::trim)
+        .collect();
+    let column = |name: &str| {
+        header
+            .iter()
+            .position(|h| h.starts_with(name))
+            .unwrap_or_else(|| panic!("no column {name}: {header:?}"))
+    };
     let final_rows: Vec<&str> = report
         .lines()
         .filter(|l| l.starts_with("| final |"))
@@ -164,10 +177,13 @@ fn bench_reports_errors_heap_and_plots_per_scene() {
     assert_eq!(final_rows.len(), 2, "{report}");
     for row in final_rows {
         let cells: Vec<&str> = row.split('|').map(str::trim).collect();
-        // | final | ms | CPU | density | colour | fragments | PSNR | alpha | depth | heap |
-        let psnr: f64 = cells[7].parse().expect("a PSNR");
+        let psnr: f64 = cells[column("PSNR")].parse().expect("a PSNR");
         assert!(psnr > 40.0, "{row}");
-        let heap: f64 = cells[10].parse().expect("a measured peak heap");
+        let budget: u64 = cells[column("rays at")].parse().expect("a count");
+        assert_eq!(budget, 0, "{row}");
+        let heap: f64 = cells[column("peak heap")]
+            .parse()
+            .expect("a measured peak heap");
         assert!(heap > 0.0, "{row}");
     }
     for png in ["time_vs_psnr_demo.png", "time_vs_psnr_blob.png"] {

@@ -11,7 +11,6 @@ mod common_fields;
 mod common_ingp;
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use common_ingp::{scratch, write_blob_snapshot, Ball, Spec};
 use glam::{DMat4, DVec3};
@@ -40,48 +39,20 @@ fn placed(dir: &Path, snapshot: &Path, sampler: Option<&str>) -> nerfx::Result<S
 
 /// Per ray: r, g, b, alpha, expected depth, steps taken, first and last composited sample.
 fn numpy_march(snapshot: &Path, rays: &[NgpRay], max_steps: usize) -> Option<Vec<[f64; 8]>> {
-    if std::env::var("NERFX_SKIP_NUMPY").as_deref() == Ok("1") {
-        println!("skipped: NumPy cross-check (NERFX_SKIP_NUMPY=1)");
-        return None;
-    }
-    let dir = snapshot.parent().unwrap();
-    let (input, output) = (dir.join("rays.bin"), dir.join("numpy_out.bin"));
-    let bytes: Vec<u8> = rays
+    let rays: Vec<[f64; 8]> = rays
         .iter()
-        .flat_map(|r| {
-            [
-                r.origin.x, r.origin.y, r.origin.z, r.dir.x, r.dir.y, r.dir.z, r.near, r.far,
-            ]
+        .map(|r| {
+            let (o, d) = (r.origin, r.dir);
+            [o.x, o.y, o.z, d.x, d.y, d.z, r.near, r.far]
         })
-        .flat_map(f64::to_le_bytes)
         .collect();
-    std::fs::write(&input, bytes).unwrap();
-    let script =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/numpy/ingp_marcher_reference.py");
-    let out = Command::new("python3")
-        .arg(&script)
-        .arg(snapshot)
-        .arg(&input)
-        .arg(&output)
-        .arg(max_steps.to_string())
-        .output()
-        .unwrap_or_else(|e| {
-            panic!(
-                "the NumPy cross-check needs python3 with numpy and msgpack ({e}); \
-                 NERFX_SKIP_NUMPY=1 skips it"
-            )
-        });
-    assert!(
-        out.status.success(),
-        "the NumPy reference failed (it needs numpy and msgpack; NERFX_SKIP_NUMPY=1 skips \
-         it):\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let values: Vec<f64> = std::fs::read(&output)
-        .unwrap()
-        .chunks_exact(8)
-        .map(|b| f64::from_le_bytes(b.try_into().unwrap()))
-        .collect();
+    let values = common_fields::numpy_rays(
+        "ingp_marcher_reference.py",
+        &["numpy", "msgpack"],
+        snapshot,
+        &rays,
+        &[max_steps.to_string()],
+    )?;
     Some(
         values
             .chunks_exact(8)
@@ -89,6 +60,22 @@ fn numpy_march(snapshot: &Path, rays: &[NgpRay], max_steps: usize) -> Option<Vec
             .collect(),
     )
 }
+
+/// One ball in each of three cascades (aabb_scale 4).
+const BALLS_IN_THREE_CASCADES: [Ball; 3] = [
+    Ball {
+        centre: [0.5, 0.5, 0.5],
+        radius: 0.3,
+    },
+    Ball {
+        centre: [1.4, 0.6, 0.5],
+        radius: 0.35,
+    },
+    Ball {
+        centre: [0.5, -0.9, 0.4],
+        radius: 0.45,
+    },
+];
 
 fn camera(w: u32, h: u32, fov: f64, eye: DVec3, target: DVec3) -> Camera {
     let p = Perspective::from_vertical_fov(w, h, fov).unwrap();
@@ -263,21 +250,7 @@ fn aabb_scale_4_with_cone_growth_and_three_cascades_renders_as_a_numpy_march() {
         n_cascades: 3,
         ..Spec::small_8x4()
     };
-    // One ball in each cascade.
-    let balls = [
-        Ball {
-            centre: [0.5, 0.5, 0.5],
-            radius: 0.3,
-        },
-        Ball {
-            centre: [1.4, 0.6, 0.5],
-            radius: 0.35,
-        },
-        Ball {
-            centre: [0.5, -0.9, 0.4],
-            radius: 0.45,
-        },
-    ];
+    let balls = BALLS_IN_THREE_CASCADES;
     let path = snapshot(&dir, &spec, &balls, 1.4);
     let camera = camera(
         48,
@@ -575,20 +548,7 @@ fn bench_ngp_sampler_against_final() {
         n_cascades: 3,
         ..Spec::small_8x4()
     };
-    let balls = [
-        Ball {
-            centre: [0.5, 0.5, 0.5],
-            radius: 0.3,
-        },
-        Ball {
-            centre: [1.4, 0.6, 0.5],
-            radius: 0.35,
-        },
-        Ball {
-            centre: [0.5, -0.9, 0.4],
-            radius: 0.45,
-        },
-    ];
+    let balls = BALLS_IN_THREE_CASCADES;
     let camera = camera(
         w,
         h,

@@ -11,7 +11,6 @@ mod common_fields;
 mod common_nerfacto;
 
 use std::path::Path;
-use std::process::Command;
 
 use common_nerfacto::{sampler_split, scratch, write_run, Spec};
 use glam::{DMat4, DVec3};
@@ -25,45 +24,20 @@ const H: u32 = 16;
 
 /// Per ray: the main samples' edges, then r, g, b, accumulation, expected depth.
 fn numpy_render(run: &Path, rays: &[SamplerRay], n_edges: usize) -> Option<Vec<Vec<f64>>> {
-    if std::env::var("NERFX_SKIP_NUMPY").as_deref() == Ok("1") {
-        println!("skipped: NumPy cross-check (NERFX_SKIP_NUMPY=1)");
-        return None;
-    }
-    let dir = run.parent().unwrap();
-    let (input, output) = (dir.join("rays.bin"), dir.join("numpy_out.bin"));
-    let bytes: Vec<u8> = rays
+    let rays: Vec<[f64; 8]> = rays
         .iter()
-        .flat_map(|r| {
-            [
-                r.origin.x, r.origin.y, r.origin.z, r.dir.x, r.dir.y, r.dir.z, r.near, r.far,
-            ]
+        .map(|r| {
+            let (o, d) = (r.origin, r.dir);
+            [o.x, o.y, o.z, d.x, d.y, d.z, r.near, r.far]
         })
-        .flat_map(f64::to_le_bytes)
         .collect();
-    std::fs::write(&input, bytes).unwrap();
-    let script =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/numpy/nerfacto_proposal_reference.py");
-    let out = Command::new("python3")
-        .arg(&script)
-        .arg(run)
-        .arg(&input)
-        .arg(&output)
-        .output()
-        .unwrap_or_else(|e| {
-            panic!(
-                "the NumPy cross-check needs python3 with numpy ({e}); NERFX_SKIP_NUMPY=1 skips it"
-            )
-        });
-    assert!(
-        out.status.success(),
-        "the NumPy reference failed (it needs numpy; NERFX_SKIP_NUMPY=1 skips it):\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let values: Vec<f64> = std::fs::read(&output)
-        .unwrap()
-        .chunks_exact(8)
-        .map(|b| f64::from_le_bytes(b.try_into().unwrap()))
-        .collect();
+    let values = common_fields::numpy_rays(
+        "nerfacto_proposal_reference.py",
+        &["numpy"],
+        run,
+        &rays,
+        &[],
+    )?;
     Some(
         values
             .chunks_exact(n_edges + 5)

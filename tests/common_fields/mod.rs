@@ -44,19 +44,62 @@ pub fn numpy_reference(
     pts: &[Vec3],
     dirs: &[Vec3],
 ) -> Option<Vec<[f32; 4]>> {
-    if std::env::var("NERFX_SKIP_NUMPY").as_deref() == Ok("1") {
-        println!("skipped: NumPy cross-check (NERFX_SKIP_NUMPY=1)");
-        return None;
-    }
-    let (names, pip) = (modules.join(" and "), modules.join(" "));
-    let dir = target.parent().unwrap();
-    let (input, output) = (dir.join("points.bin"), dir.join("numpy_out.bin"));
     let bytes: Vec<u8> = pts
         .iter()
         .zip(dirs)
         .flat_map(|(p, d)| [p.x, p.y, p.z, d.x, d.y, d.z])
         .flat_map(f32::to_le_bytes)
         .collect();
+    let out = run_script(script, modules, target, ("points.bin", &bytes), &[])?;
+    Some(
+        out.chunks_exact(16)
+            .map(|c| {
+                [0, 1, 2, 3].map(|k| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().unwrap()))
+            })
+            .collect(),
+    )
+}
+
+/// Runs `tests/numpy/<script> <target> rays.bin numpy_out.bin <args…>` next to `target` on
+/// rays given as eight little-endian f64 each (origin, direction, near, far); returns the
+/// script's answer as f64 values, or `None` when skipped by `NERFX_SKIP_NUMPY=1`. `modules`
+/// as for [`numpy_reference`].
+pub fn numpy_rays(
+    script: &str,
+    modules: &[&str],
+    target: &Path,
+    rays: &[[f64; 8]],
+    args: &[String],
+) -> Option<Vec<f64>> {
+    let bytes: Vec<u8> = rays
+        .iter()
+        .flatten()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let out = run_script(script, modules, target, ("rays.bin", &bytes), args)?;
+    Some(
+        out.chunks_exact(8)
+            .map(|b| f64::from_le_bytes(b.try_into().unwrap()))
+            .collect(),
+    )
+}
+
+/// Writes `input` (name, bytes) next to `target`, runs the script on them and returns what it
+/// wrote to `numpy_out.bin`; `None` when skipped.
+fn run_script(
+    script: &str,
+    modules: &[&str],
+    target: &Path,
+    (input_name, bytes): (&str, &[u8]),
+    args: &[String],
+) -> Option<Vec<u8>> {
+    if std::env::var("NERFX_SKIP_NUMPY").as_deref() == Ok("1") {
+        println!("skipped: NumPy cross-check (NERFX_SKIP_NUMPY=1)");
+        return None;
+    }
+    let (names, pip) = (modules.join(" and "), modules.join(" "));
+    let dir = target.parent().unwrap();
+    let (input, output) = (dir.join(input_name), dir.join("numpy_out.bin"));
     std::fs::write(&input, bytes).unwrap();
     let script = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/numpy")
@@ -66,6 +109,7 @@ pub fn numpy_reference(
         .arg(target)
         .arg(&input)
         .arg(&output)
+        .args(args)
         .output()
         .unwrap_or_else(|e| {
             panic!("the NumPy cross-check needs python3 ({e}); install it with {names} (pip install {pip}) or set NERFX_SKIP_NUMPY=1")
@@ -76,14 +120,7 @@ pub fn numpy_reference(
          skips it):\n{}",
         String::from_utf8_lossy(&run.stderr)
     );
-    let out = std::fs::read(&output).unwrap();
-    Some(
-        out.chunks_exact(16)
-            .map(|c| {
-                [0, 1, 2, 3].map(|k| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().unwrap()))
-            })
-            .collect(),
-    )
+    Some(std::fs::read(&output).unwrap())
 }
 
 /// `|a − b| / |b|`, with equal values (zero included) giving exactly 0.

@@ -13,6 +13,8 @@ use std::sync::Arc;
 use glam::{DMat4, DVec3, Vec3};
 use nerfx::camera::{Camera, Perspective, Projection};
 use nerfx::field::{Analytic, Primitive, ShColor, Shape, SplatColor, Splats};
+use nerfx::graph::{node, ParamValues, RenderRequest, Value};
+use nerfx::image::Window;
 use nerfx::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
 use nerfx::scene::{CropBox, FieldHandle, Instance, Scene, SplatInstance};
 
@@ -300,6 +302,45 @@ fn the_command_line_renders_and_describes_a_splat_file() {
         assert!(std::fs::metadata(&out).unwrap().len() > 1000);
         std::fs::remove_file(&out).unwrap();
     }
+
+    // The NeRF Render node of the same files: its crop box keeps the splats inside it and
+    // drops those outside, like the fields' samples.
+    let n = node("org.nerfx.NeRFRender").unwrap();
+    let mut values = n.defaults();
+    values
+        .set("file", Value::Text(scene.display().to_string()))
+        .unwrap();
+    values
+        .set("shot", Value::Text(shot.display().to_string()))
+        .unwrap();
+    let request = RenderRequest::new(1.0, Window::new(0, 0, 64, 48), 1.0);
+    let coverage = |values: &ParamValues| -> f64 {
+        let planes = n.render(values, &request).unwrap();
+        planes
+            .alpha
+            .unwrap()
+            .data
+            .iter()
+            .map(|&a| f64::from(a))
+            .sum()
+    };
+    let uncropped = coverage(&values);
+    assert!(uncropped > 100.0, "{uncropped}");
+    values.set("crop", Value::Bool(true)).unwrap();
+    values
+        .set("cropCenter", Value::Doubles(vec![0.42, 2.33, 3.13]))
+        .unwrap();
+    values
+        .set("cropSize", Value::Doubles(vec![100.0; 3]))
+        .unwrap();
+    assert_eq!(coverage(&values), uncropped);
+    values
+        .set("cropCenter", Value::Doubles(vec![50.0, 0.0, 0.0]))
+        .unwrap();
+    values
+        .set("cropSize", Value::Doubles(vec![1.0; 3]))
+        .unwrap();
+    assert_eq!(coverage(&values), 0.0);
 }
 
 #[test]

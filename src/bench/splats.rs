@@ -9,7 +9,7 @@ use glam::{DVec3, Quat, Vec3};
 
 use crate::camera::{BlenderIntrinsics, Camera, Perspective, Projection};
 use crate::demo::look_at;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::field::{SplatColor, Splats};
 use crate::render::{render_with_progress, splat_layer, Outputs, Quality, RenderSettings};
 use crate::scene::{Scene, SplatInstance};
@@ -137,6 +137,9 @@ pub fn time_splats(
 /// A camera at `width × height` looking at the middle half of `splats` (trained scenes carry
 /// far outliers) from three times its extent.
 pub fn framing_camera(splats: &Splats, width: u32, height: u32) -> Result<Camera> {
+    if splats.means.is_empty() {
+        return Err(Error::invalid("splat benchmark", "the splat set is empty"));
+    }
     let quantile = |axis: usize, q: f64| {
         let mut v: Vec<f32> = splats.means.iter().map(|m| m[axis]).collect();
         let k = ((v.len().max(1) - 1) as f64 * q) as usize;

@@ -378,7 +378,12 @@ fn placed_scene(values: &ParamValues, shot: &Shot, at: &ShotFrame) -> Result<Sce
             )
         })
         .collect::<Result<Vec<_>>>()?;
-    let mut cropped = Scene::new(instances);
+    let splats = scene
+        .splats
+        .iter()
+        .map(|s| s.with_crop(Some(crop)))
+        .collect::<Result<Vec<_>>>()?;
+    let mut cropped = Scene::new(instances).with_splats(splats);
     cropped.proposal = scene
         .proposal
         .iter()

@@ -33,11 +33,11 @@ pub fn render_naive(
         ));
     }
     let window = camera.clamp_window(window)?;
-    let rows: Vec<(Window, Vec<PixelResult>, [u64; 2])> = (window.y0..window.y1)
+    let rows: Vec<(Window, Vec<PixelResult>, [u64; 3])> = (window.y0..window.y1)
         .into_par_iter()
         .map(|y| {
             let row = Window::new(window.x0, y, window.x1, y + 1);
-            let mut counts = [0; 2];
+            let mut counts = [0; 3];
             let pixels = (row.x0..row.x1)
                 .map(|x| naive_pixel(scene, camera, x, y, step, outputs, &mut counts))
                 .collect();
@@ -48,6 +48,7 @@ pub fn render_naive(
         pixels: window.area() as u64,
         density_samples: rows.iter().map(|r| r.2[0]).sum(),
         color_samples: rows.iter().map(|r| r.2[1]).sum(),
+        invalid_samples: rows.iter().map(|r| r.2[2]).sum(),
         ..RenderStats::default()
     };
     let rows: Vec<_> = rows.into_iter().map(|(w, px, _)| (w, px)).collect();
@@ -62,9 +63,9 @@ fn naive_pixel(
     y: u32,
     step: f64,
     outputs: &Outputs,
-    counts: &mut [u64; 2],
+    counts: &mut [u64; 3],
 ) -> PixelResult {
-    let [samples, colours] = counts;
+    let [samples, colours, invalid] = counts;
     let mut result = PixelResult {
         depth_ray: f32::INFINITY,
         depth_z: f32::INFINITY,
@@ -113,9 +114,13 @@ fn naive_pixel(
         // Colour only where there is density: elsewhere it is weighed by zero.
         lit.clear();
         lit_points.clear();
-        // As the marcher takes them: a NaN or infinite density is empty.
-        dens.iter_mut()
-            .for_each(|d| *d = if d.is_finite() && *d > 0.0 { *d } else { 0.0 });
+        // As the marcher takes them: a NaN or infinite density is empty, and counted.
+        for d in dens.iter_mut() {
+            if !d.is_finite() {
+                *invalid += 1;
+            }
+            *d = if d.is_finite() && *d > 0.0 { *d } else { 0.0 };
+        }
         for (k, (&j, &d)) in idx.iter().zip(&dens).enumerate() {
             if d > 0.0 {
                 sigma[j] += d as f64 * lr.units_per_world as f64;

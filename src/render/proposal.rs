@@ -26,8 +26,9 @@ pub(super) struct ProposalScratch {
     sampler: SamplerScratch,
 }
 
-/// Fills `out[i]` (empty) with the fragments of the proposal-sampled instances along
-/// `rays[i]`, front to back.
+/// Appends to `out[i]` the fragments of the proposal-sampled instances along `rays[i]`, each
+/// instance's front to back (the marcher sorts a ray's fragments when several instances
+/// gave them).
 pub(super) fn fill(
     scene: &Scene,
     rays: &[Option<Ray>],
@@ -71,11 +72,6 @@ pub(super) fn fill(
                     rgb: p.rgb,
                 })
             }));
-        }
-    }
-    if scene.proposal.len() > 1 {
-        for f in out.iter_mut() {
-            f.sort_by(|a, b| a.t.total_cmp(&b.t));
         }
     }
 }

@@ -50,8 +50,10 @@ pub struct MarchParams {
     /// Per ray, the lightest samples go without a colour query while their weights add up
     /// to at most this (which bounds the colour error it causes).
     pub color_skip_budget: f32,
-    /// Density samples one ray may take at most (regular and refinement, over all
-    /// instances' shared nodes). A ray that reaches it stops where it is, and is counted in
+    /// A ray's sample budget: density samples (regular and refinement, over all instances'
+    /// shared nodes) after which it stops, at the end of the round that reaches it (a round
+    /// lays at most a chunk of nodes and their bisections, so a ray may pass the budget by
+    /// that much). A ray that reaches it is counted in
     /// [`RenderStats::budget_limited_rays`](super::RenderStats::budget_limited_rays): its
     /// pixel may miss the target.
     pub max_samples: u32,

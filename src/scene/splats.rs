@@ -48,6 +48,12 @@ impl SplatInstance {
         })
     }
 
+    /// The same placement with another crop box.
+    pub fn with_crop(&self, crop: Option<CropBox>) -> Result<Self> {
+        let (name, splats) = (self.name.clone(), self.splats.clone());
+        Self::new(name, splats, self.world_from_splats, crop, self.antialiased)
+    }
+
     /// The splats.
     pub fn splats(&self) -> &Splats {
         &self.splats

@@ -351,15 +351,16 @@ impl IngpField {
             for &i in &s.live {
                 let r = &mut s.rays[i as usize];
                 for _ in 0..ROUND {
+                    let Some(t) = self.next_occupied(r, &stepping) else {
+                        r.done = true;
+                        break;
+                    };
+                    // Capped only with a step left to take.
                     if r.steps >= max_steps {
                         r.done = true;
                         stats.capped += 1;
                         break;
                     }
-                    let Some(t) = self.next_occupied(r, &stepping) else {
-                        r.done = true;
-                        break;
-                    };
                     let dt = stepping.dt(t);
                     s.laid.push((i, t, dt));
                     r.t = t + dt;

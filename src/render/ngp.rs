@@ -58,6 +58,7 @@ pub(super) fn fill(
         stats.density_samples += done.samples;
         stats.color_samples += done.color_queries;
         stats.budget_limited_rays += done.capped;
+        stats.invalid_samples += done.invalid;
         let encode = space == ColorSpace::Srgb && field.color_space() == ColorSpace::Linear;
         for (&(i, k), samples) in s.owners.iter().zip(samples.iter()) {
             out[i as usize].extend(samples.iter().filter(|f| f.alpha > 0.0).map(|f| Fragment {

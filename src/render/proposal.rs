@@ -57,6 +57,7 @@ pub(super) fn fill(
         };
         stats.density_samples += done.proposal_queries + done.main_queries;
         stats.color_samples += done.color_queries;
+        stats.invalid_samples += done.invalid_samples;
         let per_ray = s.pieces.len() / s.rays.len();
         for (&(i, k), pieces) in s.owners.iter().zip(s.pieces.chunks_exact(per_ray)) {
             let Some(ray) = &rays[i as usize] else {

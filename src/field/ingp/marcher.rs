@@ -52,6 +52,7 @@
 use glam::{DVec3, Vec3};
 
 use super::{ColourScratch, IngpField, DENSITY_OUTPUTS};
+use crate::field::network::exp_density;
 
 /// `STEPSIZE()`: `√3/1024`, the finest step (`NERF_STEPS` of them span the unit cube's
 /// diagonal).
@@ -116,6 +117,8 @@ pub struct NgpStats {
     pub opaque: u64,
     /// Rays that reached the step cap.
     pub capped: u64,
+    /// Samples whose density was NaN, taken as empty.
+    pub invalid: u64,
 }
 
 impl std::ops::AddAssign for NgpStats {
@@ -125,6 +128,7 @@ impl std::ops::AddAssign for NgpStats {
         self.color_queries += o.color_queries;
         self.opaque += o.opaque;
         self.capped += o.capped;
+        self.invalid += o.invalid;
     }
 }
 
@@ -384,9 +388,14 @@ impl IngpField {
                         break;
                     }
                     let (_, t, dt) = s.laid[k];
-                    let sigma = s.outputs[k * DENSITY_OUTPUTS]
-                        .min(super::MAX_LOG_DENSITY)
-                        .exp();
+                    // A NaN density (an overflowed network) is empty, and counted.
+                    let sigma = exp_density(s.outputs[k * DENSITY_OUTPUTS]);
+                    let sigma = if sigma.is_nan() {
+                        stats.invalid += 1;
+                        0.0
+                    } else {
+                        sigma
+                    };
                     let alpha = -(-f64::from(sigma) * dt).exp_m1();
                     let weight = alpha * (1.0 - r.acc);
                     r.acc += weight;

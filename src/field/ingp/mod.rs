@@ -31,7 +31,8 @@ mod marcher;
 
 use super::container::{read_document, Doc};
 use super::network::{
-    correctly_rounded, non_finite, sh4, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage,
+    correctly_rounded, exp_density, non_finite, sh4, HashGrid, HashGridConfig, Mlp, MlpConfig,
+    TableStorage,
 };
 use super::{Aabb, ColorSpace, Field};
 use crate::error::{Error, Result};
@@ -42,8 +43,6 @@ pub use marcher::{NgpRay, NgpSample, NgpScratch, NgpStats, NGP_MAX_STEPS};
 const CHUNK: usize = 512;
 /// Outputs of instant-ngp's density MLP (1 density + 15 geometry features).
 const DENSITY_OUTPUTS: usize = 16;
-/// Largest exponent fed to `exp` for the density (keeps σ finite).
-const MAX_LOG_DENSITY: f32 = 80.0;
 
 /// An instant-ngp snapshot loaded as a field.
 #[derive(Clone, Debug)]
@@ -573,8 +572,7 @@ impl Field for IngpField {
             self.occupied_points(pts, &mut xs, &mut idx);
             self.density_outputs(&self.sigma_mlp, &xs, &mut enc, &mut out);
             for (&i, &raw) in idx.iter().zip(out.iter()) {
-                let raw = raw.min(MAX_LOG_DENSITY);
-                sig[i] = self.scale * raw.exp();
+                sig[i] = self.scale * exp_density(raw);
             }
         }
     }
@@ -613,7 +611,7 @@ impl Field for IngpField {
             self.occupied_points(pts, &mut xs, &mut idx);
             self.density_outputs(&self.density_mlp, &xs, &mut enc, &mut out);
             for (&i, o) in idx.iter().zip(out.chunks_exact(DENSITY_OUTPUTS)) {
-                sig[i] = self.scale * o[0].min(MAX_LOG_DENSITY).exp();
+                sig[i] = self.scale * exp_density(o[0]);
                 feat[i * DENSITY_OUTPUTS..(i + 1) * DENSITY_OUTPUTS].copy_from_slice(o);
             }
         }

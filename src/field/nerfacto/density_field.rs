@@ -21,11 +21,11 @@ use super::config::ProposalNetSettings;
 use super::torch::TorchHashGrid;
 use super::{
     read_linear_layers, read_params, read_torch_grid, read_weights, tcnn_grid, tcnn_grid_config,
-    Keys, NerfactoField, MAX_LOG_DENSITY,
+    Keys, NerfactoField,
 };
 use crate::error::Result;
 use crate::field::container::Checkpoint;
-use crate::field::network::{HashGrid, Mlp, MlpConfig};
+use crate::field::network::{exp_density, HashGrid, Mlp, MlpConfig};
 
 /// The grid, in one of the two layouts.
 #[derive(Clone, Debug)]
@@ -174,7 +174,7 @@ impl DensityField {
         s.raw.resize(n, 0.0);
         self.head.forward(&s.encoded, &mut s.raw);
         for (&i, &raw) in s.index.iter().zip(&s.raw) {
-            sigma[i as usize] = self.average_init_density * raw.min(MAX_LOG_DENSITY).exp();
+            sigma[i as usize] = self.average_init_density * exp_density(raw);
         }
     }
 }

@@ -54,7 +54,9 @@ use glam::Vec3;
 use half::f16;
 
 use super::container::{Checkpoint, DType};
-use super::network::{non_finite, sh4, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage};
+use super::network::{
+    exp_density, non_finite, sh4, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage,
+};
 use super::{Aabb, ColorSpace, Field, Unbounded};
 use crate::error::{Error, Result};
 use config::{RunSettings, SamplerSettings};
@@ -80,8 +82,6 @@ pub use proposal::{
 
 /// Points per batch (bounds the scratch memory).
 const CHUNK: usize = 512;
-/// Largest exponent fed to `exp` for the density (keeps σ finite).
-const MAX_LOG_DENSITY: f32 = 80.0;
 /// The occupancy grid's cells per axis over the contracted cube…
 const OCCUPANCY_CELLS: usize = 64;
 /// …and the opacity across a cell above which it is occupied.
@@ -412,10 +412,10 @@ impl NerfactoField {
         }
     }
 
-    /// `average_init_density · exp(raw)` (the exponent capped to keep σ finite).
+    /// `average_init_density · exp(raw)` (see [`exp_density`]).
     #[inline]
     fn sigma_from_raw(&self, raw: f32) -> f32 {
-        self.settings.average_init_density * raw.min(MAX_LOG_DENSITY).exp()
+        self.settings.average_init_density * exp_density(raw)
     }
 
     /// Whether `p` may have density: inside the bounds and in an occupied cell.

@@ -81,6 +81,8 @@ pub struct SamplerStats {
     pub main_queries: u64,
     /// Main-field colour queries.
     pub color_queries: u64,
+    /// Main-field samples whose density was NaN or infinite, taken as empty.
+    pub invalid_samples: u64,
     /// Time in the proposal iterations (evaluation and resampling).
     pub proposal_time: Duration,
     /// Time in the main field (density, features, colour).
@@ -92,6 +94,7 @@ impl std::ops::AddAssign for SamplerStats {
         self.proposal_queries += o.proposal_queries;
         self.main_queries += o.main_queries;
         self.color_queries += o.color_queries;
+        self.invalid_samples += o.invalid_samples;
         self.proposal_time += o.proposal_time;
         self.main_time += o.main_time;
     }
@@ -405,6 +408,7 @@ impl NerfactoField {
             for (k, (&(r, j), &sigma)) in s.owners.iter().zip(&s.sigma).enumerate() {
                 let (r, j) = (r as usize, j as usize);
                 let p = &mut pieces[base + r * n + j];
+                stats.invalid_samples += u64::from(!sigma.is_finite());
                 p.sigma = sanitised(sigma) as f32;
                 let e = (-f64::from(p.sigma) * (p.t1 - p.t0)).exp_m1();
                 let w = -e * s.transmittance[r];
@@ -431,11 +435,11 @@ impl NerfactoField {
     }
 }
 
-/// NaN or negative densities count as empty, infinities as huge.
+/// NaN, infinite or negative densities count as empty (as in the marcher).
 #[inline]
 fn sanitised(sigma: f32) -> f64 {
-    if sigma > 0.0 {
-        f64::from(sigma.min(f32::MAX))
+    if sigma.is_finite() && sigma > 0.0 {
+        f64::from(sigma)
     } else {
         0.0
     }

@@ -2,11 +2,13 @@
 //! runs: the multiresolution hash-grid encoding, the fully fused MLP, and the spherical-harmonics
 //! direction encoding (whose basis 3D Gaussian splats use too).
 
+mod density;
 mod hashgrid;
 mod mlp;
 mod sh4;
 mod weights;
 
+pub(crate) use density::exp_density;
 pub use hashgrid::TableStorage;
 pub(crate) use hashgrid::{correctly_rounded, HashGrid, HashGridConfig};
 pub(crate) use mlp::{Mlp, MlpConfig};

@@ -534,13 +534,7 @@ fn bench_ngp_sampler_against_final() {
     use nerfx::render::render_with_progress;
     use std::time::Instant;
 
-    let (w, h) = std::env::var("NERFX_BENCH_SIZE")
-        .ok()
-        .and_then(|s| {
-            let (a, b) = s.split_once('x')?;
-            Some((a.parse().ok()?, b.parse().ok()?))
-        })
-        .unwrap_or((320u32, 180u32));
+    let (w, h) = common_fields::bench_size((320, 180));
     let dir = scratch("ngp-bench");
     let spec = Spec {
         log2_table_size: 19,

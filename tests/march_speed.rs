@@ -24,17 +24,6 @@ use nerfx::reference::ErrorReport;
 use nerfx::render::{render_with_progress, MarchParams, Outputs, Quality, RenderSettings};
 use nerfx::scene::{FieldHandle, Instance, Scene};
 
-/// `NERFX_BENCH_SIZE`, or `default`.
-fn size(default: (u32, u32)) -> (u32, u32) {
-    std::env::var("NERFX_BENCH_SIZE")
-        .ok()
-        .and_then(|s| {
-            let (w, h) = s.split_once('x')?;
-            Some((w.parse().ok()?, h.parse().ok()?))
-        })
-        .unwrap_or(default)
-}
-
 /// The presets `NERFX_BENCH_QUALITY` names (all by default).
 fn presets() -> Vec<Quality> {
     let Ok(names) = std::env::var("NERFX_BENCH_QUALITY") else {
@@ -111,7 +100,7 @@ fn line(name: &str, per_px: [f64; 3], ms: f64, cpu: Option<f64>, error: Option<&
 #[test]
 #[ignore]
 fn bench_demo() {
-    let (w, h) = size((1920, 1080));
+    let (w, h) = common_fields::bench_size((1920, 1080));
     let (scene, camera) = nerfx::demo::scene_and_camera(w, h).unwrap();
     let reference = std::env::var("NERFX_BENCH_NO_REFERENCE").is_err().then(|| {
         let t = Instant::now();
@@ -149,7 +138,7 @@ fn bench_demo() {
 #[test]
 #[ignore]
 fn bench_fog() {
-    let (w, h) = size((240, 135));
+    let (w, h) = common_fields::bench_size((240, 135));
     let dir = scratch("fog");
     let scene = fog_scene(&dir);
     let p = Perspective::from_vertical_fov(w, h, 40.0).unwrap();

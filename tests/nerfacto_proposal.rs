@@ -322,13 +322,7 @@ fn bench_proposal_render_1080p_final() {
     use nerfx::render::render_with_progress;
     use std::time::Instant;
 
-    let (w, h) = std::env::var("NERFX_BENCH_SIZE")
-        .ok()
-        .and_then(|s| {
-            let (a, b) = s.split_once('x')?;
-            Some((a.parse().ok()?, b.parse().ok()?))
-        })
-        .unwrap_or((1920u32, 1080u32));
+    let (w, h) = common_fields::bench_size((1920, 1080));
     let dir = scratch("proposal-bench");
     let spec = Spec {
         log2_table_size: 19,

@@ -126,13 +126,7 @@ fn bench_first_camera_final() {
     use common_nerfacto::sampler_split;
     use std::time::Instant;
 
-    let (w, h) = std::env::var("NERFX_BENCH_SIZE")
-        .ok()
-        .and_then(|s| {
-            let (a, b) = s.split_once('x')?;
-            Some((a.parse().ok()?, b.parse().ok()?))
-        })
-        .unwrap_or((1920u32, 1080u32));
+    let (w, h) = common_fields::bench_size((1920, 1080));
     let dir = scratch("nerfstudio-bench");
     let (_, scene) = copied_run(&dir);
     let text = std::fs::read_to_string(fixture().join("camera_path.json")).unwrap();

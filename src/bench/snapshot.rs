@@ -20,6 +20,7 @@ use std::path::{Path, PathBuf};
 use half::f16;
 use rmpv::Value;
 
+use super::rng::SplitMix64;
 use crate::error::{Error, Result};
 
 /// Cells per side of each occupancy cascade.
@@ -199,25 +200,6 @@ impl SnapshotSpec {
     }
 }
 
-/// SplitMix64 (Steele, Lea, Flood 2014): a tiny, well-mixed seeded generator, so a spec
-/// always gives the same bytes.
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[lo, hi)`, single precision.
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * ((self.next_u64() >> 40) as f32 / (1u64 << 24) as f32)
-    }
-}
-
 /// Hash-grid entries per level, from the facts: scale `2^(l·log2 b)·N_min − 1`,
 /// resolution `⌈scale⌉ + 1`, `min(next multiple of 8 of res³, 2^log2T)`.
 fn grid_entries(s: &SnapshotSpec) -> usize {
@@ -321,7 +303,7 @@ pub fn occupied_fraction(s: &SnapshotSpec) -> f64 {
             n_cascades: 1,
             ..s.clone()
         },
-        &mut SplitMix64(0),
+        &mut SplitMix64::new(0),
     )
     .1
 }
@@ -332,7 +314,7 @@ fn kv(k: &str, v: Value) -> (Value, Value) {
 
 /// The snapshot's msgpack bytes (before any gzip framing).
 pub fn snapshot_bytes(s: &SnapshotSpec) -> Result<Vec<u8>> {
-    let mut rng = SplitMix64(s.seed);
+    let mut rng = SplitMix64::new(s.seed);
     let params = params(s, &mut rng);
     let params_binary: Vec<u8> = if s.half {
         params
@@ -456,10 +438,10 @@ mod tests {
         // A ball of radius 0.35 fills 4/3·π·0.35³ ≈ 0.1796 of the unit cube.
         let fill = occupied_fraction(&spec);
         assert!((fill - 0.1796).abs() < 2e-3, "{fill}");
-        let p = params(&spec, &mut SplitMix64(spec.seed));
+        let p = params(&spec, &mut SplitMix64::new(spec.seed));
         let std = (p.iter().map(|&w| f64::from(w).powi(2)).sum::<f64>() / p.len() as f64).sqrt();
         assert!((std - 0.05).abs() < 2e-3, "{std}");
-        let gained = params(&SnapshotSpec::dense_blob(), &mut SplitMix64(1));
+        let gained = params(&SnapshotSpec::dense_blob(), &mut SplitMix64::new(1));
         let n_in = SnapshotSpec::dense_blob().mlp_inputs();
         assert!(gained[64 * n_in..64 * n_in + 64].iter().all(|&w| w >= 0.0));
     }

@@ -5,19 +5,17 @@
 
 use glam::{DQuat, DVec3, Vec3};
 
-pub struct SplitMix64(u64);
+/// The library's generator (the benchmark scenes are drawn from it too), with the draws the
+/// tests need.
+pub struct SplitMix64(nerfx::bench::rng::SplitMix64);
 
 impl SplitMix64 {
     pub fn new(seed: u64) -> Self {
-        SplitMix64(seed)
+        SplitMix64(nerfx::bench::rng::SplitMix64::new(seed))
     }
 
     pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        self.0.next_u64()
     }
 
     /// Uniform in `[lo, hi)`.
@@ -28,12 +26,12 @@ impl SplitMix64 {
 
     /// Uniform in `[0, 1)`, single precision.
     pub fn unit(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+        self.0.unit()
     }
 
     /// Uniform in `[lo, hi)`, single precision.
     pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.unit()
+        self.0.range(lo, hi)
     }
 
     /// Log-uniform in `[lo, hi)`.

@@ -89,7 +89,6 @@ impl Report {
 }
 
 fn scene_markdown(scene: &SceneReport) -> String {
-    let budget = scene.rows.iter().any(|r| r.budget_hits.is_some());
     let mut s = format!(
         "\n### {}\n\n{}. Reference: {} ({:.0} ms). Scene and occupancy heap: {} MiB; one \
          16×16 Final tile: {} MiB.\n\n",
@@ -101,13 +100,10 @@ fn scene_markdown(scene: &SceneReport) -> String {
         mib(scene.tile_heap),
     );
     s += "| configuration | ms/frame | CPU s/frame | density samples/px | colour samples/px | \
-          splat fragments/px | PSNR (dB) | max alpha error | max depth error (rel.) |";
-    s += if budget { " rays at budget |" } else { "" };
-    s += " peak heap (MiB) |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|";
-    s += if budget { "---:|" } else { "" };
-    s += "---:|\n";
+          splat fragments/px | PSNR (dB) | max alpha error | max depth error (rel.) | \
+          rays at budget | peak heap (MiB) |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
     for r in &scene.rows {
-        s += &row_markdown(r, budget);
+        s += &row_markdown(r);
     }
     if scene.rows.iter().any(|r| r.on_rows) {
         s += "\n¹ timed on the reference rows only, scaled to a frame.\n";
@@ -115,7 +111,7 @@ fn scene_markdown(scene: &SceneReport) -> String {
     s
 }
 
-fn row_markdown(r: &Row, budget: bool) -> String {
+fn row_markdown(r: &Row) -> String {
     let mut s = format!(
         "| {}{} | {:.0} | {} | {:.1} | {:.1} | {:.1} |",
         r.name,
@@ -137,13 +133,6 @@ fn row_markdown(r: &Row, budget: bool) -> String {
         }
         None => s += " — | — | — |",
     }
-    if budget {
-        let _ = write!(
-            s,
-            " {} |",
-            r.budget_hits.map_or("n/a".into(), |n| n.to_string())
-        );
-    }
-    let _ = writeln!(s, " {} |", mib(r.peak_heap));
+    let _ = writeln!(s, " {} | {} |", r.budget_hits, mib(r.peak_heap));
     s
 }

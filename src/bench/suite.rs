@@ -71,8 +71,8 @@ pub struct Row {
     pub fragments_per_pixel: f64,
     /// Errors against the reference (`None` where there is none).
     pub error: Option<ErrorReport>,
-    /// Rays that ran out of their sample budget, where the renderer counts them.
-    pub budget_hits: Option<u64>,
+    /// Rays that ran out of their sample budget.
+    pub budget_hits: u64,
     /// Peak heap of the frame above what was live before it, where measured.
     pub peak_heap: Option<usize>,
     /// The run covered only the reference rows; its time is scaled to the frame.
@@ -482,7 +482,7 @@ fn counts(stats: &RenderStats) -> Row {
         color_samples_per_pixel: stats.color_samples as f64 / pixels,
         fragments_per_pixel: stats.splat_fragments as f64 / pixels,
         error: None,
-        budget_hits: Some(stats.budget_limited_rays),
+        budget_hits: stats.budget_limited_rays,
         peak_heap: None,
         on_rows: false,
     }

@@ -132,20 +132,23 @@ pub struct RenderStats {
 }
 
 impl RenderStats {
-    /// What a user should hear about this render, if anything: rays that stopped at their
-    /// sample budget and density samples a field answered with NaN or an infinity.
+    /// What a user should hear about this render, if anything, and what to do about it: rays
+    /// that stopped at their sample budget (a finer preset has a larger one) and density
+    /// samples a field answered with NaN or an infinity (the field file holds weights that
+    /// overflow, or a broken training).
     pub fn warning(&self) -> Option<String> {
         let mut parts = Vec::new();
         if self.budget_limited_rays > 0 {
             parts.push(format!(
                 "{} of {} pixels stopped at the preset's sample budget and may miss its \
-                 error target",
+                 error target (a higher quality preset gives rays a larger budget)",
                 self.budget_limited_rays, self.pixels
             ));
         }
         if self.invalid_samples > 0 {
             parts.push(format!(
-                "{} density samples were NaN or infinite and were taken as empty",
+                "{} density samples were NaN or infinite and were taken as empty (check the \
+                 field file: its network overflows there)",
                 self.invalid_samples
             ));
         }

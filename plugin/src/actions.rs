@@ -161,13 +161,24 @@ pub fn run(
     } else {
         let node = inst.node.desc.label;
         match render::render(inst, props(in_args, "inArgs")?)? {
-            render::Outcome::Rendered { time, stats } => match stats.warning() {
-                Some(warning) => {
-                    let text = format!("{node}, frame {time}: {warning}");
-                    message::warn(effect.cast(), &inst.shown, &text);
-                }
-                None => message::succeeded(effect.cast(), &inst.shown),
-            },
+            render::Outcome::Rendered {
+                time,
+                frame,
+                window,
+                stats,
+            } => {
+                // Under the record's lock: tiles rendered at once post in the order they count.
+                inst.frame_stats
+                    .record(frame, window, stats, |frame_stats| {
+                        match frame_stats.warning() {
+                            Some(warning) => {
+                                let text = format!("{node}, frame {time}: {warning}");
+                                message::warn(effect.cast(), &inst.shown, &text);
+                            }
+                            None => message::succeeded(effect.cast(), &inst.shown),
+                        }
+                    });
+            }
             render::Outcome::NotReady(param) => {
                 let label = inst.node.desc.param(param).map_or(param, |p| p.label);
                 let text = format!(

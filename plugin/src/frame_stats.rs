@@ -4,7 +4,9 @@
 //! nothing about its neighbours: the warning is the frame's. Each instance keeps the
 //! statistics of the windows it rendered at one time, render scale and quality; a render of
 //! another frame (or scale, or quality) starts afresh, as does an edit of the artist, and a
-//! window rendered again replaces its earlier count.
+//! window rendered again replaces its earlier count. What the frame's counts say is reported
+//! under the record's lock, so a clean tile that counted before a warned one cannot clear the
+//! warning after it was posted.
 
 use std::sync::{Mutex, PoisonError};
 
@@ -45,8 +47,15 @@ struct Frame {
 pub struct FrameStats(Mutex<Frame>);
 
 impl FrameStats {
-    /// Records what rendering `window` of `frame` counted; returns the frame's counts so far.
-    pub fn record(&self, frame: FrameKey, window: Window, stats: RenderStats) -> RenderStats {
+    /// Records what rendering `window` of `frame` counted, then hands the frame's counts so
+    /// far to `report` (still holding the record).
+    pub fn record(
+        &self,
+        frame: FrameKey,
+        window: Window,
+        stats: RenderStats,
+        report: impl FnOnce(&RenderStats),
+    ) {
         let mut f = self.0.lock().unwrap_or_else(PoisonError::into_inner);
         if f.key != Some(frame) {
             *f = Frame {
@@ -59,9 +68,11 @@ impl FrameStats {
             f.windows.remove(0);
         }
         f.windows.push((window, stats));
-        f.windows
+        let total = f
+            .windows
             .iter()
-            .fold(RenderStats::default(), |sum, (_, s)| sum + *s)
+            .fold(RenderStats::default(), |sum, (_, s)| sum + *s);
+        report(&total);
     }
 
     /// Forgets the frame (an edit of the artist: its renders are stale).
@@ -73,6 +84,13 @@ impl FrameStats {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Records `stats` of `window` into `f`; what it reported for the frame.
+    fn record(f: &FrameStats, at: FrameKey, window: Window, stats: RenderStats) -> RenderStats {
+        let mut reported = None;
+        f.record(at, window, stats, |s| reported = Some(*s));
+        reported.expect("a report")
+    }
 
     fn stats(pixels: u64, limited: u64) -> RenderStats {
         RenderStats {
@@ -87,32 +105,32 @@ mod tests {
         let f = FrameStats::default();
         let at = FrameKey::new(1001.0, 1.0, false);
         let (a, b) = (Window::new(0, 0, 8, 8), Window::new(8, 0, 16, 8));
-        assert_eq!(f.record(at, a, stats(64, 3)), stats(64, 3));
+        assert_eq!(record(&f, at, a, stats(64, 3)), stats(64, 3));
         // A clean neighbour keeps the frame's warning.
-        assert_eq!(f.record(at, b, stats(64, 0)), stats(128, 3));
+        assert_eq!(record(&f, at, b, stats(64, 0)), stats(128, 3));
         // The same tile again replaces its count.
-        assert_eq!(f.record(at, a, stats(64, 3)), stats(128, 3));
+        assert_eq!(record(&f, at, a, stats(64, 3)), stats(128, 3));
         // Another frame, scale or quality is another frame.
         for other in [
             FrameKey::new(1002.0, 1.0, false),
             FrameKey::new(1002.0, 0.5, false),
             FrameKey::new(1002.0, 0.5, true),
         ] {
-            assert_eq!(f.record(other, b, stats(64, 0)), stats(64, 0));
+            assert_eq!(record(&f, other, b, stats(64, 0)), stats(64, 0));
         }
-        f.record(at, a, stats(64, 3));
+        record(&f, at, a, stats(64, 3));
         f.reset();
-        assert_eq!(f.record(at, b, stats(64, 0)), stats(64, 0));
+        assert_eq!(record(&f, at, b, stats(64, 0)), stats(64, 0));
     }
 
     #[test]
     fn windows_are_bounded() {
         let f = FrameStats::default();
         let at = FrameKey::new(1.0, 1.0, false);
-        f.record(at, Window::new(0, 0, 1, 1), stats(1, 1));
+        record(&f, at, Window::new(0, 0, 1, 1), stats(1, 1));
         let mut last = RenderStats::default();
         for i in 1..=MAX_WINDOWS as u32 {
-            last = f.record(at, Window::new(i, 0, i + 1, 1), stats(1, 0));
+            last = record(&f, at, Window::new(i, 0, i + 1, 1), stats(1, 0));
         }
         // The first (warned) window was forgotten to make room.
         assert_eq!(last, stats(MAX_WINDOWS as u64, 0));

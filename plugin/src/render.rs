@@ -12,8 +12,8 @@
 //! A node that is not ready (a file parameter still empty, [`crate::params::unset_file`])
 //! renders its first connected RGBA input unchanged, or transparent black, and no error: the
 //! render reports which file is missing, and the action marks the node with a warning. A node
-//! that rendered reports its frame's statistics so far ([`crate::frame_stats`]): the action
-//! warns when they say the pixels may be off.
+//! that rendered reports the window's statistics and its frame: the action adds them to the
+//! frame's ([`crate::frame_stats`]) and warns when those say the pixels may be off.
 //! When the host renders one field of fielded footage into a full-frame image
 //! (`kOfxImageEffectPropFieldToRender` lower or upper), only that field's rows are written;
 //! the render time may then be a half frame, at which the core interpolates the shot as at any
@@ -80,12 +80,15 @@ pub fn field_rows(field: &str, single_field: bool) -> Rows {
 /// What a render has to tell the artist.
 #[derive(Debug)]
 pub enum Outcome {
-    /// The node rendered a window of the frame at `time`; `stats`: what the renders of that
-    /// frame have counted so far (none for a node that only composites).
+    /// The node rendered `window` of the frame at `time`.
     Rendered {
         /// The host's time.
         time: f64,
-        /// The frame's counts.
+        /// The frame: time, render scale and quality.
+        frame: FrameKey,
+        /// The raster window rendered.
+        window: Window,
+        /// What rendering it counted (nothing for a node that only composites).
         stats: RenderStats,
     },
     /// That file parameter is empty: the node rendered its first RGBA input or nothing.
@@ -169,11 +172,9 @@ pub fn render(instance: &Instance, in_args: Props) -> Result<Outcome> {
         Some(param) => Outcome::NotReady(param),
         None => Outcome::Rendered {
             time,
-            stats: instance.frame_stats.record(
-                FrameKey::new(time, s, draft),
-                window,
-                rendered.stats,
-            ),
+            frame: FrameKey::new(time, s, draft),
+            window,
+            stats: rendered.stats,
         },
     })
 }

@@ -291,6 +291,7 @@ fn measure_scene(
     ));
     let reference_error = match &truth {
         Reference::Rows(fine) => {
+            let started = Instant::now();
             let checked: Vec<&(u32, Planes)> = fine.iter().step_by(CHECK_STRIDE).collect();
             let ys: Vec<u32> = checked.iter().map(|(y, _)| *y).collect();
             let finer = render_rows(camera, &ys, |w| {
@@ -302,7 +303,11 @@ fn measure_scene(
                     .zip(&checked)
                     .map(|((_, finer), (_, fine))| ErrorReport::compare(finer, fine)),
             );
-            log(&format!("{}: reference's own error {e}", b.kind.name()));
+            log(&format!(
+                "{}: reference's own error {e} ({:.0} ms)",
+                b.kind.name(),
+                started.elapsed().as_secs_f64() * 1e3
+            ));
             Some(e)
         }
         _ => None,

@@ -289,3 +289,39 @@ fn assemble(
     }
     planes
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_warning_says_how_many_and_what_to_do_and_a_clean_render_has_none() {
+        let clean = RenderStats {
+            pixels: 100,
+            density_samples: 4000,
+            ..RenderStats::default()
+        };
+        assert_eq!(clean.warning(), None);
+        let budget = RenderStats {
+            budget_limited_rays: 7,
+            ..clean
+        };
+        let w = budget.warning().expect("a warning");
+        assert!(
+            w.contains("7 of 100 pixels") && w.contains("higher quality preset"),
+            "{w}"
+        );
+        assert!(!w.contains("NaN"), "{w}");
+        let both = RenderStats {
+            invalid_samples: 12,
+            ..budget
+        };
+        let w = both.warning().expect("a warning");
+        assert!(
+            w.contains("7 of 100 pixels")
+                && w.contains("12 density samples were NaN or infinite")
+                && w.contains("check the field file"),
+            "{w}"
+        );
+    }
+}

@@ -134,8 +134,9 @@ fn bad_input_fails_with_a_message_naming_the_file() {
 
 /// `nerfx bench` on a tiny frame of an analytic and a trained scene: the report has a table
 /// per scene with measured errors (the exact reference for the demo, the finer march on
-/// sampled rows for the blob), heap figures from the binary's counting allocator (not
-/// `n/a`), and a plot per scene; the generated snapshot is gone from the output folder.
+/// sampled rows for the blob), whether Final keeps its error target, what was compared,
+/// heap figures from the binary's counting allocator (not `n/a`), and a plot per scene; the
+/// generated snapshot is gone from the output folder.
 #[test]
 fn bench_reports_errors_heap_and_plots_per_scene() {
     let dir = scratch_dir("bench");
@@ -157,6 +158,16 @@ fn bench_reports_errors_heap_and_plots_per_scene() {
         assert!(report.contains(scene), "{report}");
     }
     assert!(report.contains("every 16th row (2 of 32)"), "{report}");
+    // What "within target" compared: every pixel against the exact integral for the demo; the
+    // blob's rows against a fine march, whose own error is estimated.
+    assert!(
+        report.contains("Compared: every pixel, against the exact integral."),
+        "{report}"
+    );
+    assert!(
+        report.contains("against a march twice as fine again"),
+        "{report}"
+    );
     let header: Vec<&str> = report
         .lines()
         .find(|l| l.starts_with("| configuration |"))
@@ -179,6 +190,15 @@ fn bench_reports_errors_heap_and_plots_per_scene() {
         let cells: Vec<&str> = row.split('|').map(str::trim).collect();
         let psnr: f64 = cells[column("PSNR")].parse().expect("a PSNR");
         assert!(psnr > 40.0, "{row}");
+        // Final's target is 1e-3 in alpha and colour (the cells are rounded: a margin).
+        let alpha: f64 = cells[column("max alpha")].parse().expect("an error");
+        let colour: f64 = cells[column("max colour")].parse().expect("an error");
+        let within = cells[column("within target")];
+        if alpha.max(colour) > 1.01e-3 {
+            assert_eq!(within, "no", "{row}");
+        } else if alpha.max(colour) < 0.99e-3 {
+            assert_eq!(within, "yes", "{row}");
+        }
         let budget: u64 = cells[column("rays at")].parse().expect("a count");
         assert_eq!(budget, 0, "{row}");
         let heap: f64 = cells[column("peak heap")]

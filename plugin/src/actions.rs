@@ -11,7 +11,7 @@
 //!   default, it renders transparent black or passes its first connected RGBA input through,
 //!   and it never posts an error — hosts ask for the region at once, and a dialog before the
 //!   artist could pick a file is noise. Its render marks the node with a persistent warning
-//!   naming the missing file ([`message::warn_not_ready`]), so a node left empty does not
+//!   naming the missing file ([`message::warn`]), so a node left empty does not
 //!   render black without a word. A file that is set but unreadable is an error.
 //! - getRegionsOfInterest: each connected input needs exactly the region asked for (every
 //!   node works pixel by pixel).
@@ -29,7 +29,10 @@
 //!   The 1.4 header has hosts ask only in the General context; hosts also ask generators
 //!   (Natron), and the answer does not depend on the context.
 //! - begin/endSequenceRender: nothing to prepare (files are cached on first use).
-//! - render: [`crate::render`].
+//! - render: [`crate::render`]. A frame whose renders counted rays stopped at their sample
+//!   budget or NaN densities marks the node with a persistent warning saying how many and
+//!   what to do ([`nerfx::render::RenderStats::warning`]); the render succeeds, and the next
+//!   clean frame clears it.
 //! - instanceChanged: an edit by the artist or the plugin (`kOfxPropChangeReason`) clears the
 //!   instance's persistent error (the next action re-checks); a change because the time
 //!   moved changes nothing.
@@ -125,6 +128,7 @@ pub fn run(
             // SAFETY: an instance action, between create and destroy.
             let inst = unsafe { instance::get(effect) }?;
             message::reset(effect.cast(), &inst.shown);
+            inst.frame_stats.reset();
         }
         return Ok(OK);
     }
@@ -155,15 +159,32 @@ pub fn run(
     } else if is(kOfxImageEffectActionGetTimeDomain) {
         time_domain(inst, props(out_args, "outArgs")?)
     } else {
+        let node = inst.node.desc.label;
         match render::render(inst, props(in_args, "inArgs")?)? {
-            None => message::succeeded(effect.cast(), &inst.shown),
-            Some(param) => {
+            render::Outcome::Rendered {
+                time,
+                frame,
+                window,
+                stats,
+            } => {
+                // Under the record's lock: tiles rendered at once post in the order they count.
+                inst.frame_stats
+                    .record(frame, window, stats, |frame_stats| {
+                        match frame_stats.warning() {
+                            Some(warning) => {
+                                let text = format!("{node}, frame {time}: {warning}");
+                                message::warn(effect.cast(), &inst.shown, &text);
+                            }
+                            None => message::succeeded(effect.cast(), &inst.shown),
+                        }
+                    });
+            }
+            render::Outcome::NotReady(param) => {
                 let label = inst.node.desc.param(param).map_or(param, |p| p.label);
                 let text = format!(
-                    "{}: no {label} chosen; it renders nothing of its own until one is",
-                    inst.node.desc.label
+                    "{node}: no {label} chosen; it renders nothing of its own until one is"
                 );
-                message::warn_not_ready(effect.cast(), &inst.shown, &text);
+                message::warn(effect.cast(), &inst.shown, &text);
             }
         }
         Ok(OK)

@@ -3,8 +3,9 @@
 //!
 //! The handles never change after creation, so render threads share them without locks (the
 //! plugin declares itself fully thread safe): every value a render needs is read from the host
-//! per call, and the core's caches are internally synchronised. The one mutable part is the
-//! record of messages shown to the artist, behind its own mutex.
+//! per call, and the core's caches are internally synchronised. The mutable parts are the
+//! record of messages shown to the artist and the frame's render statistics, each behind its
+//! own mutex.
 
 use std::ffi::CString;
 use std::sync::Mutex;
@@ -16,6 +17,7 @@ use openfx_sys::{
 };
 
 use crate::effect::{context_from_name, effect_props, param_set};
+use crate::frame_stats::FrameStats;
 use crate::message::Shown;
 use crate::props::name;
 use crate::status::{check, Failure, Result};
@@ -44,6 +46,8 @@ pub struct Instance {
     pub inputs: Vec<(&'static ClipDesc, ClipRef)>,
     /// What the instance has shown the artist ([`crate::message`]).
     pub shown: Mutex<Shown>,
+    /// What the renders of the frame on show counted ([`crate::frame_stats`]).
+    pub frame_stats: FrameStats,
 }
 
 fn clip(effect: OfxImageEffectHandle, clip_name: &str) -> Result<ClipRef> {
@@ -102,6 +106,7 @@ pub fn create(node: &'static Node, effect: OfxImageEffectHandle) -> Result<()> {
         output,
         inputs,
         shown: Mutex::new(Shown::default()),
+        frame_stats: FrameStats::default(),
     });
     let ptr = Box::into_raw(data);
     if let Err(e) = props.set_pointer(name(kOfxPropInstanceData), ptr.cast()) {

@@ -11,7 +11,8 @@
 //!   `effect`: an action's effect handle (its property and parameter sets, its context).
 //! - `params`: parameter values at a time; `images` and `pixels`: clip images ⇄
 //!   [`nerfx::image::Planes`]; `coords`: OpenFX pixel rectangles ⇄ raster windows.
-//! - `props`, `suites`, `message`, `status`: the host's suites made safe, and errors.
+//! - `props`, `suites`, `message`, `status`: the host's suites made safe, and errors;
+//!   `frame_stats`: a frame's render statistics over its tiles, for the node's warning.
 #![deny(missing_docs)]
 
 mod actions;
@@ -19,6 +20,7 @@ mod coords;
 mod describe;
 mod effect;
 mod entry;
+mod frame_stats;
 mod images;
 mod instance;
 mod message;

@@ -121,11 +121,12 @@ pub fn post_error(target: Target, shown: Option<&Mutex<Shown>>, text: &str) {
     }
 }
 
-/// Marks an instance that rendered without all its files (`text` says which is missing) with
-/// a persistent *warning*: the node says why it renders nothing, without a dialog. Hosts
-/// without persistent messages get it once per edit on standard error. Cleared like an
-/// error: by the artist's next edit or a successful render.
-pub fn warn_not_ready(instance: *mut c_void, shown: &Mutex<Shown>, text: &str) {
+/// Marks an instance whose render succeeded but has something to say with a persistent
+/// *warning* (the host goes on; the node is flagged, without a dialog): a node without all
+/// its files says why it renders nothing, a render whose pixels may be off says why and what
+/// to do. Hosts without persistent messages get it once per edit on standard error. Cleared
+/// like an error: by the artist's next edit or a clean render.
+pub fn warn(instance: *mut c_void, shown: &Mutex<Shown>, text: &str) {
     let mut shown = shown.lock().unwrap_or_else(PoisonError::into_inner);
     match suites().ok().and_then(|s| s.message) {
         Some(MessageSuite::V2(m)) => {
@@ -153,7 +154,7 @@ pub fn warn_not_ready(instance: *mut c_void, shown: &Mutex<Shown>, text: &str) {
     }
 }
 
-/// After a successful render: clears the node's persistent message, if one is set.
+/// After a clean render: clears the node's persistent message, if one is set.
 pub fn succeeded(instance: *mut c_void, shown: &Mutex<Shown>) {
     let was = std::mem::take(
         &mut shown

@@ -11,17 +11,21 @@
 //!
 //! A node that is not ready (a file parameter still empty, [`crate::params::unset_file`])
 //! renders its first connected RGBA input unchanged, or transparent black, and no error: the
-//! render reports which file is missing, and the action marks the node with a warning.
+//! render reports which file is missing, and the action marks the node with a warning. A node
+//! that rendered reports the window's statistics and its frame: the action adds them to the
+//! frame's ([`crate::frame_stats`]) and warns when those say the pixels may be off.
 //! When the host renders one field of fielded footage into a full-frame image
 //! (`kOfxImageEffectPropFieldToRender` lower or upper), only that field's rows are written;
 //! the render time may then be a half frame, at which the core interpolates the shot as at any
 //! sub-frame time.
 
-use nerfx::graph::{check_render_scale, ClipKind, RenderRequest};
+use nerfx::graph::{check_render_scale, ClipKind, RenderRequest, Rendered};
 use nerfx::image::{Plane, Planes, Window};
+use nerfx::render::RenderStats;
 use openfx_sys::*;
 
 use crate::coords::{Frame, PixelRect};
+use crate::frame_stats::FrameKey;
 use crate::images::{connected, pixel_aspect, ClipImage};
 use crate::instance::Instance;
 use crate::params::{unset_file, values_at};
@@ -73,9 +77,26 @@ pub fn field_rows(field: &str, single_field: bool) -> Rows {
     }
 }
 
-/// Renders one window of `instance`; `Some(parameter)` when the node was not ready (that file
-/// parameter is empty) and rendered its input or nothing.
-pub fn render(instance: &Instance, in_args: Props) -> Result<Option<&'static str>> {
+/// What a render has to tell the artist.
+#[derive(Debug)]
+pub enum Outcome {
+    /// The node rendered `window` of the frame at `time`.
+    Rendered {
+        /// The host's time.
+        time: f64,
+        /// The frame: time, render scale and quality.
+        frame: FrameKey,
+        /// The raster window rendered.
+        window: Window,
+        /// What rendering it counted (nothing for a node that only composites).
+        stats: RenderStats,
+    },
+    /// That file parameter is empty: the node rendered its first RGBA input or nothing.
+    NotReady(&'static str),
+}
+
+/// Renders one window of `instance`.
+pub fn render(instance: &Instance, in_args: Props) -> Result<Outcome> {
     let node = instance.node;
     let time = in_args.double(name(kOfxPropTime))?;
     let render = PixelRect::from_ints(in_args.ints::<4>(name(kOfxImageEffectPropRenderWindow))?);
@@ -105,8 +126,8 @@ pub fn render(instance: &Instance, in_args: Props) -> Result<Option<&'static str
             Failure::failed(format!("{}: the host gave no output image", node.desc.id))
         })?;
     let rows = field_rows(&field, output.single_field);
-    let planes = if window.area() == 0 {
-        clear(window)
+    let rendered = if window.area() == 0 {
+        Rendered::from(clear(window))
     } else if !ready {
         let region = render.canonical(scale, pixel_aspect(&instance.output));
         let mut planes = clear(window);
@@ -118,7 +139,7 @@ pub fn render(instance: &Instance, in_args: Props) -> Result<Option<&'static str
                 break;
             }
         }
-        planes
+        Rendered::from(planes)
     } else {
         let region = render.canonical(scale, pixel_aspect(&instance.output));
         let mut request = RenderRequest::new(time, window, s);
@@ -136,11 +157,26 @@ pub fn render(instance: &Instance, in_args: Props) -> Result<Option<&'static str
             };
             request = request.with_input(clip.name, planes);
         }
-        node.render(&values, &request)?
+        node.render_with_stats(&values, &request)?
     };
-    write_planes(&mut output.view, frame, window, render, rows, &planes)
-        .map_err(|e| Failure::failed(format!("{}: Output: {e}", node.desc.id)))?;
-    Ok(unset)
+    write_planes(
+        &mut output.view,
+        frame,
+        window,
+        render,
+        rows,
+        &rendered.planes,
+    )
+    .map_err(|e| Failure::failed(format!("{}: Output: {e}", node.desc.id)))?;
+    Ok(match unset {
+        Some(param) => Outcome::NotReady(param),
+        None => Outcome::Rendered {
+            time,
+            frame: FrameKey::new(time, s, draft),
+            window,
+            stats: rendered.stats,
+        },
+    })
 }
 
 #[cfg(test)]

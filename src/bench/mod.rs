@@ -4,7 +4,8 @@
 //! smooth trained fog, a dense trained blob, Gaussian splats) with each quality preset and
 //! with the naive uniform-step marcher, compares every image with the scene's reference
 //! (exact for analytic scenes, a much finer march for trained fields) and reports ms/frame,
-//! CPU time, samples per pixel, PSNR, the largest alpha and depth errors and peak heap
+//! CPU time, samples per pixel, PSNR, the largest alpha, colour and depth errors (and
+//! whether the preset keeps its error target) and peak heap
 //! ([`memory`]), as Markdown and as plots of time against PSNR ([`report`]); [`scaling`]
 //! measures how cost grows with resolution, instances and occupied space. [`snapshot`]
 //! generates the trained fields (and the tests' snapshot fixtures); [`splats`], [`passes`]

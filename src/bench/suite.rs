@@ -10,6 +10,12 @@
 //! scaled to a frame (`baseline_row`; a second reference for trained fields, such as
 //! instant-ngp's own marcher, is one more such row, compared on the same rows). Splats are
 //! rasterised, not marched: they have neither reference nor naive row.
+//!
+//! Each preset promises a per-pixel error ([`MarchParams::error_target`], alpha and
+//! premultiplied colour): a row says whether it keeps it over the pixels compared. A fine
+//! march is no exact reference, so its own error is estimated too, against a march twice as
+//! fine ([`finer_params`]) on every [`CHECK_STRIDE`]-th reference row: a preset missing its
+//! target by less than that may be the reference's miss.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -23,6 +29,7 @@ use super::scenes::{build, BenchScene, SceneKind, Truth};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::image::{Planes, Window};
+use crate::reference::metrics::nan_max;
 use crate::reference::{self, ErrorReport};
 use crate::render::{
     render_naive, render_with_progress, MarchParams, Outputs, Quality, RenderSettings, RenderStats,
@@ -32,6 +39,9 @@ use crate::scene::Scene;
 /// Trained scenes are compared on every this many rows (starting at the middle of the
 /// first band).
 pub const ROW_STRIDE: u32 = 16;
+
+/// A fine reference's own error is estimated on every this many of its rows.
+pub const CHECK_STRIDE: usize = 4;
 
 /// Naive step sizes, as fractions of the scene's largest bounding-box diagonal: analytic
 /// scenes, then trained ones (whose naive run only covers the reference rows).
@@ -73,6 +83,9 @@ pub struct Row {
     pub error: Option<ErrorReport>,
     /// Rays that ran out of their sample budget.
     pub budget_hits: u64,
+    /// The per-pixel error the configuration promises (a preset's
+    /// [`MarchParams::error_target`]; `None` for baselines, which promise nothing).
+    pub error_target: Option<f64>,
     /// Peak heap of the frame above what was live before it, where measured.
     pub peak_heap: Option<usize>,
     /// The run covered only the reference rows; its time is scaled to the frame.
@@ -90,6 +103,9 @@ pub struct SceneReport {
     pub truth: String,
     /// Time of the reference, milliseconds (0 when there is none).
     pub reference_ms: f64,
+    /// A fine reference's own error: against [`finer_params`] on every [`CHECK_STRIDE`]-th
+    /// of its rows (`None` for exact references and scenes without one).
+    pub reference_error: Option<ErrorReport>,
     /// Heap the loaded scene and its occupancy grids hold, where measured.
     pub scene_heap: Option<usize>,
     /// Peak heap of a one-tile (16×16) Final render once the occupancy is built: the tile's
@@ -131,6 +147,30 @@ pub fn fine_params() -> MarchParams {
         color_skip_budget: 0.0,
         max_samples: u32::MAX,
         ..Quality::Final.params()
+    }
+}
+
+/// The march a fine reference is checked against: twice as fine in every dial (half the
+/// base step and the refinement threshold, one more bisection, a ten times lower stopping
+/// transmittance).
+pub fn finer_params() -> MarchParams {
+    let p = fine_params();
+    MarchParams {
+        steps_per_feature: 2.0 * p.steps_per_feature,
+        min_transmittance: 0.1 * p.min_transmittance,
+        refine_depth: p.refine_depth + 1,
+        error_target: 0.5 * p.error_target,
+        ..p
+    }
+}
+
+impl Row {
+    /// Whether the row keeps its promised per-pixel error in alpha and colour over the
+    /// pixels compared; `None` when it promises none or has no reference.
+    pub fn within_target(&self) -> Option<bool> {
+        let (e, target) = (self.error?, self.error_target?);
+        // NaN errors compare false: they keep nothing.
+        Some(e.max_alpha_error <= target && e.max_color_error <= target)
     }
 }
 
@@ -249,6 +289,29 @@ fn measure_scene(
         "{}: reference {reference_ms:.0} ms",
         b.kind.name()
     ));
+    let reference_error = match &truth {
+        Reference::Rows(fine) => {
+            let started = Instant::now();
+            let checked: Vec<&(u32, Planes)> = fine.iter().step_by(CHECK_STRIDE).collect();
+            let ys: Vec<u32> = checked.iter().map(|(y, _)| *y).collect();
+            let finer = render_rows(camera, &ys, |w| {
+                render_frame(scene, camera, w, finer_params(), outputs).map(|(p, _)| p)
+            })?;
+            let e = combine(
+                finer
+                    .iter()
+                    .zip(&checked)
+                    .map(|((_, finer), (_, fine))| ErrorReport::compare(finer, fine)),
+            );
+            log(&format!(
+                "{}: reference's own error {e} ({:.0} ms)",
+                b.kind.name(),
+                started.elapsed().as_secs_f64() * 1e3
+            ));
+            Some(e)
+        }
+        _ => None,
+    };
 
     let mut report_rows = Vec::new();
     for quality in Quality::ALL {
@@ -265,6 +328,7 @@ fn measure_scene(
             ms_per_frame: ms,
             cpu_s_per_frame: cpu,
             error: compare(&truth, &planes)?,
+            error_target: Some(f64::from(quality.params().error_target)),
             peak_heap: heap.map(|h| h.peak),
             on_rows: false,
             ..counts(&stats)
@@ -316,6 +380,7 @@ fn measure_scene(
         description: b.description.clone(),
         truth: reference_note,
         reference_ms,
+        reference_error,
         scene_heap,
         tile_heap: tile_heap.map(|h| h.peak),
         rows: report_rows,
@@ -448,26 +513,21 @@ fn compare_references(truth: &Reference, test: &Reference) -> Result<Option<Erro
 /// squared errors, the largest of the other errors (NaN if any is NaN).
 fn combine(parts: impl Iterator<Item = ErrorReport>) -> ErrorReport {
     let (mut mse, mut n) = (0.0, 0usize);
-    let mut worst = [0.0f64; 2];
-    let max = |a: f64, b: f64| {
-        if a.is_nan() || b.is_nan() {
-            f64::NAN
-        } else {
-            a.max(b)
-        }
-    };
+    let mut worst = [0.0f64; 3];
     for e in parts {
         mse += 10f64.powf(-e.psnr / 10.0);
         n += 1;
         worst = [
-            max(worst[0], e.max_alpha_error),
-            max(worst[1], e.max_depth_rel_error),
+            nan_max(worst[0], e.max_alpha_error),
+            nan_max(worst[1], e.max_color_error),
+            nan_max(worst[2], e.max_depth_rel_error),
         ];
     }
     ErrorReport {
         psnr: -10.0 * (mse / n.max(1) as f64).log10(),
         max_alpha_error: worst[0],
-        max_depth_rel_error: worst[1],
+        max_color_error: worst[1],
+        max_depth_rel_error: worst[2],
     }
 }
 
@@ -483,6 +543,7 @@ fn counts(stats: &RenderStats) -> Row {
         fragments_per_pixel: stats.splat_fragments as f64 / pixels,
         error: None,
         budget_hits: stats.budget_limited_rays,
+        error_target: None,
         peak_heap: None,
         on_rows: false,
     }
@@ -544,6 +605,7 @@ mod tests {
             "{combined} vs {whole}"
         );
         assert_eq!(combined.max_alpha_error, whole.max_alpha_error);
+        assert_eq!(combined.max_color_error, whole.max_color_error);
         assert_eq!(combined.max_depth_rel_error, whole.max_depth_rel_error);
         // Compared on sampled rows, a frame is measured on exactly those rows.
         let truth = Reference::Rows(vec![(1, a.crop(Window::new(0, 1, 7, 2)).unwrap())]);
@@ -553,6 +615,41 @@ mod tests {
             &b.crop(Window::new(0, 1, 7, 2)).unwrap(),
         );
         assert_eq!(on_row, want);
+    }
+
+    #[test]
+    fn a_row_keeps_its_target_only_in_alpha_and_colour_both() {
+        let row = |alpha: f64, color: f64, target: Option<f64>| Row {
+            error: Some(ErrorReport {
+                psnr: 40.0,
+                max_alpha_error: alpha,
+                max_color_error: color,
+                max_depth_rel_error: 0.0,
+            }),
+            error_target: target,
+            ..counts(&RenderStats::default())
+        };
+        let t = Some(5e-3);
+        assert_eq!(row(5e-3, 1e-3, t).within_target(), Some(true));
+        assert_eq!(row(5.1e-3, 1e-3, t).within_target(), Some(false));
+        assert_eq!(row(1e-3, 6e-3, t).within_target(), Some(false));
+        assert_eq!(row(f64::NAN, 0.0, t).within_target(), Some(false));
+        assert_eq!(row(0.0, 0.0, None).within_target(), None);
+        let no_reference = Row {
+            error: None,
+            ..row(0.0, 0.0, t)
+        };
+        assert_eq!(no_reference.within_target(), None);
+    }
+
+    #[test]
+    fn the_finer_march_is_finer_in_every_dial() {
+        let (fine, finer) = (fine_params(), finer_params());
+        assert!(finer.steps_per_feature > fine.steps_per_feature);
+        assert!(finer.error_target < fine.error_target);
+        assert!(finer.min_transmittance < fine.min_transmittance);
+        assert!(finer.refine_depth > fine.refine_depth);
+        assert_eq!(finer.max_step_factor, 1.0);
     }
 
     #[test]

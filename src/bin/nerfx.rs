@@ -598,6 +598,10 @@ mod graph {
             bar.set_message(format!("frame {frame} {node}"));
             bar.inc(1);
         })?;
+        // The plugin's text names the frame.
+        for (node, warning) in graph.warnings() {
+            bar.suspend(|| eprintln!("nerfx: warning: graph node {node}: {warning}"));
+        }
         let image = |name: &str| {
             images
                 .get(name)

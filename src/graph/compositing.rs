@@ -2,7 +2,7 @@
 //! reads its clips, calls one [`crate::composite`] function, then mixes with its input.
 
 use super::desc::{ClipDesc, ClipKind, Context, NodeDesc, ParamDesc, ParamKind, Range};
-use super::node::{single_channel, Node, RenderRequest};
+use super::node::{single_channel, Node, RenderRequest, Rendered};
 use super::values::ParamValues;
 use crate::composite::{accumulation_matte, depth_merge, mix, shadow_catcher_merge, MatteCurve};
 use crate::error::Result;
@@ -134,7 +134,7 @@ pub(crate) fn accumulation_matte_node() -> Node {
                 floater_clip: values.double("floaterClip")? as f32,
             };
             let out = accumulation_matte(&source, &matte, &curve)?;
-            mixed(out, values, request, "Source")
+            mixed(out, values, request, "Source").map(Rendered::from)
         },
         rod: None,
         identity: Some(|v| Ok((v.double("mix")? == 0.0).then_some("Source"))),
@@ -212,7 +212,7 @@ pub(crate) fn shadow_catcher_merge_node() -> Node {
                 values.double("opacity")? as f32,
                 [t[0] as f32, t[1] as f32, t[2] as f32],
             )?;
-            mixed(out, values, request, "B")
+            mixed(out, values, request, "B").map(Rendered::from)
         },
         rod: None,
         identity: Some(|v| Ok((v.double("mix")? == 0.0).then_some("B"))),
@@ -280,7 +280,7 @@ pub(crate) fn depth_merge_node() -> Node {
                 &depth("BDepth"),
                 values.double("softness")? as f32,
             )?;
-            mixed(out, values, request, "B")
+            mixed(out, values, request, "B").map(Rendered::from)
         },
         rod: None,
         identity: Some(|v| Ok((v.double("mix")? == 0.0).then_some("B"))),

@@ -45,7 +45,7 @@ pub use file::{Graph, GraphNode};
 pub use matrix_text::{matrix_text, parse_matrix};
 pub use node::{
     check_render_scale, single_channel, Format, IdentityFn, Node, PixelAspectFn, RenderFn,
-    RenderRequest, RodFn, TimeDomainFn,
+    RenderRequest, Rendered, RodFn, TimeDomainFn,
 };
 #[cfg(feature = "host")]
 pub use ofx::OfxGraph;

@@ -20,7 +20,7 @@ use glam::DMat4;
 
 use super::cache::{cached_scene, cached_shot};
 use super::desc::{ClipDesc, ClipKind, Context, NodeDesc, ParamDesc, ParamKind, Range};
-use super::node::{Format, Node, RenderRequest};
+use super::node::{Format, Node, RenderRequest, Rendered};
 use super::shared_renders::{shared_render, RenderKey};
 use super::values::ParamValues;
 use crate::camera::{
@@ -29,7 +29,9 @@ use crate::camera::{
 use crate::composite::{over, rgba_pixels, rgba_planes, shutter_average};
 use crate::error::{Error, Result};
 use crate::image::{scaled_size, Plane, Planes, BACKGROUND_DEPTH};
-use crate::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
+use crate::render::{
+    render_with_progress, ColorOutput, Outputs, Quality, RenderSettings, RenderStats,
+};
 use crate::scene::{CropBox, Instance, Scene};
 
 const CONTEXTS: &[Context] = &[Context::Generator, Context::Filter, Context::General];
@@ -401,7 +403,7 @@ fn placed_scene(values: &ParamValues, shot: &Shot, at: &ShotFrame) -> Result<Sce
 /// render.
 const LOOK: &[&str] = &["output", "background", "exposure"];
 
-fn render_node(values: &ParamValues, request: &RenderRequest) -> Result<Planes> {
+fn render_node(values: &ParamValues, request: &RenderRequest) -> Result<Rendered> {
     let shot = node_shot(values)?;
     let key = RenderKey {
         scene: Arc::downgrade(&cached_scene(file(values, "file")?)?),
@@ -412,12 +414,16 @@ fn render_node(values: &ParamValues, request: &RenderRequest) -> Result<Planes> 
         window: request.window,
         draft: request.draft,
     };
-    let planes = shared_render(key, || march(values, &shot, request))?;
-    look(values, request, &planes)
+    let shared = shared_render(key, || march(values, &shot, request))?;
+    Ok(Rendered {
+        planes: look(values, request, &shared.planes)?,
+        stats: shared.stats,
+    })
 }
 
-/// Every pass of the node's scene for `request`, from one march per shutter time.
-fn march(values: &ParamValues, shot: &Shot, request: &RenderRequest) -> Result<Planes> {
+/// Every pass of the node's scene for `request`, from one march per shutter time, and the
+/// marches' statistics summed.
+fn march(values: &ParamValues, shot: &Shot, request: &RenderRequest) -> Result<Rendered> {
     let window = request.window;
     let quality = match values.choice("quality")? {
         _ if request.draft => Quality::Draft,
@@ -447,6 +453,7 @@ fn march(values: &ParamValues, shot: &Shot, request: &RenderRequest) -> Result<P
         _ => vec![request.time],
     };
     let mut renders = Vec::with_capacity(times.len());
+    let mut stats = RenderStats::default();
     for time in times {
         let (at, camera) = camera(values, shot, time, request.render_scale)?;
         if camera.clamp_window(window)? != window {
@@ -460,12 +467,15 @@ fn march(values: &ParamValues, shot: &Shot, request: &RenderRequest) -> Result<P
             ));
         }
         let scene = placed_scene(values, shot, &at)?;
-        renders.push(render(&scene, &camera, window, &settings)?);
+        let (planes, s) = render_with_progress(&scene, &camera, window, &settings, &|_| {})?;
+        renders.push(planes);
+        stats = stats + s;
     }
-    match renders.len() {
-        1 => Ok(renders.remove(0)),
-        _ => shutter_average(renders),
-    }
+    let planes = match renders.len() {
+        1 => renders.remove(0),
+        _ => shutter_average(renders)?,
+    };
+    Ok(Rendered { planes, stats })
 }
 
 /// The output the node shows of `planes`: one pass, exposed and over the background.

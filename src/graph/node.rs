@@ -6,6 +6,7 @@ use super::desc::{ClipKind, NodeDesc};
 use super::values::ParamValues;
 use crate::error::{Error, Result};
 use crate::image::{Plane, Planes, Window};
+use crate::render::RenderStats;
 
 /// What one render call asks for.
 #[derive(Clone, Debug, PartialEq)]
@@ -92,8 +93,29 @@ pub fn single_channel(kind: ClipKind, planes: &Planes) -> Plane {
         .unwrap_or_else(|| Plane::filled(planes.width, planes.height, fill))
 }
 
+/// A node's output and what rendering it did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rendered {
+    /// RGBA premultiplied planes of the request's window.
+    pub planes: Planes,
+    /// The marcher's counts, summed over the renders the output was made from (none for a
+    /// node that only composites its inputs); [`RenderStats::warning`] says what a user
+    /// should hear about them.
+    pub stats: RenderStats,
+}
+
+/// An image made without marching anything.
+impl From<Planes> for Rendered {
+    fn from(planes: Planes) -> Self {
+        Rendered {
+            planes,
+            stats: RenderStats::default(),
+        }
+    }
+}
+
 /// Renders a node: validated values and a checked request in, output planes out.
-pub type RenderFn = fn(&ParamValues, &RenderRequest) -> Result<Planes>;
+pub type RenderFn = fn(&ParamValues, &RenderRequest) -> Result<Rendered>;
 /// A node's region of definition at a time (full-resolution pixels).
 pub type RodFn = fn(&ParamValues, f64) -> Result<(u32, u32)>;
 /// The frames a node can produce, `(first, last)` in the host's time, or `None` when that
@@ -159,6 +181,16 @@ impl Node {
     /// values of another node, unknown or missing clips, inputs not of the window's size and
     /// a render scale outside (0, 1]; every error names the node.
     pub fn render(&self, values: &ParamValues, request: &RenderRequest) -> Result<Planes> {
+        self.render_with_stats(values, request).map(|r| r.planes)
+    }
+
+    /// [`Node::render`], with what the render did: the counts behind a warning the node's
+    /// user should see (rays at their sample budget, NaN densities).
+    pub fn render_with_stats(
+        &self,
+        values: &ParamValues,
+        request: &RenderRequest,
+    ) -> Result<Rendered> {
         self.own(values)?;
         let id = self.desc.id;
         check_render_scale(request.render_scale).map_err(|e| self.in_context(e))?;

@@ -1,6 +1,7 @@
 //! A graph rendered through the OpenFX bundle: one plugin instance per node, created and set
 //! once, fed its upstream images through the host. This is the farm's path, and it runs the
-//! very code an artist's compositor runs.
+//! very code an artist's compositor runs; what the plugins flag their nodes with (a render
+//! whose pixels may be off) is gathered per frame ([`OfxGraph::warnings`]).
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -35,6 +36,7 @@ fn context_of(node: &GraphNode) -> Context {
 pub struct OfxGraph {
     graph: Graph,
     instances: BTreeMap<String, Instance>,
+    warnings: Vec<(String, String)>,
 }
 
 impl OfxGraph {
@@ -57,7 +59,11 @@ impl OfxGraph {
             }
             instances.insert(node.name.clone(), instance);
         }
-        Ok(OfxGraph { graph, instances })
+        Ok(OfxGraph {
+            graph,
+            instances,
+            warnings: Vec::new(),
+        })
     }
 
     /// The graph.
@@ -124,6 +130,13 @@ impl OfxGraph {
             .try_for_each(|i| i.end_sequence(first, last, render_scale))
     }
 
+    /// The warnings the nodes rendered by the last [`OfxGraph::render`] were flagged with,
+    /// as `(node name, text)` in the order they rendered: the render succeeded, but these
+    /// nodes' pixels may be off (the text says why and what to do).
+    pub fn warnings(&self) -> &[(String, String)] {
+        &self.warnings
+    }
+
     /// Renders the nodes the outputs need at `time` through the bundle (whole images at
     /// `render_scale`), as [`evaluate`] does; `on_node` hears each finished node's name.
     pub fn render(
@@ -134,6 +147,8 @@ impl OfxGraph {
         on_node: &dyn Fn(&str),
     ) -> Result<BTreeMap<String, Planes>> {
         let instances = &mut self.instances;
+        let warnings = &mut self.warnings;
+        warnings.clear();
         let mut render = |node: &GraphNode, request: &RenderRequest| -> Result<Planes> {
             let instance = instances.get_mut(&node.name).ok_or_else(|| {
                 Error::invalid(format!("graph node {}", node.name), "was not instantiated")
@@ -145,12 +160,18 @@ impl OfxGraph {
                 instance.connect(clip, upstream(&image, request.render_scale))?;
                 held.push(image);
             }
-            instance.render(
+            let planes = instance.render(
                 request.time,
                 request.window,
                 request.render_scale,
                 request.draft,
-            )
+            )?;
+            // After a render the instance's persistent message is the plugin's word on it (a
+            // clean render clears it).
+            if let Some(m) = instance.persistent_message().filter(|m| m.is_warning()) {
+                warnings.push((node.name.clone(), m.text));
+            }
+            Ok(planes)
         };
         evaluate(&self.graph, time, render_scale, draft, &mut render, on_node)
     }

@@ -6,11 +6,12 @@
 //! scene, shot, time, window, render scale and every parameter that changes the march agree
 //! get the same render. The cache holds at most [`BUDGET_BYTES`] of planes, dropping the
 //! least recently used first; two threads asking for the same render at once wait for one
-//! march. Entries hold the scene and shot weakly, so an edited file is never served stale
+//! march; each gets the render's statistics with its planes. Entries hold the scene and shot weakly, so an edited file is never served stale
 //! and a replaced scene is not kept alive by the cache.
 
 use std::sync::{Arc, Mutex, PoisonError, Weak};
 
+use super::node::Rendered;
 use super::values::ParamValues;
 use crate::camera::Shot;
 use crate::error::Result;
@@ -52,7 +53,7 @@ impl PartialEq for RenderKey {
     }
 }
 
-type Slot = Arc<Mutex<Option<Arc<Planes>>>>;
+type Slot = Arc<Mutex<Option<Arc<Rendered>>>>;
 
 struct Entry {
     key: RenderKey,
@@ -132,8 +133,8 @@ fn plane_bytes(p: &Planes) -> usize {
 /// (a failed march is not cached: the next request tries again).
 pub(super) fn shared_render(
     key: RenderKey,
-    march: impl FnOnce() -> Result<Planes>,
-) -> Result<Arc<Planes>> {
+    march: impl FnOnce() -> Result<Rendered>,
+) -> Result<Arc<Rendered>> {
     let slot = with_cache(|cache| {
         cache.clock += 1;
         let clock = cache.clock;
@@ -158,21 +159,21 @@ pub(super) fn shared_render(
             }
         }
     });
-    let mut planes = slot.lock().unwrap_or_else(PoisonError::into_inner);
-    if let Some(p) = &*planes {
+    let mut held = slot.lock().unwrap_or_else(PoisonError::into_inner);
+    if let Some(r) = &*held {
         with_cache(|cache| cache.shared += 1);
-        return Ok(p.clone());
+        return Ok(r.clone());
     }
     match march() {
-        Ok(p) => {
-            let p = Arc::new(p);
-            *planes = Some(p.clone());
-            drop(planes);
-            with_cache(|cache| cache.finished(&slot, plane_bytes(&p)));
-            Ok(p)
+        Ok(r) => {
+            let r = Arc::new(r);
+            *held = Some(r.clone());
+            drop(held);
+            with_cache(|cache| cache.finished(&slot, plane_bytes(&r.planes)));
+            Ok(r)
         }
         Err(e) => {
-            drop(planes);
+            drop(held);
             with_cache(|cache| cache.forget(&slot));
             Err(e)
         }

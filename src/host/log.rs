@@ -7,6 +7,10 @@
 use std::cell::RefCell;
 use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 
+use openfx_sys as ofx;
+
+use super::spec::cstr;
+
 /// A message the plugin posted through the message suite.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Message {
@@ -16,6 +20,14 @@ pub struct Message {
     pub text: String,
     /// Posted with `setPersistentMessage`.
     pub persistent: bool,
+}
+
+impl Message {
+    /// Whether it is a warning (`kOfxMessageWarning`): the plugin went on, with something to
+    /// say.
+    pub fn is_warning(&self) -> bool {
+        self.kind == cstr(ofx::kOfxMessageWarning)
+    }
 }
 
 /// Messages and violations of one bundle.

@@ -1,5 +1,6 @@
-//! How far a render is from the reference: PSNR of the colour, the largest alpha error and
-//! the largest relative depth error where the surface is solid.
+//! How far a render is from the reference: PSNR of the colour, the largest alpha and
+//! premultiplied colour errors (what a quality preset's error target bounds) and the largest
+//! relative depth error where the surface is solid.
 //!
 //! ```
 //! use nerfx::image::{Plane, Planes};
@@ -74,6 +75,15 @@ pub fn max_abs_error(a: &Plane, b: &Plane) -> f64 {
     worst
 }
 
+/// The larger of `a` and `b`, NaN if either is (a NaN error fails every threshold).
+pub fn nan_max(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.max(b)
+    }
+}
+
 /// The largest relative camera-Z error `|z_test − z_ref| / z_ref` over the pixels where
 /// the reference alpha is at least [`DEPTH_ALPHA_THRESHOLD`] (see there for why); 0 when
 /// there are none, `+∞` where the test has no depth but the reference does. NaN when a
@@ -111,6 +121,8 @@ pub struct ErrorReport {
     pub psnr: f64,
     /// [`max_abs_error`] of the alpha planes.
     pub max_alpha_error: f64,
+    /// The largest [`max_abs_error`] of the three premultiplied colour planes.
+    pub max_color_error: f64,
     /// [`depth_error`]: the largest relative camera-Z error where the reference is solid.
     pub max_depth_rel_error: f64,
 }
@@ -123,9 +135,18 @@ impl ErrorReport {
             (Some(a), Some(b)) => max_abs_error(a, b),
             _ => f64::NAN,
         };
+        let max_color_error = match (&reference.rgb, &test.rgb) {
+            (Some(a), Some(b)) => a
+                .iter()
+                .zip(b)
+                .map(|(a, b)| max_abs_error(a, b))
+                .fold(0.0, nan_max),
+            _ => f64::NAN,
+        };
         ErrorReport {
             psnr: psnr(reference, test),
             max_alpha_error,
+            max_color_error,
             max_depth_rel_error: depth_error(reference, test),
         }
     }
@@ -135,9 +156,11 @@ impl fmt::Display for ErrorReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
-            "PSNR {:.2} dB, max alpha error {:.2e}, max depth error {:.3} %",
+            "PSNR {:.2} dB, max alpha error {:.2e}, max colour error {:.2e}, max depth error \
+             {:.3} %",
             self.psnr,
             self.max_alpha_error,
+            self.max_color_error,
             100.0 * self.max_depth_rel_error
         )
     }
@@ -219,5 +242,23 @@ mod tests {
         assert!(e.max_depth_rel_error.is_nan() && e.max_alpha_error == 0.25);
         let small = planes(0.5, &[1.0], &[1.0]);
         assert!(ErrorReport::compare(&r, &small).psnr.is_nan());
+    }
+
+    #[test]
+    fn colour_error_is_the_worst_channel_of_the_worst_pixel() {
+        let r = planes(0.5, &[1.0, 0.5], &[1.0, 2.0]);
+        let mut t = planes(0.5, &[1.0, 0.5], &[1.0, 2.0]);
+        assert_eq!(ErrorReport::compare(&r, &t).max_color_error, 0.0);
+        if let Some(rgb) = &mut t.rgb {
+            rgb[0].data[1] = 0.25;
+            rgb[2].data[0] = 0.125;
+        }
+        assert_eq!(ErrorReport::compare(&r, &t).max_color_error, 0.25);
+        if let Some(rgb) = &mut t.rgb {
+            rgb[1].data[0] = f32::NAN;
+        }
+        assert!(ErrorReport::compare(&r, &t).max_color_error.is_nan());
+        t.rgb = None;
+        assert!(ErrorReport::compare(&r, &t).max_color_error.is_nan());
     }
 }

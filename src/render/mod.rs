@@ -132,20 +132,23 @@ pub struct RenderStats {
 }
 
 impl RenderStats {
-    /// What a user should hear about this render, if anything: rays that stopped at their
-    /// sample budget and density samples a field answered with NaN or an infinity.
+    /// What a user should hear about this render, if anything, and what to do about it: rays
+    /// that stopped at their sample budget (a finer preset has a larger one) and density
+    /// samples a field answered with NaN or an infinity (the field file holds weights that
+    /// overflow, or a broken training).
     pub fn warning(&self) -> Option<String> {
         let mut parts = Vec::new();
         if self.budget_limited_rays > 0 {
             parts.push(format!(
                 "{} of {} pixels stopped at the preset's sample budget and may miss its \
-                 error target",
+                 error target (a higher quality preset gives rays a larger budget)",
                 self.budget_limited_rays, self.pixels
             ));
         }
         if self.invalid_samples > 0 {
             parts.push(format!(
-                "{} density samples were NaN or infinite and were taken as empty",
+                "{} density samples were NaN or infinite and were taken as empty (check the \
+                 field file: its network overflows there)",
                 self.invalid_samples
             ));
         }
@@ -285,4 +288,40 @@ fn assemble(
         }
     }
     planes
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_warning_says_how_many_and_what_to_do_and_a_clean_render_has_none() {
+        let clean = RenderStats {
+            pixels: 100,
+            density_samples: 4000,
+            ..RenderStats::default()
+        };
+        assert_eq!(clean.warning(), None);
+        let budget = RenderStats {
+            budget_limited_rays: 7,
+            ..clean
+        };
+        let w = budget.warning().expect("a warning");
+        assert!(
+            w.contains("7 of 100 pixels") && w.contains("higher quality preset"),
+            "{w}"
+        );
+        assert!(!w.contains("NaN"), "{w}");
+        let both = RenderStats {
+            invalid_samples: 12,
+            ..budget
+        };
+        let w = both.warning().expect("a warning");
+        assert!(
+            w.contains("7 of 100 pixels")
+                && w.contains("12 density samples were NaN or infinite")
+                && w.contains("check the field file"),
+            "{w}"
+        );
+    }
 }

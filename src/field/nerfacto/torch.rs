@@ -110,6 +110,79 @@ impl TorchHashGrid {
         }
     }
 
+    /// Whether [`Self::encode8_avx2`] applies: two features per level, gather offsets that
+    /// fit `i32`, and a CPU with AVX2.
+    #[cfg(target_arch = "x86_64")]
+    pub(super) fn has_encode8_avx2(&self) -> bool {
+        self.kernel() == Kernel::Avx2
+    }
+
+    /// The encoding of eight unit-cube points (`u`: their x, y and z lanes) feature-major:
+    /// `out[2l + f]` is feature `f` of level `l`, lane `k` point `k`; the same operations in
+    /// the same order as [`Self::encode_features`] (so the same bits). Only where
+    /// [`Self::has_encode8_avx2`]; `out` holds `2L` vectors.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub(super) fn encode8_avx2(
+        &self,
+        u: [std::arch::x86_64::__m256; 3],
+        out: &mut [std::arch::x86_64::__m256],
+    ) {
+        use std::arch::x86_64::*;
+        let rows = self.table_size as usize;
+        let mask = _mm256_set1_epi32((self.table_size - 1) as i32);
+        let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
+        let primes = [1u32, 2_654_435_761, 805_459_861].map(|p| _mm256_set1_epi32(p as i32));
+        // A 64-bit gather fetches a row's two features for four points; gathering points
+        // (0, 1, 4, 5) and (2, 3, 6, 7) makes the two shuffles that separate the features
+        // leave the points in order.
+        let order = _mm256_setr_epi32(0, 1, 4, 5, 2, 3, 6, 7);
+        let levels = self.scales.iter().zip(self.table.chunks_exact(rows * 2));
+        for ((&s, table), features) in levels.zip(out.chunks_exact_mut(2)) {
+            let scale = _mm256_set1_ps(s);
+            let mut h = [[_mm256_setzero_si256(); 2]; 3];
+            let mut w = [[zero; 2]; 3];
+            for a in 0..3 {
+                let p = _mm256_mul_ps(u[a], scale);
+                let lo = _mm256_cvttps_epi32(p);
+                let frac = _mm256_sub_ps(p, _mm256_cvtepi32_ps(lo));
+                // `hi = lo + (frac > 0)`: the comparison's mask is −1 where true.
+                let up = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_GT_OQ>(frac, zero));
+                let hi = _mm256_sub_epi32(lo, up);
+                h[a] = [lo, hi]
+                    .map(|k| _mm256_permutevar8x32_epi32(_mm256_mullo_epi32(k, primes[a]), order));
+                w[a] = [_mm256_sub_ps(one, frac), frac];
+            }
+            let mut acc = [zero; 2];
+            for corner in 0..8 {
+                let (a, b, c) = (corner & 1, corner >> 1 & 1, corner >> 2);
+                let weight = _mm256_mul_ps(_mm256_mul_ps(w[0][a], w[1][b]), w[2][c]);
+                let hash = _mm256_xor_si256(_mm256_xor_si256(h[0][a], h[1][b]), h[2][c]);
+                let row = _mm256_and_si256(hash, mask);
+                // SAFETY: every `row < rows`, and the level's table has `2·rows` values.
+                let [first, second] = [
+                    _mm256_castsi256_si128(row),
+                    _mm256_extracti128_si256::<1>(row),
+                ]
+                .map(|rows| unsafe {
+                    _mm256_castsi256_ps(_mm256_i32gather_epi64::<8>(
+                        table.as_ptr().cast::<i64>(),
+                        rows,
+                    ))
+                });
+                let pairs = [
+                    _mm256_shuffle_ps::<0b10_00_10_00>(first, second),
+                    _mm256_shuffle_ps::<0b11_01_11_01>(first, second),
+                ];
+                for (sum, v) in acc.iter_mut().zip(pairs) {
+                    *sum = _mm256_add_ps(*sum, _mm256_mul_ps(weight, v));
+                }
+            }
+            features.copy_from_slice(&acc);
+        }
+    }
+
     /// [`Self::encode_features`] for two features, eight points per step with the same
     /// operations in the same order (so the same bits): the corners' hashes and weights as
     /// vectors, the rows gathered. The last `len mod 8` points go through the plain loop.

@@ -149,6 +149,9 @@ impl DensityField {
                 format!("{} outputs; a density field has 1", head.config().n_outputs),
             ));
         }
+        // The fused kernel is x86-64's only.
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = layers;
         #[cfg(target_arch = "x86_64")]
         let fused = match (&grid, &layers) {
             (Grid::Torch(g), Some(layers)) => FusedDensity::new(g, layers),

@@ -244,14 +244,7 @@ impl Mlp {
         for (start, ys) in (0..n).step_by(B).zip(outputs.chunks_mut(B * no)) {
             let m = (n - start).min(B);
             // Transpose the block's inputs to feature-major.
-            for (k, row) in inputs[start * ni..(start + m) * ni]
-                .chunks_exact(ni)
-                .enumerate()
-            {
-                for (i, v) in row.iter().enumerate() {
-                    x[i * B + k] = *v;
-                }
-            }
+            transpose::<FMA, B>(&inputs[start * ni..(start + m) * ni], ni, &mut x, B, m, ni);
             for i in 0..ni {
                 x[i * B + m..(i + 1) * B].fill(0.0);
             }
@@ -266,11 +259,48 @@ impl Mlp {
                     std::mem::swap(&mut a, &mut b);
                 }
             }
-            for (k, y) in ys.chunks_exact_mut(no).enumerate() {
-                for (o, v) in y.iter_mut().enumerate() {
-                    *v = a[o * B + k];
-                }
+            transpose::<FMA, B>(&a, B, ys, no, no, m);
+        }
+    }
+}
+
+/// `dst[c·dst_stride + r] = src[r·src_stride + c]` for `r < rows`, `c < cols`: a block's rows
+/// of samples to feature-major rows and back. With `FMA` and `B = 16` (the AVX2 kernel's
+/// blocks) whole 8×8 tiles move through vector shuffles, the rest value by value; either
+/// way the values are copied, never changed.
+#[inline(always)]
+fn transpose<const FMA: bool, const B: usize>(
+    src: &[f32],
+    src_stride: usize,
+    dst: &mut [f32],
+    dst_stride: usize,
+    rows: usize,
+    cols: usize,
+) {
+    let (mut r0, mut c0) = (0, 0);
+    #[cfg(target_arch = "x86_64")]
+    if FMA && B == 16 {
+        (r0, c0) = (rows / 8 * 8, cols / 8 * 8);
+        for r in (0..r0).step_by(8) {
+            for c in (0..c0).step_by(8) {
+                // SAFETY: this runs only from `Mlp::forward_avx2`, which `Kernel::detect`
+                // picks where the CPU has AVX2.
+                unsafe {
+                    simd::transpose8x8(
+                        &src[r * src_stride + c..],
+                        src_stride,
+                        &mut dst[c * dst_stride + r..],
+                        dst_stride,
+                    )
+                };
             }
+        }
+    }
+    // What the tiles left: the columns past `c0` of the tiled rows, then the rows past `r0`.
+    for r in 0..rows {
+        let from = if r < r0 { c0 } else { 0 };
+        for c in from..cols {
+            dst[c * dst_stride + r] = src[r * src_stride + c];
         }
     }
 }
@@ -324,6 +354,50 @@ fn layer<const FMA: bool, const B: usize, const T: usize>(
 mod simd {
     use super::Layer;
     use std::arch::x86_64::*;
+
+    /// Row `r < 8` of `src` (8 values from `r·src_stride`) to column `r` of `dst` (value `c`
+    /// at `c·dst_stride + r`).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn transpose8x8(src: &[f32], src_stride: usize, dst: &mut [f32], dst_stride: usize) {
+        let row = |r: usize| {
+            let s = &src[r * src_stride..][..8];
+            // SAFETY: `s` holds 8 values.
+            unsafe { _mm256_loadu_ps(s.as_ptr()) }
+        };
+        let r = [0, 1, 2, 3, 4, 5, 6, 7].map(row);
+        // Pairs of rows interleaved, then pairs of pairs, then the 128-bit halves swapped.
+        let t = [
+            _mm256_unpacklo_ps(r[0], r[1]),
+            _mm256_unpackhi_ps(r[0], r[1]),
+            _mm256_unpacklo_ps(r[2], r[3]),
+            _mm256_unpackhi_ps(r[2], r[3]),
+            _mm256_unpacklo_ps(r[4], r[5]),
+            _mm256_unpackhi_ps(r[4], r[5]),
+            _mm256_unpacklo_ps(r[6], r[7]),
+            _mm256_unpackhi_ps(r[6], r[7]),
+        ];
+        let u = [
+            _mm256_shuffle_ps::<0x44>(t[0], t[2]),
+            _mm256_shuffle_ps::<0xee>(t[0], t[2]),
+            _mm256_shuffle_ps::<0x44>(t[1], t[3]),
+            _mm256_shuffle_ps::<0xee>(t[1], t[3]),
+            _mm256_shuffle_ps::<0x44>(t[4], t[6]),
+            _mm256_shuffle_ps::<0xee>(t[4], t[6]),
+            _mm256_shuffle_ps::<0x44>(t[5], t[7]),
+            _mm256_shuffle_ps::<0xee>(t[5], t[7]),
+        ];
+        for c in 0..8 {
+            let v = if c < 4 {
+                _mm256_permute2f128_ps::<0x20>(u[c], u[c + 4])
+            } else {
+                _mm256_permute2f128_ps::<0x31>(u[c - 4], u[c])
+            };
+            let d = &mut dst[c * dst_stride..][..8];
+            // SAFETY: `d` holds 8 values.
+            unsafe { _mm256_storeu_ps(d.as_mut_ptr(), v) };
+        }
+    }
 
     /// `T` outputs from `o0` for 16 samples (two vectors of 8); `x` is `[n_in][16]`, `y` is
     /// `[T][16]`.
@@ -492,6 +566,34 @@ mod tests {
                 let mut avx2 = vec![f32::NAN; n * no];
                 mlp.forward_with(Kernel::Avx2, &x, &mut avx2);
                 assert_close(&avx2, &plain, scale);
+            }
+        }
+    }
+
+    #[test]
+    fn tiled_transposes_move_every_value_where_the_plain_loop_does() {
+        // Blocks of 16 samples and of fewer, feature counts with and without a partial tile.
+        for (rows, cols) in [(16, 32), (13, 32), (16, 3), (7, 16), (16, 63), (8, 8)] {
+            let src = seeded(rows * cols, rows as u64);
+            let mut want = vec![f32::NAN; cols * 16];
+            for r in 0..rows {
+                for c in 0..cols {
+                    want[c * 16 + r] = src[r * cols + c];
+                }
+            }
+            let mut plain = vec![f32::NAN; cols * 16];
+            transpose::<false, 16>(&src, cols, &mut plain, 16, rows, cols);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&plain), bits(&want), "plain {rows}x{cols}");
+            #[cfg(target_arch = "x86_64")]
+            if Kernel::detect() == Kernel::Avx2 {
+                let mut tiled = vec![f32::NAN; cols * 16];
+                transpose::<true, 16>(&src, cols, &mut tiled, 16, rows, cols);
+                assert_eq!(bits(&tiled), bits(&want), "tiled {rows}x{cols}");
+                // And back: feature-major rows to sample rows.
+                let mut back = vec![f32::NAN; rows * cols];
+                transpose::<true, 16>(&tiled, 16, &mut back, cols, cols, rows);
+                assert_eq!(bits(&back), bits(&src), "back {rows}x{cols}");
             }
         }
     }

@@ -492,12 +492,14 @@ mod simd {
     #[inline]
     #[target_feature(enable = "avx2")]
     pub(super) fn transpose8x8(src: &[f32], src_stride: usize, dst: &mut [f32], dst_stride: usize) {
-        let row = |r: usize| {
-            let s = &src[r * src_stride..][..8];
+        // A loop, not a closure: a closure would not inherit the target features, and its
+        // loads would become calls.
+        let mut r = [_mm256_setzero_ps(); 8];
+        for (k, v) in r.iter_mut().enumerate() {
+            let s = &src[k * src_stride..][..8];
             // SAFETY: `s` holds 8 values.
-            unsafe { _mm256_loadu_ps(s.as_ptr()) }
-        };
-        let r = [0, 1, 2, 3, 4, 5, 6, 7].map(row);
+            *v = unsafe { _mm256_loadu_ps(s.as_ptr()) };
+        }
         // Pairs of rows interleaved, then pairs of pairs, then the 128-bit halves swapped.
         let t = [
             _mm256_unpacklo_ps(r[0], r[1]),

@@ -397,8 +397,10 @@ fn prefetch<T>(table: &[T], nf: usize, index: &[u32]) {
     #[cfg(target_arch = "x86_64")]
     for &i in index {
         use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        let p = table[i as usize * nf..].as_ptr();
-        // SAFETY: a prefetch is a hint that never faults; `p` points into `table`.
+        // No bounds check (two instructions of a prefetch's six): the address is only a
+        // hint, and the indices are the table's anyway.
+        let p = table.as_ptr().wrapping_add(i as usize * nf);
+        // SAFETY: a prefetch is a hint that never faults, whatever the address.
         unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) };
     }
     #[cfg(not(target_arch = "x86_64"))]

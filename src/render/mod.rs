@@ -11,6 +11,7 @@ mod naive;
 mod ngp;
 mod proposal;
 mod quality;
+mod runs;
 mod splats;
 
 pub(crate) use splats::splat_layer;

@@ -73,6 +73,34 @@ pub struct Instance {
     world_from_field: DMat4,
     field_from_world: DMat4,
     crop: Option<CropBox>,
+    /// The field's bounds, in f64, and the interval its near and far distances allow
+    /// (`[0, ∞)` for a bounded field): fixed for the field, so taken once here rather than
+    /// asked of it on every ray.
+    clip: Clip,
+}
+
+/// What [`Instance::clip_local`] needs of the field, taken once per instance.
+#[derive(Clone, Copy, Debug)]
+struct Clip {
+    min: DVec3,
+    max: DVec3,
+    near: f64,
+    far: f64,
+}
+
+impl Clip {
+    fn of(field: &dyn Field) -> Self {
+        let b = field.bounds();
+        let (near, far) = field.unbounded().map_or((0.0f64, f64::INFINITY), |u| {
+            (f64::from(u.near).max(0.0), f64::from(u.far))
+        });
+        Clip {
+            min: b.min.as_dvec3(),
+            max: b.max.as_dvec3(),
+            near,
+            far,
+        }
+    }
 }
 
 /// A world ray seen from one instance: the part of it inside the field's bounds and crop.
@@ -147,8 +175,10 @@ impl Instance {
     ) -> Result<Self> {
         let name = name.into();
         let field_from_world = check_placement(&name, world_from_field, crop.as_ref())?;
+        let clip = Clip::of(field.field());
         Ok(Instance {
             name,
+            clip,
             field,
             world_from_field,
             field_from_world,
@@ -185,22 +215,22 @@ impl Instance {
     /// the field's bounds and the crop box, in f64; for an unbounded field, also between its
     /// near and far distances from `o`.
     fn clip_local(&self, o: DVec3, d: DVec3) -> Option<(f64, f64)> {
-        let b = self.field().bounds();
-        let (mut lo, mut hi) = self
-            .field()
-            .unbounded()
-            .map_or((0.0f64, f64::INFINITY), |u| {
-                (f64::from(u.near).max(0.0), f64::from(u.far))
-            });
+        let Clip {
+            min,
+            max,
+            near: mut lo,
+            far: mut hi,
+        } = self.clip;
         for axis in 0..3 {
-            let (mn, mx) = (b.min[axis] as f64, b.max[axis] as f64);
+            let (mn, mx) = (min[axis], max[axis]);
             if d[axis] == 0.0 {
                 if o[axis] < mn || o[axis] > mx {
                     return None;
                 }
                 continue;
             }
-            let (a, c) = ((mn - o[axis]) / d[axis], (mx - o[axis]) / d[axis]);
+            let inv = 1.0 / d[axis];
+            let (a, c) = ((mn - o[axis]) * inv, (mx - o[axis]) * inv);
             lo = lo.max(a.min(c));
             hi = hi.min(a.max(c));
         }
@@ -218,10 +248,13 @@ impl Instance {
     pub fn local_ray(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<LocalRay> {
         let o = self.field_from_world.transform_point3(ray.origin);
         let d = self.field_from_world.transform_vector3(ray.dir);
+        // Reciprocals, not divisions, per ray: f64 divisions were most of this function's
+        // cost (results move by an ulp).
         let k = d.length();
-        let d = d / k;
+        let inv_k = 1.0 / k;
+        let d = d * inv_k;
         let (u0, u1) = self.clip_local(o, d)?;
-        let (t_near, t_far) = ((u0 / k).max(t_min), (u1 / k).min(t_max));
+        let (t_near, t_far) = ((u0 * inv_k).max(t_min), (u1 * inv_k).min(t_max));
         if t_near.is_nan() || t_far.is_nan() || t_near >= t_far {
             return None;
         }

@@ -20,6 +20,8 @@ pub use composite::{crossing_depth, opacity, srgb_composite_to_linear, Pieces};
 pub use naive::render_naive;
 pub use quality::{MarchParams, Quality};
 
+use std::sync::{Mutex, PoisonError};
+
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -185,9 +187,10 @@ pub fn render(
 /// [`render`], calling `on_tile(pixels)` as each tile finishes (from any thread) and
 /// returning what the render did.
 ///
-/// The frame's planes are allocated once and filled in bands of one tile row, each band's
-/// tiles marched in turn by one thread and written straight into its rows: a frame's
-/// pixels are held once, not once as tiles and again as planes.
+/// The frame's planes are allocated once, cut into bands of one tile row, and every tile
+/// is written straight into its band as soon as it is marched: a frame's pixels are held
+/// once, not once as tiles and again as planes, and the tiles still run in parallel one by
+/// one (a host's render window may be a single band high).
 pub fn render_with_progress(
     scene: &Scene,
     camera: &Camera,
@@ -202,36 +205,58 @@ pub fn render_with_progress(
     let decode =
         scene.composite_space() == ColorSpace::Srgb && settings.color == ColorOutput::Linear;
     let mut planes = empty_planes(window, &settings.outputs);
-    let stats = bands(&mut planes, size)
+    let bands: Vec<Mutex<Band>> = bands(&mut planes, size)
+        .into_iter()
+        .map(Mutex::new)
+        .collect();
+    let stats = tiles(window, size)
         .into_par_iter()
         .map_init(
             || (Scratch::default(), Vec::new()),
-            |(scratch, out), mut band| {
-                let y0 = window.y0 + band.row;
-                let y1 = (y0 + size).min(window.y1);
-                let mut stats = RenderStats::default();
-                for x in (window.x0..window.x1).step_by(size as usize) {
-                    let tile = Window::new(x, y0, (x + size).min(window.x1), y1);
-                    out.clear();
-                    stats = stats
-                        + march_tile(
-                            scene,
-                            &plans,
-                            splats.as_ref(),
-                            camera,
-                            tile,
-                            settings,
-                            scratch,
-                            out,
-                        );
-                    band.write(x - window.x0, tile.width(), out, decode);
-                    on_tile(tile.area() as u64);
-                }
+            |(scratch, out), tile| {
+                out.clear();
+                let stats = march_tile(
+                    scene,
+                    &plans,
+                    splats.as_ref(),
+                    camera,
+                    tile,
+                    settings,
+                    scratch,
+                    out,
+                );
+                let band = &bands[((tile.y0 - window.y0) / size) as usize];
+                // Writing a tile cannot panic, so the lock is never poisoned; if it were,
+                // the rows are still whole.
+                band.lock().unwrap_or_else(PoisonError::into_inner).write(
+                    tile.x0 - window.x0,
+                    tile.width(),
+                    out,
+                    decode,
+                );
+                on_tile(tile.area() as u64);
                 stats
             },
         )
         .reduce(RenderStats::default, |a, b| a + b);
+    drop(bands);
     Ok((planes, stats))
+}
+
+/// `window` cut into tiles of `size` pixels, row by row.
+fn tiles(window: Window, size: u32) -> Vec<Window> {
+    let mut tiles = Vec::new();
+    for y in (window.y0..window.y1).step_by(size as usize) {
+        for x in (window.x0..window.x1).step_by(size as usize) {
+            tiles.push(Window::new(
+                x,
+                y,
+                (x + size).min(window.x1),
+                (y + size).min(window.y1),
+            ));
+        }
+    }
+    tiles
 }
 
 /// The requested planes of `window`, zeroed.
@@ -251,7 +276,7 @@ fn empty_planes(window: Window, outputs: &Outputs) -> Planes {
     }
 }
 
-/// `rows` rows of every present plane, starting at row `row` of the window: R, G, B,
+/// One band's rows of every present plane, starting at row `row` of the window: R, G, B,
 /// alpha, depth Z, ray depth and median depth, in that order.
 struct Band<'a> {
     row: u32,

@@ -208,8 +208,10 @@ pub trait Field: Send + Sync {
     /// parts: inside a span the density is continuous and has no bump two samples could
     /// straddle, so the marcher starts and ends its runs of samples at span ends instead of
     /// searching for edges, and searches for no thin sheet or peak between samples. Outside
-    /// every span the density must be exactly zero. `false` (the default, `out` untouched): the field cannot say, and the
-    /// marcher finds its edges by sampling (trained fields).
+    /// every span the density must be exactly zero. `false` (the default, `out` untouched):
+    /// the field cannot say, and the marcher finds its edges by sampling (trained fields).
+    /// The answer must be the same for every ray: the marcher asks once per instance
+    /// whether to march it by spans or by its occupancy grid.
     fn spans(&self, _origin: Vec3, _dir: Vec3, _t0: f64, _t1: f64, _out: &mut Vec<Span>) -> bool {
         false
     }

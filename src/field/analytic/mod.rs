@@ -45,6 +45,11 @@ fn default_cutoff() -> f32 {
 /// 2³¹ turns a small blob into one billions of steps across.
 const MAX_CUTOFF: f32 = 64.0;
 
+/// The most primitives an analytic field gives exact spans for: each ray tests every
+/// primitive and sweeps the intervals it meets (quadratic in those), a cost that grows with
+/// the scene where the occupancy grid's walk does not.
+const MAX_SPAN_PRIMITIVES: usize = 64;
+
 /// The support of a primitive, in field space.
 ///
 /// JSON: `{"sphere": {"center": [x, y, z], "radius": r}}`,
@@ -362,8 +367,13 @@ impl Field for Analytic {
     }
 
     /// Each primitive's interval in closed form, cut where any begins or ends; a span is
-    /// constant unless a Gaussian is in it (see `spans.rs`).
+    /// constant unless a Gaussian is in it (see `spans.rs`). A field of more than
+    /// [`MAX_SPAN_PRIMITIVES`] primitives says nothing (the same for every ray), and the
+    /// marcher walks its occupancy grid instead.
     fn spans(&self, origin: Vec3, dir: Vec3, t0: f64, t1: f64, out: &mut Vec<Span>) -> bool {
+        if self.active().nth(MAX_SPAN_PRIMITIVES).is_some() {
+            return false;
+        }
         spans::spans(self.active(), origin, dir, t0, t1, out);
         true
     }

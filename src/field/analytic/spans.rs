@@ -7,7 +7,8 @@
 //! consecutive interval ends: inside each piece the same primitives are present and every
 //! Gaussian only rises or only falls, so the density has no jump there and no peak but the
 //! slight one two overlapping Gaussians may make between their own peaks (which the
-//! marcher's curvature test sees), and it is constant where none of them is a Gaussian.
+//! marcher's curvature test sees between a run's inner samples, but not on its first or
+//! last step), and it is constant where none of them is a Gaussian.
 
 use glam::{DVec3, Vec3};
 
@@ -170,6 +171,29 @@ mod tests {
 
     fn close(a: f64, b: f64) -> bool {
         (a - b).abs() < 1e-9
+    }
+
+    #[test]
+    fn a_field_of_many_primitives_gives_no_spans_for_any_ray() {
+        let puffs = |n: usize| Analytic {
+            primitives: (0..n)
+                .map(|i| {
+                    prim(Shape::Gaussian {
+                        center: Vec3::new(i as f32 * 0.1, 0.0, 0.0),
+                        sigma: 0.05,
+                        cutoff: 3.0,
+                    })
+                })
+                .collect(),
+        };
+        let limit = super::super::MAX_SPAN_PRIMITIVES;
+        let (o, d) = (Vec3::new(-1.0, 0.0, 0.0), Vec3::X);
+        assert!(!spans_of(&puffs(limit), o, d, 0.0, 100.0).is_empty());
+        for (o, d) in [(o, d), (Vec3::new(0.0, 5.0, 0.0), Vec3::Z)] {
+            let mut out = Vec::new();
+            assert!(!puffs(limit + 1).spans(o, d, 0.0, 100.0, &mut out));
+            assert!(out.is_empty());
+        }
     }
 
     #[test]

@@ -40,6 +40,11 @@ const MAX_BISECTIONS: u32 = 52;
 /// on the benchmark fog's worst Final pixel, together 1.2× the target at a share of 1).
 const GAP_SHARE: f64 = 4.0;
 
+/// Points probed inside one step at most ([`hides_gap`]): each is an occupancy query, and a
+/// dense field would ask for thousands per step (the target over `δ·T·σ`). Beyond this a
+/// step's gaps are found down to a ninth of its length, not to the target's length.
+const GAP_PROBES: f64 = 8.0;
+
 /// Bisections below the base step at most in the search for what a step empty at both ends
 /// may hide ([`hides_content`]), whatever the preset's depth: a ray running along an
 /// occupied cell's face keeps touching it, and each level may double its samples there.
@@ -1048,7 +1053,8 @@ fn hides_content(
 /// across the staircase rim of a masked fog would integrate the gap as fog. Points are
 /// probed at most `g = target / (GAP_SHARE·T·σ)` apart (`σ` the larger end's density), so a
 /// gap the probes miss is shorter than `g` and changes the pixel by less than a
-/// `GAP_SHARE`th of the target; a step no longer than `g` is not probed.
+/// `GAP_SHARE`th of the target; a step no longer than `g` is not probed, and none gets more
+/// than [`GAP_PROBES`] probes.
 fn hides_gap(
     scene: &Scene,
     plans: &[InstancePlan],
@@ -1069,7 +1075,7 @@ fn hides_gap(
         if sa <= 0.0 || sb <= 0.0 || hidden <= tolerance {
             return false;
         }
-        let probes = (hidden / tolerance).ceil().min(f64::from(u16::MAX));
+        let probes = (hidden / tolerance).ceil().min(GAP_PROBES);
         let field = scene.instances[i].field();
         (1..probes as u32).any(|j| {
             let t = a.t + length * f64::from(j) / probes;

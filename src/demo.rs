@@ -20,7 +20,7 @@ use crate::camera::{
 };
 use crate::error::{Error, Result};
 use crate::field::{Analytic, Primitive, ShColor, Shape};
-use crate::graph::{evaluate, render_direct, Graph};
+use crate::graph::{evaluate, Graph};
 use crate::image::Planes;
 use crate::render::Quality;
 use crate::scene::{FieldSource, InstanceDesc, Scene, SceneDesc};
@@ -242,6 +242,9 @@ pub struct Comp {
     pub layers: Vec<(String, Planes)>,
     /// The graph file.
     pub graph: PathBuf,
+    /// `(node name, text)` for each node whose render the user should hear about (rays at
+    /// their sample budget), in the order they rendered.
+    pub warnings: Vec<(String, String)>,
 }
 
 /// Renders the demo's composite at its first frame: writes the demo's files into `dir` (the
@@ -257,12 +260,19 @@ pub fn render_comp(dir: &Path, width: u32, height: u32, quality: Quality) -> Res
             node.values.set_choice("quality", quality.name())?;
         }
     }
+    let mut warnings = Vec::new();
     let mut images = evaluate(
         &graph,
         FIRST_FRAME as f64,
         1.0,
         false,
-        &mut |node, request| render_direct(node, request),
+        &mut |node, request| {
+            let rendered = node.node.render_with_stats(&node.values, request)?;
+            if let Some(warning) = rendered.stats.warning() {
+                warnings.push((node.name.clone(), warning));
+            }
+            Ok(rendered.planes)
+        },
         &|_| {},
     )?;
     let mut take = |node: &str| {
@@ -280,6 +290,7 @@ pub fn render_comp(dir: &Path, width: u32, height: u32, quality: Quality) -> Res
         image,
         layers,
         graph: path,
+        warnings,
     })
 }
 

@@ -7,12 +7,18 @@
 
 mod common;
 
+use std::sync::Arc;
+
 use common::*;
-use glam::{DMat4, DVec3};
+use glam::{DMat4, DVec3, Vec3};
+use nerfx::bench::scenes::{build, SceneKind};
 use nerfx::camera::Camera;
+use nerfx::field::{Aabb, Analytic, Field};
 use nerfx::image::{Plane, Planes, Window};
-use nerfx::render::{render, render_naive, MarchParams, Outputs, Quality, RenderSettings};
-use nerfx::scene::Scene;
+use nerfx::render::{
+    render, render_naive, render_with_progress, MarchParams, Outputs, Quality, RenderSettings,
+};
+use nerfx::scene::{FieldHandle, Instance, Scene};
 
 const W: u32 = 64;
 const H: u32 = 48;
@@ -85,6 +91,134 @@ fn demo_scene_final_matches_the_reference() {
     let got = render_full(&scene, &camera, Quality::Final.params());
     assert_sane("demo, Final", &got);
     assert_close("demo, Final", &got, &want, FINAL);
+}
+
+/// An analytic field that does not give its spans, as a trained field does not: the marcher
+/// finds its edges by bisection and its thin sheets by density bounds.
+struct Searched(Analytic);
+
+impl Field for Searched {
+    fn bounds(&self) -> Aabb {
+        self.0.bounds()
+    }
+    fn density(&self, points: &[Vec3], sigma: &mut [f32]) {
+        self.0.density(points, sigma)
+    }
+    fn radiance(&self, points: &[Vec3], dirs: &[Vec3], rgb: &mut [Vec3]) {
+        self.0.radiance(points, dirs, rgb)
+    }
+    fn feature_size(&self) -> f32 {
+        self.0.feature_size()
+    }
+    fn density_bounds(&self, regions: &[Aabb], bounds: &mut [f32]) -> bool {
+        self.0.density_bounds(regions, bounds)
+    }
+    fn may_be_occupied(&self, region: &Aabb) -> bool {
+        self.0.may_be_occupied(region)
+    }
+}
+
+/// The same scene with every instance's field hidden behind [`Searched`].
+fn searched(scene: &Scene) -> Scene {
+    let instances = scene
+        .instances
+        .iter()
+        .map(|inst| {
+            let analytic = inst.handle().as_analytic().expect("an analytic scene");
+            let field = FieldHandle::new(Arc::new(Searched(analytic.clone())));
+            Instance::new(
+                inst.name.clone(),
+                field,
+                inst.world_from_field(),
+                inst.crop().copied(),
+            )
+            .expect("the same placement")
+        })
+        .collect();
+    Scene::new(instances)
+}
+
+/// Fields without spans (trained fields) keep the marcher's edge search: the same random
+/// scenes with their spans hidden still match the exact reference at Final.
+#[test]
+fn final_without_spans_matches_the_reference_on_random_scenes() {
+    for seed in 0..SEEDS / 2 {
+        let mut rng = SplitMix64::new(seed);
+        let scene = random_scene(&mut rng);
+        let camera = random_camera(&mut rng, W, H);
+        let want = reference_full(&scene, &camera);
+        let got = render_full(&searched(&scene), &camera, Quality::Final.params());
+        let what = format!("Final without spans, random scene {seed}");
+        assert_sane(&what, &got);
+        assert_close(&what, &got, &want, FINAL);
+    }
+}
+
+/// Every preset keeps its error target — the largest alpha and premultiplied colour error of
+/// any pixel at most [`MarchParams::error_target`] — on the benchmark's demo and on its
+/// sheets 1e-3 to 1e-5 units thick in haze, far thinner than any step: spans give their
+/// faces exactly, where sampling finds them only if a bisection lands inside.
+#[test]
+fn every_preset_keeps_its_error_target_on_the_demo_and_thin_sheets() {
+    let dir = std::env::temp_dir();
+    for kind in [SceneKind::Demo, SceneKind::Sheets] {
+        let bench = build(kind, 96, 54, &dir, None).expect("an analytic bench scene");
+        let want = reference_full(&bench.scene, &bench.camera);
+        for quality in Quality::ALL {
+            let params = quality.params();
+            let got = render_full(&bench.scene, &bench.camera, params);
+            let what = format!("{}, {quality:?}", kind.name());
+            assert_sane(&what, &got);
+            let target = f64::from(params.error_target);
+            let tol = Tol {
+                min_psnr: 0.0,
+                min_alpha_psnr: 0.0,
+                rgb: target,
+                alpha: target,
+                depth_rel: f64::INFINITY,
+            };
+            assert_close(&what, &got, &want, tol);
+        }
+    }
+}
+
+/// A box of constant density seen whole: its span is one piece, so every ray that crosses
+/// it takes one density sample and at most one colour sample (none where its weight is
+/// within the colour-skip budget), none elsewhere, and its alpha is the closed form
+/// `1 − e^{−k·L}` (chord length `L`) to rounding.
+#[test]
+fn a_constant_span_takes_one_sample() {
+    let scene = Scene::new(vec![instance(
+        "box",
+        vec![prim(cube([-1.0; 3], [1.0; 3]), 0.7, [0.9, 0.5, 0.2])],
+        DMat4::from_rotation_z(0.4),
+        None,
+    )]);
+    let camera = camera_at(DVec3::new(4.0, -5.0, 3.0), DVec3::ZERO, 48, 36, 35.0);
+    let want = reference_full(&scene, &camera);
+    let settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
+    let (got, stats) =
+        render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {})
+            .expect("render");
+    let crossing = want
+        .alpha
+        .as_ref()
+        .expect("alpha")
+        .data
+        .iter()
+        .filter(|&&a| a > 0.0)
+        .count() as u64;
+    assert!(crossing > 100, "the box must be in view");
+    assert_eq!(stats.density_samples, crossing);
+    assert!(stats.color_samples <= crossing && stats.color_samples > crossing / 2);
+    let tight = Tol {
+        min_psnr: 100.0,
+        min_alpha_psnr: 100.0,
+        rgb: 1e-5,
+        alpha: 1e-5,
+        depth_rel: 1e-5,
+    };
+    assert_close("one box", &got, &want, tight);
 }
 
 /// A seeded scene and camera that fill most of a 64×48 image.

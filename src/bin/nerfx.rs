@@ -209,6 +209,9 @@ fn run(cli: Cli) -> Result<()> {
             create_dir(&out)?;
             let started = Instant::now();
             let comp = demo::render_comp(&out, width, height, quality)?;
+            for (node, warning) in &comp.warnings {
+                eprintln!("nerfx: warning: demo node {node}: {warning}");
+            }
             let layers: Vec<(&str, &_)> =
                 comp.layers.iter().map(|(n, p)| (n.as_str(), p)).collect();
             write_exr_layers(&out.join("demo.exr"), &comp.image, &layers, 1.0)?;

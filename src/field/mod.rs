@@ -102,6 +102,19 @@ impl Unbounded {
     }
 }
 
+/// An interval of a field-space ray where a field's density is non-zero (see
+/// [`Field::spans`]): distances along the ray's unit direction, in field units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Span {
+    /// Where the ray enters the interval.
+    pub enter: f64,
+    /// Where it leaves it (> `enter`).
+    pub exit: f64,
+    /// Whether the density may change inside the interval; `false`: it is one constant
+    /// throughout, so one sample gives its integral exactly.
+    pub varies: bool,
+}
+
 /// A radiance field in its own frame ("field space").
 ///
 /// Queries are batched: the marcher gathers a tile's samples and asks once, so an
@@ -186,6 +199,18 @@ pub trait Field: Send + Sync {
     /// marcher uses them to find features thinner than a step between two samples (a dense
     /// sheet inside fog); a field without bounds gets no such search.
     fn density_bounds(&self, _regions: &[Aabb], _bounds: &mut [f32]) -> bool {
+        false
+    }
+
+    /// The exact intervals of the ray `origin + t·dir`, `t ∈ [t0, t1]` (`dir` a unit
+    /// vector), where the density may be non-zero, appended to `out` sorted and not
+    /// overlapping, and cut wherever the density may jump and at the peaks of its smooth
+    /// parts: inside a span the density is continuous and has no bump two samples could
+    /// straddle, so the marcher starts and ends its runs of samples at span ends instead of
+    /// searching for edges, and searches for no thin sheet or peak between samples. Outside
+    /// every span the density must be exactly zero. `false` (the default, `out` untouched): the field cannot say, and the
+    /// marcher finds its edges by sampling (trained fields).
+    fn spans(&self, _origin: Vec3, _dir: Vec3, _t0: f64, _t1: f64, _out: &mut Vec<Span>) -> bool {
         false
     }
 

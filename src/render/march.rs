@@ -1,14 +1,18 @@
-//! The per-tile marcher: estimator (occupancy segments, step policy, refinement) and
-//! integrator (pieces → planes), batched across a tile.
+//! The per-tile marcher: estimator (runs, step policy, refinement) and integrator (pieces →
+//! planes), batched across a tile.
 //!
 //! A tile's rays advance together in *chunks*. Each round, every live ray lays a chunk of
-//! sample positions ("nodes") along its occupied segments; the tile asks each field once for
-//! all of them; steps whose two ends disagree (a surface, a steep gradient), or between whose
-//! ends a field's density bound rises above both (a sheet thinner than a step), are bisected
-//! — again batched across the tile — until the step is resolved or the depth limit is hit. Between two nodes the density is taken as their mean (the trapezoid rule,
-//! exact for piecewise-constant fields once an edge is bracketed). The pieces are composited
-//! in order; only then is colour asked for, and only at nodes whose weight matters. A ray
-//! leaves the batch when its transmittance falls below the threshold or its segments end.
+//! sample positions ("nodes") along its runs (module `runs`: the exact spans of fields that
+//! give them, the occupied segments of the others); the tile asks each field once for all of
+//! them; steps whose two ends disagree (a surface, a steep gradient), or between whose ends a
+//! field's density bound rises above both (a sheet thinner than a step, a peak), are bisected
+//! — again batched across the tile — until the step is resolved or the depth limit is hit.
+//! A run whose ends are a span's has no edge or peak inside, so only its quadrature is
+//! judged; a run of constant density is one node and one piece. Between two nodes the
+//! density is taken as their mean (the trapezoid rule, exact for piecewise-constant fields
+//! once an edge is bracketed). The pieces are composited in order; only then is colour asked
+//! for, and only at nodes whose weight matters. A ray leaves the batch when its transmittance
+//! falls below the threshold or its runs end.
 
 use std::sync::Arc;
 
@@ -17,11 +21,12 @@ use glam::{DVec3, Vec3};
 use super::composite::{crossing_depth, Pieces};
 use super::ngp::{self, NgpFill};
 use super::proposal::{self, ProposalScratch};
+use super::runs::{instance_runs, merge, Run, RunKind, RunScratch};
 use super::splats::Splatting;
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
 use crate::field::{
-    linear_to_srgb, Aabb, ColorSpace, Field, Fragment, Occupancy, SplatPixel, Unbounded,
+    linear_to_srgb, Aabb, ColorSpace, Fragment, Occupancy, Span, SplatPixel, Unbounded,
     SPLAT_MIN_TRANSMITTANCE,
 };
 use crate::image::Window;
@@ -62,7 +67,9 @@ pub(super) struct PixelResult {
 
 /// Per instance, what the marcher needs that does not change per ray.
 pub(super) struct InstancePlan {
-    occupancy: Arc<Occupancy>,
+    /// The occupancy grid that finds the field's occupied segments; `None` for a field that
+    /// gives its [spans](crate::field::Field::spans) instead.
+    occupancy: Option<Arc<Occupancy>>,
     /// Base step in field units.
     base_step: f64,
     /// Floats of per-sample state the field passes from its density to its colour query,
@@ -97,12 +104,22 @@ impl InstancePlan {
             .map(|inst| {
                 let features = inst.field().feature_count();
                 feature_offset += features;
-                let occupancy = inst.handle().occupancy(params.occupancy_resolution);
+                let spans =
+                    inst.field()
+                        .spans(Vec3::ZERO, Vec3::X, 0.0, 0.0, &mut Vec::<Span>::new());
+                let occupancy =
+                    (!spans).then(|| inst.handle().occupancy(params.occupancy_resolution));
                 let bounded = inst
                     .field()
                     .density_bounds(&[inst.field().bounds()], &mut [0.0]);
-                let cell = occupancy.bounds().size().min_element() as f64
-                    / f64::from(occupancy.resolution().max(1));
+                // Without bounds, gaps may hide between samples: a field with spans has
+                // none unseen, one with an occupancy grid none finer than a cell.
+                let longest = match &occupancy {
+                    Some(o) if !bounded => {
+                        o.bounds().size().min_element() as f64 / f64::from(o.resolution().max(1))
+                    }
+                    _ => f64::INFINITY,
+                };
                 InstancePlan {
                     occupancy,
                     base_step: inst.field().feature_size() as f64
@@ -114,7 +131,7 @@ impl InstancePlan {
                         && inst.field().color_space() == ColorSpace::Linear,
                     unbounded: inst.field().unbounded(),
                     bounded,
-                    longest: if bounded { f64::INFINITY } else { cell },
+                    longest,
                     world_sphere: world_sphere(inst.field().bounds(), inst.world_from_field()),
                 }
             })
@@ -197,22 +214,47 @@ fn feature_stride(plans: &[InstancePlan]) -> usize {
 #[derive(Clone, Copy, Debug)]
 struct Node {
     t: f64,
+    /// Where the fields were sampled for this node: `t`, or just inside its run where `t`
+    /// is a span's end, or the middle of a constant run.
+    probe: f64,
     /// Total density per world unit.
     sigma: f64,
     /// Where this node's per-instance densities start in `Scratch::inst_sigma`.
     slot: u32,
-    /// No piece joins this node to the one before it (a segment starts here).
+    /// No piece joins this node to the one before it (a run starts here).
     starts_run: bool,
+    /// Its run's ends are the density's only edges and peaks ([`RunKind::Smooth`] and
+    /// [`RunKind::Constant`]): no edge, thin sheet or peak lies between its samples.
+    exact: bool,
+    /// > 0: the node stands for the whole constant run `[t, t + extent]`, one piece.
+    extent: f64,
     /// Colour weight gathered this round.
     weight: f64,
 }
 
-/// A node to be evaluated.
+/// A node to be evaluated (fields as in [`Node`]).
 #[derive(Clone, Copy, Debug)]
 struct Pending {
     ray: u32,
     t: f64,
+    probe: f64,
     starts_run: bool,
+    exact: bool,
+    extent: f64,
+}
+
+impl Pending {
+    /// A node between `a` and another node of its run, sampled where it lies.
+    fn between(ray: u32, t: f64, a: &Node) -> Self {
+        Pending {
+            ray,
+            t,
+            probe: t,
+            starts_run: false,
+            exact: a.exact,
+            extent: 0.0,
+        }
+    }
 }
 
 #[derive(Clone, Debug, Default)]
@@ -220,11 +262,13 @@ struct RayState {
     ray: Option<Ray>,
     pieces: Pieces,
     rgb: DVec3,
-    /// Occupied world segments (the union over instances), and the current one.
-    segments: Vec<[f64; 2]>,
-    segment: usize,
-    /// Next node position inside the current segment; `None`: at the segment's start.
+    /// The ray's runs (see module `runs`), and the current one.
+    runs: Vec<Run>,
+    run: usize,
+    /// Next node position inside the current run; `None`: at the run's start.
     next_t: Option<f64>,
+    /// How far inside a span's end its sample is taken (world units).
+    inset: f64,
     live: bool,
     /// Weight whose colour was not evaluated.
     skipped_weight: f64,
@@ -284,7 +328,7 @@ pub(super) struct Scratch {
     by_inst: Vec<Vec<u32>>,
     /// Per instance, whether some ray of the tile may meet it ([`cull_instances`]).
     tile_insts: Vec<bool>,
-    occupied: Vec<[f32; 2]>,
+    run_scratch: RunScratch,
     nodes: Vec<Vec<Node>>,
     inst_sigma: Vec<f64>,
     inst_sigma_prev: Vec<f64>,
@@ -346,7 +390,8 @@ pub(super) fn march_tile(
         s.pending.clear();
         for a in 0..s.active.len() {
             let r = s.active[a] as usize;
-            let carried = s.nodes[r].last().copied();
+            // A constant run's node is a piece of its own, never the start of the next one.
+            let carried = s.nodes[r].last().copied().filter(|n| n.extent == 0.0);
             s.nodes[r].clear();
             if let Some(mut node) = carried {
                 let slot = node.slot as usize;
@@ -432,26 +477,35 @@ fn setup_rays(
         state.worst = 0.0;
         state.samples = 0;
         state.log.clear();
-        state.segments.clear();
-        state.segment = 0;
+        state.runs.clear();
+        state.run = 0;
+        state.inset = 0.0;
         s.nodes[r].clear();
         for (i, (inst, plan)) in scene.instances.iter().zip(plans).enumerate() {
             let local = ray
                 .filter(|_| s.tile_insts[i])
                 .and_then(|ray| inst.local_ray(&ray, ray.near, ray.far));
             if let Some(lr) = &local {
-                occupied_segments(lr, plan, inst.field(), &mut s.occupied, &mut state.segments);
+                let inset = instance_runs(
+                    lr,
+                    inst.field(),
+                    plan.occupancy.as_deref(),
+                    plan.unbounded.as_ref(),
+                    &mut s.run_scratch,
+                    &mut state.runs,
+                );
+                state.inset = state.inset.max(inset);
                 s.ray_insts.push(i as u32);
             }
             s.local.push(local);
         }
         s.ray_inst_at.push(s.ray_insts.len() as u32);
-        union_in_place(&mut state.segments);
+        merge(&mut state.runs, &mut s.run_scratch);
         state.fragments.clear();
         state.next_fragment = 0;
         state.volume.clear();
         state.next_volume = 0;
-        state.live = !state.segments.is_empty();
+        state.live = !state.runs.is_empty();
         if state.live {
             s.active.push(r as u32);
         }
@@ -507,94 +561,6 @@ fn setup_rays(
             composite_fragments(state, f64::INFINITY, outputs);
         }
     }
-}
-
-/// Appends the occupied segments of one instance along a local ray, in world distance.
-fn occupied_segments(
-    lr: &LocalRay,
-    plan: &InstancePlan,
-    field: &dyn Field,
-    scratch: &mut Vec<[f32; 2]>,
-    out: &mut Vec<[f64; 2]>,
-) {
-    let k = lr.units_per_world as f64;
-    let length = ((lr.t_far - lr.t_near) * k) as f32;
-    scratch.clear();
-    plan.occupancy
-        .segments(lr.origin, lr.dir, 0.0, length, scratch);
-    if let Some(u) = &plan.unbounded {
-        far_segments(lr, u, field, length, scratch);
-    }
-    out.extend(scratch.iter().map(|&[u0, u1]| {
-        [
-            (lr.t_near + u0 as f64 / k).max(lr.t_near),
-            (lr.t_near + u1 as f64 / k).min(lr.t_far),
-        ]
-    }));
-}
-
-/// Appends to `out` the intervals of `[0, length]` (field units along the local ray) outside
-/// an unbounded field's grid cube where it may have density. The ray is walked in steps of about
-/// [`Unbounded::skip`] contracted units at the finest (`skip·core·(r/core)²` field units at
-/// `‖x‖∞ = r`: `r` changes by at most one unit per unit of a unit ray), each step's box
-/// asked of [`Field::may_be_occupied`]. A step found empty doubles the next (so an empty shell costs a
-/// few queries, not one per cell); one found occupied is retried at half the length until
-/// it is the finest, and only the finest occupied steps are kept, merged when they touch.
-fn far_segments(
-    lr: &LocalRay,
-    u: &Unbounded,
-    field: &dyn Field,
-    length: f32,
-    out: &mut Vec<[f32; 2]>,
-) {
-    let outside = match u.grid_box().clip_ray(lr.origin, lr.dir, 0.0, length) {
-        Some((a, b)) => [[0.0, a], [b, length]],
-        None => [[0.0, length], [length, length]],
-    };
-    let first = out.len();
-    let box_of = |t0: f32, t1: f32| {
-        let (p, q) = (lr.origin + lr.dir * t0, lr.origin + lr.dir * t1);
-        Aabb::new(p.min(q), p.max(q))
-    };
-    for [a, b] in outside {
-        // A run with nothing far answers for the whole stretch at once.
-        if a >= b || !field.may_be_occupied(&box_of(a, b)) {
-            continue;
-        }
-        let (mut t, mut scale) = (a, 1.0f32);
-        while t < b {
-            let fine = u.skip * u.core * u.step_growth(lr.origin + lr.dir * t);
-            let t1 = (t + (fine * scale).max(f32::EPSILON * t.abs())).min(b);
-            if !field.may_be_occupied(&box_of(t, t1)) {
-                t = t1;
-                scale *= 2.0;
-            } else if scale > 1.0 {
-                scale = (scale * 0.5).max(1.0);
-            } else {
-                match out[first..].last_mut() {
-                    Some(last) if last[1] >= t => last[1] = t1,
-                    _ => out.push([t, t1]),
-                }
-                t = t1;
-            }
-        }
-    }
-}
-
-/// Sorts intervals and merges the overlapping ones.
-fn union_in_place(segs: &mut Vec<[f64; 2]>) {
-    segs.sort_unstable_by(|x, y| x[0].total_cmp(&y[0]));
-    let mut merged = 0;
-    for i in 0..segs.len() {
-        let seg = segs[i];
-        if merged > 0 && seg[0] <= segs[merged - 1][1] {
-            segs[merged - 1][1] = segs[merged - 1][1].max(seg[1]);
-        } else if seg[1] >= seg[0] {
-            segs[merged] = seg;
-            merged += 1;
-        }
-    }
-    segs.truncate(merged);
 }
 
 /// The instances ray `r` has a local ray in, ascending.
@@ -673,47 +639,83 @@ fn growth(plan: &InstancePlan, lr: &LocalRay, t: f64) -> f64 {
         .map_or(1.0, |u| f64::from(u.step_growth(lr.at(t))))
 }
 
-/// Lays the next chunk of regular nodes for ray `r` into `s.pending`.
+/// Lays the next chunk of regular nodes for ray `r` into `s.pending`: from each run's start
+/// to its end at the step policy's steps, or one node for a constant run. A run whose ends
+/// are a span's is sampled just inside them (see [`RayState::inset`]).
 fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
     if !s.rays[r].live {
         return;
     }
     let mut laid = 0;
-    while laid < CHUNK && s.rays[r].segment < s.rays[r].segments.len() {
+    while laid < CHUNK && s.rays[r].run < s.rays[r].runs.len() {
         let state = &s.rays[r];
-        let [a, b] = state.segments[state.segment];
+        let run = state.runs[state.run];
         let (t, starts_run) = match state.next_t {
             Some(t) => (t, false),
-            None => (a, true),
+            None => (run.start, true),
         };
+        let exact = run.kind != RunKind::Searched;
+        if run.kind == RunKind::Constant {
+            let state = &mut s.rays[r];
+            state.run += 1;
+            s.pending.push(Pending {
+                ray: r as u32,
+                t: run.start,
+                probe: 0.5 * (run.start + run.end),
+                starts_run: true,
+                exact,
+                extent: run.end - run.start,
+            });
+            laid += 1;
+            continue;
+        }
         if starts_run {
-            // Density may begin where an occupied segment does: its first step is a base one.
+            // Density may begin where a run does: its first step is a base one.
             s.rays[r].scale = 1.0;
         }
         if laid == 0 {
             let base = base_step_at(r, t, plans, s).0;
             s.rays[r].finest = base * 0.5f64.powi(params.refine_depth.min(MAX_BISECTIONS) as i32);
         }
-        let next = if t >= b {
+        let next = if t >= run.end {
             None
         } else {
-            Some((t + step_at(r, t, s.rays[r].scale, plans, params, s)).min(b))
+            Some((t + step_at(r, t, s.rays[r].scale, plans, params, s)).min(run.end))
         };
         let state = &mut s.rays[r];
-        match next {
-            Some(n) if n > t => state.next_t = Some(n),
-            _ => {
-                state.segment += 1;
-                state.next_t = None;
+        let at_end = match next {
+            Some(n) if n > t => {
+                state.next_t = Some(n);
+                false
             }
-        }
+            _ => {
+                state.run += 1;
+                state.next_t = None;
+                true
+            }
+        };
         if state.growing {
             state.scale = (2.0 * state.scale).min(params.max_step_factor.max(1.0) as f64);
         }
+        let inset = if exact {
+            state.inset.min(0.25 * (run.end - run.start))
+        } else {
+            0.0
+        };
+        let probe = if starts_run {
+            t + inset
+        } else if at_end {
+            t - inset
+        } else {
+            t
+        };
         s.pending.push(Pending {
             ray: r as u32,
             t,
+            probe,
             starts_run,
+            exact,
+            extent: 0.0,
         });
         laid += 1;
     }
@@ -747,8 +749,8 @@ fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
             let pending = &s.pending[p as usize];
             let local = &s.local[pending.ray as usize * n_inst + i];
             if let Some(lr) = local {
-                if pending.t >= lr.t_near && pending.t <= lr.t_far {
-                    s.points.push(lr.at(pending.t));
+                if pending.probe >= lr.t_near && pending.probe <= lr.t_far {
+                    s.points.push(lr.at(pending.probe));
                     s.owners.push((p, lr.units_per_world as f64));
                 }
             }
@@ -794,9 +796,12 @@ fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
             .sum();
         let node = Node {
             t: pending.t,
+            probe: pending.probe,
             sigma,
             slot: slot as u32,
             starts_run: pending.starts_run,
+            exact: pending.exact,
+            extent: pending.extent,
             weight: 0.0,
         };
         let nodes = &mut s.nodes[pending.ray as usize];
@@ -867,8 +872,10 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         }
         let transmittance = s.rays[r as usize].pieces.transmittance();
         let base = base_step_at(r as usize, a.t, plans, s).0;
+        // An exact run's spans are where its density is: it hides nothing a probe could find.
         let hides = || {
-            b.t - a.t > 1.5 * base * 0.5f64.powi(HIDDEN_DEPTH)
+            !a.exact
+                && b.t - a.t > 1.5 * base * 0.5f64.powi(HIDDEN_DEPTH)
                 && hides_content(
                     scene,
                     plans,
@@ -883,11 +890,7 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
             // Shorter than bisection may leave: only what the step may wholly hide is
             // searched for.
             if hides() {
-                s.pending.push(Pending {
-                    ray: r,
-                    t: 0.5 * (a.t + b.t),
-                    starts_run: false,
-                });
+                s.pending.push(Pending::between(r, 0.5 * (a.t + b.t), a));
             }
             continue;
         }
@@ -895,31 +898,30 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         let smooth = any_smooth && smooth_step(r as usize, a, b, plans, s);
         // A grown step where density starts or ends is bisected back to an ungrown one
         // whatever its weight, so faint content keeps the base step's edges; so is one
-        // between two empty samples of a field that cannot say what lies between.
-        let unknown =
-            (a.sigma > 0.0) != (b.sigma > 0.0) || (a.sigma + b.sigma == 0.0 && !empty_is_known);
+        // between two empty samples of a field that cannot say what lies between. A step of
+        // an exact run holds no edge, sheet or peak: only its quadrature is judged.
+        let unknown = !a.exact
+            && ((a.sigma > 0.0) != (b.sigma > 0.0)
+                || (a.sigma + b.sigma == 0.0 && !empty_is_known));
         // The cone's steps are no exception: a grazing ray's whole crossing may fit in one.
         let edge = unknown && b.t - a.t > 1.5 * base;
         if edge
             || (!smooth && step_change(nodes, i as usize) * weight > tolerance)
             || hides()
-            || hides_gap(
-                scene,
-                plans,
-                r as usize,
-                (a, b),
-                transmittance,
-                tolerance,
-                s,
-            )
+            || (!a.exact
+                && hides_gap(
+                    scene,
+                    plans,
+                    r as usize,
+                    (a, b),
+                    transmittance,
+                    tolerance,
+                    s,
+                ))
         {
             s.rays[r as usize].refined = true;
-            s.pending.push(Pending {
-                ray: r,
-                t: 0.5 * (a.t + b.t),
-                starts_run: false,
-            });
-        } else {
+            s.pending.push(Pending::between(r, 0.5 * (a.t + b.t), a));
+        } else if !a.exact {
             s.unsure.push((r, i, 0.0));
         }
     }
@@ -975,11 +977,7 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         let weight = (b.t - a.t) * s.rays[r as usize].pieces.transmittance();
         if (bound - a.sigma.max(b.sigma)) * weight > tolerance {
             s.rays[r as usize].refined = true;
-            s.pending.push(Pending {
-                ray: r,
-                t: 0.5 * (a.t + b.t),
-                starts_run: false,
-            });
+            s.pending.push(Pending::between(r, 0.5 * (a.t + b.t), a));
         }
     }
 }
@@ -1147,51 +1145,32 @@ fn integrate(
     budget_limited: &mut u64,
 ) {
     let min_t = params.min_transmittance as f64;
-    for i in 1..nodes.len() {
-        let (a, b) = (nodes[i - 1], nodes[i]);
-        if b.starts_run {
-            continue;
-        }
-        let sum = a.sigma + b.sigma;
-        let error = if sum == 0.0 && !empty_is_known {
-            // Nothing seen at either end of a field that cannot say what lies between.
-            f64::INFINITY
-        } else {
-            (b.t - a.t) * state.pieces.transmittance() * step_change(nodes, i - 1)
-        };
-        state.worst = state.worst.max(error);
-        // The piece, split at the splat fragments inside it (composited in between).
-        let mut t0 = a.t;
-        let mut stopped = false;
-        loop {
-            let fragment = state.next_fragment_t().filter(|&t| t < b.t);
-            let t1 = fragment.map_or(b.t, |t| t.max(t0));
-            let t_enter = state.pieces.transmittance();
-            let w = state.pieces.add(t0, t1 - t0, 0.5 * sum);
+    for i in 0..nodes.len() {
+        let b = nodes[i];
+        let stopped = if b.extent > 0.0 {
+            // A constant run: one piece, its weight all this node's.
+            let (w, stopped) = composite_piece(state, [b.t, b.t + b.extent], [b.sigma; 2], outputs);
+            nodes[i].weight += w;
+            stopped
+        } else if i > 0 && !b.starts_run {
+            let a = nodes[i - 1];
+            let sum = a.sigma + b.sigma;
+            let error = if sum == 0.0 && !empty_is_known {
+                // Nothing seen at either end of a field that cannot say what lies between.
+                f64::INFINITY
+            } else {
+                (b.t - a.t) * state.pieces.transmittance() * step_change(nodes, i - 1)
+            };
+            state.worst = state.worst.max(error);
+            let (w, stopped) = composite_piece(state, [a.t, b.t], [a.sigma, b.sigma], outputs);
             if w > 0.0 {
-                if outputs.depth_median {
-                    // The density is linear between the nodes (the trapezoid rule's mean);
-                    // a piece cut by a fragment keeps that mean.
-                    let delta = t1 - t0;
-                    let (x0, x1) = if t0 == a.t && t1 == b.t {
-                        (a.sigma * delta, b.sigma * delta)
-                    } else {
-                        (0.5 * sum * delta, 0.5 * sum * delta)
-                    };
-                    state.log.push([t0, delta, x0, x1, t_enter]);
-                }
                 nodes[i - 1].weight += w * a.sigma / sum;
                 nodes[i].weight += w * b.sigma / sum;
             }
-            t0 = t1;
-            if fragment.is_none() {
-                break;
-            }
-            if !composite_fragments(state, t0, outputs) {
-                stopped = true;
-                break;
-            }
-        }
+            stopped
+        } else {
+            continue;
+        };
         if stopped || state.pieces.transmittance() < min_t {
             state.live = false;
             // Nothing after this node counts.
@@ -1201,7 +1180,7 @@ fn integrate(
             return;
         }
     }
-    if state.segment >= state.segments.len() {
+    if state.run >= state.runs.len() {
         composite_fragments(state, f64::INFINITY, outputs);
         state.live = false;
     } else if state.samples >= params.max_samples {
@@ -1211,6 +1190,44 @@ fn integrate(
         *budget_limited += 1;
     }
     adapt_step(state, params);
+}
+
+/// Composites the piece `[t₀, t₁]` whose density goes linearly from `σ₀` to `σ₁` (the
+/// trapezoid rule's mean), split at the fragments inside it (composited in between). Returns
+/// the piece's weight, and whether a fragment stopped the ray.
+fn composite_piece(
+    state: &mut RayState,
+    [a, b]: [f64; 2],
+    [sigma_a, sigma_b]: [f64; 2],
+    outputs: &Outputs,
+) -> (f64, bool) {
+    let mean = 0.5 * (sigma_a + sigma_b);
+    let mut t0 = a;
+    let mut weight = 0.0;
+    loop {
+        let fragment = state.next_fragment_t().filter(|&t| t < b);
+        let t1 = fragment.map_or(b, |t| t.max(t0));
+        let t_enter = state.pieces.transmittance();
+        let w = state.pieces.add(t0, t1 - t0, mean);
+        if w > 0.0 && outputs.depth_median {
+            // A piece cut by a fragment keeps the mean.
+            let delta = t1 - t0;
+            let (x0, x1) = if t0 == a && t1 == b {
+                (sigma_a * delta, sigma_b * delta)
+            } else {
+                (mean * delta, mean * delta)
+            };
+            state.log.push([t0, delta, x0, x1, t_enter]);
+        }
+        weight += w;
+        t0 = t1;
+        if fragment.is_none() {
+            return (weight, false);
+        }
+        if !composite_fragments(state, t0, outputs) {
+            return (weight, true);
+        }
+    }
 }
 
 /// After a round: back to the base step where a step was bisected (an edge is near); steps
@@ -1330,7 +1347,7 @@ fn shade(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Sc
             for node in nodes.iter().filter(|n| n.weight > 0.0) {
                 let share = node.weight * s.inst_sigma[node.slot as usize + i] / node.sigma;
                 if share > 0.0 {
-                    s.points.push(lr.at(node.t));
+                    s.points.push(lr.at(node.probe));
                     s.dirs.push(lr.dir);
                     s.owners.push((r as u32, share));
                     let at = node.slot as usize / n_inst * stride + plan.feature_offset;
@@ -1387,7 +1404,7 @@ mod tests {
     use super::super::{
         render, render_with_progress, MarchParams, Outputs, Quality, RenderSettings,
     };
-    use crate::field::{Aabb, Analytic, Field};
+    use crate::field::{Aabb, Analytic, Field, Span};
     use crate::scene::{FieldHandle, FieldSource, Instance, Scene};
 
     /// Hands each sample's position to the colour query as its features and colours from
@@ -1429,6 +1446,9 @@ mod tests {
         }
         fn density_bounds(&self, regions: &[Aabb], bounds: &mut [f32]) -> bool {
             self.0.density_bounds(regions, bounds)
+        }
+        fn spans(&self, o: Vec3, d: Vec3, t0: f64, t1: f64, out: &mut Vec<Span>) -> bool {
+            self.0.spans(o, d, t0, t1, out)
         }
         fn may_be_occupied(&self, region: &Aabb) -> bool {
             self.0.may_be_occupied(region)

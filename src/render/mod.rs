@@ -11,6 +11,7 @@ mod naive;
 mod ngp;
 mod proposal;
 mod quality;
+mod runs;
 mod splats;
 
 pub(crate) use splats::splat_layer;
@@ -183,6 +184,10 @@ pub fn render(
 
 /// [`render`], calling `on_tile(pixels)` as each tile finishes (from any thread) and
 /// returning what the render did.
+///
+/// The frame's planes are allocated once and filled in bands of one tile row, each band's
+/// tiles marched in turn by one thread and written straight into its rows: a frame's
+/// pixels are held once, not once as tiles and again as planes.
 pub fn render_with_progress(
     scene: &Scene,
     camera: &Camera,
@@ -193,101 +198,123 @@ pub fn render_with_progress(
     let window = camera.clamp_window(window)?;
     let plans = InstancePlan::for_scene(scene, &settings.march);
     let splats = splats::splat_layer(scene, camera, window, &settings.outputs)?;
-    let tiles = tiles(window, settings.tile_size.max(1));
-    let results: Vec<(Window, Vec<PixelResult>, RenderStats)> = tiles
-        .into_par_iter()
-        .map_init(Scratch::default, |scratch, tile| {
-            let mut out = Vec::with_capacity(tile.area());
-            let stats = march_tile(
-                scene,
-                &plans,
-                splats.as_ref(),
-                camera,
-                tile,
-                settings,
-                scratch,
-                &mut out,
-            );
-            on_tile(tile.area() as u64);
-            (tile, out, stats)
-        })
-        .collect();
-    let stats = results
-        .iter()
-        .fold(RenderStats::default(), |acc, r| acc + r.2);
-    let tiles: Vec<_> = results.into_iter().map(|(w, px, _)| (w, px)).collect();
+    let size = settings.tile_size.max(1);
     let decode =
         scene.composite_space() == ColorSpace::Srgb && settings.color == ColorOutput::Linear;
-    Ok((assemble(window, &tiles, &settings.outputs, decode), stats))
+    let mut planes = empty_planes(window, &settings.outputs);
+    let stats = bands(&mut planes, size)
+        .into_par_iter()
+        .map_init(
+            || (Scratch::default(), Vec::new()),
+            |(scratch, out), mut band| {
+                let y0 = window.y0 + band.row;
+                let y1 = (y0 + size).min(window.y1);
+                let mut stats = RenderStats::default();
+                for x in (window.x0..window.x1).step_by(size as usize) {
+                    let tile = Window::new(x, y0, (x + size).min(window.x1), y1);
+                    out.clear();
+                    stats = stats
+                        + march_tile(
+                            scene,
+                            &plans,
+                            splats.as_ref(),
+                            camera,
+                            tile,
+                            settings,
+                            scratch,
+                            out,
+                        );
+                    band.write(x - window.x0, tile.width(), out, decode);
+                    on_tile(tile.area() as u64);
+                }
+                stats
+            },
+        )
+        .reduce(RenderStats::default, |a, b| a + b);
+    Ok((planes, stats))
 }
 
-fn tiles(window: Window, size: u32) -> Vec<Window> {
-    let mut tiles = Vec::new();
-    for y in (window.y0..window.y1).step_by(size as usize) {
-        for x in (window.x0..window.x1).step_by(size as usize) {
-            tiles.push(Window::new(
-                x,
-                y,
-                (x + size).min(window.x1),
-                (y + size).min(window.y1),
-            ));
-        }
-    }
-    tiles
-}
-
-/// Gathers tiles' pixels into the requested planes; `decode`: the colours were composited in
-/// sRGB-encoded space and are wanted linear.
-fn assemble(
-    window: Window,
-    tiles: &[(Window, Vec<PixelResult>)],
-    outputs: &Outputs,
-    decode: bool,
-) -> Planes {
+/// The requested planes of `window`, zeroed.
+fn empty_planes(window: Window, outputs: &Outputs) -> Planes {
     let (w, h) = (window.width(), window.height());
     let plane = |on: bool| on.then(|| Plane::filled(w, h, 0.0));
-    let mut planes = Planes {
+    Planes {
         width: w,
         height: h,
-        rgb: outputs.rgb.then(|| {
-            [
-                Plane::filled(w, h, 0.0),
-                Plane::filled(w, h, 0.0),
-                Plane::filled(w, h, 0.0),
-            ]
-        }),
+        rgb: outputs
+            .rgb
+            .then(|| [(); 3].map(|_| Plane::filled(w, h, 0.0))),
         alpha: plane(outputs.alpha),
         depth_z: plane(outputs.depth_z),
         depth_ray: plane(outputs.depth_ray),
         depth_median: plane(outputs.depth_median),
-    };
-    for (tile, pixels) in tiles {
+    }
+}
+
+/// `rows` rows of every present plane, starting at row `row` of the window: R, G, B,
+/// alpha, depth Z, ray depth and median depth, in that order.
+struct Band<'a> {
+    row: u32,
+    width: usize,
+    planes: [Option<&'a mut [f32]>; 7],
+}
+
+impl Band<'_> {
+    /// Writes a tile's pixels (row by row, `tile_width` wide) at column `x` of the band;
+    /// `decode`: the colours were composited in sRGB-encoded space and are wanted linear.
+    fn write(&mut self, x: u32, tile_width: u32, pixels: &[PixelResult], decode: bool) {
         for (i, px) in pixels.iter().enumerate() {
-            let x = tile.x0 - window.x0 + i as u32 % tile.width();
-            let y = tile.y0 - window.y0 + i as u32 / tile.width();
-            let at = y as usize * w as usize + x as usize;
-            if let Some(rgb) = &mut planes.rgb {
-                let colour = if decode {
-                    srgb_composite_to_linear(px.rgb, px.alpha)
-                } else {
-                    px.rgb
-                };
-                for (c, plane) in rgb.iter_mut().enumerate() {
-                    plane.data[at] = colour[c];
+            let (dx, dy) = (i as u32 % tile_width, i as u32 / tile_width);
+            let at = dy as usize * self.width + (x + dx) as usize;
+            let [r, g, b] = if decode && self.planes[0].is_some() {
+                srgb_composite_to_linear(px.rgb, px.alpha)
+            } else {
+                px.rgb
+            };
+            let values = [r, g, b, px.alpha, px.depth_z, px.depth_ray, px.depth_median];
+            for (plane, v) in self.planes.iter_mut().zip(values) {
+                if let Some(plane) = plane {
+                    plane[at] = v;
                 }
             }
-            let set = |p: &mut Option<Plane>, v: f32| {
-                if let Some(p) = p {
-                    p.data[at] = v;
-                }
-            };
-            set(&mut planes.alpha, px.alpha);
-            set(&mut planes.depth_z, px.depth_z);
-            set(&mut planes.depth_ray, px.depth_ray);
-            set(&mut planes.depth_median, px.depth_median);
         }
     }
-    planes
+}
+
+/// `planes` cut into bands of `rows` rows.
+fn bands(planes: &mut Planes, rows: u32) -> Vec<Band<'_>> {
+    let width = planes.width as usize;
+    let rows = rows.max(1);
+    let count = (planes.height as usize).div_ceil(rows as usize);
+    let mut bands: Vec<Band> = (0..count)
+        .map(|i| Band {
+            row: i as u32 * rows,
+            width,
+            planes: Default::default(),
+        })
+        .collect();
+    let [r, g, b] = match &mut planes.rgb {
+        Some([r, g, b]) => [Some(r), Some(g), Some(b)],
+        None => [None, None, None],
+    };
+    let all = [
+        r,
+        g,
+        b,
+        planes.alpha.as_mut(),
+        planes.depth_z.as_mut(),
+        planes.depth_ray.as_mut(),
+        planes.depth_median.as_mut(),
+    ];
+    let chunk = (width * rows as usize).max(1);
+    for (k, plane) in all.into_iter().enumerate() {
+        if let Some(plane) = plane {
+            for (band, rows) in bands.iter_mut().zip(plane.data.chunks_mut(chunk)) {
+                band.planes[k] = Some(rows);
+            }
+        }
+    }
+    bands
 }
 
 #[cfg(test)]

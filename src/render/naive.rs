@@ -6,7 +6,7 @@ use rayon::prelude::*;
 
 use super::composite::{crossing_depth, Pieces};
 use super::march::PixelResult;
-use super::{assemble, Outputs, RenderStats};
+use super::{bands, empty_planes, Outputs, RenderStats};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::field::{linear_to_srgb, ColorSpace};
@@ -33,27 +33,28 @@ pub fn render_naive(
         ));
     }
     let window = camera.clamp_window(window)?;
-    let rows: Vec<(Window, Vec<PixelResult>, [u64; 3])> = (window.y0..window.y1)
+    let decode = scene.composite_space() == ColorSpace::Srgb;
+    let mut planes = empty_planes(window, outputs);
+    let counts = bands(&mut planes, 1)
         .into_par_iter()
-        .map(|y| {
-            let row = Window::new(window.x0, y, window.x1, y + 1);
+        .map(|mut band| {
+            let y = window.y0 + band.row;
             let mut counts = [0; 3];
-            let pixels = (row.x0..row.x1)
+            let pixels: Vec<PixelResult> = (window.x0..window.x1)
                 .map(|x| naive_pixel(scene, camera, x, y, step, outputs, &mut counts))
                 .collect();
-            (row, pixels, counts)
+            band.write(0, window.width(), &pixels, decode);
+            counts
         })
-        .collect();
+        .reduce(|| [0; 3], |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]]);
     let stats = RenderStats {
         pixels: window.area() as u64,
-        density_samples: rows.iter().map(|r| r.2[0]).sum(),
-        color_samples: rows.iter().map(|r| r.2[1]).sum(),
-        invalid_samples: rows.iter().map(|r| r.2[2]).sum(),
+        density_samples: counts[0],
+        color_samples: counts[1],
+        invalid_samples: counts[2],
         ..RenderStats::default()
     };
-    let rows: Vec<_> = rows.into_iter().map(|(w, px, _)| (w, px)).collect();
-    let decode = scene.composite_space() == ColorSpace::Srgb;
-    Ok((assemble(window, &rows, outputs, decode), stats))
+    Ok((planes, stats))
 }
 
 fn naive_pixel(

@@ -21,10 +21,11 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
 mod sh;
+mod spans;
 
 pub use sh::ShColor;
 
-use super::{Aabb, Field};
+use super::{Aabb, Field, Span};
 use crate::error::{Error, Result};
 
 /// Relative padding of [`Field::may_be_occupied`]: much larger than f32 rounding (~1e-7), much
@@ -358,6 +359,13 @@ impl Field for Analytic {
                 }
             }
         }
+    }
+
+    /// Each primitive's interval in closed form, cut where any begins or ends; a span is
+    /// constant unless a Gaussian is in it (see `spans.rs`).
+    fn spans(&self, origin: Vec3, dir: Vec3, t0: f64, t1: f64, out: &mut Vec<Span>) -> bool {
+        spans::spans(self.active(), origin, dir, t0, t1, out);
+        true
     }
 
     fn may_be_occupied(&self, region: &Aabb) -> bool {

@@ -18,10 +18,12 @@
 use glam::Vec3;
 
 use super::config::ProposalNetSettings;
+#[cfg(target_arch = "x86_64")]
+use super::density_kernel::FusedDensity;
 use super::torch::TorchHashGrid;
 use super::{
-    read_linear_layers, read_params, read_torch_grid, read_weights, tcnn_grid, tcnn_grid_config,
-    Keys, NerfactoField,
+    linear_mlp, read_linear_layers, read_linear_params, read_params, read_torch_grid, read_weights,
+    tcnn_grid, tcnn_grid_config, Keys, NerfactoField,
 };
 use crate::error::Result;
 use crate::field::container::Checkpoint;
@@ -43,6 +45,9 @@ pub(crate) struct DensityField {
     head: Mlp,
     average_init_density: f32,
     n_params: usize,
+    /// The torch layout's grid and MLP in one pass, where the CPU and the shapes allow.
+    #[cfg(target_arch = "x86_64")]
+    fused: Option<FusedDensity>,
 }
 
 /// Reusable buffers for [`DensityField::density`].
@@ -98,6 +103,8 @@ impl DensityField {
                 "no hash grid (tcnn_encoding.params or hash_table) for this proposal network",
             ));
         };
+        // The torch MLP's layers, for the fused kernel.
+        let mut layers = None;
         let (head, n_head) = if s.use_linear {
             read_linear_layers(ckpt, &keys, "linear", grid_outputs)?
         } else if let Some(name) = keys.first(&["mlp_base.1.tcnn_encoding.params"]) {
@@ -129,7 +136,12 @@ impl DensityField {
                 .ok_or_else(|| keys.err(&name, "MLP parameters do not match"))?;
             (mlp, p.len())
         } else {
-            read_linear_layers(ckpt, &keys, "mlp_base.1.layers", grid_outputs)?
+            let prefix = "mlp_base.1.layers";
+            let params = read_linear_params(ckpt, &keys, prefix)?;
+            let mlp = linear_mlp(&keys, prefix, grid_outputs, &params)?;
+            let n = params.iter().map(|(w, b)| w.len() + b.len()).sum();
+            layers = Some(params);
+            (mlp, n)
         };
         if head.config().n_outputs != 1 {
             return Err(keys.err(
@@ -137,7 +149,17 @@ impl DensityField {
                 format!("{} outputs; a density field has 1", head.config().n_outputs),
             ));
         }
+        // The fused kernel is x86-64's only.
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = layers;
+        #[cfg(target_arch = "x86_64")]
+        let fused = match (&grid, &layers) {
+            (Grid::Torch(g), Some(layers)) => FusedDensity::new(g, layers),
+            _ => None,
+        };
         Ok(DensityField {
+            #[cfg(target_arch = "x86_64")]
+            fused,
             grid,
             head,
             average_init_density,
@@ -152,6 +174,11 @@ impl DensityField {
 
     /// `σ` at each field-space point (0 outside the selector).
     pub(crate) fn density(&self, points: &[Vec3], sigma: &mut [f32], s: &mut DensityScratch) {
+        #[cfg(target_arch = "x86_64")]
+        if let (Some(fused), Grid::Torch(g)) = (&self.fused, &self.grid) {
+            fused.density(g, self.average_init_density, points, sigma);
+            return;
+        }
         s.units.clear();
         s.index.clear();
         for (i, (p, out)) in points.iter().zip(sigma.iter_mut()).enumerate() {
@@ -175,6 +202,126 @@ impl DensityField {
         self.head.forward(&s.encoded, &mut s.raw);
         for (&i, &raw) in s.index.iter().zip(&s.raw) {
             sigma[i as usize] = self.average_init_density * exp_density(raw);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A seeded proposal network of nerfstudio's default shape (5 levels × 2 features,
+    /// `2^12` rows, resolutions 16 to 256, hidden layer of 16), torch layout: as read (with
+    /// the fused kernel where it applies) and without the fused kernel.
+    fn seeded_pair(seed: u64) -> (DensityField, DensityField) {
+        let mut s = seed;
+        let mut next = move || {
+            s = s
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (s >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+        };
+        let rows = 1usize << 12;
+        let table: Vec<f32> = (0..5 * rows * 2).map(|_| next()).collect();
+        let grid = TorchHashGrid::new(5, 2, 12, 16, 256, table).unwrap();
+        let layers: Vec<(Vec<f32>, Vec<f32>)> = [(10, 16), (16, 1)]
+            .into_iter()
+            .map(|(n_in, n_out)| {
+                let w = (0..n_in * n_out).map(|_| next()).collect();
+                let b = (0..n_out).map(|_| next()).collect();
+                (w, b)
+            })
+            .collect();
+        let head = Mlp::with_biases(10, &layers).unwrap();
+        let plain = DensityField {
+            grid: Grid::Torch(grid.clone()),
+            head: head.clone(),
+            average_init_density: 0.7,
+            n_params: 0,
+            #[cfg(target_arch = "x86_64")]
+            fused: None,
+        };
+        let read = DensityField {
+            #[cfg(target_arch = "x86_64")]
+            fused: FusedDensity::new(&grid, &layers),
+            ..plain.clone()
+        };
+        (read, plain)
+    }
+
+    /// Seeded field-space points: inside the unit cube, beyond it (contracted), on the
+    /// cells' faces of every level, at the selector's edge and beyond, infinite and NaN.
+    fn seeded_points(n: usize, seed: u64) -> Vec<Vec3> {
+        let mut s = seed;
+        let mut next = move || {
+            s = s
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (s >> 40) as f32 / (1u64 << 24) as f32 * 6.0 - 3.0
+        };
+        let special = [
+            Vec3::new(0.25, -0.5, 0.0),
+            Vec3::new(1.0, 0.5, -1.0),
+            Vec3::new(-2.0, 0.0, 0.0),
+            Vec3::new(1e30, 3.0, 0.0),
+            Vec3::new(f32::INFINITY, 0.0, 0.0),
+            Vec3::new(0.5, f32::NAN, 0.0),
+        ];
+        (0..n)
+            .map(|i| {
+                special
+                    .get(i)
+                    .copied()
+                    .unwrap_or_else(|| Vec3::new(next(), next(), next()))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn fused_kernel_gives_the_separate_stages_bits() {
+        let (read, plain) = seeded_pair(3);
+        #[cfg(target_arch = "x86_64")]
+        if read.fused.is_none() {
+            eprintln!("no AVX2 and FMA: the fused kernel does not run here");
+            return;
+        }
+        let mut scratch = DensityScratch::default();
+        for n in [0, 1, 8, 37, 300] {
+            let points = seeded_points(n, n as u64);
+            let mut want = vec![f32::NAN; n];
+            plain.density(&points, &mut want, &mut scratch);
+            let mut got = vec![f32::NAN; n];
+            read.density(&points, &mut got, &mut scratch);
+            // The separate stages run the MLP with the same fused multiply-adds on this CPU.
+            for (i, (a, b)) in got.iter().zip(&want).enumerate() {
+                assert_eq!(
+                    a.to_bits(),
+                    b.to_bits(),
+                    "{n} points, {i} at {}: {a} {b}",
+                    points[i]
+                );
+            }
+            assert!(want.iter().any(|&v| v > 0.0) || n < 8);
+            assert!(n < 6 || want[4] == 0.0 && want[5] == 0.0);
+        }
+    }
+
+    /// The fused kernel against the separate stages on 4096 seeded points (a tile's round):
+    /// `cargo test --release --lib bench_proposal_density -- --ignored --nocapture`.
+    #[test]
+    #[ignore = "benchmark"]
+    fn bench_proposal_density() {
+        let (fused, plain) = seeded_pair(3);
+        let points = seeded_points(4096, 11);
+        let mut sigma = vec![0.0; points.len()];
+        let mut scratch = DensityScratch::default();
+        for (name, f) in [("separate", &plain), ("fused", &fused)].repeat(2) {
+            let t = std::time::Instant::now();
+            for _ in 0..300 {
+                f.density(&points, &mut sigma, &mut scratch);
+            }
+            let ns = t.elapsed().as_secs_f64() * 1e9 / (300.0 * points.len() as f64);
+            println!("{name}: {ns:.1} ns per point");
         }
     }
 }

@@ -70,6 +70,8 @@ use torch::{torch_sh4, TorchHashGrid};
 mod config;
 mod dataparser;
 mod density_field;
+#[cfg(target_arch = "x86_64")]
+mod density_kernel;
 mod occupancy;
 mod proposal;
 mod torch;
@@ -853,24 +855,43 @@ fn read_linear_layers(
     prefix: &str,
     n_inputs: usize,
 ) -> Result<(Mlp, usize)> {
+    let layers = read_linear_params(ckpt, keys, prefix)?;
+    let count = layers.iter().map(|(w, b)| w.len() + b.len()).sum();
+    Ok((linear_mlp(keys, prefix, n_inputs, &layers)?, count))
+}
+
+/// `<prefix>.<i>.weight|bias` for `i = 0, 1, …`: each layer's `(W, b)`, `W` row-major
+/// `[out][in]`.
+fn read_linear_params(
+    ckpt: &Checkpoint,
+    keys: &Keys,
+    prefix: &str,
+) -> Result<Vec<(Vec<f32>, Vec<f32>)>> {
     let mut layers = Vec::new();
-    let mut count = 0;
     while keys.has(&format!("{prefix}.{}.weight", layers.len())) {
         let w = read_weights(
             ckpt,
             &keys.name(&format!("{prefix}.{}.weight", layers.len())),
         )?;
         let b = read_weights(ckpt, &keys.name(&format!("{prefix}.{}.bias", layers.len())))?;
-        count += w.len() + b.len();
         layers.push((w, b));
     }
-    let mlp = Mlp::with_biases(n_inputs, &layers).ok_or_else(|| {
+    Ok(layers)
+}
+
+/// The torch [`Mlp`] of the layers read from `<prefix>`, checked to chain from `n_inputs`.
+fn linear_mlp(
+    keys: &Keys,
+    prefix: &str,
+    n_inputs: usize,
+    layers: &[(Vec<f32>, Vec<f32>)],
+) -> Result<Mlp> {
+    Mlp::with_biases(n_inputs, layers).ok_or_else(|| {
         keys.err(
             &keys.name(prefix),
             format!("layers missing or not chaining from {n_inputs} inputs"),
         )
-    })?;
-    Ok((mlp, count))
+    })
 }
 
 impl Field for NerfactoField {

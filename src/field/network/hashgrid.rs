@@ -116,6 +116,29 @@ trait Feature: Copy + Default + FeatureLoad {
         }
         out[..N].copy_from_slice(&acc);
     }
+
+    /// [`Self::blend`] for each lane of a block: lane `p`'s features go to
+    /// `rows[p·width + at..][..N]`, for the `rows.len() / width` lanes given. `AVX`: through
+    /// [`simd::Load::blend_block`] (f16 pairs eight lanes at once), with the same bits.
+    #[inline(always)]
+    fn blend_block<const N: usize, const AVX: bool>(
+        table: &[Self],
+        ix: &[u32],
+        w: &[f32],
+        rows: &mut [f32],
+        width: usize,
+        at: usize,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: `AVX` is set only under `HashGrid::encode_avx2`, which runs where the
+            // CPU has AVX2 and F16C.
+            return unsafe { Self::blend_block_avx::<N>(table, ix, w, rows, width, at) };
+        }
+        for (p, row) in rows.chunks_exact_mut(width).enumerate() {
+            Self::blend::<N, AVX>(table, ix, w, p, &mut row[at..at + N]);
+        }
+    }
 }
 
 impl Feature for f16 {
@@ -323,12 +346,8 @@ impl HashGrid {
                     let r = a * BLOCK..(n.min((a + 1) * BLOCK));
                     let ix = &index[a * CORNERS..(a + 1) * CORNERS];
                     let wx = &weight[a * CORNERS..(a + 1) * CORNERS];
-                    for (p, row) in out[r.start * width..r.end * width]
-                        .chunks_exact_mut(width)
-                        .enumerate()
-                    {
-                        T::blend::<NF, AVX>(t, ix, wx, p, &mut row[l * NF..(l + 1) * NF]);
-                    }
+                    let rows = &mut out[r.start * width..r.end * width];
+                    T::blend_block::<NF, AVX>(t, ix, wx, rows, width, l * NF);
                 }
             }
         }
@@ -378,8 +397,10 @@ fn prefetch<T>(table: &[T], nf: usize, index: &[u32]) {
     #[cfg(target_arch = "x86_64")]
     for &i in index {
         use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        let p = table[i as usize * nf..].as_ptr();
-        // SAFETY: a prefetch is a hint that never faults; `p` points into `table`.
+        // No bounds check (two instructions of a prefetch's six): the address is only a
+        // hint, and the indices are the table's anyway.
+        let p = table.as_ptr().wrapping_add(i as usize * nf);
+        // SAFETY: a prefetch is a hint that never faults, whatever the address.
         unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) };
     }
     #[cfg(not(target_arch = "x86_64"))]
@@ -510,6 +531,107 @@ mod simd {
         /// # Safety
         /// `p` must point at `N` readable values; the CPU must have AVX2 and F16C.
         unsafe fn load<const N: usize>(p: *const Self) -> __m256;
+
+        /// [`super::Feature::blend_block`]'s vector kernel: [`blend`] lane after lane.
+        ///
+        /// # Safety
+        /// The CPU must have AVX2 and F16C.
+        #[inline(always)]
+        unsafe fn blend_block_avx<const N: usize>(
+            table: &[Self],
+            ix: &[u32],
+            w: &[f32],
+            rows: &mut [f32],
+            width: usize,
+            at: usize,
+        ) {
+            // SAFETY: the caller's.
+            unsafe { blend_lanes::<Self, N>(table, ix, w, rows, width, at) }
+        }
+    }
+
+    /// [`blend`] for each lane of a block (lane `p` to `rows[p·width + at..][..N]`).
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and F16C.
+    #[inline]
+    #[target_feature(enable = "avx2,f16c")]
+    unsafe fn blend_lanes<T: Load, const N: usize>(
+        table: &[T],
+        ix: &[u32],
+        w: &[f32],
+        rows: &mut [f32],
+        width: usize,
+        at: usize,
+    ) {
+        for (p, row) in rows.chunks_exact_mut(width).enumerate() {
+            // SAFETY: the caller's.
+            unsafe { blend::<T, N>(table, ix, w, p, &mut row[at..at + N]) };
+        }
+    }
+
+    /// [`blend`] of two-feature f16 entries for the 8 lanes of a block at once: per corner
+    /// one 32-bit gather of the 8 lanes' entries, widened by F16C four lanes (8 values) at a
+    /// time, each value weighted by its lane's weight and added in corner order (a multiply
+    /// then an add, never fused): lane by lane the arithmetic of [`blend`].
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and F16C.
+    #[inline]
+    #[target_feature(enable = "avx2,f16c")]
+    unsafe fn blend_f16_pairs(
+        table: &[f16],
+        ix: &[u32],
+        w: &[f32],
+        rows: &mut [f32],
+        width: usize,
+        at: usize,
+    ) {
+        let entries = table.len() / 2;
+        if entries == 0 {
+            return;
+        }
+        // Indices are reduced to the table already; the clamp makes every gather's read
+        // provably inside it, and changes nothing.
+        let last = _mm256_set1_epi32((entries - 1).min(i32::MAX as usize) as i32);
+        let base = table.as_ptr().cast::<i32>();
+        // Lane `p`'s weight beside each of its two features: lanes 0–3, then 4–7.
+        let (spread_lo, spread_hi) = (
+            _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3),
+            _mm256_setr_epi32(4, 4, 5, 5, 6, 6, 7, 7),
+        );
+        let (mut lo, mut hi) = (_mm256_setzero_ps(), _mm256_setzero_ps());
+        for k in 0..8 {
+            let (i, wk) = (&ix[k * BLOCK..][..BLOCK], &w[k * BLOCK..][..BLOCK]);
+            // SAFETY: `i` and `wk` hold a vector's 8 values; every gathered index is at most
+            // `entries − 1`, so each 4-byte read lies inside `table`.
+            let (e, wv) = unsafe {
+                let i = _mm256_min_epu32(_mm256_loadu_si256(i.as_ptr().cast()), last);
+                (
+                    _mm256_i32gather_epi32::<4>(base, i),
+                    _mm256_loadu_ps(wk.as_ptr()),
+                )
+            };
+            let (f_lo, f_hi) = (
+                _mm256_cvtph_ps(_mm256_castsi256_si128(e)),
+                _mm256_cvtph_ps(_mm256_extracti128_si256::<1>(e)),
+            );
+            let (w_lo, w_hi) = (
+                _mm256_permutevar8x32_ps(wv, spread_lo),
+                _mm256_permutevar8x32_ps(wv, spread_hi),
+            );
+            lo = _mm256_add_ps(lo, _mm256_mul_ps(w_lo, f_lo));
+            hi = _mm256_add_ps(hi, _mm256_mul_ps(w_hi, f_hi));
+        }
+        let mut pairs = [0.0f32; 2 * BLOCK];
+        // SAFETY: `pairs` holds 16 values.
+        unsafe {
+            _mm256_storeu_ps(pairs.as_mut_ptr(), lo);
+            _mm256_storeu_ps(pairs[BLOCK..].as_mut_ptr(), hi);
+        }
+        for (row, pair) in rows.chunks_exact_mut(width).zip(pairs.chunks_exact(2)) {
+            row[at..at + 2].copy_from_slice(pair);
+        }
     }
 
     impl Load for f16 {
@@ -524,6 +646,25 @@ mod simd {
                     _ => _mm_loadu_si128(p.cast()),
                 };
                 _mm256_cvtph_ps(bits)
+            }
+        }
+
+        #[inline(always)]
+        unsafe fn blend_block_avx<const N: usize>(
+            table: &[Self],
+            ix: &[u32],
+            w: &[f32],
+            rows: &mut [f32],
+            width: usize,
+            at: usize,
+        ) {
+            // SAFETY: the caller's.
+            unsafe {
+                if N == 2 {
+                    blend_f16_pairs(table, ix, w, rows, width, at)
+                } else {
+                    blend_lanes::<Self, N>(table, ix, w, rows, width, at)
+                }
             }
         }
     }

@@ -201,6 +201,27 @@ impl Mlp {
         Some(m)
     }
 
+    /// The MLP without its last `n` inputs, and those inputs' columns of the first layer
+    /// ([`LastInputs`]): where the last inputs are shared by runs of samples (a ray's view
+    /// direction), [`LastInputs::starts`] sums their part once per run and
+    /// [`Self::forward_from`] starts each sample's first layer from it. `None` when there
+    /// are fewer inputs than `n`. The first layer's biases go with the split-off columns
+    /// (each row starts from them), so the MLP returned is for `forward_from` only.
+    pub fn split_last_inputs(&self, n: usize) -> Option<(Mlp, LastInputs)> {
+        let mut m = self.clone();
+        let first = m.layers.first_mut()?;
+        let keep = first.n_in.checked_sub(n)?;
+        let last = LastInputs {
+            n_out: first.n_out,
+            stride: first.stride,
+            w: first.w.split_off(keep * first.stride),
+            bias: std::mem::replace(&mut first.bias, vec![0.0; first.stride]),
+        };
+        first.n_in = keep;
+        m.config.n_inputs = keep;
+        Some((m, last))
+    }
+
     /// The configuration.
     pub fn config(&self) -> &MlpConfig {
         &self.config
@@ -209,94 +230,235 @@ impl Mlp {
     /// Evaluates the MLP on `n` inputs, `inputs[k·n_inputs ..][.. n_inputs]`, writing
     /// `outputs[k·n_outputs ..][.. n_outputs]`.
     pub fn forward(&self, inputs: &[f32], outputs: &mut [f32]) {
-        self.forward_with(Kernel::detect(), inputs, outputs);
+        self.forward_with(Kernel::detect(), inputs, None, outputs);
     }
 
-    fn forward_with(&self, kernel: Kernel, inputs: &[f32], outputs: &mut [f32]) {
+    /// [`Self::forward`] of an MLP from [`Self::split_last_inputs`]: sample `k`'s first
+    /// layer starts from row `row_of[k]` of `starts` (rows of [`LastInputs::stride`] values,
+    /// from [`LastInputs::starts`]) instead of its biases.
+    pub fn forward_from(&self, inputs: &[f32], starts: &[f32], row_of: &[u32], out: &mut [f32]) {
+        let starts = Starts {
+            rows: starts,
+            row_of,
+        };
+        self.forward_with(Kernel::detect(), inputs, Some(starts), out);
+    }
+
+    fn forward_with(
+        &self,
+        kernel: Kernel,
+        inputs: &[f32],
+        starts: Option<Starts>,
+        outputs: &mut [f32],
+    ) {
         match kernel {
-            Kernel::Plain => self.forward_blocks::<false, 8, 8>(inputs, outputs),
+            Kernel::Plain => self.forward_blocks::<false, 8, 8>(inputs, starts, outputs),
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `Kernel::detect` chose these only where the CPU has the features.
-            Kernel::Avx2 => unsafe { self.forward_avx2(inputs, outputs) },
+            Kernel::Avx2 => unsafe { self.forward_avx2(inputs, starts, outputs) },
         }
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    fn forward_avx2(&self, inputs: &[f32], outputs: &mut [f32]) {
-        self.forward_blocks::<true, 16, 4>(inputs, outputs);
+    fn forward_avx2(&self, inputs: &[f32], starts: Option<Starts>, outputs: &mut [f32]) {
+        self.forward_blocks::<true, 16, 4>(inputs, starts, outputs);
     }
 
     /// The batch in blocks of `B` samples (the last one zero-filled), each block's
     /// activations feature-major; `FMA` fuses the multiply-adds, `T` outputs per tile.
+    /// With `starts`, the first layer's accumulators start from each sample's row.
     #[inline(always)]
     fn forward_blocks<const FMA: bool, const B: usize, const T: usize>(
         &self,
         inputs: &[f32],
+        starts: Option<Starts>,
         outputs: &mut [f32],
     ) {
         let (ni, no) = (self.config.n_inputs, self.config.n_outputs);
         let n = inputs.len() / ni.max(1);
         debug_assert_eq!(outputs.len(), n * no);
         let widest = self.layers.iter().map(|l| l.stride).max().unwrap_or(0);
+        let first_stride = self.layers.first().map_or(0, |l| l.stride);
         let mut x = vec![0.0f32; ni * B];
         let (mut a, mut b) = (vec![0.0f32; widest * B], vec![0.0f32; widest * B]);
+        // The block's starting rows, sample-major then feature-major.
+        let (mut rows, mut init) = match starts {
+            Some(_) => (
+                vec![0.0f32; first_stride * B],
+                vec![0.0f32; first_stride * B],
+            ),
+            None => (Vec::new(), Vec::new()),
+        };
         for (start, ys) in (0..n).step_by(B).zip(outputs.chunks_mut(B * no)) {
             let m = (n - start).min(B);
             // Transpose the block's inputs to feature-major.
-            for (k, row) in inputs[start * ni..(start + m) * ni]
-                .chunks_exact(ni)
-                .enumerate()
-            {
-                for (i, v) in row.iter().enumerate() {
-                    x[i * B + k] = *v;
-                }
-            }
+            transpose::<FMA, B>(&inputs[start * ni..(start + m) * ni], ni, &mut x, B, m, ni);
             for i in 0..ni {
                 x[i * B + m..(i + 1) * B].fill(0.0);
             }
+            if let Some(s) = starts {
+                s.block::<FMA, B>(
+                    &s.row_of[start..start + m],
+                    first_stride,
+                    &mut rows,
+                    &mut init,
+                );
+            }
+            let first_init = starts.map(|_| &init[..]);
             // ReLU after every layer but the last.
             let n_layers = self.layers.len();
             for (k, l) in self.layers.iter().enumerate() {
                 let relu = k + 1 < n_layers;
                 if k == 0 {
-                    layer::<FMA, B, T>(l, &x, &mut a, relu);
+                    layer::<FMA, B, T>(l, &x, first_init, &mut a, relu);
                 } else {
-                    layer::<FMA, B, T>(l, &a, &mut b, relu);
+                    layer::<FMA, B, T>(l, &a, None, &mut b, relu);
                     std::mem::swap(&mut a, &mut b);
                 }
             }
-            for (k, y) in ys.chunks_exact_mut(no).enumerate() {
-                for (o, v) in y.iter_mut().enumerate() {
-                    *v = a[o * B + k];
-                }
+            transpose::<FMA, B>(&a, B, ys, no, no, m);
+        }
+    }
+}
+
+/// The first layer's columns of an MLP's last inputs, split off by
+/// [`Mlp::split_last_inputs`], with its biases.
+#[derive(Clone, Debug)]
+pub struct LastInputs {
+    n_out: usize,
+    stride: usize,
+    /// `[input][stride]`, as in [`Layer`].
+    w: Vec<f32>,
+    bias: Vec<f32>,
+}
+
+impl LastInputs {
+    /// Values per row of [`Self::starts`] (the first layer's outputs, padded).
+    pub fn stride(&self) -> usize {
+        self.stride
+    }
+
+    /// Appends to `rows` one row of [`Self::stride`] values: `bias[o] + Σᵢ W[i][o]·v[i]`
+    /// over these inputs `v = values`, summed in input order (each product rounded, then
+    /// added); the padding is zero. `values` beyond the inputs split off are ignored.
+    pub fn starts(&self, values: &[f32], rows: &mut Vec<f32>) {
+        let at = rows.len();
+        rows.extend_from_slice(&self.bias);
+        let row = &mut rows[at..];
+        for (w, &v) in self.w.chunks_exact(self.stride).zip(values) {
+            for (r, &wo) in row[..self.n_out].iter_mut().zip(w) {
+                *r += wo * v;
             }
         }
     }
 }
 
+/// Each sample's starting row of the first layer ([`Mlp::forward_from`]).
+#[derive(Clone, Copy)]
+struct Starts<'a> {
+    rows: &'a [f32],
+    row_of: &'a [u32],
+}
+
+impl Starts<'_> {
+    /// A block's starting values feature-major in `init` (`[stride][B]`), for the samples
+    /// whose rows are `row_of` (the rest zero), through `scratch` (`[B][stride]`). A block
+    /// whose samples share one row (most: a run is a ray's samples) fills each output's
+    /// values with its one value.
+    #[inline(always)]
+    fn block<const FMA: bool, const B: usize>(
+        &self,
+        row_of: &[u32],
+        stride: usize,
+        scratch: &mut [f32],
+        init: &mut [f32],
+    ) {
+        let row = |r: u32| &self.rows[r as usize * stride..][..stride];
+        let first = row_of.first().copied().unwrap_or(0);
+        if row_of.len() == B && row_of.iter().all(|&r| r == first) {
+            for (dst, &v) in init.chunks_exact_mut(B).zip(row(first)) {
+                dst.fill(v);
+            }
+            return;
+        }
+        for (k, &r) in row_of.iter().enumerate() {
+            scratch[k * stride..(k + 1) * stride].copy_from_slice(row(r));
+        }
+        scratch[row_of.len() * stride..].fill(0.0);
+        transpose::<FMA, B>(scratch, stride, init, B, B, stride);
+    }
+}
+
+/// `dst[c·dst_stride + r] = src[r·src_stride + c]` for `r < rows`, `c < cols`: a block's rows
+/// of samples to feature-major rows and back. With `FMA` and `B = 16` (the AVX2 kernel's
+/// blocks) whole 8×8 tiles move through vector shuffles, the rest value by value; either
+/// way the values are copied, never changed.
+#[inline(always)]
+fn transpose<const FMA: bool, const B: usize>(
+    src: &[f32],
+    src_stride: usize,
+    dst: &mut [f32],
+    dst_stride: usize,
+    rows: usize,
+    cols: usize,
+) {
+    let (mut r0, mut c0) = (0, 0);
+    #[cfg(target_arch = "x86_64")]
+    if FMA && B == 16 {
+        (r0, c0) = (rows / 8 * 8, cols / 8 * 8);
+        for r in (0..r0).step_by(8) {
+            for c in (0..c0).step_by(8) {
+                // SAFETY: this runs only from `Mlp::forward_avx2`, which `Kernel::detect`
+                // picks where the CPU has AVX2.
+                unsafe {
+                    simd::transpose8x8(
+                        &src[r * src_stride + c..],
+                        src_stride,
+                        &mut dst[c * dst_stride + r..],
+                        dst_stride,
+                    )
+                };
+            }
+        }
+    }
+    // What the tiles left: the columns past `c0` of the tiled rows, then the rows past `r0`.
+    for r in 0..rows {
+        let from = if r < r0 { c0 } else { 0 };
+        for c in from..cols {
+            dst[c * dst_stride + r] = src[r * src_stride + c];
+        }
+    }
+}
+
 /// One layer on a block of `B` samples: `y[o][b] = bias[o] + Σ_i W[i][o]·x[i][b]` summed in
-/// input order (fused, with explicit vectors, when `FMA`), then ReLU when `relu`. `x` holds
-/// `l.n_in` rows of `B`, `y` at least `n_out` rounded up to `T` rows.
+/// input order (fused, with explicit vectors, when `FMA`), then ReLU when `relu`; with
+/// `init` (`[stride][B]`), `init[o][b]` in place of `bias[o]`. `x` holds `l.n_in` rows of
+/// `B`, `y` at least `n_out` rounded up to `T` rows.
 #[inline(always)]
 fn layer<const FMA: bool, const B: usize, const T: usize>(
     l: &Layer,
     x: &[f32],
+    init: Option<&[f32]>,
     y: &mut [f32],
     relu: bool,
 ) {
     let x = &x[..l.n_in * B];
     for o0 in (0..l.n_out).step_by(T) {
+        let init = init.map(|v| &v[o0 * B..(o0 + T) * B]);
         // SAFETY: the fused kernel runs only from `Mlp::forward_avx2` (B = 16), which
         // `Kernel::detect` picks where the CPU has AVX2 and FMA.
         #[cfg(target_arch = "x86_64")]
         if FMA && B == 16 {
-            unsafe { simd::tile_avx2::<T>(l, x, &mut y[o0 * B..(o0 + T) * B], o0, relu) };
+            unsafe { simd::tile_avx2::<T>(l, x, init, &mut y[o0 * B..(o0 + T) * B], o0, relu) };
             continue;
         }
         let mut acc = [[0.0f32; B]; T];
-        for (acc_o, &b) in acc.iter_mut().zip(&l.bias[o0..o0 + T]) {
-            acc_o.fill(b);
+        for (o, acc_o) in acc.iter_mut().enumerate() {
+            match init {
+                Some(v) => acc_o.copy_from_slice(&v[o * B..(o + 1) * B]),
+                None => acc_o.fill(l.bias[o0 + o]),
+            }
         }
         for (i, xi) in x.chunks_exact(B).enumerate() {
             let w = &l.w[i * l.stride + o0..][..T];
@@ -325,6 +487,52 @@ mod simd {
     use super::Layer;
     use std::arch::x86_64::*;
 
+    /// Row `r < 8` of `src` (8 values from `r·src_stride`) to column `r` of `dst` (value `c`
+    /// at `c·dst_stride + r`).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn transpose8x8(src: &[f32], src_stride: usize, dst: &mut [f32], dst_stride: usize) {
+        // A loop, not a closure: a closure would not inherit the target features, and its
+        // loads would become calls.
+        let mut r = [_mm256_setzero_ps(); 8];
+        for (k, v) in r.iter_mut().enumerate() {
+            let s = &src[k * src_stride..][..8];
+            // SAFETY: `s` holds 8 values.
+            *v = unsafe { _mm256_loadu_ps(s.as_ptr()) };
+        }
+        // Pairs of rows interleaved, then pairs of pairs, then the 128-bit halves swapped.
+        let t = [
+            _mm256_unpacklo_ps(r[0], r[1]),
+            _mm256_unpackhi_ps(r[0], r[1]),
+            _mm256_unpacklo_ps(r[2], r[3]),
+            _mm256_unpackhi_ps(r[2], r[3]),
+            _mm256_unpacklo_ps(r[4], r[5]),
+            _mm256_unpackhi_ps(r[4], r[5]),
+            _mm256_unpacklo_ps(r[6], r[7]),
+            _mm256_unpackhi_ps(r[6], r[7]),
+        ];
+        let u = [
+            _mm256_shuffle_ps::<0x44>(t[0], t[2]),
+            _mm256_shuffle_ps::<0xee>(t[0], t[2]),
+            _mm256_shuffle_ps::<0x44>(t[1], t[3]),
+            _mm256_shuffle_ps::<0xee>(t[1], t[3]),
+            _mm256_shuffle_ps::<0x44>(t[4], t[6]),
+            _mm256_shuffle_ps::<0xee>(t[4], t[6]),
+            _mm256_shuffle_ps::<0x44>(t[5], t[7]),
+            _mm256_shuffle_ps::<0xee>(t[5], t[7]),
+        ];
+        for c in 0..8 {
+            let v = if c < 4 {
+                _mm256_permute2f128_ps::<0x20>(u[c], u[c + 4])
+            } else {
+                _mm256_permute2f128_ps::<0x31>(u[c - 4], u[c])
+            };
+            let d = &mut dst[c * dst_stride..][..8];
+            // SAFETY: `d` holds 8 values.
+            unsafe { _mm256_storeu_ps(d.as_mut_ptr(), v) };
+        }
+    }
+
     /// `T` outputs from `o0` for 16 samples (two vectors of 8); `x` is `[n_in][16]`, `y` is
     /// `[T][16]`.
     #[inline]
@@ -332,13 +540,26 @@ mod simd {
     pub(super) fn tile_avx2<const T: usize>(
         l: &Layer,
         x: &[f32],
+        init: Option<&[f32]>,
         y: &mut [f32],
         o0: usize,
         relu: bool,
     ) {
         let mut acc = [[_mm256_setzero_ps(); 2]; T];
-        for (a, &b) in acc.iter_mut().zip(&l.bias[o0..o0 + T]) {
-            *a = [_mm256_set1_ps(b); 2];
+        for (o, a) in acc.iter_mut().enumerate() {
+            *a = match init {
+                Some(v) => {
+                    let v = &v[o * 16..][..16];
+                    // SAFETY: `v` holds 16 values.
+                    unsafe {
+                        [
+                            _mm256_loadu_ps(v.as_ptr()),
+                            _mm256_loadu_ps(v[8..].as_ptr()),
+                        ]
+                    }
+                }
+                None => [_mm256_set1_ps(l.bias[o0 + o]); 2],
+            };
         }
         for (i, xi) in x.chunks_exact(16).enumerate() {
             let w = &l.w[i * l.stride + o0..][..T];
@@ -482,16 +703,44 @@ mod tests {
                 .map(|v| if v < -0.3 { 0.0 } else { 4.0 * v })
                 .collect();
             let mut plain = vec![0.0; n * no];
-            mlp.forward_with(Kernel::Plain, &x, &mut plain);
+            mlp.forward_with(Kernel::Plain, &x, None, &mut plain);
             let scale = plain.iter().fold(1.0f32, |m, v| m.max(v.abs()));
             let mut fast = vec![f32::NAN; n * no];
-            mlp.forward_with(Kernel::detect(), &x, &mut fast);
+            mlp.forward_with(Kernel::detect(), &x, None, &mut fast);
             assert_close(&fast, &plain, scale);
             #[cfg(target_arch = "x86_64")]
             if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
                 let mut avx2 = vec![f32::NAN; n * no];
-                mlp.forward_with(Kernel::Avx2, &x, &mut avx2);
+                mlp.forward_with(Kernel::Avx2, &x, None, &mut avx2);
                 assert_close(&avx2, &plain, scale);
+            }
+        }
+    }
+
+    #[test]
+    fn tiled_transposes_move_every_value_where_the_plain_loop_does() {
+        // Blocks of 16 samples and of fewer, feature counts with and without a partial tile.
+        for (rows, cols) in [(16, 32), (13, 32), (16, 3), (7, 16), (16, 63), (8, 8)] {
+            let src = seeded(rows * cols, rows as u64);
+            let mut want = vec![f32::NAN; cols * 16];
+            for r in 0..rows {
+                for c in 0..cols {
+                    want[c * 16 + r] = src[r * cols + c];
+                }
+            }
+            let mut plain = vec![f32::NAN; cols * 16];
+            transpose::<false, 16>(&src, cols, &mut plain, 16, rows, cols);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&plain), bits(&want), "plain {rows}x{cols}");
+            #[cfg(target_arch = "x86_64")]
+            if Kernel::detect() == Kernel::Avx2 {
+                let mut tiled = vec![f32::NAN; cols * 16];
+                transpose::<true, 16>(&src, cols, &mut tiled, 16, rows, cols);
+                assert_eq!(bits(&tiled), bits(&want), "tiled {rows}x{cols}");
+                // And back: feature-major rows to sample rows.
+                let mut back = vec![f32::NAN; rows * cols];
+                transpose::<true, 16>(&tiled, 16, &mut back, cols, cols, rows);
+                assert_eq!(bits(&back), bits(&src), "back {rows}x{cols}");
             }
         }
     }
@@ -507,7 +756,7 @@ mod tests {
         let m = Mlp::with_biases(2, &layers).unwrap();
         for kernel in [Kernel::Plain, Kernel::detect()] {
             let mut y = [0.0; 2];
-            m.forward_with(kernel, &[1.0, 3.0, 2.0, 0.0], &mut y);
+            m.forward_with(kernel, &[1.0, 3.0, 2.0, 0.0], None, &mut y);
             assert_eq!(y, [1.5, 5.5], "{kernel:?}");
         }
         // One layer is linear: no ReLU on its output.
@@ -568,10 +817,10 @@ mod tests {
             }
             let scale = want.iter().fold(1.0f32, |m, v| m.max(v.abs()));
             let mut plain = vec![f32::NAN; n * no];
-            mlp.forward_with(Kernel::Plain, &x, &mut plain);
+            mlp.forward_with(Kernel::Plain, &x, None, &mut plain);
             assert_close(&plain, &want, scale);
             let mut fast = vec![f32::NAN; n * no];
-            mlp.forward_with(Kernel::detect(), &x, &mut fast);
+            mlp.forward_with(Kernel::detect(), &x, None, &mut fast);
             assert_close(&fast, &plain, scale);
         }
     }
@@ -606,11 +855,72 @@ mod tests {
                 .flat_map(|v| v.iter().chain(&fixed).copied())
                 .collect();
             let (mut want, mut got) = (vec![0.0; n * 3], vec![0.0; n * 3]);
-            mlp.forward_with(Kernel::Plain, &full, &mut want);
-            folded.forward_with(Kernel::Plain, &varying, &mut got);
+            mlp.forward_with(Kernel::Plain, &full, None, &mut want);
+            folded.forward_with(Kernel::Plain, &varying, None, &mut got);
             let scale = want.iter().fold(1.0f32, |m, v| m.max(v.abs()));
             assert_close(&got, &want, scale);
             assert!(mlp.with_last_inputs(&[0.0; 64]).is_none());
+        }
+    }
+
+    #[test]
+    fn split_inputs_summed_once_per_run_give_the_full_network() {
+        // instant-ngp's colour MLP (16 features + 16 direction values → 64 → 64 → 3) and a
+        // torch one with biases, the last 16 inputs shared by runs of samples of every
+        // length around a block's (1, 3, 16, 17, 40, …).
+        let tcnn = MlpConfig {
+            n_inputs: 32,
+            width: 64,
+            n_hidden_layers: 2,
+            n_outputs: 3,
+            output_alignment: 16,
+        };
+        let torch_layers = [
+            (seeded(64 * 32, 1), seeded(64, 2)),
+            (seeded(64 * 64, 3), seeded(64, 4)),
+            (seeded(3 * 64, 5), seeded(3, 6)),
+        ];
+        let runs = [1, 3, 16, 17, 40, 2, 16, 5, 32];
+        let n: usize = runs.iter().sum();
+        let row_of: Vec<u32> = runs
+            .iter()
+            .enumerate()
+            .flat_map(|(r, &len)| std::iter::repeat_n(r as u32, len))
+            .collect();
+        let shared = seeded(runs.len() * 16, 8);
+        let varying: Vec<f32> = seeded(n * 16, 9).into_iter().map(|v| 4.0 * v).collect();
+        let full: Vec<f32> = varying
+            .chunks_exact(16)
+            .zip(&row_of)
+            .flat_map(|(v, &r)| v.iter().chain(&shared[r as usize * 16..][..16]).copied())
+            .collect();
+        for mlp in [
+            Mlp::new(tcnn, &seeded(tcnn.n_params(), 7)).unwrap(),
+            Mlp::with_biases(32, &torch_layers).unwrap(),
+        ] {
+            let (head, last) = mlp.split_last_inputs(16).unwrap();
+            assert_eq!(head.config().n_inputs, 16);
+            let mut rows = Vec::new();
+            for values in shared.chunks_exact(16) {
+                last.starts(values, &mut rows);
+            }
+            assert_eq!(rows.len(), runs.len() * last.stride());
+            let mut want = vec![0.0; n * 3];
+            mlp.forward_with(Kernel::Plain, &full, None, &mut want);
+            let scale = want.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+            let starts = Starts {
+                rows: &rows,
+                row_of: &row_of,
+            };
+            for kernel in [Kernel::Plain, Kernel::detect()] {
+                let mut got = vec![f32::NAN; n * 3];
+                head.forward_with(kernel, &varying, Some(starts), &mut got);
+                assert_close(&got, &want, scale);
+            }
+            let mut got = vec![f32::NAN; n * 3];
+            head.forward_from(&varying, &rows, &row_of, &mut got);
+            assert_close(&got, &want, scale);
+            assert!(mlp.split_last_inputs(33).is_none());
         }
     }
 

@@ -15,7 +15,7 @@
 //! trained per-image embedding table, nerfacto's `use_average_appearance_embedding`; zeros
 //! when the config turns that off) →
 //! 64 → 64 → 3, sigmoid (evaluated with the appearance folded into the first layer's
-//! biases and the direction's part of that layer summed once per ray, see [`head_outputs`]).
+//! biases and the direction's part of that layer summed once per ray, see `head_outputs`).
 //! nerfstudio trains on sRGB-encoded pixels, so the colour is
 //! converted to linear, as for instant-ngp snapshots.
 //!

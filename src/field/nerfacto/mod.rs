@@ -14,7 +14,9 @@
 //! `[SH₄((d + 1)/2) (16), geometry (15), appearance (32)]` (the appearance is the mean of the
 //! trained per-image embedding table, nerfacto's `use_average_appearance_embedding`; zeros
 //! when the config turns that off) →
-//! 64 → 64 → 3, sigmoid. nerfstudio trains on sRGB-encoded pixels, so the colour is
+//! 64 → 64 → 3, sigmoid (evaluated with the appearance folded into the first layer's
+//! biases and the direction's part of that layer summed once per ray, see `head_outputs`).
+//! nerfstudio trains on sRGB-encoded pixels, so the colour is
 //! converted to linear, as for instant-ngp snapshots.
 //!
 //! **Checkpoint layouts.** Keys under `pipeline._model.field.`: with tiny-cuda-nn,
@@ -55,7 +57,8 @@ use half::f16;
 
 use super::container::{Checkpoint, DType};
 use super::network::{
-    exp_density, non_finite, sh4, HashGrid, HashGridConfig, Mlp, MlpConfig, TableStorage,
+    exp_density, non_finite, sh4, HashGrid, HashGridConfig, LastInputs, Mlp, MlpConfig,
+    TableStorage,
 };
 use super::{Aabb, ColorSpace, Field, Unbounded};
 use crate::error::{Error, Result};
@@ -84,6 +87,8 @@ pub use proposal::{
 
 /// Points per batch (bounds the scratch memory).
 const CHUNK: usize = 512;
+/// The colour MLP's inputs for the view direction: its degree-4 SH encoding.
+const SH_INPUTS: usize = 16;
 /// The occupancy grid's cells per axis over the contracted cube…
 const OCCUPANCY_CELLS: usize = 64;
 /// …and the opacity across a cell above which it is occupied.
@@ -94,7 +99,10 @@ const OCCUPANCY_OPACITY: f32 = 1e-3;
 /// shell of `tests/nerfacto_far.rs` at Final, in cells the mask empties).
 const FAR_SKIP: f32 = 1.0 / 64.0;
 
-/// The networks, in one of the two layouts.
+/// The networks, in one of the two layouts. The colour MLP (`head`) reads the geometry
+/// features only: its first layer's columns are reordered at load to `[geometry,
+/// direction, appearance]`, the appearance folded into its biases and the direction's
+/// columns split off ([`NerfactoField::head_dir`]).
 #[derive(Clone, Debug)]
 enum Net {
     Tcnn {
@@ -121,6 +129,9 @@ pub struct NerfactoField {
     /// Density MLP outputs (1 + geometry features).
     n_base: usize,
     appearance: Vec<f32>,
+    /// The colour MLP's first-layer columns of the direction's SH encoding, with its biases
+    /// (the appearance folded in): summed once per run of samples sharing a direction.
+    head_dir: LastInputs,
     n_images: usize,
     n_params: usize,
     occupancy: OccupancyGrid,
@@ -173,15 +184,18 @@ impl NerfactoField {
             read_torch(&ckpt, &keys, &settings, appearance.len())?
         };
         // The appearance is the same for every sample: folded into the colour MLP's first
-        // biases, so that it reads the direction's SH and the geometry features only.
+        // biases. The direction is shared by a ray's samples: its columns are split off
+        // (the inputs were reordered to end with it), so the MLP reads the geometry only.
         let (Net::Tcnn { head, .. } | Net::Torch { head, .. }) = &mut net;
-        *head = head.with_last_inputs(&appearance).ok_or_else(|| {
+        let (geometry_head, head_dir) = split_head(head, &appearance).ok_or_else(|| {
             Error::format(
                 &checkpoint,
                 "mlp_head",
-                "the colour MLP has fewer inputs than the appearance embedding",
+                "the colour MLP has fewer inputs than the direction's encoding and the \
+                 appearance embedding",
             )
         })?;
+        *head = geometry_head;
         let proposal = read_proposal(&ckpt, &config_text, &config_file, &settings)?;
         let mut field = NerfactoField {
             run: run.to_path_buf(),
@@ -193,6 +207,7 @@ impl NerfactoField {
             n_base,
             n_params: n_params + appearance.len() * n_images,
             appearance,
+            head_dir,
             n_images,
             occupancy: OccupancyGrid::full(&grid),
             proposal,
@@ -232,7 +247,7 @@ impl NerfactoField {
                     format!("{} -> {}x{} -> {}", d.n_inputs, d.n_hidden_layers, d.width, d.n_outputs),
                     format!(
                         "{} -> {}x{} -> 3",
-                        h.n_inputs + self.appearance.len(),
+                        SH_INPUTS + h.n_inputs + self.appearance.len(),
                         h.n_hidden_layers,
                         h.width
                     ),
@@ -259,7 +274,7 @@ impl NerfactoField {
                     ),
                     format!(
                         "{} -> {} layers of {} -> 3",
-                        h.n_inputs + self.appearance.len(),
+                        SH_INPUTS + h.n_inputs + self.appearance.len(),
                         h.n_hidden_layers + 1,
                         h.width
                     ),
@@ -426,35 +441,36 @@ impl NerfactoField {
         self.bounds().contains(p) && self.occupancy.point(p)
     }
 
-    /// Colours from the geometry features (`n_base − 1` per point) and directions.
+    /// Colours from the geometry features (`n_base − 1` per point) and directions (see
+    /// [`head_outputs`]).
     fn colour(&self, geo: &[f32], dirs: &[Vec3], rgb: &mut [Vec3]) {
         let n_geo = self.n_base - 1;
-        // The appearance is folded into the MLP (see `load`).
-        let width = 16 + n_geo;
-        let (mut input, mut colour) = (Vec::new(), Vec::new());
+        let (Net::Tcnn { head, .. } | Net::Torch { head, .. }) = &self.net;
+        let encoding = |d| self.direction_encoding(d);
+        let (mut scratch, mut colour) = (HeadScratch::default(), Vec::new());
         let parts = geo.chunks(CHUNK * n_geo).zip(dirs.chunks(CHUNK));
         for ((g, ds), dst) in parts.zip(rgb.chunks_mut(CHUNK)) {
-            input.resize(ds.len() * width, 0.0);
-            for ((row, d), o) in input
-                .chunks_exact_mut(width)
-                .zip(ds)
-                .zip(g.chunks_exact(n_geo))
-            {
-                row[..16].copy_from_slice(&match self.net {
-                    Net::Tcnn { .. } => sh4(*d),
-                    Net::Torch { .. } => torch_sh4((*d + Vec3::ONE) * 0.5),
-                });
-                row[16..].copy_from_slice(o);
-            }
             colour.resize(ds.len() * 3, 0.0);
-            match &self.net {
-                Net::Tcnn { head, .. } | Net::Torch { head, .. } => {
-                    head.forward(&input, &mut colour)
-                }
-            }
+            head_outputs(
+                head,
+                &self.head_dir,
+                encoding,
+                g,
+                ds,
+                &mut scratch,
+                &mut colour,
+            );
             for (c, v) in dst.iter_mut().zip(colour.chunks_exact(3)) {
                 *c = Vec3::from_array([v[0], v[1], v[2]].map(|x| 1.0 / (1.0 + (-x).exp())));
             }
+        }
+    }
+
+    /// The colour MLP's encoding of the view direction `d`.
+    fn direction_encoding(&self, d: Vec3) -> [f32; SH_INPUTS] {
+        match self.net {
+            Net::Tcnn { .. } => sh4(d),
+            Net::Torch { .. } => torch_sh4((d + Vec3::ONE) * 0.5),
         }
     }
 
@@ -676,10 +692,10 @@ fn read_tcnn(
     let density = Mlp::new(density_config, &mlp_params)
         .ok_or_else(|| keys.err(&grid_name, "density MLP parameters do not match the config"))?;
     let head_name = keys.name("mlp_head.tcnn_encoding.params");
-    let head_params = read_weights(ckpt, &head_name)?;
+    let mut head_params = read_weights(ckpt, &head_name)?;
     let head_config = [16, 8]
         .map(|align| MlpConfig {
-            n_inputs: 16 + (N_BASE - 1) + n_appearance,
+            n_inputs: SH_INPUTS + (N_BASE - 1) + n_appearance,
             width: s.hidden_dim_color,
             n_hidden_layers: 2,
             n_outputs: 3,
@@ -694,10 +710,16 @@ fn read_tcnn(
                     "{} parameters do not fit a colour MLP of width {} over {} inputs",
                     head_params.len(),
                     s.hidden_dim_color,
-                    16 + (N_BASE - 1) + n_appearance
+                    SH_INPUTS + (N_BASE - 1) + n_appearance
                 ),
             )
         })?;
+    let first_layer = head_config.width * head_config.n_inputs.next_multiple_of(16);
+    direction_after_geometry(
+        &mut head_params[..first_layer],
+        head_config.n_inputs.next_multiple_of(16),
+        N_BASE - 1,
+    );
     let head = Mlp::new(head_config, &head_params)
         .ok_or_else(|| keys.err(&head_name, "colour MLP parameters do not match"))?;
     let n_params = nd + ng + head_params.len();
@@ -830,8 +852,13 @@ fn read_torch(
     if n_base < 2 {
         return Err(keys.err(mlp_prefix, "the density MLP has no geometry features"));
     }
-    let head_inputs = 16 + (n_base - 1) + n_appearance;
-    let (head, nh) = read_linear_layers(ckpt, keys, "mlp_head.layers", head_inputs)?;
+    let head_inputs = SH_INPUTS + (n_base - 1) + n_appearance;
+    let mut head_layers = read_linear_params(ckpt, keys, "mlp_head.layers")?;
+    let nh: usize = head_layers.iter().map(|(w, b)| w.len() + b.len()).sum();
+    if let Some((w, _)) = head_layers.first_mut() {
+        direction_after_geometry(w, head_inputs, n_base - 1);
+    }
+    let head = linear_mlp(keys, "mlp_head.layers", head_inputs, &head_layers)?;
     if head.config().n_outputs != 3 {
         return Err(keys.err("mlp_head.layers", "the colour MLP does not give 3 outputs"));
     }
@@ -845,6 +872,64 @@ fn read_torch(
         n_base,
         n_params,
     ))
+}
+
+/// The colour MLP as loaded (first-layer inputs `[geometry, direction, appearance]`, see
+/// [`direction_after_geometry`]) with the appearance folded into its biases and the
+/// direction's columns split off: the MLP on the geometry features and those columns.
+fn split_head(head: &Mlp, appearance: &[f32]) -> Option<(Mlp, LastInputs)> {
+    head.with_last_inputs(appearance)?
+        .split_last_inputs(SH_INPUTS)
+}
+
+/// Scratch of [`head_outputs`]: the first-layer starts, one row per run of equal
+/// directions, and each sample's run.
+#[derive(Default)]
+struct HeadScratch {
+    starts: Vec<f32>,
+    row_of: Vec<u32>,
+}
+
+/// The colour MLP's raw outputs (3 per sample, before the sigmoid) for the geometry
+/// features `geo` (`head`'s inputs per sample) and the directions, `head` and `dir` from
+/// [`split_head`]: the direction's part of the first layer (its encoding times those
+/// columns, plus the biases) is summed once per run of consecutive equal directions (a
+/// ray's samples share one), each sample's layer starting from its run's sums.
+fn head_outputs(
+    head: &Mlp,
+    dir: &LastInputs,
+    encoding: impl Fn(Vec3) -> [f32; SH_INPUTS],
+    geo: &[f32],
+    dirs: &[Vec3],
+    s: &mut HeadScratch,
+    out: &mut [f32],
+) {
+    s.starts.clear();
+    s.row_of.clear();
+    let mut run = None;
+    for d in dirs {
+        let bits = d.to_array().map(f32::to_bits);
+        if run != Some(bits) {
+            run = Some(bits);
+            dir.starts(&encoding(*d), &mut s.starts);
+        }
+        s.row_of
+            .push((s.starts.len() / dir.stride()).saturating_sub(1) as u32);
+    }
+    let n_geo = head.config().n_inputs;
+    head.forward_from(&geo[..dirs.len() * n_geo], &s.starts, &s.row_of, out);
+}
+
+/// Moves the direction's columns after the geometry's in a colour MLP's first layer,
+/// row-major `[out][row]` with inputs `[direction (16), geometry (n_geo), …]`, so that
+/// after the appearance is folded in they are the last ones ([`Mlp::split_last_inputs`]).
+/// Rows too short to hold both are left as they are (the MLP refuses them).
+fn direction_after_geometry(w: &mut [f32], row: usize, n_geo: usize) {
+    for r in w.chunks_exact_mut(row.max(1)) {
+        if let Some(inputs) = r.get_mut(..SH_INPUTS + n_geo) {
+            inputs.rotate_left(SH_INPUTS);
+        }
+    }
 }
 
 /// `<prefix>.<i>.weight|bias` for `i = 0, 1, …` as a torch [`Mlp`] (with biases), and its
@@ -1011,5 +1096,216 @@ mod tests {
         assert!((u - (c + Vec3::splat(2.0)) / 4.0).length() < 1e-6);
         // Infinitely far: u reaches 1 and leaves the selector.
         assert!(NerfactoField::unit_from_field(Vec3::new(f32::INFINITY, 0.0, 0.0)).is_none());
+    }
+
+    /// `n` values in `[−scale, scale)` from a seeded generator.
+    fn seeded(n: usize, seed: u64, scale: f32) -> Vec<f32> {
+        let mut x = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        (0..n)
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                scale * ((x >> 40) as f32 / (1u64 << 23) as f32 - 1.0)
+            })
+            .collect()
+    }
+
+    /// The MLP `(W [out][in], b)` per layer on `x` in f64, ReLU between layers.
+    fn reference(layers: &[(Vec<f32>, Vec<f32>)], x: &[f32]) -> Vec<f64> {
+        let mut a: Vec<f64> = x.iter().map(|&v| f64::from(v)).collect();
+        for (k, (w, b)) in layers.iter().enumerate() {
+            let n_in = w.len() / b.len();
+            a.resize(n_in, 0.0);
+            a = w
+                .chunks_exact(n_in)
+                .zip(b)
+                .map(|(row, &bias)| {
+                    let y = row
+                        .iter()
+                        .zip(&a)
+                        .fold(f64::from(bias), |s, (&wi, &ai)| s + f64::from(wi) * ai);
+                    if k + 1 < layers.len() {
+                        y.max(0.0)
+                    } else {
+                        y
+                    }
+                })
+                .collect();
+        }
+        a
+    }
+
+    /// The colour head as the field evaluates it (inputs reordered, appearance folded in,
+    /// the direction's part summed once per run) against the whole network on
+    /// `[encoding, geometry, appearance]`, in both layouts, on runs of equal directions of
+    /// lengths across the kernels' blocks.
+    #[test]
+    fn colour_by_runs_matches_the_whole_network() {
+        let (n_geo, n_app, width) = (15, 32, 64);
+        let n_in = SH_INPUTS + n_geo + n_app;
+        let appearance = seeded(n_app, 1, 1.0);
+        let runs = [1, 3, 16, 17, 48, 2, 5, 33, 48, 7];
+        let dirs: Vec<Vec3> = runs
+            .iter()
+            .enumerate()
+            .flat_map(|(r, &len)| {
+                let v = seeded(3, 100 + r as u64, 1.0);
+                let d = Vec3::new(v[0], v[1], v[2] + 0.1).normalize();
+                std::iter::repeat_n(d, len)
+            })
+            .collect();
+        let n = dirs.len();
+        let geo = seeded(n * n_geo, 2, 3.0);
+        let torch_layers = vec![
+            (seeded(width * n_in, 3, 0.3), seeded(width, 4, 0.5)),
+            (seeded(width * width, 5, 0.2), seeded(width, 6, 0.5)),
+            (seeded(3 * width, 7, 0.2), seeded(3, 8, 0.5)),
+        ];
+        let tcnn_config = MlpConfig {
+            n_inputs: n_in,
+            width,
+            n_hidden_layers: 2,
+            n_outputs: 3,
+            output_alignment: 16,
+        };
+        let tcnn_params = seeded(tcnn_config.n_params(), 9, 0.2);
+        // tiny-cuda-nn's layers as `(W, 0)`: inputs padded to 64, outputs to 16.
+        let row = n_in.next_multiple_of(16);
+        let (l0, rest) = tcnn_params.split_at(width * row);
+        let (l1, l2) = rest.split_at(width * width);
+        let tcnn_layers = vec![
+            (l0.to_vec(), vec![0.0; width]),
+            (l1.to_vec(), vec![0.0; width]),
+            (l2.to_vec(), vec![0.0; 16]),
+        ];
+        let tcnn_sh = |d: Vec3| sh4(d);
+        let torch_sh = |d: Vec3| torch_sh4((d + Vec3::ONE) * 0.5);
+        let cases: [(&dyn Fn(Vec3) -> [f32; SH_INPUTS], _, _, _); 2] = [
+            (
+                &tcnn_sh,
+                &tcnn_layers,
+                Mlp::new(tcnn_config, &tcnn_params).unwrap(),
+                {
+                    let mut p = tcnn_params.clone();
+                    direction_after_geometry(&mut p[..width * row], row, n_geo);
+                    Mlp::new(tcnn_config, &p).unwrap()
+                },
+            ),
+            (
+                &torch_sh,
+                &torch_layers,
+                Mlp::with_biases(n_in, &torch_layers).unwrap(),
+                {
+                    let mut layers = torch_layers.clone();
+                    direction_after_geometry(&mut layers[0].0, n_in, n_geo);
+                    Mlp::with_biases(n_in, &layers).unwrap()
+                },
+            ),
+        ];
+        for (encoding, layers, whole, reordered) in cases {
+            let full: Vec<f32> = dirs
+                .iter()
+                .zip(geo.chunks_exact(n_geo))
+                .flat_map(|(d, g)| {
+                    let mut x = encoding(*d).to_vec();
+                    x.extend_from_slice(g);
+                    x.extend_from_slice(&appearance);
+                    x
+                })
+                .collect();
+            let (head, dir) = split_head(&reordered, &appearance).unwrap();
+            assert_eq!(head.config().n_inputs, n_geo);
+            let mut got = vec![f32::NAN; n * 3];
+            let mut scratch = HeadScratch::default();
+            head_outputs(&head, &dir, encoding, &geo, &dirs, &mut scratch, &mut got);
+            assert_eq!(scratch.starts.len(), runs.len() * dir.stride());
+            // The whole network in f64 from the weights as stored, and the shared kernel
+            // on the full inputs.
+            let mut kernel = vec![f32::NAN; n * 3];
+            whole.forward(&full, &mut kernel);
+            let want: Vec<f64> = full
+                .chunks_exact(n_in)
+                .flat_map(|x| reference(layers, x)[..3].to_vec())
+                .collect();
+            let scale = want.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+            for (k, ((&g, &w), &f)) in got.iter().zip(&want).zip(&kernel).enumerate() {
+                assert!(
+                    (f64::from(g) - w).abs() <= 1e-5 * scale,
+                    "sample {} output {}: {g} by runs, {w} by the reference",
+                    k / 3,
+                    k % 3
+                );
+                assert!(
+                    (g - f).abs() <= 1e-5 * scale as f32,
+                    "sample {} output {}: {g} by runs, {f} by the whole network",
+                    k / 3,
+                    k % 3
+                );
+            }
+        }
+    }
+
+    /// The torch colour head on 512 samples in runs of 40 sharing a direction, by runs
+    /// against the whole network on the full inputs:
+    /// `cargo test --release --lib bench_colour_by_runs -- --ignored --nocapture`.
+    #[test]
+    #[ignore = "benchmark"]
+    fn bench_colour_by_runs() {
+        use std::time::Instant;
+        let (n, n_geo, n_app, width) = (512, 15, 32, 64);
+        let n_in = SH_INPUTS + n_geo + n_app;
+        let appearance = seeded(n_app, 1, 1.0);
+        let layers = vec![
+            (seeded(width * n_in, 3, 0.3), seeded(width, 4, 0.5)),
+            (seeded(width * width, 5, 0.2), seeded(width, 6, 0.5)),
+            (seeded(3 * width, 7, 0.2), seeded(3, 8, 0.5)),
+        ];
+        let dirs: Vec<Vec3> = (0..n)
+            .map(|k| Vec3::new(1.0, (k / 40) as f32 * 0.01, 0.5).normalize())
+            .collect();
+        let geo = seeded(n * n_geo, 2, 3.0);
+        let encoding = |d: Vec3| torch_sh4((d + Vec3::ONE) * 0.5);
+        let whole = Mlp::with_biases(SH_INPUTS + n_geo, &{
+            let mut l = layers.clone();
+            l[0].0 = l[0]
+                .0
+                .chunks_exact(n_in)
+                .flat_map(|r| r[..SH_INPUTS + n_geo].to_vec())
+                .collect();
+            l
+        })
+        .unwrap();
+        let mut reordered = layers.clone();
+        direction_after_geometry(&mut reordered[0].0, n_in, n_geo);
+        let (head, dir) =
+            split_head(&Mlp::with_biases(n_in, &reordered).unwrap(), &appearance).unwrap();
+        let (mut input, mut out) = (Vec::new(), vec![0.0; n * 3]);
+        let mut scratch = HeadScratch::default();
+        let rounds = 2000;
+        for round in 0..6 {
+            let t = Instant::now();
+            for _ in 0..rounds {
+                input.clear();
+                for (d, g) in dirs.iter().zip(geo.chunks_exact(n_geo)) {
+                    input.extend_from_slice(&encoding(*d));
+                    input.extend_from_slice(g);
+                }
+                whole.forward(&input, &mut out);
+            }
+            let a = t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            for _ in 0..rounds {
+                head_outputs(&head, &dir, encoding, &geo, &dirs, &mut scratch, &mut out);
+            }
+            let b = t.elapsed().as_secs_f64();
+            let per = |s: f64| s * 1e9 / (rounds * n) as f64;
+            println!(
+                "round {round}: whole network {:.1} ns/sample, by runs {:.1} ns/sample ({:.2}x)",
+                per(a),
+                per(b),
+                a / b
+            );
+        }
     }
 }

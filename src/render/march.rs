@@ -476,6 +476,7 @@ fn setup_rays(
         state.refined = false;
         state.worst = 0.0;
         state.samples = 0;
+        state.finest = 0.0;
         state.log.clear();
         state.runs.clear();
         state.run = 0;
@@ -647,6 +648,9 @@ fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scr
         return;
     }
     let mut laid = 0;
+    // The round's bisection floor is set at its first stepped node: constant runs take no
+    // steps, so a round of them alone keeps the last round's (0 on the ray's first).
+    let mut floor_set = false;
     while laid < CHUNK && s.rays[r].run < s.rays[r].runs.len() {
         let state = &s.rays[r];
         let run = state.runs[state.run];
@@ -673,7 +677,8 @@ fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scr
             // Density may begin where a run does: its first step is a base one.
             s.rays[r].scale = 1.0;
         }
-        if laid == 0 {
+        if !floor_set {
+            floor_set = true;
             let base = base_step_at(r, t, plans, s).0;
             s.rays[r].finest = base * 0.5f64.powi(params.refine_depth.min(MAX_BISECTIONS) as i32);
         }

@@ -12,6 +12,7 @@ mod common_ofx;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::{Mutex, MutexGuard, PoisonError};
 
 use common_ingp::{write_snapshot, Spec};
 use common_ofx::fixtures::{demo_dir, instance_with, text};
@@ -42,6 +43,14 @@ impl Drop for Scratch {
 
 /// A snapshot whose density network answers NaN: f32 parameters drawn with a standard
 /// deviation of 1e30, whose products overflow to ±∞ and whose sums of those are NaN.
+/// The bundle's binary keeps the host it was last given (one host per process, as a real
+/// host runs a plugin): tests that load it with their own host and count its messages take
+/// turns, or one test's warnings reach another's host.
+fn one_host_at_a_time() -> MutexGuard<'static, ()> {
+    static HOST: Mutex<()> = Mutex::new(());
+    HOST.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
 fn overflowing_snapshot(dir: &Path) -> PathBuf {
     let spec = Spec {
         half: false,
@@ -94,6 +103,7 @@ fn finite(p: &Planes) -> bool {
 
 #[test]
 fn the_host_shows_a_persistent_warning_until_a_clean_frame() {
+    let _host = one_host_at_a_time();
     let dir = Scratch::new("host");
     let (bad, clean) = (overflowing_snapshot(&dir.0), clean_snapshot(&dir.0));
     let b = load(HostOptions::default());
@@ -137,6 +147,7 @@ fn the_host_shows_a_persistent_warning_until_a_clean_frame() {
 
 #[test]
 fn without_persistent_messages_the_render_still_succeeds_without_a_dialog() {
+    let _host = one_host_at_a_time();
     let dir = Scratch::new("v1");
     let b = load(HostOptions {
         message_suite: MessageSuiteOffer::V1Only,
@@ -176,6 +187,7 @@ fn fog_graph(dir: &Path, field: &Path) -> PathBuf {
 
 #[test]
 fn a_graph_names_the_node_and_frame_whose_pixels_may_be_off() {
+    let _host = one_host_at_a_time();
     let dir = Scratch::new("graph");
     let bad = fog_graph(&dir.0, &overflowing_snapshot(&dir.0));
     let clean = fog_graph(&dir.0, &clean_snapshot(&dir.0));

@@ -537,19 +537,12 @@ impl IngpField {
     /// per run of consecutive equal directions (a ray's samples; 1 024 of a sample's 6 400
     /// multiply-adds), each sample's layer starting from its run's sums.
     fn colour(&self, outputs: &[f32], dirs: &[Vec3], dst: &mut [Vec3], s: &mut ColourScratch) {
-        s.starts.clear();
-        s.row_of.clear();
-        let mut run = None;
-        for d in dirs {
-            let bits = d.to_array().map(f32::to_bits);
-            if run != Some(bits) {
-                run = Some(bits);
-                self.rgb_dir
-                    .starts(&sh4(Vec3::new(d.y, d.z, d.x)), &mut s.starts);
-            }
-            s.row_of
-                .push((s.starts.len() / self.rgb_dir.stride()).saturating_sub(1) as u32);
-        }
+        self.rgb_dir.starts_per_run(
+            dirs,
+            |d| sh4(Vec3::new(d.y, d.z, d.x)),
+            &mut s.starts,
+            &mut s.row_of,
+        );
         s.colour.resize(dirs.len() * 3, 0.0);
         let features = &outputs[..dirs.len() * DENSITY_OUTPUTS];
         self.rgb_mlp

@@ -904,18 +904,7 @@ fn head_outputs(
     s: &mut HeadScratch,
     out: &mut [f32],
 ) {
-    s.starts.clear();
-    s.row_of.clear();
-    let mut run = None;
-    for d in dirs {
-        let bits = d.to_array().map(f32::to_bits);
-        if run != Some(bits) {
-            run = Some(bits);
-            dir.starts(&encoding(*d), &mut s.starts);
-        }
-        s.row_of
-            .push((s.starts.len() / dir.stride()).saturating_sub(1) as u32);
-    }
+    dir.starts_per_run(dirs, encoding, &mut s.starts, &mut s.row_of);
     let n_geo = head.config().n_inputs;
     head.forward_from(&geo[..dirs.len() * n_geo], &s.starts, &s.row_of, out);
 }

@@ -22,6 +22,8 @@
 //! 16 samples × 4 outputs per tile) fuses each multiply-add, so it differs from the plain
 //! one by f32 rounding only.
 
+use glam::Vec3;
+
 /// The shape of an MLP.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct MlpConfig {
@@ -334,7 +336,9 @@ pub struct LastInputs {
 }
 
 impl LastInputs {
-    /// Values per row of [`Self::starts`] (the first layer's outputs, padded).
+    /// Values per row of [`Self::starts`] (the first layer's outputs, padded): what the
+    /// tests check the rows' length by.
+    #[cfg(test)]
     pub fn stride(&self) -> usize {
         self.stride
     }
@@ -350,6 +354,30 @@ impl LastInputs {
             for (r, &wo) in row[..self.n_out].iter_mut().zip(w) {
                 *r += wo * v;
             }
+        }
+    }
+
+    /// The rows of [`Mlp::forward_from`] for samples seen along `dirs`: one row of
+    /// [`Self::starts`] (of `encode(direction)`) per run of consecutive equal directions (a
+    /// ray's samples share one) into `rows`, and each sample's row into `row_of`, both
+    /// cleared first.
+    pub fn starts_per_run<const N: usize>(
+        &self,
+        dirs: &[Vec3],
+        encode: impl Fn(Vec3) -> [f32; N],
+        rows: &mut Vec<f32>,
+        row_of: &mut Vec<u32>,
+    ) {
+        rows.clear();
+        row_of.clear();
+        let mut run = None;
+        for &d in dirs {
+            let bits = d.to_array().map(f32::to_bits);
+            if run != Some(bits) {
+                run = Some(bits);
+                self.starts(&encode(d), rows);
+            }
+            row_of.push((rows.len() / self.stride).saturating_sub(1) as u32);
         }
     }
 }

@@ -129,32 +129,12 @@ impl TorchHashGrid {
     ) {
         use std::arch::x86_64::*;
         let rows = self.table_size as usize;
-        let mask = _mm256_set1_epi32((self.table_size - 1) as i32);
-        let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
-        let primes = [1u32, 2_654_435_761, 805_459_861].map(|p| _mm256_set1_epi32(p as i32));
         let levels = self.scales.iter().zip(self.table.chunks_exact(rows * 2));
         for ((&s, table), features) in levels.zip(out.chunks_exact_mut(2)) {
-            let scale = _mm256_set1_ps(s);
-            let mut h = [[_mm256_setzero_si256(); 2]; 3];
-            let mut w = [[zero; 2]; 3];
-            for a in 0..3 {
-                let p = _mm256_mul_ps(u[a], scale);
-                let lo = _mm256_cvttps_epi32(p);
-                let frac = _mm256_sub_ps(p, _mm256_cvtepi32_ps(lo));
-                // `hi = lo + (frac > 0)`: the comparison's mask is −1 where true.
-                let up = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_GT_OQ>(frac, zero));
-                let hi = _mm256_sub_epi32(lo, up);
-                h[a] = [lo, hi].map(|k| _mm256_mullo_epi32(k, primes[a]));
-                w[a] = [_mm256_sub_ps(one, frac), frac];
-            }
-            let mut acc = [zero; 2];
+            let cells = Cells8::new(u, s);
+            let mut acc = [_mm256_setzero_ps(); 2];
             for corner in 0..8 {
-                let (a, b, c) = (corner & 1, corner >> 1 & 1, corner >> 2);
-                let weight = _mm256_mul_ps(_mm256_mul_ps(w[0][a], w[1][b]), w[2][c]);
-                let hash = _mm256_xor_si256(_mm256_xor_si256(h[0][a], h[1][b]), h[2][c]);
-                let mut r = [0u32; 8];
-                // SAFETY: `r` has 8 values.
-                unsafe { _mm256_storeu_si256(r.as_mut_ptr().cast(), _mm256_and_si256(hash, mask)) };
+                let (r, weight) = cells.corner(corner, self.table_size);
                 // Points (0, 1, 4, 5) and (2, 3, 6, 7): the two shuffles that separate the
                 // features then leave the points in order.
                 // SAFETY: every row is below `rows`, and the level's table has `2·rows` values.
@@ -193,43 +173,20 @@ impl TorchHashGrid {
                 axes[a * n8 + i] = v;
             }
         }
-        let mask = _mm256_set1_epi32((self.table_size - 1) as i32);
-        let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
-        // The hash's primes as i32 bit patterns (the products wrap as the u32 ones do).
-        let primes = [1u32, 2_654_435_761, 805_459_861].map(|p| _mm256_set1_epi32(p as i32));
         let pairs = [
             _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3),
             _mm256_setr_epi32(4, 4, 5, 5, 6, 6, 7, 7),
         ];
         let levels = self.scales.iter().zip(self.table.chunks_exact(rows * 2));
         for (l, (&s, table)) in levels.enumerate() {
-            let scale = _mm256_set1_ps(s);
             for g in (0..n8).step_by(8) {
-                let mut h = [[_mm256_setzero_si256(); 2]; 3];
-                let mut w = [[zero; 2]; 3];
-                for a in 0..3 {
-                    // SAFETY: `axes` holds `n8` values per axis and `g + 8 ≤ n8`.
-                    let x = unsafe { _mm256_loadu_ps(axes[a * n8 + g..].as_ptr()) };
-                    let p = _mm256_mul_ps(x, scale);
-                    let lo = _mm256_cvttps_epi32(p);
-                    let frac = _mm256_sub_ps(p, _mm256_cvtepi32_ps(lo));
-                    // `hi = lo + (frac > 0)`: the comparison's mask is −1 where true.
-                    let up = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_GT_OQ>(frac, zero));
-                    let hi = _mm256_sub_epi32(lo, up);
-                    h[a] = [lo, hi].map(|k| _mm256_mullo_epi32(k, primes[a]));
-                    w[a] = [_mm256_sub_ps(one, frac), frac];
-                }
+                // SAFETY: `axes` holds `n8` values per axis and `g + 8 ≤ n8`.
+                let u = [0, 1, 2].map(|a| unsafe { _mm256_loadu_ps(axes[a * n8 + g..].as_ptr()) });
+                let cells = Cells8::new(u, s);
                 // Per half of the points, their two features interleaved as in `out`.
-                let mut acc = [zero; 2];
+                let mut acc = [_mm256_setzero_ps(); 2];
                 for corner in 0..8 {
-                    let (a, b, c) = (corner & 1, corner >> 1 & 1, corner >> 2);
-                    let weight = _mm256_mul_ps(_mm256_mul_ps(w[0][a], w[1][b]), w[2][c]);
-                    let hash = _mm256_xor_si256(_mm256_xor_si256(h[0][a], h[1][b]), h[2][c]);
-                    let mut r = [0u32; 8];
-                    // SAFETY: `r` has 8 values.
-                    unsafe {
-                        _mm256_storeu_si256(r.as_mut_ptr().cast(), _mm256_and_si256(hash, mask));
-                    }
+                    let (r, weight) = cells.corner(corner, self.table_size);
                     for (half, (sum, r)) in acc.iter_mut().zip(r.chunks_exact(4)).enumerate() {
                         // Each point's weight twice, for its two features.
                         let twice = _mm256_permutevar8x32_ps(weight, pairs[half]);
@@ -295,6 +252,60 @@ impl TorchHashGrid {
                 }
             }
         }
+    }
+}
+
+/// Eight points' grid cells at one level, as the plain loop finds them
+/// ([`TorchHashGrid::encode_features`]): per axis the lower and upper corner's index times
+/// the hash's prime, and their trilinear weights `1 − frac` and `frac`.
+#[cfg(target_arch = "x86_64")]
+struct Cells8 {
+    h: [[std::arch::x86_64::__m256i; 2]; 3],
+    w: [[std::arch::x86_64::__m256; 2]; 3],
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Cells8 {
+    /// The cells of the unit-cube points `u` (their x, y and z lanes) at level scale `s`.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn new(u: [std::arch::x86_64::__m256; 3], s: f32) -> Self {
+        use std::arch::x86_64::*;
+        let (zero, one, scale) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0), _mm256_set1_ps(s));
+        // The hash's primes as i32 bit patterns (the products wrap as the u32 ones do).
+        let primes = [1u32, 2_654_435_761, 805_459_861].map(|p| _mm256_set1_epi32(p as i32));
+        let mut cells = Cells8 {
+            h: [[_mm256_setzero_si256(); 2]; 3],
+            w: [[zero; 2]; 3],
+        };
+        for a in 0..3 {
+            let p = _mm256_mul_ps(u[a], scale);
+            let lo = _mm256_cvttps_epi32(p);
+            let frac = _mm256_sub_ps(p, _mm256_cvtepi32_ps(lo));
+            // `hi = lo + (frac > 0)`: the comparison's mask is −1 where true.
+            let up = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_GT_OQ>(frac, zero));
+            let hi = _mm256_sub_epi32(lo, up);
+            cells.h[a] = [lo, hi].map(|k| _mm256_mullo_epi32(k, primes[a]));
+            cells.w[a] = [_mm256_sub_ps(one, frac), frac];
+        }
+        cells
+    }
+
+    /// Corner `corner` (bits: x, y, z upper) of the eight cells: each point's row in a
+    /// table of `table_size` rows (a power of two) and its weight.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn corner(&self, corner: usize, table_size: u32) -> ([u32; 8], std::arch::x86_64::__m256) {
+        use std::arch::x86_64::*;
+        let (h, w) = (&self.h, &self.w);
+        let (a, b, c) = (corner & 1, corner >> 1 & 1, corner >> 2);
+        let weight = _mm256_mul_ps(_mm256_mul_ps(w[0][a], w[1][b]), w[2][c]);
+        let hash = _mm256_xor_si256(_mm256_xor_si256(h[0][a], h[1][b]), h[2][c]);
+        let mask = _mm256_set1_epi32((table_size - 1) as i32);
+        let mut r = [0u32; 8];
+        // SAFETY: `r` has 8 values.
+        unsafe { _mm256_storeu_si256(r.as_mut_ptr().cast(), _mm256_and_si256(hash, mask)) };
+        (r, weight)
     }
 }
 

@@ -311,6 +311,39 @@ impl RayState {
     }
 }
 
+/// One instance's steps along one ray ([`base_step_at`]), worked out once per ray.
+#[derive(Clone, Copy, Debug)]
+struct RaySteps {
+    /// Where the ray is inside the instance (world distance).
+    t_near: f64,
+    t_far: f64,
+    /// The instance's base step and the longest a grown step may be, in world units, before
+    /// an unbounded field's growth.
+    step: f64,
+    longest: f64,
+    /// The instance's steps grow with distance (an unbounded field).
+    grows: bool,
+}
+
+/// One instance's batched colour query: sample points, directions and features, and the ray
+/// each sample's colour goes to with its share of the weight.
+#[derive(Default)]
+struct ColorQuery {
+    points: Vec<Vec3>,
+    dirs: Vec<Vec3>,
+    features: Vec<f32>,
+    owners: Vec<(u32, f64)>,
+}
+
+impl ColorQuery {
+    fn clear(&mut self) {
+        self.points.clear();
+        self.dirs.clear();
+        self.features.clear();
+        self.owners.clear();
+    }
+}
+
 /// Per-thread scratch reused from tile to tile: no allocation per sample.
 #[derive(Default)]
 pub(super) struct Scratch {
@@ -324,6 +357,8 @@ pub(super) struct Scratch {
     /// does not grow with the scene's instance count.
     ray_insts: Vec<u32>,
     ray_inst_at: Vec<u32>,
+    /// Per entry of `ray_insts`, that instance's steps along the ray.
+    ray_steps: Vec<RaySteps>,
     /// Per instance, the items (pending nodes, steps, rays) of one batched query.
     by_inst: Vec<Vec<u32>>,
     /// Per instance, whether some ray of the tile may meet it ([`cull_instances`]).
@@ -345,10 +380,11 @@ pub(super) struct Scratch {
     /// Step boxes for one batched density-bound query.
     regions: Vec<Aabb>,
     points: Vec<Vec3>,
-    dirs: Vec<Vec3>,
     owners: Vec<(u32, f64)>,
     field_out: Vec<f32>,
     rgb_out: Vec<Vec3>,
+    /// Per instance, the round's colour query ([`shade`]).
+    shading: Vec<ColorQuery>,
     /// Per pixel of the tile: its world ray and camera z per unit ray distance; one ray's
     /// splat fragments (panoramic cameras).
     world_rays: Vec<Option<Ray>>,
@@ -454,6 +490,7 @@ fn setup_rays(
     s.nodes.resize_with(n_rays, Vec::new);
     s.local.clear();
     s.ray_insts.clear();
+    s.ray_steps.clear();
     s.ray_inst_at.clear();
     s.ray_inst_at.push(0);
     s.active.clear();
@@ -497,6 +534,14 @@ fn setup_rays(
                 );
                 state.inset = state.inset.max(inset);
                 s.ray_insts.push(i as u32);
+                let units_per_world = lr.units_per_world as f64;
+                s.ray_steps.push(RaySteps {
+                    t_near: lr.t_near,
+                    t_far: lr.t_far,
+                    step: plan.base_step / units_per_world,
+                    longest: plan.longest / units_per_world,
+                    grows: plan.unbounded.is_some(),
+                });
             }
             s.local.push(local);
         }
@@ -615,15 +660,20 @@ fn step_at(
 fn base_step_at(r: usize, t: f64, plans: &[InstancePlan], s: &Scratch) -> (f64, f64) {
     let n_inst = plans.len();
     let (mut here, mut anywhere, mut cap) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
-    for &i in instances_of(s, r) {
-        let (i, plan) = (i as usize, &plans[i as usize]);
-        if let Some(lr) = &s.local[r * n_inst + i] {
-            let step = plan.base_step / lr.units_per_world as f64;
-            anywhere = anywhere.min(step);
-            if t >= lr.t_near && t <= lr.t_far {
-                let g = growth(plan, lr, t);
-                here = here.min(step * g);
-                cap = cap.min(plan.longest * g / lr.units_per_world as f64);
+    let range = s.ray_inst_at[r] as usize..s.ray_inst_at[r + 1] as usize;
+    for (&i, steps) in s.ray_insts[range.clone()].iter().zip(&s.ray_steps[range]) {
+        anywhere = anywhere.min(steps.step);
+        if t >= steps.t_near && t <= steps.t_far {
+            if steps.grows {
+                let (i, plan) = (i as usize, &plans[i as usize]);
+                if let Some(lr) = &s.local[r * n_inst + i] {
+                    let g = growth(plan, lr, t);
+                    here = here.min(steps.step * g);
+                    cap = cap.min(plan.longest * g / lr.units_per_world as f64);
+                }
+            } else {
+                here = here.min(steps.step);
+                cap = cap.min(steps.longest);
             }
         }
     }
@@ -1164,7 +1214,14 @@ fn integrate(
                 // Nothing seen at either end of a field that cannot say what lies between.
                 f64::INFINITY
             } else {
-                (b.t - a.t) * state.pieces.transmittance() * step_change(nodes, i - 1)
+                // The change is at most the jump: not worked out where even that would
+                // leave the worst estimate as it is.
+                let weight = (b.t - a.t) * state.pieces.transmittance();
+                if weight * (b.sigma - a.sigma).abs() > state.worst {
+                    weight * step_change(nodes, i - 1)
+                } else {
+                    0.0
+                }
             };
             state.worst = state.worst.max(error);
             let (w, stopped) = composite_piece(state, [a.t, b.t], [a.sigma, b.sigma], outputs);
@@ -1320,56 +1377,52 @@ fn shade(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Sc
     let n_inst = plans.len();
     let stride = feature_stride(plans);
     let budget = params.color_skip_budget as f64;
+    s.shading.resize_with(n_inst, ColorQuery::default);
+    for query in &mut s.shading {
+        query.clear();
+    }
+    // One pass over the rays' nodes fills every instance's query, in ray order.
     for &r in &s.active {
-        let state = &mut s.rays[r as usize];
-        for node in s.nodes[r as usize].iter_mut() {
+        let r = r as usize;
+        let state = &mut s.rays[r];
+        let instances = &s.ray_insts[s.ray_inst_at[r] as usize..s.ray_inst_at[r + 1] as usize];
+        for node in s.nodes[r].iter_mut() {
             if node.weight > 0.0 && state.skipped_weight + node.weight <= budget {
                 state.skipped_weight += node.weight;
                 node.weight = 0.0;
             }
-        }
-    }
-    bucket_by_instance(
-        &mut s.by_inst,
-        n_inst,
-        &s.ray_insts,
-        &s.ray_inst_at,
-        s.active.iter().map(|&r| (r, r)),
-    );
-    for (i, (inst, plan)) in scene.instances.iter().zip(plans).enumerate() {
-        if s.by_inst[i].is_empty() {
-            continue;
-        }
-        s.points.clear();
-        s.dirs.clear();
-        s.owners.clear();
-        s.field_features.clear();
-        for &r in &s.by_inst[i] {
-            let (r, nodes) = (r as usize, &s.nodes[r as usize]);
-            let Some(lr) = &s.local[r * n_inst + i] else {
+            if node.weight <= 0.0 {
                 continue;
-            };
-            for node in nodes.iter().filter(|n| n.weight > 0.0) {
+            }
+            for &i in instances {
+                let i = i as usize;
+                let Some(lr) = &s.local[r * n_inst + i] else {
+                    continue;
+                };
                 let share = node.weight * s.inst_sigma[node.slot as usize + i] / node.sigma;
                 if share > 0.0 {
-                    s.points.push(lr.at(node.probe));
-                    s.dirs.push(lr.dir);
-                    s.owners.push((r as u32, share));
+                    let (plan, query) = (&plans[i], &mut s.shading[i]);
+                    query.points.push(lr.at(node.probe));
+                    query.dirs.push(lr.dir);
+                    query.owners.push((r as u32, share));
                     let at = node.slot as usize / n_inst * stride + plan.feature_offset;
-                    s.field_features
+                    query
+                        .features
                         .extend_from_slice(&s.features[at..at + plan.features]);
                 }
             }
         }
-        if s.points.is_empty() {
+    }
+    for ((inst, plan), query) in scene.instances.iter().zip(plans).zip(&s.shading) {
+        if query.points.is_empty() {
             continue;
         }
         s.rgb_out.clear();
-        s.rgb_out.resize(s.points.len(), Vec3::ZERO);
+        s.rgb_out.resize(query.points.len(), Vec3::ZERO);
         inst.field()
-            .radiance_with_features(&s.points, &s.dirs, &s.field_features, &mut s.rgb_out);
-        s.stats.color_samples += s.points.len() as u64;
-        for (&(r, share), c) in s.owners.iter().zip(&s.rgb_out) {
+            .radiance_with_features(&query.points, &query.dirs, &query.features, &mut s.rgb_out);
+        s.stats.color_samples += query.points.len() as u64;
+        for (&(r, share), c) in query.owners.iter().zip(&s.rgb_out) {
             let c = if plan.encode {
                 c.map(linear_to_srgb)
             } else {

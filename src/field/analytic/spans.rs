@@ -15,17 +15,40 @@ use glam::{DVec3, Vec3};
 use super::{Primitive, Shape};
 use crate::field::Span;
 
-/// The closed interval of `t ∈ [t0, t1]` where the line `o + t·d` lies in the primitive's
-/// support, if it is longer than 0. Computed in f64 from the f32 ray.
-fn interval(p: &Primitive, o: DVec3, d: DVec3, t0: f64, t1: f64) -> Option<[f64; 2]> {
+/// The line `o + t·d` (f64, from the f32 ray), with the reciprocals every primitive's
+/// interval needs worked out once per ray: a multiplication where each primitive would
+/// divide (results move by an ulp at most).
+struct Line {
+    o: DVec3,
+    d: DVec3,
+    /// `1/d` per axis (infinite on an axis the line is parallel to, where it is not used).
+    inv_d: DVec3,
+    /// `1/|d|²`.
+    inv_len2: f64,
+}
+
+impl Line {
+    fn new(o: DVec3, d: DVec3) -> Line {
+        Line {
+            o,
+            d,
+            inv_d: d.recip(),
+            inv_len2: 1.0 / d.length_squared(),
+        }
+    }
+}
+
+/// The closed interval of `t ∈ [t0, t1]` where the line lies in the primitive's support, if
+/// it is longer than 0.
+fn interval(p: &Primitive, line: &Line, t0: f64, t1: f64) -> Option<[f64; 2]> {
     let [enter, exit] = match p.shape {
-        Shape::Sphere { center, radius } => ball(center, radius, o, d)?,
+        Shape::Sphere { center, radius } => ball(center, radius, line)?,
         Shape::Gaussian {
             center,
             sigma,
             cutoff,
-        } => ball(center, cutoff * sigma, o, d)?,
-        Shape::Box { min, max } => slabs(min.as_dvec3(), max.as_dvec3(), o, d)?,
+        } => ball(center, cutoff * sigma, line)?,
+        Shape::Box { min, max } => slabs(min.as_dvec3(), max.as_dvec3(), line)?,
     };
     let (enter, exit) = (enter.max(t0), exit.min(t1));
     (enter < exit).then_some([enter, exit])
@@ -33,28 +56,30 @@ fn interval(p: &Primitive, o: DVec3, d: DVec3, t0: f64, t1: f64) -> Option<[f64;
 
 /// Where the line meets the closed ball: the roots of `a·t² + 2b·t + c = 0`, in the form
 /// that does not cancel (`q = −(b + sign(b)·√(b² − ac))`, roots `q/a` and `c/q`).
-fn ball(center: Vec3, radius: f32, o: DVec3, d: DVec3) -> Option<[f64; 2]> {
-    let oc = o - center.as_dvec3();
+fn ball(center: Vec3, radius: f32, line: &Line) -> Option<[f64; 2]> {
+    let oc = line.o - center.as_dvec3();
     let r = f64::from(radius);
-    let a = d.length_squared();
-    let b = oc.dot(d);
+    let a = line.d.length_squared();
+    let b = oc.dot(line.d);
     let c = oc.length_squared() - r * r;
     let disc = b * b - a * c;
     if !(disc > 0.0 && a > 0.0) {
         return None;
     }
     let q = -(b + disc.sqrt().copysign(b));
-    let (x, y) = (q / a, if q != 0.0 { c / q } else { q / a });
+    let x = q * line.inv_len2;
+    let y = if q != 0.0 { c / q } else { x };
     Some([x.min(y), x.max(y)])
 }
 
 /// Where the line lies between `min` and `max` on every axis (slab by slab; an axis the ray
 /// is parallel to either holds the whole line or none of it).
-fn slabs(min: DVec3, max: DVec3, o: DVec3, d: DVec3) -> Option<[f64; 2]> {
+fn slabs(min: DVec3, max: DVec3, line: &Line) -> Option<[f64; 2]> {
+    let (o, d) = (line.o, line.d);
     let (mut near, mut far) = (f64::NEG_INFINITY, f64::INFINITY);
     for a in 0..3 {
         if d[a] != 0.0 {
-            let (ta, tb) = ((min[a] - o[a]) / d[a], (max[a] - o[a]) / d[a]);
+            let (ta, tb) = ((min[a] - o[a]) * line.inv_d[a], (max[a] - o[a]) * line.inv_d[a]);
             near = near.max(ta.min(tb));
             far = far.min(ta.max(tb));
         } else if !(o[a] >= min[a] && o[a] <= max[a]) {
@@ -79,14 +104,14 @@ pub(super) fn spans<'a>(
     t1: f64,
     out: &mut Vec<Span>,
 ) {
-    let (o, d) = (origin.as_dvec3(), dir.as_dvec3());
+    let line = Line::new(origin.as_dvec3(), dir.as_dvec3());
     let first = out.len();
     for p in primitives {
-        let Some([enter, exit]) = interval(p, o, d, t0, t1) else {
+        let Some([enter, exit]) = interval(p, &line, t0, t1) else {
             continue;
         };
         if let Shape::Gaussian { center, .. } = p.shape {
-            let peak = (center.as_dvec3() - o).dot(d) / d.length_squared();
+            let peak = (center.as_dvec3() - line.o).dot(line.d) * line.inv_len2;
             if enter < peak && peak < exit {
                 out.push(Span {
                     enter,

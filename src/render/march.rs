@@ -325,17 +325,18 @@ struct RaySteps {
     grows: bool,
 }
 
-/// One instance's batched colour query: sample points, directions and features, and the ray
-/// each sample's colour goes to with its share of the weight.
+/// One instance's batched field query: sample points (and directions and features, for
+/// colour), and what each answer goes to: a pending node and its field units per world unit
+/// (density), or a ray and its share of the weight (colour).
 #[derive(Default)]
-struct ColorQuery {
+struct FieldQuery {
     points: Vec<Vec3>,
     dirs: Vec<Vec3>,
     features: Vec<f32>,
     owners: Vec<(u32, f64)>,
 }
 
-impl ColorQuery {
+impl FieldQuery {
     fn clear(&mut self) {
         self.points.clear();
         self.dirs.clear();
@@ -370,8 +371,6 @@ pub(super) struct Scratch {
     /// Field features per node (`slot / n_instances · stride + offset`), and last round's.
     features: Vec<f32>,
     features_prev: Vec<f32>,
-    /// One instance's features for one batched query.
-    field_features: Vec<f32>,
     pending: Vec<Pending>,
     /// Pairs `(ray, first node)` to test for refinement.
     candidates: Vec<(u32, u32)>,
@@ -379,12 +378,11 @@ pub(super) struct Scratch {
     unsure: Vec<(u32, u32, f64)>,
     /// Step boxes for one batched density-bound query.
     regions: Vec<Aabb>,
-    points: Vec<Vec3>,
     owners: Vec<(u32, f64)>,
     field_out: Vec<f32>,
     rgb_out: Vec<Vec3>,
-    /// Per instance, the round's colour query ([`shade`]).
-    shading: Vec<ColorQuery>,
+    /// Per instance, one batched query (of [`evaluate_pending`] or [`shade`]).
+    queries: Vec<FieldQuery>,
     /// Per pixel of the tile: its world ray and camera z per unit ray distance; one ray's
     /// splat fragments (panoramic cameras).
     world_rays: Vec<Option<Ray>>,
@@ -636,19 +634,10 @@ fn bucket_by_instance(
     }
 }
 
-/// The step at world distance `t` on ray `r`: the finest base step among the instances the
-/// ray is inside at `t` (see [`base_step_at`]), times the ray's current growth `scale` (or
-/// grown with distance by the cone, whichever is longer), at most `max_step_factor` base
-/// steps.
-fn step_at(
-    r: usize,
-    t: f64,
-    scale: f64,
-    plans: &[InstancePlan],
-    params: &MarchParams,
-    s: &Scratch,
-) -> f64 {
-    let (base, cap) = base_step_at(r, t, plans, s);
+/// The step at world distance `t` on a ray whose base step there is `base`, at most `cap`
+/// (see [`base_step_at`]): the base step times the ray's current growth `scale` (or grown
+/// with distance by the cone, whichever is longer), at most `max_step_factor` base steps.
+fn step_at((base, cap): (f64, f64), t: f64, scale: f64, params: &MarchParams) -> f64 {
     let longest = (base * params.max_step_factor.max(1.0) as f64).min(cap);
     let grown = (params.cone as f64 * t).max(base * scale);
     grown.min(longest).max(base).max(f64::MIN_POSITIVE)
@@ -727,15 +716,15 @@ fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scr
             // Density may begin where a run does: its first step is a base one.
             s.rays[r].scale = 1.0;
         }
+        let base = base_step_at(r, t, plans, s);
         if !floor_set {
             floor_set = true;
-            let base = base_step_at(r, t, plans, s).0;
-            s.rays[r].finest = base * 0.5f64.powi(params.refine_depth.min(MAX_BISECTIONS) as i32);
+            s.rays[r].finest = base.0 * 0.5f64.powi(params.refine_depth.min(MAX_BISECTIONS) as i32);
         }
         let next = if t >= run.end {
             None
         } else {
-            Some((t + step_at(r, t, s.rays[r].scale, plans, params, s)).min(run.end))
+            Some((t + step_at(base, t, s.rays[r].scale, params)).min(run.end))
         };
         let state = &mut s.rays[r];
         let at_end = match next {
@@ -787,45 +776,51 @@ fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
         .resize(first_slot + s.pending.len() * n_inst, 0.0);
     s.features
         .resize((first_node + s.pending.len()) * stride, 0.0);
-    bucket_by_instance(
-        &mut s.by_inst,
-        n_inst,
-        &s.ray_insts,
-        &s.ray_inst_at,
-        s.pending.iter().enumerate().map(|(p, n)| (p as u32, n.ray)),
-    );
-    for (i, (inst, plan)) in scene.instances.iter().zip(plans).enumerate() {
-        if s.by_inst[i].is_empty() {
-            continue;
-        }
-        s.points.clear();
-        s.owners.clear();
-        for &p in &s.by_inst[i] {
-            let pending = &s.pending[p as usize];
-            let local = &s.local[pending.ray as usize * n_inst + i];
-            if let Some(lr) = local {
-                if pending.probe >= lr.t_near && pending.probe <= lr.t_far {
-                    s.points.push(lr.at(pending.probe));
-                    s.owners.push((p, lr.units_per_world as f64));
+    s.queries.resize_with(n_inst, FieldQuery::default);
+    for query in &mut s.queries {
+        query.clear();
+    }
+    // One pass over the pending nodes fills every instance's query, in their order: each
+    // node goes to the instances its ray is inside at its probe.
+    for (p, pending) in s.pending.iter().enumerate() {
+        let r = pending.ray as usize;
+        let range = s.ray_inst_at[r] as usize..s.ray_inst_at[r + 1] as usize;
+        for (&i, steps) in s.ray_insts[range.clone()].iter().zip(&s.ray_steps[range]) {
+            if pending.probe >= steps.t_near && pending.probe <= steps.t_far {
+                if let Some(lr) = &s.local[r * n_inst + i as usize] {
+                    let query = &mut s.queries[i as usize];
+                    query.points.push(lr.at(pending.probe));
+                    query.owners.push((p as u32, lr.units_per_world as f64));
                 }
             }
         }
-        if s.points.is_empty() {
+    }
+    for (i, ((inst, plan), query)) in scene
+        .instances
+        .iter()
+        .zip(plans)
+        .zip(&mut s.queries)
+        .enumerate()
+    {
+        if query.points.is_empty() {
             continue;
         }
         s.field_out.clear();
-        s.field_out.resize(s.points.len(), 0.0);
+        s.field_out.resize(query.points.len(), 0.0);
         let f = plan.features;
-        s.field_features.clear();
-        s.field_features.resize(s.points.len() * f, 0.0);
+        query.features.resize(query.points.len() * f, 0.0);
         inst.field()
-            .density_with_features(&s.points, &mut s.field_out, &mut s.field_features);
-        s.stats.density_samples += s.points.len() as u64;
-        for (&(p, _), features) in s.owners.iter().zip(s.field_features.chunks_exact(f.max(1))) {
+            .density_with_features(&query.points, &mut s.field_out, &mut query.features);
+        s.stats.density_samples += query.points.len() as u64;
+        for (&(p, _), features) in query
+            .owners
+            .iter()
+            .zip(query.features.chunks_exact(f.max(1)))
+        {
             let at = (first_node + p as usize) * stride + plan.feature_offset;
             s.features[at..at + f].copy_from_slice(&features[..f]);
         }
-        for (&(p, k), &sigma) in s.owners.iter().zip(&s.field_out) {
+        for (&(p, k), &sigma) in query.owners.iter().zip(&s.field_out) {
             // Sanitise: negative densities count as empty, and so do NaN and infinite ones,
             // which are counted.
             let sigma = if !sigma.is_finite() {
@@ -839,13 +834,12 @@ fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
             s.inst_sigma[first_slot + p as usize * n_inst + i] = sigma;
         }
     }
-    for pending in &s.pending {
-        s.rays[pending.ray as usize].samples += 1;
-    }
     for (p, pending) in s.pending.iter().enumerate() {
+        let r = pending.ray as usize;
+        s.rays[r].samples += 1;
         let slot = first_slot + p * n_inst;
         // The other instances' densities are zero: summed in the same order as all of them.
-        let sigma = instances_of(s, pending.ray as usize)
+        let sigma = instances_of(s, r)
             .iter()
             .map(|&i| s.inst_sigma[slot + i as usize])
             .sum();
@@ -859,7 +853,7 @@ fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
             extent: pending.extent,
             weight: 0.0,
         };
-        let nodes = &mut s.nodes[pending.ray as usize];
+        let nodes = &mut s.nodes[r];
         if nodes.last().is_none_or(|last| last.t <= node.t) {
             nodes.push(node);
         } else {
@@ -1377,8 +1371,8 @@ fn shade(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Sc
     let n_inst = plans.len();
     let stride = feature_stride(plans);
     let budget = params.color_skip_budget as f64;
-    s.shading.resize_with(n_inst, ColorQuery::default);
-    for query in &mut s.shading {
+    s.queries.resize_with(n_inst, FieldQuery::default);
+    for query in &mut s.queries {
         query.clear();
     }
     // One pass over the rays' nodes fills every instance's query, in ray order.
@@ -1399,9 +1393,14 @@ fn shade(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Sc
                 let Some(lr) = &s.local[r * n_inst + i] else {
                     continue;
                 };
-                let share = node.weight * s.inst_sigma[node.slot as usize + i] / node.sigma;
+                // Only an instance with density here gets a share (tested before dividing).
+                let sigma = s.inst_sigma[node.slot as usize + i];
+                if sigma <= 0.0 {
+                    continue;
+                }
+                let share = node.weight * sigma / node.sigma;
                 if share > 0.0 {
-                    let (plan, query) = (&plans[i], &mut s.shading[i]);
+                    let (plan, query) = (&plans[i], &mut s.queries[i]);
                     query.points.push(lr.at(node.probe));
                     query.dirs.push(lr.dir);
                     query.owners.push((r as u32, share));
@@ -1413,14 +1412,18 @@ fn shade(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Sc
             }
         }
     }
-    for ((inst, plan), query) in scene.instances.iter().zip(plans).zip(&s.shading) {
+    for ((inst, plan), query) in scene.instances.iter().zip(plans).zip(&s.queries) {
         if query.points.is_empty() {
             continue;
         }
         s.rgb_out.clear();
         s.rgb_out.resize(query.points.len(), Vec3::ZERO);
-        inst.field()
-            .radiance_with_features(&query.points, &query.dirs, &query.features, &mut s.rgb_out);
+        inst.field().radiance_with_features(
+            &query.points,
+            &query.dirs,
+            &query.features,
+            &mut s.rgb_out,
+        );
         s.stats.color_samples += query.points.len() as u64;
         for (&(r, share), c) in query.owners.iter().zip(&s.rgb_out) {
             let c = if plan.encode {

@@ -79,7 +79,10 @@ fn slabs(min: DVec3, max: DVec3, line: &Line) -> Option<[f64; 2]> {
     let (mut near, mut far) = (f64::NEG_INFINITY, f64::INFINITY);
     for a in 0..3 {
         if d[a] != 0.0 {
-            let (ta, tb) = ((min[a] - o[a]) * line.inv_d[a], (max[a] - o[a]) * line.inv_d[a]);
+            let (ta, tb) = (
+                (min[a] - o[a]) * line.inv_d[a],
+                (max[a] - o[a]) * line.inv_d[a],
+            );
             near = near.max(ta.min(tb));
             far = far.min(ta.max(tb));
         } else if !(o[a] >= min[a] && o[a] <= max[a]) {

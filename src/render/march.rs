@@ -300,6 +300,21 @@ struct RayState {
 }
 
 impl RayState {
+    /// Logs a piece `[t, δ, σ₀δ, σ₁δ, T_enter]` for the median depth, unless the log already
+    /// holds its answer: [`crossing_depth`] stops at the first piece whose exit transmittance
+    /// is at most `1 − alpha/2` (never below ½) and whose entry one is above 0, and a piece
+    /// entered at `0 < T ≤ ½` is such a piece whatever follows it.
+    #[inline]
+    fn log_piece(&mut self, piece: [f64; 5]) {
+        let complete = self
+            .log
+            .last()
+            .is_some_and(|last| last[4] > 0.0 && last[4] <= 0.5);
+        if !complete {
+            self.log.push(piece);
+        }
+    }
+
     /// Distance of the next fragment to composite, splat or volume.
     fn next_fragment_t(&self) -> Option<f64> {
         let splat = self.fragments.get(self.next_fragment).map(|f| f.t);
@@ -1273,7 +1288,7 @@ fn composite_piece(
             } else {
                 (mean * delta, mean * delta)
             };
-            state.log.push([t0, delta, x0, x1, t_enter]);
+            state.log_piece([t0, delta, x0, x1, t_enter]);
         }
         weight += w;
         t0 = t1;
@@ -1348,7 +1363,7 @@ fn composite_volume_fragment(state: &mut RayState, f: Fragment, outputs: &Output
     state.rgb += Vec3::from_array(f.rgb).as_dvec3() * w;
     if outputs.depth_median && alpha > 0.0 {
         let x = -(-alpha).ln_1p();
-        state.log.push([f.t, 0.0, x, x, t_enter]);
+        state.log_piece([f.t, 0.0, x, x, t_enter]);
     }
 }
 

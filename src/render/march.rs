@@ -1692,6 +1692,54 @@ mod tests {
         assert!(met > 0 && kept <= 3 * met, "kept {kept}, met {met}");
     }
 
+    /// The median depth from a log cut where [`super::RayState::log_piece`] cuts it is the
+    /// full log's, bit for bit: seeded rays of pieces (some of them fragments, `δ = 0`, some
+    /// after a fragment's drop in transmittance), every share of the pixel's alpha.
+    #[test]
+    fn a_cut_median_log_gives_the_full_logs_depth() {
+        use crate::bench::rng::SplitMix64;
+        use crate::render::crossing_depth;
+
+        let mut rng = SplitMix64::new(11);
+        let mut cut_short = 0;
+        for _ in 0..4000 {
+            let (mut state, mut full) = (super::RayState::default(), Vec::new());
+            let (mut t, mut transmittance) = (1.0, 1.0f64);
+            for _ in 0..1 + rng.next_u64() % 24 {
+                let delta = if rng.unit() < 0.2 {
+                    0.0
+                } else {
+                    f64::from(rng.range(0.0, 0.3))
+                };
+                let scale = f64::from(rng.range(0.0, 6.0)).powi(2);
+                let (x0, x1) = (
+                    scale * delta * f64::from(rng.unit()),
+                    scale * delta * f64::from(rng.unit()),
+                );
+                let piece = [t, delta, x0, x1, transmittance];
+                full.push(piece);
+                state.log_piece(piece);
+                t += delta + f64::from(rng.range(0.0, 0.1));
+                transmittance *= (-0.5 * (x0 + x1)).exp();
+                if rng.unit() < 0.1 {
+                    transmittance *= f64::from(rng.unit());
+                }
+            }
+            cut_short += usize::from(state.log.len() < full.len());
+            for alpha in [1.0 - transmittance, 0.3 * (1.0 - transmittance), 1.0] {
+                let (want, got) = (
+                    crossing_depth(&full, 0.5 * alpha),
+                    crossing_depth(&state.log, 0.5 * alpha),
+                );
+                assert_eq!(want.to_bits(), got.to_bits(), "{full:?}, alpha {alpha}");
+            }
+        }
+        assert!(
+            cut_short > 100,
+            "the seeded rays exercise the cut: {cut_short}"
+        );
+    }
+
     #[test]
     fn features_reach_the_colour_query_of_their_own_samples() {
         let (plain, camera) = crate::demo::scene_and_camera(48, 27).unwrap();

@@ -27,7 +27,7 @@ pub use analytic::{Analytic, Primitive, ShColor, Shape};
 pub use ingp::{IngpField, NgpRay, NgpSample, NgpScratch, NgpStats, NGP_MAX_STEPS};
 pub use nerfacto::{
     DataparserTransform, NerfactoField, Piece, SamplerRay, SamplerScratch, SamplerStats,
-    COLOR_MIN_WEIGHT, STOP_TRANSMITTANCE,
+    COLOR_SKIP_BUDGET, STOP_TRANSMITTANCE,
 };
 pub(crate) use network::sh_basis;
 pub use network::TableStorage;

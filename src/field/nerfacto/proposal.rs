@@ -450,10 +450,13 @@ impl SamplerScratch {
     fn skip_lightest(&mut self, n: usize, n_geo: usize) {
         self.shade_cut.clear();
         for w in self.weights.chunks_exact(n) {
+            // Only samples lighter than the budget can go unshaded (when all of them fit,
+            // the cut is the budget).
             self.cdf.clear();
-            self.cdf.extend_from_slice(w);
-            self.shade_cut
-                .push(lightest_within(&mut self.cdf, COLOR_SKIP_BUDGET));
+            self.cdf
+                .extend(w.iter().copied().filter(|&w| w < COLOR_SKIP_BUDGET));
+            let cut = lightest_within(&mut self.cdf, COLOR_SKIP_BUDGET);
+            self.shade_cut.push(cut.min(COLOR_SKIP_BUDGET));
         }
         let mut kept = 0;
         for k in 0..self.shade.len() {

@@ -1050,8 +1050,8 @@ fn hides_content(
 }
 
 /// Whether the step from `a` to `b` on ray `r`, with density at both ends in an instance
-/// that cannot bound its density, may jump over a gap that matters: the instance's
-/// occupancy ([`Field::may_be_occupied`]) says some point between them is empty, where its
+/// that cannot bound its density, may jump over a gap that matters: the field says some
+/// point between them is empty ([`Field::certainly_empty`], one batch per step), where its
 /// density is zero (an occupancy mask's edge), which the ends cannot show: a grown step
 /// across the staircase rim of a masked fog would integrate the gap as fog. Points are
 /// probed at most `g = target / (GAP_SHARE·T·σ)` apart (`σ` the larger end's density), so a
@@ -1078,13 +1078,17 @@ fn hides_gap(
         if sa <= 0.0 || sb <= 0.0 || hidden <= tolerance {
             return false;
         }
-        let probes = (hidden / tolerance).ceil().min(GAP_PROBES);
-        let field = scene.instances[i].field();
-        (1..probes as u32).any(|j| {
-            let t = a.t + length * f64::from(j) / probes;
-            let p = lr.at(t.clamp(t0, t1));
-            !field.may_be_occupied(&Aabb::new(p, p))
-        })
+        let probes = (hidden / tolerance).ceil().min(GAP_PROBES) as usize;
+        let mut points = [Vec3::ZERO; GAP_PROBES as usize - 1];
+        let mut empty = [false; GAP_PROBES as usize - 1];
+        for (j, p) in points[..probes - 1].iter_mut().enumerate() {
+            let t = a.t + length * (j + 1) as f64 / probes as f64;
+            *p = lr.at(t.clamp(t0, t1));
+        }
+        scene.instances[i]
+            .field()
+            .certainly_empty(&points[..probes - 1], &mut empty[..probes - 1]);
+        empty[..probes - 1].contains(&true)
     })
 }
 

@@ -18,7 +18,7 @@ use std::sync::Arc;
 
 use glam::{DVec3, Vec3};
 
-use super::composite::{crossing_depth, Pieces};
+use super::composite::{crossing_depth, far_share, Pieces};
 use super::ngp::{self, NgpFill};
 use super::proposal::{self, ProposalScratch};
 use super::runs::{instance_runs, merge, Run, RunKind, RunScratch};
@@ -1140,7 +1140,8 @@ fn step_change(nodes: &[Node], i: usize) -> f64 {
 }
 
 /// Composites a ray's nodes, in order, until it is opaque enough; distributes each piece's
-/// weight to its two nodes in proportion to their densities (their share of its colour).
+/// weight to its two nodes as the light it sends comes from along it ([`far_share`]: a thin
+/// piece's from all along it, an opaque one's from its near end).
 fn integrate(
     state: &mut RayState,
     nodes: &mut [Node],
@@ -1169,8 +1170,16 @@ fn integrate(
             state.worst = state.worst.max(error);
             let (w, stopped) = composite_piece(state, [a.t, b.t], [a.sigma, b.sigma], outputs);
             if w > 0.0 {
-                nodes[i - 1].weight += w * a.sigma / sum;
-                nodes[i].weight += w * b.sigma / sum;
+                // An empty end's colour is not asked for: the other end gets all the weight.
+                let far = if a.sigma == 0.0 {
+                    1.0
+                } else if b.sigma == 0.0 {
+                    0.0
+                } else {
+                    far_share(a.sigma, b.sigma, b.t - a.t)
+                };
+                nodes[i - 1].weight += w * (1.0 - far);
+                nodes[i].weight += w * far;
             }
             stopped
         } else {

@@ -13,7 +13,7 @@ use std::process::Command;
 use common_fields::{check_rgb, check_sigma, numpy_reference};
 use common_ingp::{scratch, write_snapshot, Spec, SplitMix64};
 use glam::Vec3;
-use nerfx::field::{Field, IngpField, TableStorage};
+use nerfx::field::{Aabb, Field, IngpField, TableStorage};
 
 /// Seeded points inside the field's bounds and unit directions.
 fn samples(field: &IngpField, n: usize, seed: u64) -> (Vec<Vec3>, Vec<Vec3>) {
@@ -131,6 +131,79 @@ fn occupancy_is_conservative_where_the_field_has_density() {
         }
     }
     assert!(empty_seen > 100, "{empty_seen}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The point query is the density's own mask: "empty" only where the density is exactly
+/// zero, and, at points inside a cell, what a box query of the point says. On a cell's face
+/// the point belongs to one cell while the box query, padded, sees both: there it may say
+/// "empty" where the box query does not, never the reverse. Points: cell centres jittered
+/// within the cell, points on cell faces, points beyond the bounds, and NaN.
+#[test]
+fn certainly_empty_is_the_density_mask_cell_for_cell() {
+    let dir = scratch("empty");
+    let spec = Spec {
+        log2_table_size: 12,
+        ..Spec::fog_sphere()
+    };
+    let f = IngpField::load(&write_snapshot(&dir, "e", &spec)).unwrap();
+    let b = f.bounds();
+    // One cascade over the bounds: 128 cells per axis.
+    let cell = b.size() / 128.0;
+    let mut rng = SplitMix64::new(17);
+    let mut inside = Vec::new();
+    let mut faces = Vec::new();
+    for _ in 0..4000 {
+        let k = Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 128.0;
+        let centre = b.min + (k.floor() + Vec3::splat(0.5)) * cell;
+        inside
+            .push(centre + Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 0.6 * cell - 0.3 * cell);
+        let mut on_face = b.min + k * cell;
+        on_face.x = b.min.x + k.x.floor() * cell.x;
+        faces.push(on_face);
+    }
+    let others = [
+        Vec3::splat(f32::NAN),
+        Vec3::new(0.0, f32::NAN, 0.0),
+        b.max + Vec3::ONE,
+        b.min - Vec3::ONE,
+        Vec3::splat(1e30),
+        Vec3::splat(f32::INFINITY),
+        b.min,
+        b.max,
+    ];
+    let points: Vec<Vec3> = inside
+        .iter()
+        .chain(&faces)
+        .chain(&others)
+        .copied()
+        .collect();
+    let mut empty = vec![false; points.len()];
+    f.certainly_empty(&points, &mut empty);
+    let mut sigma = vec![0.0; points.len()];
+    f.density(&points, &mut sigma);
+    for (i, ((p, e), s)) in points.iter().zip(&empty).zip(&sigma).enumerate() {
+        assert!(!e || *s == 0.0, "point {i} {p}: said empty, density {s}");
+        let boxed = f.may_be_occupied(&Aabb::new(*p, *p));
+        if i < inside.len() {
+            assert_eq!(*e, !boxed, "point {i} {p} inside a cell");
+        } else {
+            assert!(
+                *e || boxed,
+                "point {i} {p}: occupied, but not for the box query"
+            );
+        }
+    }
+    assert!(empty[inside.len() + faces.len()..].iter().all(|e| *e));
+    // Both answers are common, and the faces of the ball's rim give both too.
+    let count = |r: std::ops::Range<usize>| empty[r].iter().filter(|e| **e).count();
+    let (n, m) = (inside.len(), faces.len());
+    assert!((500..n - 500).contains(&count(0..n)), "{}", count(0..n));
+    assert!(
+        (500..m - 500).contains(&count(n..n + m)),
+        "{}",
+        count(n..n + m)
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -101,8 +101,9 @@ fn renders_as_nerfstudio_does() {
              of accumulation > 0.5",
             acc_sum / n as f64
         );
-        // Measured: PSNR 104–106 dB, accumulation within 2.7e-5, depth within 6.4e-5
-        // (float32 on both sides); the bounds leave room for other CPUs' rounding.
+        // Measured: PSNR 102–107 dB (the lightest samples' colour skipped within a budget of
+        // 1e-5 per ray), accumulation within 2.7e-4, depth within 3.4e-4 (float32 on both
+        // sides); the bounds leave room for other CPUs' rounding.
         assert!(psnr >= 80.0, "camera {k}: PSNR {psnr:.1} dB");
         assert!(acc_max <= 1e-3, "camera {k}: accumulation off by {acc_max}");
         assert!(depth_max <= 1e-3, "camera {k}: depth off by {depth_max}");

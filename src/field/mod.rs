@@ -27,7 +27,7 @@ pub use analytic::{Analytic, Primitive, ShColor, Shape};
 pub use ingp::{IngpField, NgpRay, NgpSample, NgpScratch, NgpStats, NGP_MAX_STEPS};
 pub use nerfacto::{
     DataparserTransform, NerfactoField, Piece, SamplerRay, SamplerScratch, SamplerStats,
-    COLOR_MIN_WEIGHT, STOP_TRANSMITTANCE,
+    COLOR_SKIP_BUDGET, STOP_TRANSMITTANCE,
 };
 pub(crate) use network::sh_basis;
 pub use network::TableStorage;
@@ -219,6 +219,19 @@ pub trait Field: Send + Sync {
     /// Whether the density may be non-zero anywhere in `region`. Must be *conservative*:
     /// `false` only where the density is exactly zero throughout.
     fn may_be_occupied(&self, region: &Aabb) -> bool;
+
+    /// For each point, whether the density there is certainly zero (`empty.len() ==
+    /// points.len()`): `true` only where [`Field::density`] gives exactly zero. The marcher
+    /// probes the inside of a step with density at both ends for a masked-out gap its ends
+    /// cannot show, so a field whose density is cut by a mask answers from the mask itself,
+    /// cell for cell, where a box query pads and walks. The default asks
+    /// [`Field::may_be_occupied`] for each point's degenerate box (NaN points: what the box
+    /// query says).
+    fn certainly_empty(&self, points: &[Vec3], empty: &mut [bool]) {
+        for (p, e) in points.iter().zip(empty) {
+            *e = !self.may_be_occupied(&Aabb::new(*p, *p));
+        }
+    }
 }
 
 /// A description of a field file for people (`nerfx info`): format, architecture, parameter

@@ -45,10 +45,13 @@ const MAX_BISECTIONS: u32 = 52;
 /// on the benchmark fog's worst Final pixel, together 1.2× the target at a share of 1).
 const GAP_SHARE: f64 = 4.0;
 
-/// Points probed inside one step at most ([`hides_gap`]): each is an occupancy query, and a
-/// dense field would ask for thousands per step (the target over `δ·T·σ`). Beyond this a
-/// step's gaps are found down to a ninth of its length, not to the target's length.
-const GAP_PROBES: f64 = 8.0;
+/// Gap probes per occupancy cell at most ([`hides_gap`]): each is a point query, and a
+/// dense field would ask for thousands per step (the target over `δ·T·σ`). Below this
+/// spacing a step's gaps are found down to an eighth of a cell, not to the target's length.
+const GAP_PROBES_PER_CELL: f64 = 8.0;
+
+/// Gap probes asked of a field in one batch.
+const GAP_BATCH: usize = 32;
 
 /// Bisections below the base step at most in the search for what a step empty at both ends
 /// may hide ([`hides_content`]), whatever the preset's depth: a ray running along an
@@ -85,10 +88,10 @@ pub(super) struct InstancePlan {
     /// Whether the field bounds its density over a region ([`Field::density_bounds`]): only
     /// then can a step between two empty samples be known to hold nothing, and grow.
     bounded: bool,
-    /// The longest a grown step may be, field units: a field that cannot bound its density
-    /// may have gaps as small as an occupancy cell between two samples with density, so its
-    /// steps grow to one cell at most (unlimited for the others).
-    longest: f64,
+    /// The side of an occupancy cell, field units, for a field that cannot bound its
+    /// density (infinite for the others): [`hides_gap`] probes a step with density at both
+    /// ends for gaps no finer than [`GAP_PROBES_PER_CELL`] to a cell.
+    cell: f64,
     /// A world sphere `(centre, radius)` around the field's bounds, for culling the instance
     /// from a tile's rays at once; `None` where the bounds are not finite.
     world_sphere: Option<(DVec3, f64)>,
@@ -113,8 +116,8 @@ impl InstancePlan {
                     .field()
                     .density_bounds(&[inst.field().bounds()], &mut [0.0]);
                 // Without bounds, gaps may hide between samples: a field with spans has
-                // none unseen, one with an occupancy grid none finer than a cell.
-                let longest = match &occupancy {
+                // none unseen; one with an occupancy grid has its steps probed for them.
+                let cell = match &occupancy {
                     Some(o) if !bounded => {
                         o.bounds().size().min_element() as f64 / f64::from(o.resolution().max(1))
                     }
@@ -131,7 +134,7 @@ impl InstancePlan {
                         && inst.field().color_space() == ColorSpace::Linear,
                     unbounded: inst.field().unbounded(),
                     bounded,
-                    longest,
+                    cell,
                     world_sphere: world_sphere(inst.field().bounds(), inst.world_from_field()),
                 }
             })
@@ -603,33 +606,31 @@ fn step_at(
     params: &MarchParams,
     s: &Scratch,
 ) -> f64 {
-    let (base, cap) = base_step_at(r, t, plans, s);
-    let longest = (base * params.max_step_factor.max(1.0) as f64).min(cap);
+    let base = base_step_at(r, t, plans, s);
+    let longest = base * params.max_step_factor.max(1.0) as f64;
     let grown = (params.cone as f64 * t).max(base * scale);
     grown.min(longest).max(base).max(f64::MIN_POSITIVE)
 }
 
 /// The base step at world distance `t` on ray `r`, before growth and the cone: the finest
 /// among the instances the ray is inside at `t` (each grown beyond an unbounded field's
-/// core), and the longest a grown step may be there ([`InstancePlan::longest`]).
-fn base_step_at(r: usize, t: f64, plans: &[InstancePlan], s: &Scratch) -> (f64, f64) {
+/// core).
+fn base_step_at(r: usize, t: f64, plans: &[InstancePlan], s: &Scratch) -> f64 {
     let n_inst = plans.len();
-    let (mut here, mut anywhere, mut cap) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
+    let (mut here, mut anywhere) = (f64::INFINITY, f64::INFINITY);
     for &i in instances_of(s, r) {
         let (i, plan) = (i as usize, &plans[i as usize]);
         if let Some(lr) = &s.local[r * n_inst + i] {
             let step = plan.base_step / lr.units_per_world as f64;
             anywhere = anywhere.min(step);
             if t >= lr.t_near && t <= lr.t_far {
-                let g = growth(plan, lr, t);
-                here = here.min(step * g);
-                cap = cap.min(plan.longest * g / lr.units_per_world as f64);
+                here = here.min(step * growth(plan, lr, t));
             }
         }
     }
     // Segments lie inside instances, so `here` is finite but for rounding at their ends.
     let base = if here.is_finite() { here } else { anywhere };
-    (base.max(f64::MIN_POSITIVE), cap)
+    base.max(f64::MIN_POSITIVE)
 }
 
 /// How much an instance's step grows at world distance `t` (beyond an unbounded field's
@@ -679,7 +680,7 @@ fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scr
         }
         if !floor_set {
             floor_set = true;
-            let base = base_step_at(r, t, plans, s).0;
+            let base = base_step_at(r, t, plans, s);
             s.rays[r].finest = base * 0.5f64.powi(params.refine_depth.min(MAX_BISECTIONS) as i32);
         }
         let next = if t >= run.end {
@@ -862,8 +863,9 @@ fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut S
 /// ray's transmittance at the step ([`transmittance_at`]: the steps of a round laid behind a
 /// surface are not refined as if it were not there), not by what lies behind (the piece's
 /// own weight and colour depend on what the step holds). A step that can hold no edge of a
-/// smooth field is judged by its curvature ([`smooth_change`]). Pairs that pass the cheap jump test ask the fields for a density
-/// bound over the step's box, one batch per instance.
+/// smooth field is judged by its curvature ([`smooth_change`]). Pairs that pass the cheap
+/// jump test ask the fields for a density bound over the step's box, one batch per
+/// instance.
 fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
     let empty_is_known = plans.iter().all(|p| p.bounded);
     let n_inst = plans.len();
@@ -879,7 +881,7 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         }
         let transmittance =
             transmittance_at(s.rays[r as usize].pieces.transmittance(), nodes, i as usize);
-        let base = base_step_at(r as usize, a.t, plans, s).0;
+        let base = base_step_at(r as usize, a.t, plans, s);
         // An exact run's spans are where its density is: it hides nothing a probe could find.
         let hides = || {
             !a.exact
@@ -1074,14 +1076,15 @@ fn hides_content(
 }
 
 /// Whether the step from `a` to `b` on ray `r`, with density at both ends in an instance
-/// that cannot bound its density, may jump over a gap that matters: the instance's
-/// occupancy ([`Field::may_be_occupied`]) says some point between them is empty, where its
+/// that cannot bound its density, may jump over a gap that matters: the field says some
+/// point between them is empty ([`Field::certainly_empty`], one batch per step), where its
 /// density is zero (an occupancy mask's edge), which the ends cannot show: a grown step
 /// across the staircase rim of a masked fog would integrate the gap as fog. Points are
 /// probed at most `g = target / (GAP_SHARE·T·σ)` apart (`σ` the larger end's density), so a
 /// gap the probes miss is shorter than `g` and changes the pixel by less than a
-/// `GAP_SHARE`th of the target; a step no longer than `g` is not probed, and none gets more
-/// than [`GAP_PROBES`] probes.
+/// `GAP_SHARE`th of the target; a step no longer than `g` is not probed, and probes are
+/// never closer than an occupancy cell over [`GAP_PROBES_PER_CELL`]. So a step of any length
+/// is probed as finely as one a cell long, and steps in smooth fog may grow past a cell.
 fn hides_gap(
     scene: &Scene,
     plans: &[InstancePlan],
@@ -1102,12 +1105,21 @@ fn hides_gap(
         if sa <= 0.0 || sb <= 0.0 || hidden <= tolerance {
             return false;
         }
-        let probes = (hidden / tolerance).ceil().min(GAP_PROBES);
+        // An occupancy cell, world units.
+        let plan = &plans[i];
+        let cell = plan.cell * growth(plan, lr, a.t) / lr.units_per_world as f64;
+        let per_cell = GAP_PROBES_PER_CELL * length / cell;
+        let probes = (hidden / tolerance).min(per_cell).ceil().max(1.0) as usize;
+        let (mut points, mut empty) = ([Vec3::ZERO; GAP_BATCH], [false; GAP_BATCH]);
         let field = scene.instances[i].field();
-        (1..probes as u32).any(|j| {
-            let t = a.t + length * f64::from(j) / probes;
-            let p = lr.at(t.clamp(t0, t1));
-            !field.may_be_occupied(&Aabb::new(p, p))
+        (1..probes).step_by(GAP_BATCH).any(|first| {
+            let n = GAP_BATCH.min(probes - first);
+            for (j, p) in points[..n].iter_mut().enumerate() {
+                let t = a.t + length * (first + j) as f64 / probes as f64;
+                *p = lr.at(t.clamp(t0, t1));
+            }
+            field.certainly_empty(&points[..n], &mut empty[..n]);
+            empty[..n].contains(&true)
         })
     })
 }

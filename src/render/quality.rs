@@ -92,7 +92,9 @@ impl Quality {
             Quality::Final => MarchParams {
                 steps_per_feature: 8.0,
                 cone: 0.0,
-                max_step_factor: 64.0,
+                // Final's base step is an eighth of Draft's: 128 of them are 16 of Draft's.
+                // Where steps may grow is the growth rule's to say (smooth fog), not this bound.
+                max_step_factor: 128.0,
                 min_transmittance: 1e-4,
                 occupancy_resolution: 256,
                 error_target: 1e-3,

@@ -662,4 +662,13 @@ impl Field for IngpField {
         );
         self.cascades.may_be_occupied(a.min(b), a.max(b))
     }
+
+    /// The density's own mask: a point outside every occupied cell (of the smallest
+    /// cascade holding it) is never given to the networks, so its density is zero. NaN
+    /// points and points beyond the largest cascade lie in no cell.
+    fn certainly_empty(&self, points: &[Vec3], empty: &mut [bool]) {
+        for (p, e) in points.iter().zip(empty) {
+            *e = !self.cascades.occupied_at(self.ngp_from_field(*p));
+        }
+    }
 }

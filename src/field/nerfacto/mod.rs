@@ -82,7 +82,7 @@ mod torch;
 pub(crate) use config::scan;
 pub use dataparser::DataparserTransform;
 pub use proposal::{
-    Piece, SamplerRay, SamplerScratch, SamplerStats, COLOR_MIN_WEIGHT, STOP_TRANSMITTANCE,
+    Piece, SamplerRay, SamplerScratch, SamplerStats, COLOR_SKIP_BUDGET, STOP_TRANSMITTANCE,
 };
 
 /// Points per batch (bounds the scratch memory).

@@ -24,8 +24,10 @@
 //!
 //! Two savings, both bounded: once a ray's transmittance falls below [`STOP_TRANSMITTANCE`]
 //! its later samples are not evaluated (their weights are below it, beside a padding of
-//! 0.01 per bin), and colour is not evaluated for main samples of weight below
-//! [`COLOR_MIN_WEIGHT`].
+//! 0.01 per bin), and a ray's lightest main samples are not shaded as long as their weights
+//! sum to at most [`COLOR_SKIP_BUDGET`] (colours lie in `[0, 1]`, so the pixel's
+//! premultiplied colour moves by at most that much per channel; accumulation and depth not
+//! at all).
 
 use std::time::{Duration, Instant};
 
@@ -37,8 +39,8 @@ use super::NerfactoField;
 
 /// Transmittance below which a ray's later samples are not evaluated.
 pub const STOP_TRANSMITTANCE: f64 = 1e-6;
-/// Main-field samples lighter than this are not shaded (at most 48 of them per ray).
-pub const COLOR_MIN_WEIGHT: f64 = 1e-6;
+/// The most weight per ray that may go unshaded (its lightest main-field samples, black).
+pub const COLOR_SKIP_BUDGET: f64 = 1e-5;
 /// Samples per ray evaluated per round (front to back, so rays can stop early).
 const ROUND: usize = 16;
 /// `PDFSampler`'s histogram padding and `eps`.
@@ -120,8 +122,10 @@ pub struct SamplerScratch {
     sigma: Vec<f32>,
     features: Vec<f32>,
     density: DensityScratch,
-    /// Main samples to shade: `(ray, sample)`, their features and directions, colours.
+    /// Main samples to shade: `(ray, sample)`, their features and directions, colours;
+    /// per ray the weight below which its samples go unshaded.
     shade: Vec<(u32, u32)>,
+    shade_cut: Vec<f64>,
     shade_features: Vec<f32>,
     dirs: Vec<Vec3>,
     rgb: Vec<Vec3>,
@@ -380,6 +384,8 @@ impl NerfactoField {
                 };
             }
         }
+        s.weights.clear();
+        s.weights.resize(rays.len() * n, 0.0);
         s.transmittance.clear();
         s.transmittance.resize(rays.len(), 1.0);
         s.live.clear();
@@ -413,7 +419,8 @@ impl NerfactoField {
                 let e = (-f64::from(p.sigma) * (p.t1 - p.t0)).exp_m1();
                 let w = -e * s.transmittance[r];
                 s.transmittance[r] *= 1.0 + e;
-                if w >= COLOR_MIN_WEIGHT {
+                s.weights[r * n + j] = w;
+                if w > 0.0 {
                     s.shade.push((r as u32, j as u32));
                     s.shade_features
                         .extend_from_slice(&s.features[k * n_geo..(k + 1) * n_geo]);
@@ -425,6 +432,7 @@ impl NerfactoField {
                 .retain(|&r| transmittance[r as usize] >= STOP_TRANSMITTANCE);
             first = last;
         }
+        s.skip_lightest(n, n_geo);
         s.rgb.clear();
         s.rgb.resize(s.shade.len(), Vec3::ZERO);
         self.colour(&s.shade_features, &s.dirs, &mut s.rgb);
@@ -433,6 +441,57 @@ impl NerfactoField {
             pieces[base + r as usize * n + j as usize].rgb = c.to_array();
         }
     }
+}
+
+impl SamplerScratch {
+    /// Drops from the samples to shade each ray's lightest ones, as many as keep their
+    /// summed weight within [`COLOR_SKIP_BUDGET`] (`weights`: `n` per ray; `n_geo` features
+    /// per sample). Kept samples stay in order, so their colours do not change.
+    fn skip_lightest(&mut self, n: usize, n_geo: usize) {
+        self.shade_cut.clear();
+        for w in self.weights.chunks_exact(n) {
+            // Only samples lighter than the budget can go unshaded (when all of them fit,
+            // the cut is the budget).
+            self.cdf.clear();
+            self.cdf
+                .extend(w.iter().copied().filter(|&w| w < COLOR_SKIP_BUDGET));
+            let cut = lightest_within(&mut self.cdf, COLOR_SKIP_BUDGET);
+            self.shade_cut.push(cut.min(COLOR_SKIP_BUDGET));
+        }
+        let mut kept = 0;
+        for k in 0..self.shade.len() {
+            let (r, j) = self.shade[k];
+            if self.weights[r as usize * n + j as usize] < self.shade_cut[r as usize] {
+                continue;
+            }
+            self.shade[kept] = self.shade[k];
+            self.dirs[kept] = self.dirs[k];
+            self.shade_features
+                .copy_within(k * n_geo..(k + 1) * n_geo, kept * n_geo);
+            kept += 1;
+        }
+        self.shade.truncate(kept);
+        self.dirs.truncate(kept);
+        self.shade_features.truncate(kept * n_geo);
+    }
+}
+
+/// The weight `c` such that the weights below it sum to at most `budget`: the first of
+/// them, smallest first, that would take the sum past it (infinite when all fit). `weights`
+/// is reordered.
+///
+/// Example: weights `(0.3, 1e-6, 2e-6, 0.5)` and budget `1e-5` give `0.3` (the two light
+/// ones sum to `3·10⁻⁶`).
+fn lightest_within(weights: &mut [f64], budget: f64) -> f64 {
+    weights.sort_unstable_by(f64::total_cmp);
+    let mut sum = 0.0;
+    for &w in weights.iter() {
+        sum += w;
+        if sum > budget {
+            return w;
+        }
+    }
+    f64::INFINITY
 }
 
 /// NaN, infinite or negative densities count as empty (as in the marcher).
@@ -473,5 +532,65 @@ mod tests {
         assert!((out[0] - want).abs() < 1e-12, "{} {want}", out[0]);
         assert!(out[1..8].iter().all(|&e| (0.5..=0.75).contains(&e)));
         assert!(out.windows(2).all(|w| w[0] <= w[1]));
+    }
+
+    #[test]
+    fn the_lightest_samples_within_the_budget_go_unshaded() {
+        // The doc's example: 1e-6 + 2e-6 fit in 1e-5, 0.3 does not.
+        let mut w = [0.3, 1e-6, 2e-6, 0.5];
+        assert_eq!(lightest_within(&mut w, 1e-5), 0.3);
+        // Equal weights: those below the cut sum to at most the budget (4·3e-6 ≤ 1.3e-5
+        // < 5·3e-6), and ties at the cut are all kept.
+        let mut w = [3e-6; 8];
+        assert_eq!(lightest_within(&mut w, 1.3e-5), 3e-6);
+        // Everything fits: nothing is shaded; no samples: nothing to cut.
+        assert_eq!(lightest_within(&mut [1e-6, 0.0], 1e-5), f64::INFINITY);
+        assert_eq!(lightest_within(&mut [], 1e-5), f64::INFINITY);
+    }
+
+    #[test]
+    fn skipped_samples_sum_within_the_budget() {
+        // Seeded weights of 5 rays × 48 samples spanning 1e-9 to 1: the samples dropped
+        // from the shading list are each ray's lightest and weigh at most the budget.
+        let n = 48;
+        let mut seed = 7u64;
+        let mut s = SamplerScratch::default();
+        for _ in 0..5 * n {
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            s.weights
+                .push(10f64.powf(-9.0 * (seed >> 11) as f64 / (1u64 << 53) as f64));
+        }
+        for (r, j) in (0..5u32).flat_map(|r| (0..n as u32).map(move |j| (r, j))) {
+            s.shade.push((r, j));
+            s.shade_features.extend([r as f32, j as f32]);
+            s.dirs.push(Vec3::splat(r as f32));
+        }
+        s.skip_lightest(n, 2);
+        assert_eq!(s.shade_features.len(), 2 * s.shade.len());
+        for r in 0..5 {
+            let w = &s.weights[r * n..(r + 1) * n];
+            let kept: Vec<u32> = s
+                .shade
+                .iter()
+                .filter(|k| k.0 == r as u32)
+                .map(|k| k.1)
+                .collect();
+            let skipped: f64 = (0..n as u32)
+                .filter(|j| !kept.contains(j))
+                .map(|j| w[j as usize])
+                .sum();
+            assert!(skipped <= COLOR_SKIP_BUDGET, "ray {r}: {skipped}");
+            assert!(skipped > 0.0 && kept.len() < n, "ray {r}: nothing skipped");
+            let lightest_kept = kept.iter().map(|&j| w[j as usize]).fold(1.0, f64::min);
+            assert!((0..n).all(|j| kept.contains(&(j as u32)) || w[j] <= lightest_kept));
+        }
+        // The kept samples keep their order and their features.
+        assert!(s.shade.windows(2).all(|p| p[0] < p[1]));
+        for (k, &(r, j)) in s.shade.iter().enumerate() {
+            assert_eq!(s.shade_features[2 * k..2 * k + 2], [r as f32, j as f32]);
+            assert_eq!(s.dirs[k], Vec3::splat(r as f32));
+        }
     }
 }

@@ -180,8 +180,13 @@ impl TorchHashGrid {
         let levels = self.scales.iter().zip(self.table.chunks_exact(rows * 2));
         for (l, (&s, table)) in levels.enumerate() {
             for g in (0..n8).step_by(8) {
-                // SAFETY: `axes` holds `n8` values per axis and `g + 8 ≤ n8`.
-                let u = [0, 1, 2].map(|a| unsafe { _mm256_loadu_ps(axes[a * n8 + g..].as_ptr()) });
+                // A loop, not `map`: the closure would be called, not inlined (`map` does
+                // not have the target features), and it returned its vector through memory.
+                let mut u = [_mm256_setzero_ps(); 3];
+                for (a, v) in u.iter_mut().enumerate() {
+                    // SAFETY: `axes` holds `n8` values per axis and `g + 8 ≤ n8`.
+                    *v = unsafe { _mm256_loadu_ps(axes[a * n8 + g..].as_ptr()) };
+                }
                 let cells = Cells8::new(u, s);
                 // Per half of the points, their two features interleaved as in `out`.
                 let mut acc = [_mm256_setzero_ps(); 2];

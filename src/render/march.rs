@@ -233,6 +233,8 @@ struct Node {
     extent: f64,
     /// Colour weight gathered this round.
     weight: f64,
+    /// Optical depth from the round's first node to this one ([`lay_depths`]).
+    depth: f64,
 }
 
 /// A node to be evaluated (fields as in [`Node`]).
@@ -809,6 +811,7 @@ fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
             exact: pending.exact,
             extent: pending.extent,
             weight: 0.0,
+            depth: 0.0,
         };
         let nodes = &mut s.nodes[pending.ray as usize];
         if nodes.last().is_none_or(|last| last.t <= node.t) {
@@ -847,6 +850,13 @@ fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut S
                 if (i as usize) + 1 < nodes.len() {
                     s.candidates.push((added.ray, i));
                 }
+            }
+        }
+        let mut last = None;
+        for &(r, _) in &s.candidates {
+            if last != Some(r) {
+                last = Some(r);
+                lay_depths(&mut s.nodes[r as usize]);
             }
         }
         split_candidates(scene, plans, params, s);
@@ -1124,21 +1134,29 @@ fn hides_gap(
     })
 }
 
-/// The transmittance a ray entered the round with, `t_round`, carried to node `i` of its
-/// round's nodes: through the steps before it at the lower of each step's two densities
-/// (an edge inside a step may lie anywhere in it), and through constant runs whole.
-fn transmittance_at(t_round: f64, nodes: &[Node], i: usize) -> f64 {
+/// Lays each node's [`Node::depth`]: the optical depth of a round's steps before it, each at
+/// the lower of its two densities (an edge inside a step may lie anywhere in it), constant
+/// runs whole.
+fn lay_depths(nodes: &mut [Node]) {
     let mut depth = 0.0;
-    for k in 0..i {
-        let (a, b) = (&nodes[k], &nodes[k + 1]);
+    for k in 0..nodes.len() {
+        nodes[k].depth = depth;
+        let a = &nodes[k];
         if a.extent > 0.0 {
             depth += a.extent * a.sigma;
-        }
-        if !b.starts_run && a.extent == 0.0 {
+        } else if let Some(b) = nodes.get(k + 1).filter(|b| !b.starts_run) {
             depth += (b.t - a.t) * a.sigma.min(b.sigma);
         }
     }
-    t_round * (-depth).exp()
+}
+
+/// The transmittance a ray entered the round with, `t_round`, carried to node `i` of its
+/// round's nodes through the steps before it ([`lay_depths`]).
+fn transmittance_at(t_round: f64, nodes: &[Node], i: usize) -> f64 {
+    match nodes[i].depth {
+        0.0 => t_round,
+        depth => t_round * (-depth).exp(),
+    }
 }
 
 /// Whether the step from `a` to `b` on ray `r` can hold no edge: every instance with density
@@ -1609,6 +1627,7 @@ mod tests {
             exact: false,
             extent: 0.0,
             weight: 0.0,
+            depth: 0.0,
         }
     }
 
@@ -1638,20 +1657,22 @@ mod tests {
 
     #[test]
     fn transmittance_inside_a_round_goes_through_the_lower_end_of_each_step() {
-        let nodes = [
+        let mut nodes = [
             node(0.0, 0.0),
             node(1.0, 2.0),
             node(1.5, 4.0),
             node(2.0, 1.0),
         ];
+        let mut cut = nodes;
+        super::lay_depths(&mut nodes);
         assert_eq!(super::transmittance_at(0.5, &nodes, 0), 0.5);
         // The first step may hold its edge anywhere: no depth from it.
         assert_eq!(super::transmittance_at(0.5, &nodes, 1), 0.5);
         let want = 0.5 * (-(0.5 * 2.0 + 0.5 * 1.0f64)).exp();
         assert!((super::transmittance_at(0.5, &nodes, 3) - want).abs() < 1e-15);
         // A run's start joins nothing to the node before it.
-        let mut cut = nodes;
         cut[2].starts_run = true;
+        super::lay_depths(&mut cut);
         let want = 0.5 * (-(0.5 * 1.0f64)).exp();
         assert!((super::transmittance_at(0.5, &cut, 3) - want).abs() < 1e-15);
     }

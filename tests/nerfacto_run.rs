@@ -124,6 +124,23 @@ fn occupancy_is_conservative_at_sampled_points() {
             assert!(field.may_be_occupied(&Aabb::new(*p, *p)), "{p}");
         }
     }
+    // The point query is the density's own mask: "empty" only where the density is zero,
+    // and wherever the box query already says so; NaN and points past the far plane too.
+    pts.extend([
+        Vec3::splat(f32::NAN),
+        Vec3::new(0.0, f32::NAN, 0.0),
+        Vec3::new(1000.5, 0.0, 0.0),
+        Vec3::splat(f32::INFINITY),
+    ]);
+    sigma.resize(pts.len(), 1.0);
+    field.density(&pts, &mut sigma);
+    let mut empty = vec![false; pts.len()];
+    field.certainly_empty(&pts, &mut empty);
+    for ((p, s), e) in pts.iter().zip(&sigma).zip(&empty) {
+        assert!(!e || *s == 0.0, "{p}: said empty, density {s}");
+        assert!(*e || field.may_be_occupied(&Aabb::new(*p, *p)), "{p}");
+    }
+    assert!(empty[pts.len() - 4..].iter().all(|e| *e));
     let beyond = [Vec3::new(1000.5, 0.0, 0.0), Vec3::new(0.0, -7.0, 1e4)];
     let mut s = [1.0; 2];
     field.density(&beyond, &mut s);

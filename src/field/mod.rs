@@ -226,7 +226,8 @@ pub trait Field: Send + Sync {
     /// cannot show, so a field whose density is cut by a mask answers from the mask itself,
     /// cell for cell, where a box query pads and walks. The default asks
     /// [`Field::may_be_occupied`] for each point's degenerate box (NaN points: what the box
-    /// query says).
+    /// query says). A "not empty" where the density is zero lets a gap through unseen, so
+    /// a masked field should answer exactly, and a field that wraps another forwards this.
     fn certainly_empty(&self, points: &[Vec3], empty: &mut [bool]) {
         for (p, e) in points.iter().zip(empty) {
             *e = !self.may_be_occupied(&Aabb::new(*p, *p));

@@ -48,7 +48,13 @@ const GAP_SHARE: f64 = 4.0;
 /// Gap probes per occupancy cell at most ([`hides_gap`]): each is a point query, and a
 /// dense field would ask for thousands per step (the target over `δ·T·σ`). Below this
 /// spacing a step's gaps are found down to an eighth of a cell, not to the target's length.
+/// A step shorter than a cell gets as many as one a cell long: a gap a probe found is found
+/// again in the bisected halves, whatever their length.
 const GAP_PROBES_PER_CELL: f64 = 8.0;
+
+/// Gap probes per step at most, whatever the cell (a grid squeezed thin along one axis by a
+/// crop has tiny cells) and the step's growth: they bound a step's cost.
+const GAP_PROBES_MAX: f64 = 1024.0;
 
 /// Gap probes asked of a field in one batch.
 const GAP_BATCH: usize = 32;
@@ -1092,9 +1098,10 @@ fn hides_content(
 /// across the staircase rim of a masked fog would integrate the gap as fog. Points are
 /// probed at most `g = target / (GAP_SHARE·T·σ)` apart (`σ` the larger end's density), so a
 /// gap the probes miss is shorter than `g` and changes the pixel by less than a
-/// `GAP_SHARE`th of the target; a step no longer than `g` is not probed, and probes are
-/// never closer than an occupancy cell over [`GAP_PROBES_PER_CELL`]. So a step of any length
-/// is probed as finely as one a cell long, and steps in smooth fog may grow past a cell.
+/// `GAP_SHARE`th of the target; a step no longer than `g` is not probed, and a step gets at
+/// most [`GAP_PROBES_PER_CELL`] probes per occupancy cell it spans (that many if it spans
+/// less), and never more than [`GAP_PROBES_MAX`]. So a step of any length is probed as
+/// finely as one a cell long, and steps in smooth fog may grow past a cell.
 fn hides_gap(
     scene: &Scene,
     plans: &[InstancePlan],
@@ -1118,8 +1125,12 @@ fn hides_gap(
         // An occupancy cell, world units.
         let plan = &plans[i];
         let cell = plan.cell * growth(plan, lr, a.t) / lr.units_per_world as f64;
-        let per_cell = GAP_PROBES_PER_CELL * length / cell;
-        let probes = (hidden / tolerance).min(per_cell).ceil().max(1.0) as usize;
+        let per_cell = GAP_PROBES_PER_CELL * (length / cell).max(1.0);
+        let probes = (hidden / tolerance)
+            .min(per_cell)
+            .min(GAP_PROBES_MAX)
+            .ceil()
+            .max(1.0) as usize;
         let (mut points, mut empty) = ([Vec3::ZERO; GAP_BATCH], [false; GAP_BATCH]);
         let field = scene.instances[i].field();
         (1..probes).step_by(GAP_BATCH).any(|first| {

@@ -1068,6 +1068,14 @@ impl Field for NerfactoField {
         let clipped = Aabb::new(region.min.max(b.min), region.max.min(b.max));
         !clipped.is_empty() && self.occupancy.region(&clipped)
     }
+
+    /// The density's own mask, cell for cell: a point outside the bounds or the occupied
+    /// cells is given zero density. NaN points lie in no cell.
+    fn certainly_empty(&self, points: &[Vec3], empty: &mut [bool]) {
+        for (p, e) in points.iter().zip(empty) {
+            *e = !self.kept(*p);
+        }
+    }
 }
 
 #[cfg(test)]

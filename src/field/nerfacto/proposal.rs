@@ -26,8 +26,9 @@
 //! its later samples are not evaluated (their weights are below it, beside a padding of
 //! 0.01 per bin), and a ray's lightest main samples are not shaded as long as their weights
 //! sum to at most [`COLOR_SKIP_BUDGET`] (colours lie in `[0, 1]`, so the pixel's
-//! premultiplied colour moves by at most that much per channel; accumulation and depth not
-//! at all).
+//! premultiplied colour in the trained space moves by at most that much per channel, the
+//! scene-linear output by at most the sRGB decode's slope times that; accumulation and
+//! depth not at all). The budget is nerfstudio's look, the same at every preset.
 
 use std::time::{Duration, Instant};
 

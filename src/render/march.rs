@@ -18,7 +18,7 @@ use std::sync::Arc;
 
 use glam::{DVec3, Vec3};
 
-use super::composite::{crossing_depth, Pieces};
+use super::composite::{crossing_depth, far_share, Pieces};
 use super::ngp::{self, NgpFill};
 use super::proposal::{self, ProposalScratch};
 use super::runs::{instance_runs, merge, Run, RunKind, RunScratch};
@@ -239,6 +239,8 @@ struct Node {
     extent: f64,
     /// Colour weight gathered this round.
     weight: f64,
+    /// Optical depth from the round's first node to this one ([`lay_depths`]).
+    depth: f64,
 }
 
 /// A node to be evaluated (fields as in [`Node`]).
@@ -866,6 +868,7 @@ fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
             exact: pending.exact,
             extent: pending.extent,
             weight: 0.0,
+            depth: 0.0,
         };
         let nodes = &mut s.nodes[r];
         if nodes.last().is_none_or(|last| last.t <= node.t) {
@@ -906,6 +909,13 @@ fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut S
                 }
             }
         }
+        let mut last = None;
+        for &(r, _) in &s.candidates {
+            if last != Some(r) {
+                last = Some(r);
+                lay_depths(&mut s.nodes[r as usize]);
+            }
+        }
         split_candidates(scene, plans, params, s);
         if s.pending.is_empty() {
             break;
@@ -917,9 +927,12 @@ fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut S
 /// Tests each candidate pair `(ray, i)` (nodes `i` and `i + 1`) and lays the midpoints of
 /// those that need splitting into `s.pending`. What a step may get wrong matters
 /// only as much as light from there reaches the camera, so each test is weighed by the
-/// ray's transmittance (not by what lies behind: the piece's own weight and colour depend on
-/// what the step holds). Pairs that pass the cheap jump test ask the fields for a density
-/// bound over the step's box, one batch per instance.
+/// ray's transmittance at the step ([`transmittance_at`]: the steps of a round laid behind a
+/// surface are not refined as if it were not there), not by what lies behind (the piece's
+/// own weight and colour depend on what the step holds). A step that can hold no edge of a
+/// smooth field is judged by its curvature ([`smooth_change`]). Pairs that pass the cheap
+/// jump test ask the fields for a density bound over the step's box, one batch per
+/// instance.
 fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
     let empty_is_known = plans.iter().all(|p| p.bounded);
     let n_inst = plans.len();
@@ -933,7 +946,8 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         if b.starts_run {
             continue;
         }
-        let transmittance = s.rays[r as usize].pieces.transmittance();
+        let transmittance =
+            transmittance_at(s.rays[r as usize].pieces.transmittance(), nodes, i as usize);
         let base = base_step_at(r as usize, a.t, plans, s);
         // An exact run's spans are where its density is: it hides nothing a probe could find.
         let hides = || {
@@ -959,6 +973,11 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         }
         let weight = (b.t - a.t) * transmittance;
         let smooth = any_smooth && smooth_step(r as usize, a, b, plans, s);
+        let change = if smooth {
+            smooth_change(nodes, i as usize)
+        } else {
+            step_change(nodes, i as usize)
+        };
         // A grown step where density starts or ends is bisected back to an ungrown one
         // whatever its weight, so faint content keeps the base step's edges; so is one
         // between two empty samples of a field that cannot say what lies between. A step of
@@ -968,8 +987,22 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
                 || (a.sigma + b.sigma == 0.0 && !empty_is_known));
         // The cone's steps are no exception: a grazing ray's whole crossing may fit in one.
         let edge = unknown && b.t - a.t > 1.5 * base;
+        // A sample with density between two empty ones says nothing of how dense the thin
+        // shell it hit is (a grazing ray's silhouette): its steps are bisected until the
+        // shell has two samples, whatever their weight.
+        let isolated = !a.exact
+            && (a.sigma > 0.0) != (b.sigma > 0.0)
+            && transmittance > tolerance
+            && if a.sigma > 0.0 {
+                i > 0 && !a.starts_run && nodes[i as usize - 1].sigma == 0.0
+            } else {
+                nodes
+                    .get(i as usize + 2)
+                    .is_some_and(|q| !q.starts_run && q.sigma == 0.0)
+            };
         if edge
-            || (!smooth && step_change(nodes, i as usize) * weight > tolerance)
+            || isolated
+            || change * weight > tolerance
             || hides()
             || (!a.exact
                 && hides_gap(
@@ -1037,7 +1070,9 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
     for &(r, i, bound) in &s.unsure {
         let nodes = &s.nodes[r as usize];
         let (a, b) = (&nodes[i as usize], &nodes[i as usize + 1]);
-        let weight = (b.t - a.t) * s.rays[r as usize].pieces.transmittance();
+        let transmittance =
+            transmittance_at(s.rays[r as usize].pieces.transmittance(), nodes, i as usize);
+        let weight = (b.t - a.t) * transmittance;
         if (bound - a.sigma.max(b.sigma)) * weight > tolerance {
             s.rays[r as usize].refined = true;
             s.pending.push(Pending::between(r, 0.5 * (a.t + b.t), a));
@@ -1161,6 +1196,31 @@ fn hides_gap(
     })
 }
 
+/// Lays each node's [`Node::depth`]: the optical depth of a round's steps before it, each at
+/// the lower of its two densities (an edge inside a step may lie anywhere in it), constant
+/// runs whole.
+fn lay_depths(nodes: &mut [Node]) {
+    let mut depth = 0.0;
+    for k in 0..nodes.len() {
+        nodes[k].depth = depth;
+        let a = &nodes[k];
+        if a.extent > 0.0 {
+            depth += a.extent * a.sigma;
+        } else if let Some(b) = nodes.get(k + 1).filter(|b| !b.starts_run) {
+            depth += (b.t - a.t) * a.sigma.min(b.sigma);
+        }
+    }
+}
+
+/// The transmittance a ray entered the round with, `t_round`, carried to node `i` of its
+/// round's nodes through the steps before it ([`lay_depths`]).
+fn transmittance_at(t_round: f64, nodes: &[Node], i: usize) -> f64 {
+    match nodes[i].depth {
+        0.0 => t_round,
+        depth => t_round * (-depth).exp(),
+    }
+}
+
 /// Whether the step from `a` to `b` on ray `r` can hold no edge: every instance with density
 /// at either end has it at both and is smooth over the step's length (see
 /// [`Field::smooth_length`](crate::field::Field::smooth_length)).
@@ -1186,19 +1246,41 @@ fn smooth_step(r: usize, a: &Node, b: &Node, plans: &[InstancePlan], s: &Scratch
 /// How much the density changes across the step from node `i` to `i + 1` in a way the
 /// trapezoid rule may get wrong: the jump `|σ_b − σ_a|`, unless the curvature through the
 /// step's ends and their outer neighbours says the density is (nearly) linear there, which
-/// the rule integrates exactly: the smaller of the jump and `δ²·|σ''|`, `σ''` estimated by
-/// the second divided differences on either side (the larger; steps may differ in length).
-/// An edge keeps its full jump; a steady slope of a smooth field is not bisected.
+/// the rule integrates exactly: the smaller of the jump and `δ²·|σ''|` ([`step_curvature`],
+/// the larger of its two sides). An edge keeps its full jump; a steady slope of a smooth
+/// field is not bisected.
 #[inline]
 fn step_change(nodes: &[Node], i: usize) -> f64 {
     let (a, b) = (&nodes[i], &nodes[i + 1]);
     let jump = (b.sigma - a.sigma).abs();
+    match step_curvature(nodes, i) {
+        [Some(before), Some(after)] => jump.min(before.max(after)),
+        _ => jump,
+    }
+}
+
+/// How much the trapezoid rule may get a step wrong that can hold no edge ([`smooth_step`]):
+/// its curvature `δ²·|σ''|` alone, the larger side where both are known. Not the jump: a
+/// bump between two ends of equal density has none, yet holds most of a surface's weight
+/// where a trained density is the exponential of a smooth function. A step with neither
+/// neighbour keeps its jump.
+#[inline]
+fn smooth_change(nodes: &[Node], i: usize) -> f64 {
+    match step_curvature(nodes, i) {
+        [None, None] => (nodes[i + 1].sigma - nodes[i].sigma).abs(),
+        [before, after] => before.unwrap_or(0.0).max(after.unwrap_or(0.0)),
+    }
+}
+
+/// `δ²·|σ''|` over the step from node `i` to `i + 1`, `σ''` estimated by the second divided
+/// difference through the step's ends and the node before it, and through them and the one
+/// after it (steps may differ in length); `None` where the run has no such node.
+#[inline]
+fn step_curvature(nodes: &[Node], i: usize) -> [Option<f64>; 2] {
+    let (a, b) = (&nodes[i], &nodes[i + 1]);
     let h = b.t - a.t;
     let before = (i > 0 && !a.starts_run).then(|| &nodes[i - 1]);
     let after = nodes.get(i + 2).filter(|n| !n.starts_run);
-    let (Some(p), Some(q)) = (before, after) else {
-        return jump;
-    };
     // 2·f[x0, x1, x2]·h², which is `σ0 − 2σ1 + σ2` for equal steps of length `h`.
     let curvature = |x: &Node, y: &Node, z: &Node| {
         let (h0, h1) = (y.t - x.t, z.t - y.t);
@@ -1209,11 +1291,15 @@ fn step_change(nodes: &[Node], i: usize) -> f64 {
             f64::INFINITY
         }
     };
-    jump.min(curvature(p, a, b).max(curvature(a, b, q)))
+    [
+        before.map(|p| curvature(p, a, b)),
+        after.map(|q| curvature(a, b, q)),
+    ]
 }
 
 /// Composites a ray's nodes, in order, until it is opaque enough; distributes each piece's
-/// weight to its two nodes in proportion to their densities (their share of its colour).
+/// weight to its two nodes as the light it sends comes from along it ([`far_share`]: a thin
+/// piece's from all along it, an opaque one's from its near end).
 fn integrate(
     state: &mut RayState,
     nodes: &mut [Node],
@@ -1249,8 +1335,16 @@ fn integrate(
             state.worst = state.worst.max(error);
             let (w, stopped) = composite_piece(state, [a.t, b.t], [a.sigma, b.sigma], outputs);
             if w > 0.0 {
-                nodes[i - 1].weight += w * a.sigma / sum;
-                nodes[i].weight += w * b.sigma / sum;
+                // An empty end's colour is not asked for: the other end gets all the weight.
+                let far = if a.sigma == 0.0 {
+                    1.0
+                } else if b.sigma == 0.0 {
+                    0.0
+                } else {
+                    far_share(a.sigma, b.sigma, b.t - a.t)
+                };
+                nodes[i - 1].weight += w * (1.0 - far);
+                nodes[i].weight += w * far;
             }
             stopped
         } else {
@@ -1595,6 +1689,66 @@ mod tests {
         for plane in planes.rgb.as_ref().unwrap() {
             assert!(plane.data.iter().all(|c| c.is_finite() && *c >= 0.0));
         }
+    }
+
+    fn node(t: f64, sigma: f64) -> super::Node {
+        super::Node {
+            t,
+            probe: t,
+            sigma,
+            slot: 0,
+            starts_run: false,
+            exact: false,
+            extent: 0.0,
+            weight: 0.0,
+            depth: 0.0,
+        }
+    }
+
+    #[test]
+    fn a_bump_between_ends_of_equal_density_is_judged_by_its_curvature() {
+        // σ = 0, 5, 5, 0 at t = 0, 1, 2, 3: the middle step has no jump, but the density
+        // turns over inside it.
+        let nodes = [
+            node(0.0, 0.0),
+            node(1.0, 5.0),
+            node(2.0, 5.0),
+            node(3.0, 0.0),
+        ];
+        assert_eq!(super::step_change(&nodes, 1), 0.0);
+        assert_eq!(super::smooth_change(&nodes, 1), 5.0);
+        // A steady slope has none.
+        let slope = [
+            node(0.0, 1.0),
+            node(1.0, 2.0),
+            node(2.0, 3.0),
+            node(3.0, 4.0),
+        ];
+        assert_eq!(super::smooth_change(&slope, 1), 0.0);
+        // Without neighbours, the jump.
+        assert_eq!(super::smooth_change(&slope[1..3], 0), 1.0);
+    }
+
+    #[test]
+    fn transmittance_inside_a_round_goes_through_the_lower_end_of_each_step() {
+        let mut nodes = [
+            node(0.0, 0.0),
+            node(1.0, 2.0),
+            node(1.5, 4.0),
+            node(2.0, 1.0),
+        ];
+        let mut cut = nodes;
+        super::lay_depths(&mut nodes);
+        assert_eq!(super::transmittance_at(0.5, &nodes, 0), 0.5);
+        // The first step may hold its edge anywhere: no depth from it.
+        assert_eq!(super::transmittance_at(0.5, &nodes, 1), 0.5);
+        let want = 0.5 * (-(0.5 * 2.0 + 0.5 * 1.0f64)).exp();
+        assert!((super::transmittance_at(0.5, &nodes, 3) - want).abs() < 1e-15);
+        // A run's start joins nothing to the node before it.
+        cut[2].starts_run = true;
+        super::lay_depths(&mut cut);
+        let want = 0.5 * (-(0.5 * 1.0f64)).exp();
+        assert!((super::transmittance_at(0.5, &cut, 3) - want).abs() < 1e-15);
     }
 
     #[test]

@@ -43,7 +43,11 @@ pub struct MarchParams {
     /// estimate exceeds this. The estimate is the density jump `|σ_b − σ_a|` between its
     /// ends, or the curvature through its neighbours (`δ²·|σ''|`) where that is smaller (a
     /// smooth slope the trapezoid rule integrates well), or how far the field's density
-    /// bound over the step rises above both ends (a sheet thinner than the step).
+    /// bound over the step rises above both ends (a sheet thinner than the step). A step
+    /// that can hold no edge (density at both ends, shorter than the field's
+    /// [`smooth_length`](crate::field::Field::smooth_length)) is judged by its curvature
+    /// alone: a bump between ends of equal density has no jump. `T` is the ray's at the
+    /// step, carried through the steps before it.
     pub error_target: f32,
     /// Bisections of a base step at most (a step grown by `2^k` gets `k` more).
     pub refine_depth: u32,
@@ -70,7 +74,7 @@ impl Quality {
                 min_transmittance: 1e-2,
                 occupancy_resolution: 64,
                 error_target: 5e-2,
-                refine_depth: 2,
+                refine_depth: 4,
                 color_skip_budget: 1e-3,
                 max_samples: 1024,
             },

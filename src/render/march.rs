@@ -946,11 +946,15 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         if b.starts_run {
             continue;
         }
-        let transmittance =
-            transmittance_at(s.rays[r as usize].pieces.transmittance(), nodes, i as usize);
-        let base = base_step_at(r as usize, a.t, plans, s);
+        let t_round = s.rays[r as usize].pieces.transmittance();
+        // Only steps that are not exact use it (edges and what a step hides).
+        let base = if a.exact {
+            0.0
+        } else {
+            base_step_at(r as usize, a.t, plans, s)
+        };
         // An exact run's spans are where its density is: it hides nothing a probe could find.
-        let hides = || {
+        let hides = |transmittance: f64| {
             !a.exact
                 && b.t - a.t > 1.5 * base * 0.5f64.powi(HIDDEN_DEPTH)
                 && hides_content(
@@ -963,20 +967,30 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
                     s,
                 )
         };
+        // Every test below grows with the transmittance, and the round's bounds the step's:
+        // the step's own (an exponential, [`transmittance_at`]) is worked out only where the
+        // round's says split.
+        let exact_t = || transmittance_at(t_round, nodes, i as usize);
+        let confirmed = |test: &dyn Fn(f64) -> bool| {
+            test(t_round) && (nodes[i as usize].depth == 0.0 || test(exact_t()))
+        };
         if b.t - a.t <= 1.5 * s.rays[r as usize].finest {
             // Shorter than bisection may leave: only what the step may wholly hide is
             // searched for.
-            if hides() {
+            if confirmed(&hides) {
                 s.pending.push(Pending::between(r, 0.5 * (a.t + b.t), a));
             }
             continue;
         }
-        let weight = (b.t - a.t) * transmittance;
         let smooth = any_smooth && smooth_step(r as usize, a, b, plans, s);
-        let change = if smooth {
-            smooth_change(nodes, i as usize)
-        } else {
-            step_change(nodes, i as usize)
+        // The jump bounds `step_change`: the curvature is asked only where it may decide.
+        let jump = (b.sigma - a.sigma).abs();
+        let change = |weight: f64| {
+            if smooth {
+                smooth_change(nodes, i as usize) * weight > tolerance
+            } else {
+                jump * weight > tolerance && step_change(nodes, i as usize) * weight > tolerance
+            }
         };
         // A grown step where density starts or ends is bisected back to an ungrown one
         // whatever its weight, so faint content keeps the base step's edges; so is one
@@ -990,9 +1004,8 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         // A sample with density between two empty ones says nothing of how dense the thin
         // shell it hit is (a grazing ray's silhouette): its steps are bisected until the
         // shell has two samples, whatever their weight.
-        let isolated = !a.exact
+        let lone = !a.exact
             && (a.sigma > 0.0) != (b.sigma > 0.0)
-            && transmittance > tolerance
             && if a.sigma > 0.0 {
                 i > 0 && !a.starts_run && nodes[i as usize - 1].sigma == 0.0
             } else {
@@ -1000,21 +1013,22 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
                     .get(i as usize + 2)
                     .is_some_and(|q| !q.starts_run && q.sigma == 0.0)
             };
-        if edge
-            || isolated
-            || change * weight > tolerance
-            || hides()
-            || (!a.exact
-                && hides_gap(
-                    scene,
-                    plans,
-                    r as usize,
-                    (a, b),
-                    transmittance,
-                    tolerance,
-                    s,
-                ))
-        {
+        let split = |transmittance: f64| {
+            (lone && transmittance > tolerance)
+                || change((b.t - a.t) * transmittance)
+                || hides(transmittance)
+                || (!a.exact
+                    && hides_gap(
+                        scene,
+                        plans,
+                        r as usize,
+                        (a, b),
+                        transmittance,
+                        tolerance,
+                        s,
+                    ))
+        };
+        if edge || confirmed(&split) {
             s.rays[r as usize].refined = true;
             s.pending.push(Pending::between(r, 0.5 * (a.t + b.t), a));
         } else if !a.exact {
@@ -1070,10 +1084,12 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
     for &(r, i, bound) in &s.unsure {
         let nodes = &s.nodes[r as usize];
         let (a, b) = (&nodes[i as usize], &nodes[i as usize + 1]);
-        let transmittance =
-            transmittance_at(s.rays[r as usize].pieces.transmittance(), nodes, i as usize);
-        let weight = (b.t - a.t) * transmittance;
-        if (bound - a.sigma.max(b.sigma)) * weight > tolerance {
+        // As above: the round's transmittance first, the step's only where that says split.
+        let t_round = s.rays[r as usize].pieces.transmittance();
+        let excess = (bound - a.sigma.max(b.sigma)) * (b.t - a.t);
+        if excess * t_round > tolerance
+            && excess * transmittance_at(t_round, nodes, i as usize) > tolerance
+        {
             s.rays[r as usize].refined = true;
             s.pending.push(Pending::between(r, 0.5 * (a.t + b.t), a));
         }

@@ -26,7 +26,7 @@ use super::splats::Splatting;
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
 use crate::field::{
-    linear_to_srgb, Aabb, ColorSpace, Fragment, Occupancy, Span, SplatPixel, Unbounded,
+    linear_to_srgb, Aabb, ColorSpace, Field, Fragment, Occupancy, Span, SplatPixel, Unbounded,
     SPLAT_MIN_TRANSMITTANCE,
 };
 use crate::image::Window;
@@ -63,6 +63,15 @@ const GAP_BATCH: usize = 32;
 /// may hide ([`hides_content`]), whatever the preset's depth: a ray running along an
 /// occupied cell's face keeps touching it, and each level may double its samples there.
 const HIDDEN_DEPTH: i32 = 5;
+
+/// Halvings at most in the search for a point of a step that [`hides_content`]
+/// ([`hidden_point`]): 2^-24 of the step is below an `f32` position's resolution.
+const HIDDEN_SEARCH_DEPTH: u32 = 24;
+
+/// Field queries at most in one [`hidden_point`] search: a box padded past a cell's face
+/// keeps its halves next to the face "occupied" down to the depth limit, so a search may
+/// follow a few such dead ends before it finds the cell or gives up.
+const HIDDEN_SEARCH_QUERIES: u32 = 96;
 
 /// What one pixel ends up with.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -978,7 +987,8 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
             // Shorter than bisection may leave: only what the step may wholly hide is
             // searched for.
             if confirmed(&hides) {
-                s.pending.push(Pending::between(r, 0.5 * (a.t + b.t), a));
+                let t = split_point(scene, plans, r as usize, i as usize, s);
+                s.pending.push(Pending::between(r, t, a));
             }
             continue;
         }
@@ -1030,7 +1040,8 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         };
         if edge || confirmed(&split) {
             s.rays[r as usize].refined = true;
-            s.pending.push(Pending::between(r, 0.5 * (a.t + b.t), a));
+            let t = split_point(scene, plans, r as usize, i as usize, s);
+            s.pending.push(Pending::between(r, t, a));
         } else if !a.exact {
             s.unsure.push((r, i, 0.0));
         }
@@ -1156,6 +1167,64 @@ fn hides_content(
             .field()
             .may_be_occupied(&Aabb::new(p.min(q), p.max(q)))
     })
+}
+
+/// Where to split the step from node `k` to `k + 1` on ray `r`: its midpoint, unless the
+/// step is empty at both ends and a field that cannot bound its density has a point inside
+/// it that it does not call empty ([`hidden_point`]). A ray clipping the corner of an
+/// occupied cell crosses a sliver far shorter than bisection below the base step reaches
+/// ([`HIDDEN_DEPTH`]); a node placed inside it sees that content whatever its length.
+fn split_point(scene: &Scene, plans: &[InstancePlan], r: usize, k: usize, s: &Scratch) -> f64 {
+    let (a, b) = (&s.nodes[r][k], &s.nodes[r][k + 1]);
+    let mid = 0.5 * (a.t + b.t);
+    if a.exact || a.sigma != 0.0 || b.sigma != 0.0 {
+        return mid;
+    }
+    unbounded_over(plans, r, a.t, b.t, s)
+        .find_map(|(i, lr, t0, t1)| {
+            let mut queries = HIDDEN_SEARCH_QUERIES;
+            let field = scene.instances[i].field();
+            hidden_point(field, lr, t0, t1, HIDDEN_SEARCH_DEPTH, &mut queries)
+        })
+        .filter(|&t| t > a.t && t < b.t)
+        .unwrap_or(mid)
+}
+
+/// A point strictly inside `(t0, t1)` on `lr` that `field` does not call certainly empty
+/// ([`Field::certainly_empty`], the mask itself for a masked field), found depth first,
+/// nearest first: the midpoint is asked, then each half whose box may be occupied
+/// ([`Field::may_be_occupied`]). `None` where no such point turned up within `depth`
+/// halvings and `queries` field queries.
+fn hidden_point(
+    field: &dyn Field,
+    lr: &LocalRay,
+    t0: f64,
+    t1: f64,
+    depth: u32,
+    queries: &mut u32,
+) -> Option<f64> {
+    if *queries == 0 {
+        return None;
+    }
+    *queries -= 1;
+    let mid = 0.5 * (t0 + t1);
+    let mut empty = [true];
+    field.certainly_empty(&[lr.at(mid)], &mut empty);
+    if !empty[0] {
+        return Some(mid);
+    }
+    if depth == 0 {
+        return None;
+    }
+    let mut half = |a: f64, b: f64| {
+        let (p, q) = (lr.at(a), lr.at(b));
+        if *queries == 0 || !field.may_be_occupied(&Aabb::new(p.min(q), p.max(q))) {
+            return None;
+        }
+        *queries -= 1;
+        hidden_point(field, lr, a, b, depth - 1, queries)
+    };
+    half(t0, mid).or_else(|| half(mid, t1))
 }
 
 /// Whether the step from `a` to `b` on ray `r`, with density at both ends in an instance

@@ -1172,9 +1172,10 @@ fn hides_content(
 
 /// Where to split the step from node `k` to `k + 1` on ray `r`: its midpoint, unless the
 /// step is empty at both ends and a field that cannot bound its density, whose box over the
-/// step may be occupied, has a point inside it that it does not call empty ([`hidden_point`]). A ray clipping the corner of an
-/// occupied cell crosses a sliver far shorter than bisection below the base step reaches
-/// ([`HIDDEN_DEPTH`]); a node placed inside it sees that content whatever its length.
+/// step may be occupied, has a point inside it that it does not call empty
+/// ([`hidden_point`]). A ray clipping the corner of an occupied cell crosses a sliver far
+/// shorter than bisection below the base step reaches ([`HIDDEN_DEPTH`]); a node placed
+/// inside it sees that content whatever its length.
 fn split_point(scene: &Scene, plans: &[InstancePlan], r: usize, k: usize, s: &Scratch) -> f64 {
     let (a, b) = (&s.nodes[r][k], &s.nodes[r][k + 1]);
     let mid = 0.5 * (a.t + b.t);

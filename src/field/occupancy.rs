@@ -618,19 +618,11 @@ impl Occupancy {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::{Analytic, Primitive, ShColor, Shape};
-
-    fn prim(shape: Shape) -> Primitive {
-        Primitive {
-            shape,
-            density: 1.0,
-            color: ShColor::constant(Vec3::ONE),
-        }
-    }
+    use crate::field::{Analytic, Primitive, Shape};
 
     fn one(shape: Shape) -> Analytic {
         Analytic {
-            primitives: vec![prim(shape)],
+            primitives: vec![Primitive::white(shape)],
         }
     }
 
@@ -710,8 +702,8 @@ mod tests {
     fn radii_are_chebyshev_distances_to_the_other_state() {
         let f = Analytic {
             primitives: vec![
-                prim(sphere(Vec3::ZERO, 1.0)),
-                prim(Shape::Gaussian {
+                Primitive::white(sphere(Vec3::ZERO, 1.0)),
+                Primitive::white(Shape::Gaussian {
                     center: Vec3::new(1.5, 1.5, 0.0),
                     sigma: 0.1,
                     cutoff: 4.0,
@@ -740,8 +732,8 @@ mod tests {
         // Two small balls at opposite corners of a 150³ grid.
         let f = Analytic {
             primitives: vec![
-                prim(sphere(Vec3::splat(-1.0), 0.01)),
-                prim(sphere(Vec3::splat(1.0), 0.01)),
+                Primitive::white(sphere(Vec3::splat(-1.0), 0.01)),
+                Primitive::white(sphere(Vec3::splat(1.0), 0.01)),
             ],
         };
         let n = 150;
@@ -767,12 +759,12 @@ mod tests {
     fn jumps_agree_with_the_cell_by_cell_walk() {
         let f = Analytic {
             primitives: vec![
-                prim(Shape::Box {
+                Primitive::white(Shape::Box {
                     min: Vec3::new(-2.0, -2.0, -0.3),
                     max: Vec3::new(2.0, 2.0, 0.0),
                 }),
-                prim(sphere(Vec3::new(0.5, 0.3, 0.8), 0.4)),
-                prim(Shape::Box {
+                Primitive::white(sphere(Vec3::new(0.5, 0.3, 0.8), 0.4)),
+                Primitive::white(Shape::Box {
                     min: Vec3::new(-1.5, 1.0, 0.0),
                     max: Vec3::new(-1.2, 1.3, 1.5),
                 }),

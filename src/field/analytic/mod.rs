@@ -220,6 +220,17 @@ pub struct Primitive {
 }
 
 impl Primitive {
+    /// A white primitive of unit density: what the tests of the field's spans and of the
+    /// occupancy grid build their scenes from.
+    #[cfg(test)]
+    pub(crate) fn white(shape: Shape) -> Self {
+        Primitive {
+            shape,
+            density: 1.0,
+            color: ShColor::constant(Vec3::ONE),
+        }
+    }
+
     /// Adds this primitive's density at each point to `sigma` (the concrete shape is chosen
     /// once, outside the loop).
     fn add_density(&self, points: &[Vec3], sigma: &mut [f32]) {

@@ -176,15 +176,7 @@ pub(super) fn spans<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::{Analytic, Field, ShColor};
-
-    fn prim(shape: Shape) -> Primitive {
-        Primitive {
-            shape,
-            density: 1.0,
-            color: ShColor::constant(Vec3::ONE),
-        }
-    }
+    use crate::field::{Analytic, Field};
 
     fn spans_of(f: &Analytic, o: Vec3, d: Vec3, t0: f64, t1: f64) -> Vec<Span> {
         let mut out = vec![Span {
@@ -206,7 +198,7 @@ mod tests {
         let puffs = |n: usize| Analytic {
             primitives: (0..n)
                 .map(|i| {
-                    prim(Shape::Gaussian {
+                    Primitive::white(Shape::Gaussian {
                         center: Vec3::new(i as f32 * 0.1, 0.0, 0.0),
                         sigma: 0.05,
                         cutoff: 3.0,
@@ -231,20 +223,20 @@ mod tests {
         // the ray misses.
         let f = Analytic {
             primitives: vec![
-                prim(Shape::Sphere {
+                Primitive::white(Shape::Sphere {
                     center: Vec3::new(5.0, 0.0, 0.0),
                     radius: 1.0,
                 }),
-                prim(Shape::Gaussian {
+                Primitive::white(Shape::Gaussian {
                     center: Vec3::new(10.0, 0.0, 0.0),
                     sigma: 0.5,
                     cutoff: 2.0,
                 }),
-                prim(Shape::Box {
+                Primitive::white(Shape::Box {
                     min: Vec3::new(7.0, -1.0, -1.0),
                     max: Vec3::new(8.0, 1.0, 1.0),
                 }),
-                prim(Shape::Sphere {
+                Primitive::white(Shape::Sphere {
                     center: Vec3::new(5.0, 3.0, 0.0),
                     radius: 1.0,
                 }),
@@ -277,11 +269,11 @@ mod tests {
         // haze, haze and box up to the peak and from it, haze.
         let f = Analytic {
             primitives: vec![
-                prim(Shape::Box {
+                Primitive::white(Shape::Box {
                     min: Vec3::splat(-1.0),
                     max: Vec3::splat(1.0),
                 }),
-                prim(Shape::Gaussian {
+                Primitive::white(Shape::Gaussian {
                     center: Vec3::ZERO,
                     sigma: 1.0,
                     cutoff: 3.0,
@@ -297,11 +289,11 @@ mod tests {
         // Two boxes, one inside the other: three constant spans.
         let g = Analytic {
             primitives: vec![
-                prim(Shape::Box {
+                Primitive::white(Shape::Box {
                     min: Vec3::splat(-2.0),
                     max: Vec3::splat(2.0),
                 }),
-                prim(Shape::Box {
+                Primitive::white(Shape::Box {
                     min: Vec3::splat(-1.0),
                     max: Vec3::splat(1.0),
                 }),
@@ -318,7 +310,7 @@ mod tests {
     #[test]
     fn parallel_rays_tangents_and_empty_fields() {
         let b = Analytic {
-            primitives: vec![prim(Shape::Box {
+            primitives: vec![Primitive::white(Shape::Box {
                 min: Vec3::ZERO,
                 max: Vec3::ONE,
             })],
@@ -331,7 +323,7 @@ mod tests {
         assert!(spans_of(&b, Vec3::new(-1.0, 1.5, 0.5), Vec3::X, 0.0, 9.0).is_empty());
         // Grazing the unit sphere: no interval of positive length.
         let s = Analytic {
-            primitives: vec![prim(Shape::Sphere {
+            primitives: vec![Primitive::white(Shape::Sphere {
                 center: Vec3::ZERO,
                 radius: 1.0,
             })],
@@ -355,23 +347,23 @@ mod tests {
     fn spans_agree_with_sampled_density() {
         let f = Analytic {
             primitives: vec![
-                prim(Shape::Sphere {
+                Primitive::white(Shape::Sphere {
                     center: Vec3::new(0.1, 0.2, -0.3),
                     radius: 0.7,
                 }),
                 Primitive {
                     density: 2.0,
-                    ..prim(Shape::Box {
+                    ..Primitive::white(Shape::Box {
                         min: Vec3::new(-1.0, 0.5, -1.0),
                         max: Vec3::new(-0.2, 0.9, 0.1),
                     })
                 },
-                prim(Shape::Gaussian {
+                Primitive::white(Shape::Gaussian {
                     center: Vec3::new(0.6, -0.6, 0.6),
                     sigma: 0.2,
                     cutoff: 4.0,
                 }),
-                prim(Shape::Box {
+                Primitive::white(Shape::Box {
                     min: Vec3::new(-0.5, -0.5, -0.5),
                     max: Vec3::new(0.3, 0.1, 0.4),
                 }),

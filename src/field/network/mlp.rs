@@ -853,27 +853,33 @@ mod tests {
         }
     }
 
-    #[test]
-    fn fixed_inputs_fold_into_the_first_biases() {
-        // tiny-cuda-nn's 63 → 64 → 64 → 3 colour MLP and a torch one, the last 32 inputs
-        // fixed: the same outputs as passing them every time, up to f32 rounding.
+    /// A colour network of `n_inputs` → 64 → 64 → 3 in both layouts, seeded: tiny-cuda-nn's
+    /// (no biases, outputs padded to 16) and a torch one with biases.
+    fn colour_networks(n_inputs: usize) -> [Mlp; 2] {
         let tcnn = MlpConfig {
-            n_inputs: 63,
+            n_inputs,
             width: 64,
             n_hidden_layers: 2,
             n_outputs: 3,
             output_alignment: 16,
         };
         let torch_layers = [
-            (seeded(64 * 63, 1), seeded(64, 2)),
+            (seeded(64 * n_inputs, 1), seeded(64, 2)),
             (seeded(64 * 64, 3), seeded(64, 4)),
             (seeded(3 * 64, 5), seeded(3, 6)),
         ];
-        let fixed = seeded(32, 8);
-        for mlp in [
+        [
             Mlp::new(tcnn, &seeded(tcnn.n_params(), 7)).unwrap(),
-            Mlp::with_biases(63, &torch_layers).unwrap(),
-        ] {
+            Mlp::with_biases(n_inputs, &torch_layers).unwrap(),
+        ]
+    }
+
+    #[test]
+    fn fixed_inputs_fold_into_the_first_biases() {
+        // tiny-cuda-nn's 63 → 64 → 64 → 3 colour MLP and a torch one, the last 32 inputs
+        // fixed: the same outputs as passing them every time, up to f32 rounding.
+        let fixed = seeded(32, 8);
+        for mlp in colour_networks(63) {
             let folded = mlp.with_last_inputs(&fixed).unwrap();
             assert_eq!(folded.config().n_inputs, 31);
             let n = 19;
@@ -896,18 +902,6 @@ mod tests {
         // instant-ngp's colour MLP (16 features + 16 direction values → 64 → 64 → 3) and a
         // torch one with biases, the last 16 inputs shared by runs of samples of every
         // length around a block's (1, 3, 16, 17, 40, …).
-        let tcnn = MlpConfig {
-            n_inputs: 32,
-            width: 64,
-            n_hidden_layers: 2,
-            n_outputs: 3,
-            output_alignment: 16,
-        };
-        let torch_layers = [
-            (seeded(64 * 32, 1), seeded(64, 2)),
-            (seeded(64 * 64, 3), seeded(64, 4)),
-            (seeded(3 * 64, 5), seeded(3, 6)),
-        ];
         let runs = [1, 3, 16, 17, 40, 2, 16, 5, 32];
         let n: usize = runs.iter().sum();
         let row_of: Vec<u32> = runs
@@ -922,10 +916,7 @@ mod tests {
             .zip(&row_of)
             .flat_map(|(v, &r)| v.iter().chain(&shared[r as usize * 16..][..16]).copied())
             .collect();
-        for mlp in [
-            Mlp::new(tcnn, &seeded(tcnn.n_params(), 7)).unwrap(),
-            Mlp::with_biases(32, &torch_layers).unwrap(),
-        ] {
+        for mlp in colour_networks(32) {
             let (head, last) = mlp.split_last_inputs(16).unwrap();
             assert_eq!(head.config().n_inputs, 16);
             let mut rows = Vec::new();

@@ -78,6 +78,7 @@ mod density_kernel;
 mod occupancy;
 mod proposal;
 mod torch;
+mod weights;
 
 pub(crate) use config::scan;
 pub use dataparser::DataparserTransform;

@@ -145,9 +145,10 @@ fn exp_m1_4(v: std::arch::x86_64::__m256d) -> std::arch::x86_64::__m256d {
         }
         c
     };
-    // `ln 2` split: its high part has 32 significant bits, so `k·LN2_HI` is exact.
-    const LN2_HI: f64 = 0.693_147_180_369_123_816_49;
-    const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
+    // `ln 2` split: its high part (0.6931471803…) has 32 significant bits, so `k·LN2_HI`
+    // is exact; the low part (1.9082149…·10⁻¹⁰) is the rest to double precision.
+    const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
+    const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
     let v = _mm256_max_pd(v, _mm256_set1_pd(-40.0));
     let k = _mm256_round_pd::<{ _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC }>(_mm256_mul_pd(
         v,

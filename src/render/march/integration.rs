@@ -9,8 +9,11 @@ use crate::render::composite::far_share;
 use crate::render::{MarchParams, Outputs};
 
 /// What the error rule aims a step's weighted error estimate at, as a fraction of the target
-/// ([`allowed_step`]): the curvature ahead is estimated from the round behind.
-const STEP_SAFETY: f64 = 8.0;
+/// ([`allowed_step`]): the curvature ahead is estimated from the round behind, and a step
+/// whose own estimate exceeds the target is bisected, so the curvature may double from the
+/// one to the other before a step costs a bisection (measured on the demo's Final: an
+/// eighth of the target lays 11 % more samples and costs 7 % more CPU time than a half).
+const STEP_SAFETY: f64 = 2.0;
 
 /// Composites a ray's nodes, in order, until it is opaque enough; distributes each piece's
 /// weight to its two nodes as the light it sends comes from along it ([`far_share`]: a thin

@@ -27,7 +27,8 @@ pub struct MarchParams {
     /// Base step: each field's [`feature_size`](crate::field::Field::feature_size) divided by
     /// this (in field units).
     pub steps_per_feature: f32,
-    /// Step growth with world distance from the camera: `δ = max(base, cone·t)`.
+    /// Step growth with world distance from the camera: `δ = max(base, cone·t)`, in runs
+    /// searched for their edges (the error rule sets the steps of exact runs).
     pub cone: f32,
     /// The step never exceeds `base · max_step_factor`. Steps grow towards it (doubling
     /// from node to node) where the last steps' error estimates are far below the target:

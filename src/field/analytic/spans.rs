@@ -6,9 +6,9 @@
 //! along the ray. The field's spans are the pieces of the union of those intervals between
 //! consecutive interval ends: inside each piece the same primitives are present and every
 //! Gaussian only rises or only falls, so the density has no jump there and no peak but the
-//! slight one two overlapping Gaussians may make between their own peaks (which the
-//! marcher's curvature test sees between a run's inner samples, but not on its first or
-//! last step), and it is constant where none of them is a Gaussian.
+//! slight one two overlapping Gaussians may make between their own peaks (whose curvature
+//! the marcher measures between a run's inner samples and shortens its steps for, but not
+//! on its first or last step), and it is constant where none of them is a Gaussian.
 
 use glam::{DVec3, Vec3};
 

@@ -2,7 +2,7 @@
 
 use glam::Vec3;
 
-use super::refinement::{change, step_curvature};
+use super::refinement::{change, larger_side, step_curvature};
 use super::{Node, RayState};
 use crate::field::{Fragment, SPLAT_MIN_TRANSMITTANCE};
 use crate::render::composite::far_share;
@@ -27,8 +27,10 @@ pub(super) fn integrate(
     budget_limited: &mut u64,
 ) {
     let min_t = params.min_transmittance as f64;
-    // The largest weighted error estimate per cubed step length of the round's exact steps.
+    // The largest weighted error estimate per cubed step length of the round's exact steps,
+    // and whether any of them had a neighbour to measure its curvature through.
     let mut rate = 0.0f64;
+    let mut measured = false;
     for i in 0..nodes.len() {
         let b = nodes[i];
         let stopped = if b.extent > 0.0 {
@@ -55,10 +57,12 @@ pub(super) fn integrate(
                 0.0
             };
             state.worst = state.worst.max(error);
-            if let (true, Some([before, after])) = (a.exact, curvature) {
-                let delta = b.t - a.t;
-                let curvature = before.unwrap_or(0.0).max(after.unwrap_or(0.0));
-                rate = rate.max(weight * curvature / (delta * delta * delta));
+            if let (true, Some(sides @ [before, after])) = (a.exact, curvature) {
+                if before.is_some() || after.is_some() {
+                    let delta = b.t - a.t;
+                    measured = true;
+                    rate = rate.max(weight * larger_side(sides) / (delta * delta * delta));
+                }
             }
             let (w, stopped) = composite_piece(state, [a.t, b.t], [a.sigma, b.sigma], outputs);
             if w > 0.0 {
@@ -95,7 +99,9 @@ pub(super) fn integrate(
         state.live = false;
         *budget_limited += 1;
     }
-    state.allowed = allowed_step(rate, params);
+    if measured {
+        state.allowed = allowed_step(rate, params);
+    }
     adapt_step(state, params);
 }
 
@@ -103,12 +109,15 @@ pub(super) fn integrate(
 /// `δ` is `δ³·|σ''|/12` in optical depth, and a step's weighted error estimate is
 /// `e = w·δ²·|σ''|` ([`step_curvature`], the larger side; `w = δ·T`), so `e` grows as
 /// `rate·δ³`. The rule's step is estimated at `target / STEP_SAFETY` at the round's highest
-/// `rate`: `(target / (STEP_SAFETY·rate))^⅓`. Infinite where no step showed curvature.
-fn allowed_step(rate: f64, params: &MarchParams) -> f64 {
-    if rate > 0.0 && rate.is_finite() {
+/// `rate`: `(target / (STEP_SAFETY·rate))^⅓`. Infinite where the measured curvature was
+/// zero (a linear density); zero, so the finest step, where it was infinite or not a number.
+pub(super) fn allowed_step(rate: f64, params: &MarchParams) -> f64 {
+    if rate == 0.0 {
+        f64::INFINITY
+    } else if rate > 0.0 && rate.is_finite() {
         (params.error_target as f64 / (STEP_SAFETY * rate)).cbrt()
     } else {
-        f64::INFINITY
+        0.0
     }
 }
 
@@ -150,10 +159,11 @@ fn composite_piece(
     }
 }
 
-/// After a round: back to the base step where a step was bisected (an edge is near); steps
-/// double from node to node while every step's weighted error estimate is under 1/64 of the
-/// target (the trapezoid rule's error grows as `δ³`, so a doubled step stays under an eighth
-/// of it), and are halved where one was over it.
+/// After a round, for the steps of runs searched for their edges (exact runs' steps are the
+/// error rule's, [`allowed_step`]): back to the base step where a step was bisected (an edge
+/// is near); steps double from node to node while every step's weighted error estimate is
+/// under 1/64 of the target (the trapezoid rule's error grows as `δ³`, so a doubled step
+/// stays under an eighth of it), and are halved where one was over it.
 fn adapt_step(state: &mut RayState, params: &MarchParams) {
     let target = params.error_target as f64;
     if state.refined {

@@ -13,9 +13,16 @@ const CHUNK: usize = 8;
 /// [`base_step_at`]): the base step times the ray's current growth `scale` (or grown with
 /// distance by the cone, whichever is longer), at most `max_step_factor` base steps.
 fn step_at(base: f64, t: f64, scale: f64, params: &MarchParams) -> f64 {
-    let longest = base * params.max_step_factor.max(1.0) as f64;
     let grown = (params.cone as f64 * t).max(base * scale);
-    grown.min(longest).max(base).max(f64::MIN_POSITIVE)
+    grown
+        .min(longest_step(base, params))
+        .max(base)
+        .max(f64::MIN_POSITIVE)
+}
+
+/// The longest step any rule may take where the base step is `base`.
+fn longest_step(base: f64, params: &MarchParams) -> f64 {
+    base * params.max_step_factor.max(1.0) as f64
 }
 
 /// The base step at world distance `t` on ray `r`, before growth and the cone: the finest
@@ -99,12 +106,18 @@ pub(super) fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, 
             } else {
                 2.0 * state.last_step
             };
-            let longest = base * params.max_step_factor.max(1.0) as f64;
-            let step = reach.min(state.allowed).min(longest).max(state.finest);
+            let step = reach
+                .min(state.allowed)
+                .min(longest_step(base, params))
+                .max(state.finest);
             state.last_step = step;
             step.max(f64::MIN_POSITIVE)
         } else {
-            step_at(base, t, state.scale, params)
+            let step = step_at(base, t, state.scale, params);
+            if state.growing {
+                state.scale = (2.0 * state.scale).min(params.max_step_factor.max(1.0) as f64);
+            }
+            step
         };
         let next = (t < run.end).then(|| (t + step).min(run.end));
         let at_end = match next {
@@ -118,9 +131,6 @@ pub(super) fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, 
                 true
             }
         };
-        if state.growing {
-            state.scale = (2.0 * state.scale).min(params.max_step_factor.max(1.0) as f64);
-        }
         let inset = if exact {
             state.inset.min(0.25 * (run.end - run.start))
         } else {

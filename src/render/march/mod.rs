@@ -178,7 +178,8 @@ struct RayState {
     scale: f64,
     growing: bool,
     /// In exact runs (whose steps the error rule sets, not `scale`): the longest step the
-    /// rule allows after the last round (`integration::allowed_step`), and the last step
+    /// rule allows after the last round that measured a curvature
+    /// (`integration::allowed_step`; unbounded before any did), and the last step
     /// laid (world units).
     allowed: f64,
     last_step: f64,

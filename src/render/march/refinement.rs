@@ -120,7 +120,11 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
             if smooth {
                 smooth_change(nodes, i as usize) * weight > tolerance
             } else {
-                jump * weight > tolerance && step_change(nodes, i as usize) * weight > tolerance
+                (jump * weight > tolerance && step_change(nodes, i as usize) * weight > tolerance)
+                    // A step of an exact run may straddle the slight peak two overlapping
+                    // Gaussians make inside a span, its ends' densities equal: its curvature
+                    // is judged too.
+                    || (a.exact && larger_side(step_curvature(nodes, i as usize)) * weight > tolerance)
             }
         };
         // A grown step where density starts or ends is bisected back to an ungrown one
@@ -305,8 +309,15 @@ pub(super) fn change(jump: f64, curvature: [Option<f64>; 2]) -> f64 {
 pub(super) fn smooth_change(nodes: &[Node], i: usize) -> f64 {
     match step_curvature(nodes, i) {
         [None, None] => (nodes[i + 1].sigma - nodes[i].sigma).abs(),
-        [before, after] => before.unwrap_or(0.0).max(after.unwrap_or(0.0)),
+        sides => larger_side(sides),
     }
+}
+
+/// The larger of a step's curvatures on its two sides ([`step_curvature`]), 0 for a side
+/// without a neighbour.
+#[inline]
+pub(super) fn larger_side([before, after]: [Option<f64>; 2]) -> f64 {
+    before.unwrap_or(0.0).max(after.unwrap_or(0.0))
 }
 
 /// `δ²·|σ''|` over the step from node `i` to `i + 1`, `σ''` estimated by the second divided

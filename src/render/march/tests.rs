@@ -382,3 +382,19 @@ fn features_reach_the_colour_query_of_their_own_samples() {
     let got = render(&echo, &camera, camera.full_window(), &settings).unwrap();
     assert_eq!(got, want);
 }
+
+#[test]
+fn the_step_rule_grows_only_where_a_curvature_allows_it() {
+    use super::integration::allowed_step;
+    let params = crate::render::Quality::Final.params();
+    // A linear density (curvature measured zero): no bound from the rule.
+    assert_eq!(allowed_step(0.0, &params), f64::INFINITY);
+    // An infinite or undefined curvature: the finest step, never the longest.
+    assert_eq!(allowed_step(f64::INFINITY, &params), 0.0);
+    assert_eq!(allowed_step(f64::NAN, &params), 0.0);
+    // Otherwise the step whose estimate `rate·δ³` is half the target.
+    let rate = 1e3;
+    let step = allowed_step(rate, &params);
+    let estimate = rate * step.powi(3);
+    assert!((estimate / f64::from(params.error_target) - 0.5).abs() < 1e-12);
+}

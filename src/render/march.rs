@@ -87,7 +87,8 @@ pub(super) struct PixelResult {
 /// Per instance, what the marcher needs that does not change per ray.
 pub(super) struct InstancePlan {
     /// The occupancy grid that finds the field's occupied segments; `None` for a field that
-    /// gives its [spans](crate::field::Field::spans) instead.
+    /// gives its [spans](crate::field::Field::spans) or
+    /// [mask segments](crate::field::Field::mask_segments) instead.
     occupancy: Option<Arc<Occupancy>>,
     /// Base step in field units.
     base_step: f64,
@@ -126,13 +127,18 @@ impl InstancePlan {
                 let spans =
                     inst.field()
                         .spans(Vec3::ZERO, Vec3::X, 0.0, 0.0, &mut Vec::<Span>::new());
+                let exact = spans
+                    || inst
+                        .field()
+                        .mask_segments(Vec3::ZERO, Vec3::X, 0.0, 0.0, &mut Vec::new());
                 let occupancy =
-                    (!spans).then(|| inst.handle().occupancy(params.occupancy_resolution));
+                    (!exact).then(|| inst.handle().occupancy(params.occupancy_resolution));
                 let bounded = inst
                     .field()
                     .density_bounds(&[inst.field().bounds()], &mut [0.0]);
-                // Without bounds, gaps may hide between samples: a field with spans has
-                // none unseen; one with an occupancy grid has its steps probed for them.
+                // Without bounds, gaps may hide between samples: a field with spans or
+                // mask segments has none unseen; one with an occupancy grid has its steps
+                // probed for them.
                 let cell = match &occupancy {
                     Some(o) if !bounded => {
                         o.bounds().size().min_element() as f64 / f64::from(o.resolution().max(1))
@@ -893,8 +899,11 @@ fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
 /// Bisects the steps whose two ends disagree (`|σ_b − σ_a|·δ` above the tolerance) or
 /// between whose ends the fields' density bound rises well above both (a sheet thinner than
 /// a step), level by level, each level one batch across the tile. After the first level only
-/// the pairs next to the nodes just added can need it, so only those are looked at. Steps
-/// that cannot hold an edge of a smooth field are not bisected for their jump.
+/// the pairs next to the nodes just added can need it, and the pairs beyond those, whose
+/// curvature has a new neighbour (a run's first step has no node before it: its curvature
+/// is the one through the node after it, which may have moved closer), so only those are
+/// looked at. Steps that cannot hold an edge of a smooth field are not bisected for their
+/// jump.
 fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
     s.candidates.clear();
     for &r in &s.active {
@@ -910,14 +919,15 @@ fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut S
             s.candidates.clear();
             for added in &s.pending {
                 let nodes = &s.nodes[added.ray as usize];
-                let i = nodes.partition_point(|n| n.t < added.t) as u32;
-                if i > 0 {
-                    s.candidates.push((added.ray, i - 1));
-                }
-                if (i as usize) + 1 < nodes.len() {
-                    s.candidates.push((added.ray, i));
+                let i = nodes.partition_point(|n| n.t < added.t);
+                // The two steps beside it, and the two beyond those, whose curvature it is a
+                // neighbour of.
+                for k in i.saturating_sub(2)..(i + 2).min(nodes.len().saturating_sub(1)) {
+                    s.candidates.push((added.ray, k as u32));
                 }
             }
+            s.candidates.sort_unstable();
+            s.candidates.dedup();
         }
         let mut last = None;
         for &(r, _) in &s.candidates {

@@ -4,9 +4,12 @@
 //! An instance whose field gives its [spans](crate::field::Field::spans) (analytic fields)
 //! contributes them exactly: the density's edges are the spans' ends, so the marcher starts
 //! and ends its runs there and searches for none; a span of constant density is one piece,
-//! integrated from one sample. Any other instance contributes the segments its occupancy
-//! grid (and, beyond an unbounded field's grid, its empty-space test) finds occupied, in
-//! which the marcher finds edges by bisection. Over a ray the instances' intervals are cut
+//! integrated from one sample. So does one whose field gives the segments where its
+//! occupancy mask is on ([`Field::mask_segments`], instant-ngp's cascades): its density is
+//! a smooth interpolant cut to zero by the mask, so those ends are its only edges. Any
+//! other instance contributes the segments its occupancy grid (and, beyond an unbounded
+//! field's grid, its empty-space test) finds occupied, in which the marcher finds edges by
+//! bisection. Over a ray the instances' intervals are cut
 //! at every span end, so that inside a run each instance's density is continuous or
 //! searched, never jumping unseen.
 
@@ -19,9 +22,10 @@ pub(super) enum RunKind {
     /// Constant throughout (every instance present there gave a span of constant density):
     /// one sample, one piece.
     Constant,
-    /// Continuous and without a peak of its own, the ends its only edges (every instance
-    /// present gave a span): sampled just inside its ends and stepped between; no edge, thin
-    /// sheet or peak to search for.
+    /// Continuous, the ends its only edges (every instance present gave a span, or its
+    /// mask's segments): sampled just inside its ends and stepped between; no edge, thin
+    /// sheet or peak to search for (a span has none; a masked field's density is a smooth
+    /// interpolant, whose bumps only the step rule resolves).
     Smooth,
     /// An occupied segment of an instance that gave no spans: edges are found by bisection.
     Searched,
@@ -45,14 +49,15 @@ const INSET: f64 = 1e-5;
 pub(super) struct RunScratch {
     occupied: Vec<[f32; 2]>,
     spans: Vec<Span>,
+    mask: Vec<[f64; 2]>,
     /// `(t, Δcovering, Δsearched, Δvarying, from a span)` per interval end.
     events: Vec<(f64, i32, i32, i32, bool)>,
 }
 
 /// Appends one instance's intervals along its local ray to `out` (world distance): its
-/// spans when `spans` (the field gives them), else its occupied segments. Returns the world
-/// distance inside a span end at which that end's sample is taken for this instance (0 when
-/// it gave no spans).
+/// occupied segments when it has an `occupancy` grid, else its spans or its mask's
+/// segments. Returns the world distance inside a span's (or mask segment's) end at which
+/// that end's sample is taken for this instance (0 when it gave neither).
 pub(super) fn instance_runs(
     lr: &LocalRay,
     field: &dyn Field,
@@ -78,22 +83,31 @@ pub(super) fn instance_runs(
         }));
         return 0.0;
     }
+    let run = |start: f64, end: f64, kind: RunKind| {
+        let (start, end) = (world(start), world(end));
+        (start < end).then_some(Run { start, end, kind })
+    };
     scratch.spans.clear();
-    if !field.spans(lr.origin, lr.dir, 0.0, length, &mut scratch.spans) {
-        return 0.0;
-    }
-    out.extend(scratch.spans.iter().filter_map(|s| {
-        let (start, end) = (world(s.enter), world(s.exit));
-        (start < end).then_some(Run {
-            start,
-            end,
-            kind: if s.varies {
+    scratch.mask.clear();
+    if field.spans(lr.origin, lr.dir, 0.0, length, &mut scratch.spans) {
+        out.extend(scratch.spans.iter().filter_map(|s| {
+            let kind = if s.varies {
                 RunKind::Smooth
             } else {
                 RunKind::Constant
-            },
-        })
-    }));
+            };
+            run(s.enter, s.exit, kind)
+        }));
+    } else if field.mask_segments(lr.origin, lr.dir, 0.0, length, &mut scratch.mask) {
+        out.extend(
+            scratch
+                .mask
+                .iter()
+                .filter_map(|&[a, b]| run(a, b, RunKind::Smooth)),
+        );
+    } else {
+        return 0.0;
+    }
     INSET * (lr.origin.abs().max_element() as f64 + length + 1.0) / k
 }
 

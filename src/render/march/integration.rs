@@ -1,0 +1,198 @@
+//! Integration: a round's nodes composited into pieces, merged with fragments, in order.
+
+use glam::Vec3;
+
+use super::refinement::step_change;
+use super::{Node, RayState};
+use crate::field::{Fragment, SPLAT_MIN_TRANSMITTANCE};
+use crate::render::composite::far_share;
+use crate::render::{MarchParams, Outputs};
+
+/// Composites a ray's nodes, in order, until it is opaque enough; distributes each piece's
+/// weight to its two nodes as the light it sends comes from along it ([`far_share`]: a thin
+/// piece's from all along it, an opaque one's from its near end).
+pub(super) fn integrate(
+    state: &mut RayState,
+    nodes: &mut [Node],
+    params: &MarchParams,
+    outputs: &Outputs,
+    empty_is_known: bool,
+    budget_limited: &mut u64,
+) {
+    let min_t = params.min_transmittance as f64;
+    for i in 0..nodes.len() {
+        let b = nodes[i];
+        let stopped = if b.extent > 0.0 {
+            // A constant run: one piece, its weight all this node's.
+            let (w, stopped) = composite_piece(state, [b.t, b.t + b.extent], [b.sigma; 2], outputs);
+            nodes[i].weight += w;
+            stopped
+        } else if i > 0 && !b.starts_run {
+            let a = nodes[i - 1];
+            let sum = a.sigma + b.sigma;
+            let error = if sum == 0.0 && !empty_is_known {
+                // Nothing seen at either end of a field that cannot say what lies between.
+                f64::INFINITY
+            } else {
+                // The change is at most the jump: not worked out where even that would
+                // leave the worst estimate as it is.
+                let weight = (b.t - a.t) * state.pieces.transmittance();
+                if weight * (b.sigma - a.sigma).abs() > state.worst {
+                    weight * step_change(nodes, i - 1)
+                } else {
+                    0.0
+                }
+            };
+            state.worst = state.worst.max(error);
+            let (w, stopped) = composite_piece(state, [a.t, b.t], [a.sigma, b.sigma], outputs);
+            if w > 0.0 {
+                // An empty end's colour is not asked for: the other end gets all the weight.
+                let far = if a.sigma == 0.0 {
+                    1.0
+                } else if b.sigma == 0.0 {
+                    0.0
+                } else {
+                    far_share(a.sigma, b.sigma, b.t - a.t)
+                };
+                nodes[i - 1].weight += w * (1.0 - far);
+                nodes[i].weight += w * far;
+            }
+            stopped
+        } else {
+            continue;
+        };
+        if stopped || state.pieces.transmittance() < min_t {
+            state.live = false;
+            // Nothing after this node counts.
+            for n in &mut nodes[i + 1..] {
+                n.weight = 0.0;
+            }
+            return;
+        }
+    }
+    if state.run >= state.runs.len() {
+        composite_fragments(state, f64::INFINITY, outputs);
+        state.live = false;
+    } else if state.samples >= params.max_samples {
+        // Out of budget: what lies further is not marched (the caller counts the ray).
+        composite_fragments(state, f64::INFINITY, outputs);
+        state.live = false;
+        *budget_limited += 1;
+    }
+    adapt_step(state, params);
+}
+
+/// Composites the piece `[t₀, t₁]` whose density goes linearly from `σ₀` to `σ₁` (the
+/// trapezoid rule's mean), split at the fragments inside it (composited in between). Returns
+/// the piece's weight, and whether a fragment stopped the ray.
+fn composite_piece(
+    state: &mut RayState,
+    [a, b]: [f64; 2],
+    [sigma_a, sigma_b]: [f64; 2],
+    outputs: &Outputs,
+) -> (f64, bool) {
+    let mean = 0.5 * (sigma_a + sigma_b);
+    let mut t0 = a;
+    let mut weight = 0.0;
+    loop {
+        let fragment = state.next_fragment_t().filter(|&t| t < b);
+        let t1 = fragment.map_or(b, |t| t.max(t0));
+        let t_enter = state.pieces.transmittance();
+        let w = state.pieces.add(t0, t1 - t0, mean);
+        if w > 0.0 && outputs.depth_median {
+            // A piece cut by a fragment keeps the mean.
+            let delta = t1 - t0;
+            let (x0, x1) = if t0 == a && t1 == b {
+                (sigma_a * delta, sigma_b * delta)
+            } else {
+                (mean * delta, mean * delta)
+            };
+            state.log_piece([t0, delta, x0, x1, t_enter]);
+        }
+        weight += w;
+        t0 = t1;
+        if fragment.is_none() {
+            return (weight, false);
+        }
+        if !composite_fragments(state, t0, outputs) {
+            return (weight, true);
+        }
+    }
+}
+
+/// After a round: back to the base step where a step was bisected (an edge is near); steps
+/// double from node to node while every step's weighted error estimate is under 1/64 of the
+/// target (the trapezoid rule's error grows as `δ³`, so a doubled step stays under an eighth
+/// of it), and are halved where one was over it.
+fn adapt_step(state: &mut RayState, params: &MarchParams) {
+    let target = params.error_target as f64;
+    if state.refined {
+        state.scale = 1.0;
+        state.growing = false;
+    } else {
+        state.growing = 64.0 * state.worst <= target;
+        if state.worst > target {
+            state.scale = (0.5 * state.scale).max(1.0);
+        }
+    }
+    state.refined = false;
+    state.worst = 0.0;
+}
+
+/// Composites the ray's fragments up to `t_end`, splat and volume ones merged in order.
+/// `false` when the ray is done: a splat fragment would bring its transmittance to the
+/// splats' floor (gsplat's rule, which makes a pixel of splats alone exactly gsplat's).
+/// Volume fragments (proposal samples) have no such floor: nerfstudio composites every
+/// sample.
+pub(super) fn composite_fragments(state: &mut RayState, t_end: f64, outputs: &Outputs) -> bool {
+    loop {
+        let splat = state.fragments.get(state.next_fragment);
+        let volume = state.volume.get(state.next_volume);
+        let (f, is_splat) = match (splat, volume) {
+            (Some(a), Some(b)) if b.t < a.t => (*b, false),
+            (Some(a), _) => (*a, true),
+            (None, Some(b)) => (*b, false),
+            (None, None) => break,
+        };
+        if f.t > t_end {
+            break;
+        }
+        if !is_splat {
+            composite_volume_fragment(state, f, outputs);
+            state.next_volume += 1;
+        } else if composite_fragment(state, f, outputs) {
+            state.next_fragment += 1;
+        } else {
+            state.next_fragment = state.fragments.len();
+            state.next_volume = state.volume.len();
+            state.live = false;
+            return false;
+        }
+    }
+    true
+}
+
+/// Composites a fragment with no floor (a proposal sample: nerfstudio composites every
+/// sample; a splat fragment once it has passed the floor).
+#[inline]
+fn composite_volume_fragment(state: &mut RayState, f: Fragment, outputs: &Outputs) {
+    let alpha = f64::from(f.alpha);
+    let t_enter = state.pieces.transmittance();
+    let w = state.pieces.add_fragment(f.t, alpha);
+    state.rgb += Vec3::from_array(f.rgb).as_dvec3() * w;
+    if outputs.depth_median && alpha > 0.0 {
+        let x = -(-alpha).ln_1p();
+        state.log_piece([f.t, 0.0, x, x, t_enter]);
+    }
+}
+
+/// Composites the ray's next splat fragment; `false` (and nothing composited) when it would
+/// bring the ray's transmittance to the splats' floor: the ray is done.
+#[inline]
+pub(super) fn composite_fragment(state: &mut RayState, f: Fragment, outputs: &Outputs) -> bool {
+    if state.pieces.transmittance() * (1.0 - f64::from(f.alpha)) <= SPLAT_MIN_TRANSMITTANCE {
+        return false;
+    }
+    composite_volume_fragment(state, f, outputs);
+    true
+}

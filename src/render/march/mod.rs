@@ -1,0 +1,416 @@
+//! The per-tile marcher: estimator (runs, step policy, refinement) and integrator (pieces →
+//! planes), batched across a tile.
+//!
+//! A tile's rays advance together in *chunks*. Each round, every live ray lays a chunk of
+//! sample positions ("nodes") along its runs (module `runs`: the exact spans of fields that
+//! give them, the occupied segments of the others); the tile asks each field once for all of
+//! them; steps whose two ends disagree (a surface, a steep gradient), or between whose ends a
+//! field's density bound rises above both (a sheet thinner than a step, a peak), are bisected
+//! — again batched across the tile — until the step is resolved or the depth limit is hit.
+//! A run whose ends are a span's has no edge or peak inside, so only its quadrature is
+//! judged; a run of constant density is one node and one piece. Between two nodes the
+//! density is taken as their mean (the trapezoid rule, exact for piecewise-constant fields
+//! once an edge is bracketed). The pieces are composited in order; only then is colour asked
+//! for, and only at nodes whose weight matters. A ray leaves the batch when its transmittance
+//! falls below the threshold or its runs end.
+
+mod hidden;
+mod integration;
+mod laying;
+mod plan;
+mod refinement;
+mod sampling;
+mod setup;
+mod shading;
+#[cfg(test)]
+mod tests;
+
+use std::sync::Arc;
+
+use glam::{DVec3, Vec3};
+
+use self::integration::integrate;
+use self::laying::lay_nodes;
+use self::refinement::refine;
+use self::sampling::evaluate_pending;
+use self::setup::setup_rays;
+use self::shading::shade;
+use super::composite::{crossing_depth, Pieces};
+use super::ngp::NgpFill;
+use super::proposal::ProposalScratch;
+use super::runs::{Run, RunScratch};
+use super::splats::Splatting;
+use super::{Outputs, RenderSettings, RenderStats};
+use crate::camera::{Camera, Ray};
+use crate::field::{Aabb, Fragment, Occupancy, SplatPixel, Unbounded};
+use crate::image::Window;
+use crate::scene::{LocalRay, Scene};
+
+/// Bisections of one step at most, whatever the dials say: 52 halvings take any step below
+/// the resolution of an `f64` distance.
+const MAX_BISECTIONS: u32 = 52;
+
+/// What one pixel ends up with.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(super) struct PixelResult {
+    pub rgb: [f32; 3],
+    pub alpha: f32,
+    pub depth_ray: f32,
+    pub depth_z: f32,
+    pub depth_median: f32,
+}
+
+/// Per instance, what the marcher needs that does not change per ray.
+pub(super) struct InstancePlan {
+    /// The occupancy grid that finds the field's occupied segments; `None` for a field that
+    /// gives its [spans](crate::field::Field::spans) or
+    /// [mask segments](crate::field::Field::mask_segments) instead.
+    occupancy: Option<Arc<Occupancy>>,
+    /// Base step in field units.
+    base_step: f64,
+    /// Floats of per-sample state the field passes from its density to its colour query,
+    /// and where they start among a node's features (the instances' side by side).
+    features: usize,
+    feature_offset: usize,
+    /// The field's [`smooth_length`](crate::field::Field::smooth_length), field units.
+    smooth: f64,
+    /// A linear field in a scene composited in sRGB-encoded space: its colours are encoded.
+    encode: bool,
+    /// How the field is marched beyond its core, when it is defined on all of space.
+    unbounded: Option<Unbounded>,
+    /// Whether the field bounds its density over a region ([`Field::density_bounds`]): only
+    /// then can a step between two empty samples be known to hold nothing, and grow.
+    bounded: bool,
+    /// The side of an occupancy cell, field units, for a field that cannot bound its
+    /// density (infinite for the others): [`hides_gap`] probes a step with density at both
+    /// ends for gaps no finer than [`GAP_PROBES_PER_CELL`] to a cell.
+    cell: f64,
+    /// A world sphere `(centre, radius)` around the field's bounds, for culling the instance
+    /// from a tile's rays at once; `None` where the bounds are not finite.
+    world_sphere: Option<(DVec3, f64)>,
+}
+
+/// Floats of field features per node: every instance's, side by side.
+fn feature_stride(plans: &[InstancePlan]) -> usize {
+    plans.iter().map(|p| p.features).sum()
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    t: f64,
+    /// Where the fields were sampled for this node: `t`, or just inside its run where `t`
+    /// is a span's end, or the middle of a constant run.
+    probe: f64,
+    /// Total density per world unit.
+    sigma: f64,
+    /// Where this node's per-instance densities start in `Scratch::inst_sigma`.
+    slot: u32,
+    /// No piece joins this node to the one before it (a run starts here).
+    starts_run: bool,
+    /// Its run's ends are the density's only edges and peaks ([`RunKind::Smooth`] and
+    /// [`RunKind::Constant`]): no edge, thin sheet or peak lies between its samples.
+    exact: bool,
+    /// > 0: the node stands for the whole constant run `[t, t + extent]`, one piece.
+    extent: f64,
+    /// Colour weight gathered this round.
+    weight: f64,
+    /// Optical depth from the round's first node to this one ([`lay_depths`]).
+    depth: f64,
+}
+
+/// A node to be evaluated (fields as in [`Node`]).
+#[derive(Clone, Copy, Debug)]
+struct Pending {
+    ray: u32,
+    t: f64,
+    probe: f64,
+    starts_run: bool,
+    exact: bool,
+    extent: f64,
+}
+
+impl Pending {
+    /// A node between `a` and another node of its run, sampled where it lies.
+    fn between(ray: u32, t: f64, a: &Node) -> Self {
+        Pending {
+            ray,
+            t,
+            probe: t,
+            starts_run: false,
+            exact: a.exact,
+            extent: 0.0,
+        }
+    }
+}
+
+#[derive(Clone, Debug, Default)]
+struct RayState {
+    ray: Option<Ray>,
+    pieces: Pieces,
+    rgb: DVec3,
+    /// The ray's runs (see module `runs`), and the current one.
+    runs: Vec<Run>,
+    run: usize,
+    /// Next node position inside the current run; `None`: at the run's start.
+    next_t: Option<f64>,
+    /// How far inside a span's end its sample is taken (world units).
+    inset: f64,
+    live: bool,
+    /// Weight whose colour was not evaluated.
+    skipped_weight: f64,
+    /// The pieces `[t, δ, σ₀δ, σ₁δ, T_enter]` composited so far, kept only for the median
+    /// depth (see [`crossing_depth`]).
+    log: Vec<[f64; 5]>,
+    /// The pixel's splat fragments, front to back, and the next one to composite.
+    fragments: Vec<Fragment>,
+    next_fragment: usize,
+    /// The pixel's volume fragments of sampled instances (modules `proposal`, `ngp`),
+    /// front to back, and the next one to composite.
+    volume: Vec<Fragment>,
+    next_volume: usize,
+    /// The next regular step as a multiple of the base step (see [`step_at`]), and whether
+    /// it doubles from node to node: the ray's last steps were all well within the error
+    /// target.
+    scale: f64,
+    growing: bool,
+    /// Whether a step of this round was bisected, and the largest weighted error estimate
+    /// of this round's steps.
+    refined: bool,
+    worst: f64,
+    /// Nodes evaluated for this ray so far (its share of the sample budget).
+    samples: u32,
+    /// The shortest step bisection may leave this round: the base step where the round's
+    /// nodes start, halved `refine_depth` times (a grown step may be bisected further than
+    /// its own `refine_depth` halvings, never below this).
+    finest: f64,
+}
+
+impl RayState {
+    /// Logs a piece `[t, δ, σ₀δ, σ₁δ, T_enter]` for the median depth, unless the log already
+    /// holds its answer: [`crossing_depth`] stops at the first piece whose exit transmittance
+    /// is at most `1 − alpha/2` (never below ½) and whose entry one is above 0, and a piece
+    /// entered at `0 < T ≤ ½` is such a piece whatever follows it.
+    #[inline]
+    fn log_piece(&mut self, piece: [f64; 5]) {
+        let complete = self
+            .log
+            .last()
+            .is_some_and(|last| last[4] > 0.0 && last[4] <= 0.5);
+        if !complete {
+            self.log.push(piece);
+        }
+    }
+
+    /// Distance of the next fragment to composite, splat or volume.
+    fn next_fragment_t(&self) -> Option<f64> {
+        let splat = self.fragments.get(self.next_fragment).map(|f| f.t);
+        let volume = self.volume.get(self.next_volume).map(|f| f.t);
+        match (splat, volume) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+}
+
+/// One instance's steps along one ray ([`base_step_at`]), worked out once per ray.
+#[derive(Clone, Copy, Debug)]
+struct RaySteps {
+    /// Where the ray is inside the instance (world distance).
+    t_near: f64,
+    t_far: f64,
+    /// The instance's base step in world units, before an unbounded field's growth.
+    step: f64,
+    /// The instance's steps grow with distance (an unbounded field).
+    grows: bool,
+}
+
+/// One instance's batched field query: sample points (and directions and features, for
+/// colour), and what each answer goes to: a pending node and its field units per world unit
+/// (density), or a ray and its share of the weight (colour).
+#[derive(Default)]
+struct FieldQuery {
+    points: Vec<Vec3>,
+    dirs: Vec<Vec3>,
+    features: Vec<f32>,
+    owners: Vec<(u32, f64)>,
+}
+
+impl FieldQuery {
+    fn clear(&mut self) {
+        self.points.clear();
+        self.dirs.clear();
+        self.features.clear();
+        self.owners.clear();
+    }
+}
+
+/// Per-thread scratch reused from tile to tile: no allocation per sample.
+#[derive(Default)]
+pub(super) struct Scratch {
+    rays: Vec<RayState>,
+    /// The rays still marching, in pixel order.
+    active: Vec<u32>,
+    /// `local[ray · n_instances + i]`.
+    local: Vec<Option<LocalRay>>,
+    /// Per ray, the instances it has a local ray in (`ray_insts[ray_inst_at[r]..
+    /// ray_inst_at[r + 1]]`, ascending): the only ones its samples visit, so a sample's cost
+    /// does not grow with the scene's instance count.
+    ray_insts: Vec<u32>,
+    ray_inst_at: Vec<u32>,
+    /// Per entry of `ray_insts`, that instance's steps along the ray.
+    ray_steps: Vec<RaySteps>,
+    /// Per instance, the items (pending nodes, steps, rays) of one batched query.
+    by_inst: Vec<Vec<u32>>,
+    /// Per instance, whether some ray of the tile may meet it ([`cull_instances`]).
+    tile_insts: Vec<bool>,
+    run_scratch: RunScratch,
+    nodes: Vec<Vec<Node>>,
+    inst_sigma: Vec<f64>,
+    inst_sigma_prev: Vec<f64>,
+    /// Field features per node (`slot / n_instances · stride + offset`), and last round's.
+    features: Vec<f32>,
+    features_prev: Vec<f32>,
+    pending: Vec<Pending>,
+    /// Pairs `(ray, first node)` to test for refinement.
+    candidates: Vec<(u32, u32)>,
+    /// Candidates that passed the jump test, with their density bound.
+    unsure: Vec<(u32, u32, f64)>,
+    /// Step boxes for one batched density-bound query.
+    regions: Vec<Aabb>,
+    owners: Vec<(u32, f64)>,
+    field_out: Vec<f32>,
+    rgb_out: Vec<Vec3>,
+    /// Per instance, one batched query (of [`evaluate_pending`] or [`shade`]).
+    queries: Vec<FieldQuery>,
+    /// Per pixel of the tile: its world ray and camera z per unit ray distance; one ray's
+    /// splat fragments (panoramic cameras).
+    world_rays: Vec<Option<Ray>>,
+    z_per_t: Vec<f64>,
+    along: Vec<Fragment>,
+    splat_pixels: Vec<SplatPixel>,
+    /// Per pixel of the tile: its sampled instances' fragments.
+    volume: Vec<Vec<Fragment>>,
+    proposal: ProposalScratch,
+    ngp: NgpFill,
+    stats: RenderStats,
+}
+
+/// Marches one tile. `out` receives the tile's pixels row by row.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn march_tile(
+    scene: &Scene,
+    plans: &[InstancePlan],
+    splats: Option<&Splatting>,
+    camera: &Camera,
+    tile: Window,
+    settings: &RenderSettings,
+    s: &mut Scratch,
+    out: &mut Vec<PixelResult>,
+) -> RenderStats {
+    let (params, outputs) = (&settings.march, &settings.outputs);
+    let n_inst = scene.instances.len();
+    let stride = feature_stride(plans);
+    let n_rays = tile.area();
+    setup_rays(scene, plans, splats, camera, tile, outputs, s);
+    let empty_is_known = plans.iter().all(|p| p.bounded);
+
+    while !s.active.is_empty() {
+        // Each live ray keeps its last node (the start of its next piece), then lays more.
+        std::mem::swap(&mut s.inst_sigma, &mut s.inst_sigma_prev);
+        std::mem::swap(&mut s.features, &mut s.features_prev);
+        s.inst_sigma.clear();
+        s.features.clear();
+        s.pending.clear();
+        for a in 0..s.active.len() {
+            let r = s.active[a] as usize;
+            // A constant run's node is a piece of its own, never the start of the next one.
+            let carried = s.nodes[r].last().copied().filter(|n| n.extent == 0.0);
+            s.nodes[r].clear();
+            if let Some(mut node) = carried {
+                let slot = node.slot as usize;
+                node.slot = s.inst_sigma.len() as u32;
+                s.inst_sigma
+                    .extend_from_slice(&s.inst_sigma_prev[slot..slot + n_inst]);
+                let f = slot / n_inst * stride;
+                s.features
+                    .extend_from_slice(&s.features_prev[f..f + stride]);
+                node.weight = 0.0;
+                s.nodes[r].push(node);
+            }
+            lay_nodes(r, plans, params, s);
+        }
+        evaluate_pending(scene, plans, s);
+
+        refine(scene, plans, params, s);
+
+        // Integrate the pieces, in order.
+        for &r in &s.active {
+            let r = r as usize;
+            integrate(
+                &mut s.rays[r],
+                &mut s.nodes[r],
+                params,
+                outputs,
+                empty_is_known,
+                &mut s.stats.budget_limited_rays,
+            );
+        }
+
+        if outputs.rgb {
+            shade(scene, plans, params, s);
+        }
+        let rays = &s.rays;
+        s.active.retain(|&r| rays[r as usize].live);
+    }
+
+    out.clear();
+    out.extend(s.rays[..n_rays].iter().map(|st| finish(st, outputs)));
+    RenderStats {
+        pixels: n_rays as u64,
+        ..std::mem::take(&mut s.stats)
+    }
+}
+
+/// The instances ray `r` has a local ray in, ascending.
+#[inline]
+fn instances_of(s: &Scratch, r: usize) -> &[u32] {
+    &s.ray_insts[s.ray_inst_at[r] as usize..s.ray_inst_at[r + 1] as usize]
+}
+
+/// Sorts `items` (an item and its ray) into one list per instance the ray has a local ray
+/// in, keeping their order: a batched query per instance then visits only its own items.
+fn bucket_by_instance(
+    by_inst: &mut Vec<Vec<u32>>,
+    n_inst: usize,
+    ray_insts: &[u32],
+    ray_inst_at: &[u32],
+    items: impl Iterator<Item = (u32, u32)>,
+) {
+    by_inst.resize_with(n_inst, Vec::new);
+    for list in by_inst.iter_mut() {
+        list.clear();
+    }
+    for (item, r) in items {
+        let r = r as usize;
+        for &i in &ray_insts[ray_inst_at[r] as usize..ray_inst_at[r + 1] as usize] {
+            by_inst[i as usize].push(item);
+        }
+    }
+}
+
+fn finish(state: &RayState, outputs: &Outputs) -> PixelResult {
+    let alpha = state.pieces.accumulation();
+    let depth = state.pieces.expected_depth();
+    let z_per_t = state.ray.map_or(1.0, |r| r.z_per_t);
+    PixelResult {
+        rgb: state.rgb.as_vec3().to_array(),
+        alpha: alpha as f32,
+        depth_ray: depth as f32,
+        depth_z: (depth * z_per_t) as f32,
+        depth_median: if outputs.depth_median {
+            crossing_depth(&state.log, 0.5 * alpha) as f32
+        } else {
+            f32::INFINITY
+        },
+    }
+}

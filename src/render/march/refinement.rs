@@ -1,0 +1,334 @@
+//! Refinement: which steps are bisected, and the error estimates that decide it.
+
+use super::hidden::{hides_content, hides_gap, split_point, HIDDEN_DEPTH};
+use super::laying::{base_step_at, growth};
+use super::sampling::evaluate_pending;
+use super::{
+    bucket_by_instance, instances_of, InstancePlan, Node, Pending, Scratch, MAX_BISECTIONS,
+};
+use crate::field::Aabb;
+use crate::render::MarchParams;
+use crate::scene::Scene;
+
+/// Bisects the steps whose two ends disagree (`|σ_b − σ_a|·δ` above the tolerance) or
+/// between whose ends the fields' density bound rises well above both (a sheet thinner than
+/// a step), level by level, each level one batch across the tile. After the first level only
+/// the pairs next to the nodes just added can need it, and the pairs beyond those, whose
+/// curvature has a new neighbour (a run's first step has no node before it: its curvature
+/// is the one through the node after it, which may have moved closer), so only those are
+/// looked at. Steps that cannot hold an edge of a smooth field are not bisected for their
+/// jump.
+pub(super) fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
+    s.candidates.clear();
+    for &r in &s.active {
+        for i in 0..s.nodes[r as usize].len().saturating_sub(1) {
+            s.candidates.push((r, i as u32));
+        }
+    }
+    // A step grown by 2^k needs k more bisections to reach a base step's bracket.
+    let grown_levels = params.max_step_factor.max(1.0).log2().ceil() as u32;
+    let levels = (params.refine_depth + grown_levels).min(MAX_BISECTIONS);
+    for level in 0..levels {
+        if level > 0 {
+            s.candidates.clear();
+            for added in &s.pending {
+                let nodes = &s.nodes[added.ray as usize];
+                let i = nodes.partition_point(|n| n.t < added.t);
+                // The two steps beside it, and the two beyond those, whose curvature it is a
+                // neighbour of.
+                for k in i.saturating_sub(2)..(i + 2).min(nodes.len().saturating_sub(1)) {
+                    s.candidates.push((added.ray, k as u32));
+                }
+            }
+            s.candidates.sort_unstable();
+            s.candidates.dedup();
+        }
+        let mut last = None;
+        for &(r, _) in &s.candidates {
+            if last != Some(r) {
+                last = Some(r);
+                lay_depths(&mut s.nodes[r as usize]);
+            }
+        }
+        split_candidates(scene, plans, params, s);
+        if s.pending.is_empty() {
+            break;
+        }
+        evaluate_pending(scene, plans, s);
+    }
+}
+
+/// Tests each candidate pair `(ray, i)` (nodes `i` and `i + 1`) and lays the midpoints of
+/// those that need splitting into `s.pending`. What a step may get wrong matters
+/// only as much as light from there reaches the camera, so each test is weighed by the
+/// ray's transmittance at the step ([`transmittance_at`]: the steps of a round laid behind a
+/// surface are not refined as if it were not there), not by what lies behind (the piece's
+/// own weight and colour depend on what the step holds). A step that can hold no edge of a
+/// smooth field is judged by its curvature ([`smooth_change`]). Pairs that pass the cheap
+/// jump test ask the fields for a density bound over the step's box, one batch per
+/// instance.
+fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
+    let empty_is_known = plans.iter().all(|p| p.bounded);
+    let n_inst = plans.len();
+    let tolerance = params.error_target as f64;
+    let any_smooth = plans.iter().any(|p| p.smooth > 0.0);
+    s.pending.clear();
+    s.unsure.clear();
+    for &(r, i) in &s.candidates {
+        let nodes = &s.nodes[r as usize];
+        let (a, b) = (&nodes[i as usize], &nodes[i as usize + 1]);
+        if b.starts_run {
+            continue;
+        }
+        let t_round = s.rays[r as usize].pieces.transmittance();
+        // Only steps that are not exact use it (edges and what a step hides).
+        let base = if a.exact {
+            0.0
+        } else {
+            base_step_at(r as usize, a.t, plans, s)
+        };
+        // An exact run's spans are where its density is: it hides nothing a probe could find.
+        let hides = |transmittance: f64| {
+            !a.exact
+                && b.t - a.t > 1.5 * base * 0.5f64.powi(HIDDEN_DEPTH)
+                && hides_content(
+                    scene,
+                    plans,
+                    r as usize,
+                    i as usize,
+                    transmittance,
+                    tolerance,
+                    s,
+                )
+        };
+        // Every test below grows with the transmittance, and the round's bounds the step's:
+        // the step's own (an exponential, [`transmittance_at`]) is worked out only where the
+        // round's says split.
+        let exact_t = || transmittance_at(t_round, nodes, i as usize);
+        let confirmed = |test: &dyn Fn(f64) -> bool| {
+            test(t_round) && (nodes[i as usize].depth == 0.0 || test(exact_t()))
+        };
+        if b.t - a.t <= 1.5 * s.rays[r as usize].finest {
+            // Shorter than bisection may leave: only what the step may wholly hide is
+            // searched for.
+            if confirmed(&hides) {
+                let t = split_point(scene, plans, r as usize, i as usize, s);
+                s.pending.push(Pending::between(r, t, a));
+            }
+            continue;
+        }
+        let smooth = any_smooth && smooth_step(r as usize, a, b, plans, s);
+        // The jump bounds `step_change`: the curvature is asked only where it may decide.
+        let jump = (b.sigma - a.sigma).abs();
+        let change = |weight: f64| {
+            if smooth {
+                smooth_change(nodes, i as usize) * weight > tolerance
+            } else {
+                jump * weight > tolerance && step_change(nodes, i as usize) * weight > tolerance
+            }
+        };
+        // A grown step where density starts or ends is bisected back to an ungrown one
+        // whatever its weight, so faint content keeps the base step's edges; so is one
+        // between two empty samples of a field that cannot say what lies between. A step of
+        // an exact run holds no edge, sheet or peak: only its quadrature is judged.
+        let unknown = !a.exact
+            && ((a.sigma > 0.0) != (b.sigma > 0.0)
+                || (a.sigma + b.sigma == 0.0 && !empty_is_known));
+        // The cone's steps are no exception: a grazing ray's whole crossing may fit in one.
+        let edge = unknown && b.t - a.t > 1.5 * base;
+        // A sample with density between two empty ones says nothing of how dense the thin
+        // shell it hit is (a grazing ray's silhouette): its steps are bisected until the
+        // shell has two samples, whatever their weight.
+        let lone = !a.exact
+            && (a.sigma > 0.0) != (b.sigma > 0.0)
+            && if a.sigma > 0.0 {
+                i > 0 && !a.starts_run && nodes[i as usize - 1].sigma == 0.0
+            } else {
+                nodes
+                    .get(i as usize + 2)
+                    .is_some_and(|q| !q.starts_run && q.sigma == 0.0)
+            };
+        let split = |transmittance: f64| {
+            (lone && transmittance > tolerance)
+                || change((b.t - a.t) * transmittance)
+                || hides(transmittance)
+                || (!a.exact
+                    && hides_gap(
+                        scene,
+                        plans,
+                        r as usize,
+                        (a, b),
+                        transmittance,
+                        tolerance,
+                        s,
+                    ))
+        };
+        if edge || confirmed(&split) {
+            s.rays[r as usize].refined = true;
+            let t = split_point(scene, plans, r as usize, i as usize, s);
+            s.pending.push(Pending::between(r, t, a));
+        } else if !a.exact {
+            s.unsure.push((r, i, 0.0));
+        }
+    }
+    // Density bounds over the unsure steps, summed over instances (per world unit).
+    bucket_by_instance(
+        &mut s.by_inst,
+        n_inst,
+        &s.ray_insts,
+        &s.ray_inst_at,
+        s.unsure.iter().enumerate().map(|(u, n)| (u as u32, n.0)),
+    );
+    for (k, inst) in scene.instances.iter().enumerate() {
+        if s.by_inst[k].is_empty() {
+            continue;
+        }
+        s.regions.clear();
+        s.owners.clear();
+        for &u in &s.by_inst[k] {
+            let (r, i, _) = s.unsure[u as usize];
+            let Some(lr) = &s.local[r as usize * n_inst + k] else {
+                continue;
+            };
+            let nodes = &s.nodes[r as usize];
+            let (a, b) = (
+                nodes[i as usize].t.max(lr.t_near),
+                nodes[i as usize + 1].t.min(lr.t_far),
+            );
+            if a <= b {
+                let (pa, pb) = (lr.at(a), lr.at(b));
+                s.regions.push(Aabb::new(pa.min(pb), pa.max(pb)));
+                s.owners.push((u, lr.units_per_world as f64));
+            }
+        }
+        if s.regions.is_empty() {
+            continue;
+        }
+        s.field_out.clear();
+        s.field_out.resize(s.regions.len(), 0.0);
+        if !inst.field().density_bounds(&s.regions, &mut s.field_out) {
+            // No bound from this field: its steps cannot be searched.
+            for &(u, _) in &s.owners {
+                s.unsure[u as usize].2 = f64::NEG_INFINITY;
+            }
+            continue;
+        }
+        for (&(u, k), &bound) in s.owners.iter().zip(&s.field_out) {
+            s.unsure[u as usize].2 += bound as f64 * k;
+        }
+    }
+    for &(r, i, bound) in &s.unsure {
+        let nodes = &s.nodes[r as usize];
+        let (a, b) = (&nodes[i as usize], &nodes[i as usize + 1]);
+        // As above: the round's transmittance first, the step's only where that says split.
+        let t_round = s.rays[r as usize].pieces.transmittance();
+        let excess = (bound - a.sigma.max(b.sigma)) * (b.t - a.t);
+        if excess * t_round > tolerance
+            && excess * transmittance_at(t_round, nodes, i as usize) > tolerance
+        {
+            s.rays[r as usize].refined = true;
+            s.pending.push(Pending::between(r, 0.5 * (a.t + b.t), a));
+        }
+    }
+}
+
+/// Lays each node's [`Node::depth`]: the optical depth of a round's steps before it, each at
+/// the lower of its two densities (an edge inside a step may lie anywhere in it), constant
+/// runs whole.
+pub(super) fn lay_depths(nodes: &mut [Node]) {
+    let mut depth = 0.0;
+    for k in 0..nodes.len() {
+        nodes[k].depth = depth;
+        let a = &nodes[k];
+        if a.extent > 0.0 {
+            depth += a.extent * a.sigma;
+        } else if let Some(b) = nodes.get(k + 1).filter(|b| !b.starts_run) {
+            depth += (b.t - a.t) * a.sigma.min(b.sigma);
+        }
+    }
+}
+
+/// The transmittance a ray entered the round with, `t_round`, carried to node `i` of its
+/// round's nodes through the steps before it ([`lay_depths`]).
+pub(super) fn transmittance_at(t_round: f64, nodes: &[Node], i: usize) -> f64 {
+    match nodes[i].depth {
+        0.0 => t_round,
+        depth => t_round * (-depth).exp(),
+    }
+}
+
+/// Whether the step from `a` to `b` on ray `r` can hold no edge: every instance with density
+/// at either end has it at both and is smooth over the step's length (see
+/// [`Field::smooth_length`](crate::field::Field::smooth_length)).
+fn smooth_step(r: usize, a: &Node, b: &Node, plans: &[InstancePlan], s: &Scratch) -> bool {
+    let n_inst = plans.len();
+    instances_of(s, r).iter().all(|&i| {
+        let (i, plan) = (i as usize, &plans[i as usize]);
+        let (sa, sb) = (
+            s.inst_sigma[a.slot as usize + i],
+            s.inst_sigma[b.slot as usize + i],
+        );
+        if sa == 0.0 && sb == 0.0 {
+            return true;
+        }
+        let Some(lr) = &s.local[r * n_inst + i] else {
+            return true;
+        };
+        let smooth = plan.smooth * growth(plan, lr, a.t).min(growth(plan, lr, b.t));
+        sa > 0.0 && sb > 0.0 && (b.t - a.t) * lr.units_per_world as f64 <= smooth
+    })
+}
+
+/// How much the density changes across the step from node `i` to `i + 1` in a way the
+/// trapezoid rule may get wrong: the jump `|σ_b − σ_a|`, unless the curvature through the
+/// step's ends and their outer neighbours says the density is (nearly) linear there, which
+/// the rule integrates exactly: the smaller of the jump and `δ²·|σ''|` ([`step_curvature`],
+/// the larger of its two sides). An edge keeps its full jump; a steady slope of a smooth
+/// field is not bisected.
+#[inline]
+pub(super) fn step_change(nodes: &[Node], i: usize) -> f64 {
+    let (a, b) = (&nodes[i], &nodes[i + 1]);
+    let jump = (b.sigma - a.sigma).abs();
+    match step_curvature(nodes, i) {
+        [Some(before), Some(after)] => jump.min(before.max(after)),
+        _ => jump,
+    }
+}
+
+/// How much the trapezoid rule may get a step wrong that can hold no edge ([`smooth_step`]):
+/// its curvature `δ²·|σ''|` alone, the larger side where both are known. Not the jump: a
+/// bump between two ends of equal density has none, yet holds most of a surface's weight
+/// where a trained density is the exponential of a smooth function. A step with neither
+/// neighbour keeps its jump.
+#[inline]
+pub(super) fn smooth_change(nodes: &[Node], i: usize) -> f64 {
+    match step_curvature(nodes, i) {
+        [None, None] => (nodes[i + 1].sigma - nodes[i].sigma).abs(),
+        [before, after] => before.unwrap_or(0.0).max(after.unwrap_or(0.0)),
+    }
+}
+
+/// `δ²·|σ''|` over the step from node `i` to `i + 1`, `σ''` estimated by the second divided
+/// difference through the step's ends and the node before it, and through them and the one
+/// after it (steps may differ in length); `None` where the run has no such node.
+#[inline]
+fn step_curvature(nodes: &[Node], i: usize) -> [Option<f64>; 2] {
+    let (a, b) = (&nodes[i], &nodes[i + 1]);
+    let h = b.t - a.t;
+    let before = (i > 0 && !a.starts_run).then(|| &nodes[i - 1]);
+    let after = nodes.get(i + 2).filter(|n| !n.starts_run);
+    // 2·f[x0, x1, x2]·h², which is `σ0 − 2σ1 + σ2` for equal steps of length `h`.
+    let curvature = |x: &Node, y: &Node, z: &Node| {
+        let (h0, h1) = (y.t - x.t, z.t - y.t);
+        if h0 > 0.0 && h1 > 0.0 {
+            let d = (z.sigma - y.sigma) / h1 - (y.sigma - x.sigma) / h0;
+            (2.0 * d / (h0 + h1) * h * h).abs()
+        } else {
+            f64::INFINITY
+        }
+    };
+    [
+        before.map(|p| curvature(p, a, b)),
+        after.map(|q| curvature(a, b, q)),
+    ]
+}

@@ -1,0 +1,151 @@
+//! A tile's rays before marching: world and local rays, runs, splat and volume fragments.
+
+use glam::DVec3;
+
+use super::integration::{composite_fragment, composite_fragments};
+use super::plan::cull_instances;
+use super::RayState;
+use super::{InstancePlan, RaySteps, Scratch};
+use crate::camera::Camera;
+use crate::field::Fragment;
+use crate::image::Window;
+use crate::render::composite::Pieces;
+use crate::render::ngp;
+use crate::render::proposal;
+use crate::render::runs::{instance_runs, merge};
+use crate::render::splats::Splatting;
+use crate::render::Outputs;
+use crate::scene::Scene;
+
+/// Builds each pixel's world ray, its local rays, its occupied segments and its splat
+/// fragments; a pixel with fragments and no segments is composited here and done.
+pub(super) fn setup_rays(
+    scene: &Scene,
+    plans: &[InstancePlan],
+    splats: Option<&Splatting>,
+    camera: &Camera,
+    tile: Window,
+    outputs: &Outputs,
+    s: &mut Scratch,
+) {
+    let n_rays = tile.area();
+    s.rays.resize_with(n_rays, RayState::default);
+    s.nodes.resize_with(n_rays, Vec::new);
+    s.local.clear();
+    s.ray_insts.clear();
+    s.ray_steps.clear();
+    s.ray_inst_at.clear();
+    s.ray_inst_at.push(0);
+    s.active.clear();
+    s.world_rays.clear();
+    s.world_rays.extend((0..n_rays).map(|r| {
+        let x = tile.x0 + (r % tile.width() as usize) as u32;
+        let y = tile.y0 + (r / tile.width() as usize) as u32;
+        camera.ray(x as f64 + 0.5, y as f64 + 0.5)
+    }));
+    cull_instances(plans, &s.world_rays, &mut s.tile_insts);
+    for (r, state) in s.rays.iter_mut().enumerate().take(n_rays) {
+        let ray = s.world_rays[r];
+        state.ray = ray;
+        state.pieces = Pieces::new();
+        state.rgb = DVec3::ZERO;
+        state.next_t = None;
+        state.skipped_weight = 0.0;
+        state.scale = 1.0;
+        state.growing = false;
+        state.refined = false;
+        state.worst = 0.0;
+        state.samples = 0;
+        state.finest = 0.0;
+        state.log.clear();
+        state.runs.clear();
+        state.run = 0;
+        state.inset = 0.0;
+        s.nodes[r].clear();
+        for (i, (inst, plan)) in scene.instances.iter().zip(plans).enumerate() {
+            let local = ray
+                .filter(|_| s.tile_insts[i])
+                .and_then(|ray| inst.local_ray(&ray, ray.near, ray.far));
+            if let Some(lr) = &local {
+                let inset = instance_runs(
+                    lr,
+                    inst.field(),
+                    plan.occupancy.as_deref(),
+                    plan.unbounded.as_ref(),
+                    &mut s.run_scratch,
+                    &mut state.runs,
+                );
+                state.inset = state.inset.max(inset);
+                s.ray_insts.push(i as u32);
+                s.ray_steps.push(RaySteps {
+                    t_near: lr.t_near,
+                    t_far: lr.t_far,
+                    step: plan.base_step / lr.units_per_world as f64,
+                    grows: plan.unbounded.is_some(),
+                });
+            }
+            s.local.push(local);
+        }
+        s.ray_inst_at.push(s.ray_insts.len() as u32);
+        merge(&mut state.runs, &mut s.run_scratch);
+        state.fragments.clear();
+        state.next_fragment = 0;
+        state.volume.clear();
+        state.next_volume = 0;
+        state.live = !state.runs.is_empty();
+        if state.live {
+            s.active.push(r as u32);
+        }
+    }
+    if scene.has_sampled() {
+        s.volume.resize_with(n_rays, Vec::new);
+        for f in &mut s.volume[..n_rays] {
+            f.clear();
+        }
+        let volume = &mut s.volume[..n_rays];
+        proposal::fill(scene, &s.world_rays, &mut s.proposal, volume, &mut s.stats);
+        ngp::fill(scene, &s.world_rays, &mut s.ngp, volume, &mut s.stats);
+        if scene.proposal.len() + scene.ngp.len() > 1 {
+            for f in volume.iter_mut() {
+                f.sort_by(|a, b| a.t.total_cmp(&b.t));
+            }
+        }
+        for (state, volume) in s.rays[..n_rays].iter_mut().zip(&mut s.volume) {
+            std::mem::swap(&mut state.volume, volume);
+        }
+    }
+    if let Some(layer) = splats {
+        // A tile of splats alone is composited sixteen pixels at once.
+        if s.active.is_empty() && !scene.has_sampled() && !outputs.depth_median {
+            let composited =
+                layer.composite(tile, &s.world_rays, &mut s.z_per_t, &mut s.splat_pixels);
+            if let Some(fragments) = composited {
+                s.stats.splat_fragments += fragments;
+                for (state, px) in s.rays[..n_rays].iter_mut().zip(&s.splat_pixels) {
+                    state.pieces = Pieces::from_sums(px.transmittance, px.depth_moment);
+                    state.rgb = DVec3::from_array(px.rgb);
+                }
+                return;
+            }
+        }
+        let (rays, stats) = (&mut s.rays, &mut s.stats);
+        // A ray that marches nothing and has no volume fragments composites its fragments as
+        // they come; the others keep them to merge with their pieces or volume fragments.
+        let sink = |i: usize, f: Fragment| {
+            stats.splat_fragments += 1;
+            let state = &mut rays[i];
+            if state.live || !state.volume.is_empty() {
+                state.fragments.push(f);
+                true
+            } else {
+                composite_fragment(state, f, outputs)
+            }
+        };
+        layer.fill(tile, &s.world_rays, &mut s.z_per_t, &mut s.along, sink);
+    }
+    for state in &mut s.rays[..n_rays] {
+        if !state.live {
+            composite_fragments(state, f64::INFINITY, outputs);
+        }
+    }
+}

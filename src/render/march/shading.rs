@@ -1,0 +1,84 @@
+//! Shading: colour asked where a node's weight matters.
+
+use glam::{DVec3, Vec3};
+
+use super::{feature_stride, FieldQuery, InstancePlan, Scratch};
+use crate::field::linear_to_srgb;
+use crate::render::MarchParams;
+use crate::scene::Scene;
+
+/// Evaluates colour where the weight matters and adds it to the rays' colours. The lightest
+/// nodes of a ray go unshaded while their weights add up to at most
+/// [`MarchParams::color_skip_budget`], so the colour error a ray can get from skipping is
+/// bounded by that budget times its brightest radiance.
+pub(super) fn shade(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
+    let n_inst = plans.len();
+    let stride = feature_stride(plans);
+    let budget = params.color_skip_budget as f64;
+    s.queries.resize_with(n_inst, FieldQuery::default);
+    for query in &mut s.queries {
+        query.clear();
+    }
+    // One pass over the rays' nodes fills every instance's query, in ray order.
+    for &r in &s.active {
+        let r = r as usize;
+        let state = &mut s.rays[r];
+        let instances = &s.ray_insts[s.ray_inst_at[r] as usize..s.ray_inst_at[r + 1] as usize];
+        for node in s.nodes[r].iter_mut() {
+            if node.weight > 0.0 && state.skipped_weight + node.weight <= budget {
+                state.skipped_weight += node.weight;
+                node.weight = 0.0;
+            }
+            if node.weight <= 0.0 {
+                continue;
+            }
+            for &i in instances {
+                let i = i as usize;
+                let Some(lr) = &s.local[r * n_inst + i] else {
+                    continue;
+                };
+                // Only an instance with density here gets a share (tested before dividing).
+                let sigma = s.inst_sigma[node.slot as usize + i];
+                if sigma <= 0.0 {
+                    continue;
+                }
+                let share = node.weight * sigma / node.sigma;
+                if share > 0.0 {
+                    let (plan, query) = (&plans[i], &mut s.queries[i]);
+                    query.points.push(lr.at(node.probe));
+                    query.dirs.push(lr.dir);
+                    query.owners.push((r as u32, share));
+                    let at = node.slot as usize / n_inst * stride + plan.feature_offset;
+                    query
+                        .features
+                        .extend_from_slice(&s.features[at..at + plan.features]);
+                }
+            }
+        }
+    }
+    for ((inst, plan), query) in scene.instances.iter().zip(plans).zip(&s.queries) {
+        if query.points.is_empty() {
+            continue;
+        }
+        s.rgb_out.clear();
+        s.rgb_out.resize(query.points.len(), Vec3::ZERO);
+        inst.field().radiance_with_features(
+            &query.points,
+            &query.dirs,
+            &query.features,
+            &mut s.rgb_out,
+        );
+        s.stats.color_samples += query.points.len() as u64;
+        for (&(r, share), c) in query.owners.iter().zip(&s.rgb_out) {
+            let c = if plan.encode {
+                c.map(linear_to_srgb)
+            } else {
+                *c
+            };
+            let c = c.as_dvec3().max(DVec3::ZERO);
+            if c.is_finite() {
+                s.rays[r as usize].rgb += c * share;
+            }
+        }
+    }
+}

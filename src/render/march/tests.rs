@@ -1,0 +1,384 @@
+use std::sync::Arc;
+
+use glam::Vec3;
+
+use crate::field::{Aabb, Analytic, Field, Span};
+use crate::render::{render, render_with_progress, MarchParams, Outputs, Quality, RenderSettings};
+use crate::scene::{FieldHandle, FieldSource, Instance, Scene};
+
+/// Occupied only in the cube `[lo, lo + side]³`, exactly.
+struct Speck {
+    lo: f32,
+    side: f32,
+}
+
+impl Field for Speck {
+    fn bounds(&self) -> Aabb {
+        Aabb::new(Vec3::ZERO, Vec3::ONE)
+    }
+    fn density(&self, _: &[Vec3], sigma: &mut [f32]) {
+        sigma.fill(0.0);
+    }
+    fn radiance(&self, _: &[Vec3], _: &[Vec3], rgb: &mut [Vec3]) {
+        rgb.fill(Vec3::ZERO);
+    }
+    fn may_be_occupied(&self, region: &Aabb) -> bool {
+        let (lo, hi) = (Vec3::splat(self.lo), Vec3::splat(self.lo + self.side));
+        region.min.cmple(hi).all() && region.max.cmpge(lo).all()
+    }
+}
+
+/// A ray crossing a speck a hundred-thousandth of the step long (a corner clip of an
+/// occupied cell) gets a split point inside it, found well within the search's budget;
+/// a ray missing it gets none.
+#[test]
+fn hidden_point_finds_a_sliver_far_below_the_bisection_depth() {
+    let speck = Speck {
+        lo: 0.3,
+        side: 1e-5,
+    };
+    let ray = |y: f32| crate::scene::LocalRay {
+        origin: Vec3::new(0.0, y, 0.300_005),
+        dir: Vec3::X,
+        units_per_world: 1.0,
+        t_near: 0.0,
+        t_far: 1.0,
+    };
+    let lr = ray(0.300_005);
+    let mut queries = super::hidden::HIDDEN_SEARCH_QUERIES;
+    let depth = super::hidden::HIDDEN_SEARCH_DEPTH;
+    let t = super::hidden::hidden_point(&speck, &lr, 0.0, 1.0, depth, &mut queries);
+    let t = t.expect("the sliver is found");
+    assert!(speck.may_be_occupied(&Aabb::new(lr.at(t), lr.at(t))), "{t}");
+    let mut queries = super::hidden::HIDDEN_SEARCH_QUERIES;
+    let missed = super::hidden::hidden_point(&speck, &ray(0.4), 0.0, 1.0, depth, &mut queries);
+    assert_eq!(missed, None);
+}
+
+/// Hands each sample's position to the colour query as its features and colours from
+/// those alone: if the marcher paired features with the wrong samples (or the wrong
+/// instance), colours would change.
+struct Echo(Analytic);
+
+impl Field for Echo {
+    fn bounds(&self) -> Aabb {
+        self.0.bounds()
+    }
+    fn density(&self, points: &[Vec3], sigma: &mut [f32]) {
+        self.0.density(points, sigma)
+    }
+    fn radiance(&self, _: &[Vec3], _: &[Vec3], _: &mut [Vec3]) {
+        unreachable!("the marcher asks for colour with the density pass's features")
+    }
+    fn feature_count(&self) -> usize {
+        3
+    }
+    fn density_with_features(&self, points: &[Vec3], sigma: &mut [f32], features: &mut [f32]) {
+        self.0.density(points, sigma);
+        for (p, f) in points.iter().zip(features.chunks_exact_mut(3)) {
+            f.copy_from_slice(&p.to_array());
+        }
+    }
+    fn radiance_with_features(
+        &self,
+        _: &[Vec3],
+        dirs: &[Vec3],
+        features: &[f32],
+        rgb: &mut [Vec3],
+    ) {
+        let points: Vec<Vec3> = features.chunks_exact(3).map(Vec3::from_slice).collect();
+        self.0.radiance(&points, dirs, rgb)
+    }
+    fn feature_size(&self) -> f32 {
+        self.0.feature_size()
+    }
+    fn density_bounds(&self, regions: &[Aabb], bounds: &mut [f32]) -> bool {
+        self.0.density_bounds(regions, bounds)
+    }
+    fn spans(&self, o: Vec3, d: Vec3, t0: f64, t1: f64, out: &mut Vec<Span>) -> bool {
+        self.0.spans(o, d, t0, t1, out)
+    }
+    fn may_be_occupied(&self, region: &Aabb) -> bool {
+        self.0.may_be_occupied(region)
+    }
+}
+
+/// A field that answers every third density sample with NaN, +inf or −inf in turn.
+struct Poisoned(Analytic);
+
+impl Field for Poisoned {
+    fn bounds(&self) -> Aabb {
+        self.0.bounds()
+    }
+    fn density(&self, points: &[Vec3], sigma: &mut [f32]) {
+        self.0.density(points, sigma);
+        let bad = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
+        for (i, s) in sigma.iter_mut().enumerate().filter(|(i, _)| i % 3 == 0) {
+            *s = bad[i / 3 % 3];
+        }
+    }
+    fn radiance(&self, points: &[Vec3], dirs: &[Vec3], rgb: &mut [Vec3]) {
+        self.0.radiance(points, dirs, rgb)
+    }
+    fn may_be_occupied(&self, region: &Aabb) -> bool {
+        self.0.may_be_occupied(region)
+    }
+}
+
+fn demo_with(object: impl Fn(Analytic) -> Arc<dyn Field>) -> (Scene, crate::camera::Camera) {
+    let (plain, camera) = crate::demo::scene_and_camera(48, 27).unwrap();
+    let desc = crate::demo::scene_desc();
+    let instances = plain
+        .instances
+        .iter()
+        .zip(&desc.instances)
+        .map(|(inst, d)| {
+            let FieldSource::Analytic(a) = &d.field else {
+                unreachable!("the demo is analytic")
+            };
+            let handle = if inst.name == "object" {
+                FieldHandle::new(object(a.clone()))
+            } else {
+                inst.handle().clone()
+            };
+            Instance::new(inst.name.clone(), handle, inst.world_from_field(), None).unwrap()
+        })
+        .collect();
+    (Scene::new(instances), camera)
+}
+
+fn assert_finite(planes: &crate::image::Planes) {
+    let alpha = planes.alpha.as_ref().unwrap();
+    assert!(alpha.data.iter().all(|a| (0.0..=1.0).contains(a)));
+    for plane in planes.rgb.as_ref().unwrap() {
+        assert!(plane.data.iter().all(|c| c.is_finite() && *c >= 0.0));
+    }
+}
+
+fn node(t: f64, sigma: f64) -> super::Node {
+    super::Node {
+        t,
+        probe: t,
+        sigma,
+        slot: 0,
+        starts_run: false,
+        exact: false,
+        extent: 0.0,
+        weight: 0.0,
+        depth: 0.0,
+    }
+}
+
+#[test]
+fn a_bump_between_ends_of_equal_density_is_judged_by_its_curvature() {
+    // σ = 0, 5, 5, 0 at t = 0, 1, 2, 3: the middle step has no jump, but the density
+    // turns over inside it.
+    let nodes = [
+        node(0.0, 0.0),
+        node(1.0, 5.0),
+        node(2.0, 5.0),
+        node(3.0, 0.0),
+    ];
+    assert_eq!(super::refinement::step_change(&nodes, 1), 0.0);
+    assert_eq!(super::refinement::smooth_change(&nodes, 1), 5.0);
+    // A steady slope has none.
+    let slope = [
+        node(0.0, 1.0),
+        node(1.0, 2.0),
+        node(2.0, 3.0),
+        node(3.0, 4.0),
+    ];
+    assert_eq!(super::refinement::smooth_change(&slope, 1), 0.0);
+    // Without neighbours, the jump.
+    assert_eq!(super::refinement::smooth_change(&slope[1..3], 0), 1.0);
+}
+
+#[test]
+fn transmittance_inside_a_round_goes_through_the_lower_end_of_each_step() {
+    let mut nodes = [
+        node(0.0, 0.0),
+        node(1.0, 2.0),
+        node(1.5, 4.0),
+        node(2.0, 1.0),
+    ];
+    let mut cut = nodes;
+    super::refinement::lay_depths(&mut nodes);
+    assert_eq!(super::refinement::transmittance_at(0.5, &nodes, 0), 0.5);
+    // The first step may hold its edge anywhere: no depth from it.
+    assert_eq!(super::refinement::transmittance_at(0.5, &nodes, 1), 0.5);
+    let want = 0.5 * (-(0.5 * 2.0 + 0.5 * 1.0f64)).exp();
+    assert!((super::refinement::transmittance_at(0.5, &nodes, 3) - want).abs() < 1e-15);
+    // A run's start joins nothing to the node before it.
+    cut[2].starts_run = true;
+    super::refinement::lay_depths(&mut cut);
+    let want = 0.5 * (-(0.5 * 1.0f64)).exp();
+    assert!((super::refinement::transmittance_at(0.5, &cut, 3) - want).abs() < 1e-15);
+}
+
+#[test]
+fn non_finite_densities_are_empty_and_counted() {
+    let (scene, camera) = demo_with(|a| Arc::new(Poisoned(a)));
+    let settings = RenderSettings::new(Quality::Preview.params(), Outputs::all());
+    let (planes, stats) =
+        render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {}).unwrap();
+    assert_finite(&planes);
+    assert!(stats.invalid_samples > 0);
+    assert!(stats.warning().unwrap().contains("NaN or infinite"));
+}
+
+#[test]
+fn rays_out_of_budget_stop_and_are_counted() {
+    let (scene, camera) = demo_with(|a| Arc::new(a));
+    let final_params = Quality::Final.params();
+    let render = |max_samples| {
+        let params = MarchParams {
+            max_samples,
+            ..final_params
+        };
+        let settings = RenderSettings::new(params, Outputs::all());
+        render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {}).unwrap()
+    };
+    let (planes, stats) = render(final_params.max_samples);
+    assert_finite(&planes);
+    assert_eq!(stats.budget_limited_rays, 0);
+    assert_eq!(stats.warning(), None);
+    let (short, stats) = render(6);
+    assert_finite(&short);
+    assert!(stats.budget_limited_rays > 0 && stats.budget_limited_rays <= stats.pixels);
+    assert!(stats.warning().unwrap().contains("sample budget"));
+    // A ray stopped early has composited less, never more.
+    let (a, b) = (short.alpha.unwrap(), planes.alpha.unwrap());
+    assert!(a.data.iter().zip(&b.data).all(|(s, f)| *s <= f + 1e-6));
+    assert!(a.data.iter().zip(&b.data).any(|(s, f)| *s < f - 1e-3));
+}
+
+#[test]
+fn tile_culling_keeps_every_instance_a_ray_of_the_tile_meets() {
+    use crate::camera::{Camera, Perspective, Projection};
+    use crate::field::{Primitive, ShColor, Shape};
+    use glam::{DMat4, DVec3};
+
+    // An 8×8 grid of small balls facing the camera, one ball behind it and one far to
+    // its side: tiles see a few balls each, and no tile sees the last two.
+    let ball = FieldHandle::analytic(Analytic {
+        primitives: vec![Primitive {
+            shape: Shape::Sphere {
+                center: Vec3::ZERO,
+                radius: 0.1,
+            },
+            density: 1.0,
+            color: ShColor::constant(Vec3::ONE),
+        }],
+    });
+    let mut at: Vec<DVec3> = (0..64)
+        .map(|k| {
+            DVec3::new(
+                -1.0 + 0.25 * (k % 8) as f64 + 0.125,
+                0.0,
+                -1.0 + 0.25 * (k / 8) as f64 + 0.125,
+            )
+        })
+        .collect();
+    at.extend([DVec3::new(0.0, -8.0, 0.0), DVec3::new(30.0, 0.0, 0.0)]);
+    let instances = at
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            Instance::new(
+                format!("ball {k}"),
+                ball.clone(),
+                DMat4::from_translation(*p),
+                None,
+            )
+            .unwrap()
+        })
+        .collect();
+    let scene = Scene::new(instances);
+    let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
+    let p = Perspective::from_vertical_fov(64, 48, 40.0).unwrap();
+    let eye = crate::demo::look_at(DVec3::new(0.0, -4.0, 0.0), DVec3::ZERO);
+    let camera = Camera::new(eye, Projection::Perspective(p)).unwrap();
+    let (mut keep, mut kept, mut met) = (Vec::new(), 0, 0);
+    for (x0, y0) in (0..4).flat_map(|i| (0..3).map(move |j| (16 * i, 16 * j))) {
+        let rays: Vec<_> = (0..256)
+            .map(|k| camera.ray((x0 + k % 16) as f64 + 0.5, (y0 + k / 16) as f64 + 0.5))
+            .collect();
+        super::plan::cull_instances(&plans, &rays, &mut keep);
+        for (i, inst) in scene.instances.iter().enumerate() {
+            let meets = rays
+                .iter()
+                .flatten()
+                .any(|r| inst.local_ray(r, r.near, r.far).is_some());
+            assert!(
+                keep[i] || !meets,
+                "tile ({x0}, {y0}) culled instance {i}, which a ray meets"
+            );
+            kept += usize::from(keep[i]);
+            met += usize::from(meets);
+        }
+        assert!(!keep[64] && !keep[65]);
+    }
+    // Conservative, yet close: a tile keeps a few balls per ball it meets (the sphere
+    // around a ball's box, and the cone around the tile's rays, are wider than both).
+    assert!(met > 0 && kept <= 3 * met, "kept {kept}, met {met}");
+}
+
+/// The median depth from a log cut where [`super::RayState::log_piece`] cuts it is the
+/// full log's, bit for bit: seeded rays of pieces (some of them fragments, `δ = 0`, some
+/// after a fragment's drop in transmittance), every share of the pixel's alpha.
+#[test]
+fn a_cut_median_log_gives_the_full_logs_depth() {
+    use crate::bench::rng::SplitMix64;
+    use crate::render::crossing_depth;
+
+    let mut rng = SplitMix64::new(11);
+    let mut cut_short = 0;
+    for _ in 0..4000 {
+        let (mut state, mut full) = (super::RayState::default(), Vec::new());
+        let (mut t, mut transmittance) = (1.0, 1.0f64);
+        for _ in 0..1 + rng.next_u64() % 24 {
+            let delta = if rng.unit() < 0.2 {
+                0.0
+            } else {
+                f64::from(rng.range(0.0, 0.3))
+            };
+            let scale = f64::from(rng.range(0.0, 6.0)).powi(2);
+            let (x0, x1) = (
+                scale * delta * f64::from(rng.unit()),
+                scale * delta * f64::from(rng.unit()),
+            );
+            let piece = [t, delta, x0, x1, transmittance];
+            full.push(piece);
+            state.log_piece(piece);
+            t += delta + f64::from(rng.range(0.0, 0.1));
+            transmittance *= (-0.5 * (x0 + x1)).exp();
+            if rng.unit() < 0.1 {
+                transmittance *= f64::from(rng.unit());
+            }
+        }
+        cut_short += usize::from(state.log.len() < full.len());
+        for alpha in [1.0 - transmittance, 0.3 * (1.0 - transmittance), 1.0] {
+            let (want, got) = (
+                crossing_depth(&full, 0.5 * alpha),
+                crossing_depth(&state.log, 0.5 * alpha),
+            );
+            assert_eq!(want.to_bits(), got.to_bits(), "{full:?}, alpha {alpha}");
+        }
+    }
+    assert!(
+        cut_short > 100,
+        "the seeded rays exercise the cut: {cut_short}"
+    );
+}
+
+#[test]
+fn features_reach_the_colour_query_of_their_own_samples() {
+    let (plain, camera) = crate::demo::scene_and_camera(48, 27).unwrap();
+    // The object instance echoes its features, the environment does not: offsets into
+    // a node's features must keep them apart.
+    let (echo, _) = demo_with(|a| Arc::new(Echo(a)));
+    let settings = RenderSettings::new(Quality::Preview.params(), Outputs::rgba());
+    let want = render(&plain, &camera, camera.full_window(), &settings).unwrap();
+    let got = render(&echo, &camera, camera.full_window(), &settings).unwrap();
+    assert_eq!(got, want);
+}

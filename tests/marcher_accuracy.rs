@@ -13,7 +13,7 @@ use common::*;
 use glam::{DMat4, DVec3, Vec3};
 use nerfx::bench::scenes::{build, SceneKind};
 use nerfx::camera::Camera;
-use nerfx::field::{Aabb, Analytic, Field};
+use nerfx::field::{Aabb, Analytic, Field, Shape};
 use nerfx::image::{Plane, Planes, Window};
 use nerfx::render::{
     render, render_naive, render_with_progress, MarchParams, Outputs, Quality, RenderSettings,
@@ -219,6 +219,65 @@ fn a_constant_span_takes_one_sample() {
         depth_rel: 1e-5,
     };
     assert_close("one box", &got, &want, tight);
+}
+
+/// A Gaussian seen whole is two exact runs, one each side of its peak along the ray, with no
+/// edge inside: their steps are as long as the trapezoid rule's error estimate allows at
+/// Final's target, so a ray crossing it takes a few times fewer density samples than the
+/// ball's diameter holds base steps (148 here), and the image stays within Final's error
+/// target (1e-3 in alpha and each colour channel) against the closed form.
+#[test]
+fn a_gaussian_is_marched_in_steps_its_curvature_allows() {
+    let (sigma, cutoff) = (0.5, 4.0);
+    let gaussian = prim(
+        Shape::Gaussian {
+            center: Vec3::ZERO,
+            sigma,
+            cutoff,
+        },
+        2.0,
+        [0.4, 0.6, 0.9],
+    );
+    let field = Analytic {
+        primitives: vec![gaussian],
+    };
+    let scene = Scene::new(vec![instance(
+        "haze",
+        vec![gaussian],
+        DMat4::IDENTITY,
+        None,
+    )]);
+    let camera = camera_at(DVec3::new(0.0, -7.0, 0.0), DVec3::ZERO, 48, 36, 40.0);
+    let want = reference_full(&scene, &camera);
+    let params = Quality::Final.params();
+    let settings = RenderSettings::new(params, Outputs::all());
+    let (got, stats) =
+        render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {})
+            .expect("render");
+    let crossing = want
+        .alpha
+        .as_ref()
+        .expect("alpha")
+        .data
+        .iter()
+        .filter(|&&a| a > 0.0)
+        .count() as f64;
+    assert!(crossing > 500.0, "the Gaussian must fill much of the view");
+    let base = f64::from(field.feature_size() / params.steps_per_feature);
+    let diameter_steps = f64::from(2.0 * cutoff * sigma) / base;
+    let per_ray = stats.density_samples as f64 / crossing;
+    assert!(
+        per_ray < diameter_steps / 4.0,
+        "{per_ray:.1} samples per ray, the diameter holds {diameter_steps:.0} base steps"
+    );
+    let target = Tol {
+        min_psnr: 60.0,
+        min_alpha_psnr: 60.0,
+        rgb: 1e-3,
+        alpha: 1e-3,
+        depth_rel: 1e-2,
+    };
+    assert_close("one Gaussian", &got, &want, target);
 }
 
 /// A seeded scene and camera that fill most of a 64×48 image.

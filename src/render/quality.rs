@@ -32,7 +32,9 @@ pub struct MarchParams {
     /// The step never exceeds `base · max_step_factor`. Steps grow towards it (doubling
     /// from node to node) where the last steps' error estimates are far below the target:
     /// empty or evenly dense space, smooth fog, and wherever the transmittance left makes a
-    /// step's error irrelevant.
+    /// step's error irrelevant. In a run whose ends are a field's exact spans (no edge
+    /// inside) a step is as long as the trapezoid rule's error estimate allows at the last
+    /// round's curvature and transmittance, at most twice the step before it.
     pub max_step_factor: f32,
     /// A ray stops once its transmittance falls below this.
     pub min_transmittance: f32,

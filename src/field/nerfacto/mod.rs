@@ -78,6 +78,7 @@ mod density_kernel;
 mod occupancy;
 mod proposal;
 mod torch;
+mod weights;
 
 pub(crate) use config::scan;
 pub use dataparser::DataparserTransform;
@@ -478,8 +479,8 @@ impl NerfactoField {
     /// (no bounds, no occupancy), zero outside the contraction's selector.
     fn density_features_unbounded(&self, points: &[Vec3], sigma: &mut [f32], features: &mut [f32]) {
         let n_geo = self.n_base - 1;
-        self.for_each_base(points, |i, o| {
-            sigma[i] = if Self::unit_from_field(points[i]).is_some() {
+        self.for_each_base(points, |i, selected, o| {
+            sigma[i] = if selected {
                 self.sigma_from_raw(o[0])
             } else {
                 0.0
@@ -499,18 +500,23 @@ impl NerfactoField {
     }
 
     /// The density outputs at every point (nerfacto zeroes the position outside its
-    /// selector), calling `each(i, outputs)` per point.
-    fn for_each_base(&self, points: &[Vec3], mut each: impl FnMut(usize, &[f32])) {
+    /// selector), calling `each(i, selected, outputs)` per point, `selected` whether the
+    /// point is inside the selector.
+    fn for_each_base(&self, points: &[Vec3], mut each: impl FnMut(usize, bool, &[f32])) {
         let (mut xs, mut enc, mut out) = (Vec::with_capacity(CHUNK), Vec::new(), Vec::new());
+        let mut selected = Vec::with_capacity(CHUNK);
         for (c, pts) in points.chunks(CHUNK).enumerate() {
             xs.clear();
-            xs.extend(
-                pts.iter()
-                    .map(|p| Self::unit_from_field(*p).unwrap_or(Vec3::ZERO)),
-            );
+            selected.clear();
+            for p in pts {
+                let u = Self::unit_from_field(*p);
+                selected.push(u.is_some());
+                xs.push(u.unwrap_or(Vec3::ZERO));
+            }
             self.base(&xs, &mut enc, &mut out);
-            for (k, o) in out.chunks_exact(self.n_base).enumerate() {
-                each(c * CHUNK + k, o);
+            let outputs = out.chunks_exact(self.n_base).zip(&selected);
+            for (k, (o, &selected)) in outputs.enumerate() {
+                each(c * CHUNK + k, selected, o);
             }
         }
     }
@@ -1008,7 +1014,7 @@ impl Field for NerfactoField {
     fn radiance(&self, points: &[Vec3], dirs: &[Vec3], rgb: &mut [Vec3]) {
         let n_geo = self.n_base - 1;
         let mut geo = vec![0.0; points.len() * n_geo];
-        self.for_each_base(points, |i, o| {
+        self.for_each_base(points, |i, _, o| {
             geo[i * n_geo..(i + 1) * n_geo].copy_from_slice(&o[1..]);
         });
         self.colour(&geo, dirs, rgb);
@@ -1021,9 +1027,8 @@ impl Field for NerfactoField {
 
     fn density_with_features(&self, points: &[Vec3], sigma: &mut [f32], features: &mut [f32]) {
         let n_geo = self.n_base - 1;
-        self.for_each_base(points, |i, o| {
-            let p = points[i];
-            let inside = Self::unit_from_field(p).is_some() && self.kept(p);
+        self.for_each_base(points, |i, selected, o| {
+            let inside = selected && self.kept(points[i]);
             sigma[i] = if inside {
                 self.sigma_from_raw(o[0])
             } else {

@@ -30,12 +30,14 @@
 //! scene-linear output by at most the sRGB decode's slope times that; accumulation and
 //! depth not at all). The budget is nerfstudio's look, the same at every preset.
 
+use std::ops::Range;
 use std::time::{Duration, Instant};
 
 use glam::{DVec3, Vec3};
 
 use super::config::SamplerSettings;
 use super::density_field::{DensityField, DensityScratch};
+use super::weights::{sanitised, weigh_run};
 use super::NerfactoField;
 
 /// Transmittance below which a ray's later samples are not evaluated.
@@ -109,9 +111,11 @@ pub struct SamplerScratch {
     /// Spacing edges per ray (`n + 1` each) of this iteration and the last.
     edges: Vec<f64>,
     prev_edges: Vec<f64>,
-    /// Weights per ray (`n` each) of the last evaluated iteration, and one ray's CDF of them.
+    /// Weights per ray (`n` each) of the last evaluated iteration, one ray's CDF of them,
+    /// and where in it the next iteration's edges go.
     weights: Vec<f64>,
     cdf: Vec<f64>,
+    quantiles: Vec<f64>,
     /// `(g(near), g(far))` per ray, and the distances of this iteration's edges.
     span: Vec<[f64; 2]>,
     distances: Vec<f64>,
@@ -119,7 +123,6 @@ pub struct SamplerScratch {
     transmittance: Vec<f64>,
     live: Vec<u32>,
     points: Vec<Vec3>,
-    owners: Vec<(u32, u32)>,
     sigma: Vec<f32>,
     features: Vec<f32>,
     density: DensityScratch,
@@ -187,12 +190,19 @@ impl ProposalSampler {
     }
 }
 
-/// `B` edges resampled by inverse CDF from `edges` (`n + 1`) and their `weights` (`n`),
-/// appended to `out`; see the module's step 3. `cdf` is scratch.
+/// The `B` positions `u_k = (k + ½)/B` in the CDF at which [`resample`] places its edges.
+fn quantiles(b: usize, out: &mut Vec<f64>) {
+    out.clear();
+    out.extend((0..b).map(|k| (k as f64 + 0.5) / b as f64));
+}
+
+/// `B` edges resampled by inverse CDF from `edges` (`n + 1`) and their `weights` (`n`) at
+/// the [`quantiles`] `u` (`B` of them), appended to `out`; see the module's step 3. `cdf`
+/// is scratch.
 pub(crate) fn resample(
     edges: &[f64],
     weights: &[f64],
-    b: usize,
+    u: &[f64],
     cdf: &mut Vec<f64>,
     out: &mut Vec<f64>,
 ) {
@@ -202,16 +212,18 @@ pub(crate) fn resample(
     sum += pad;
     let pad = pad / n as f64;
     // The CDF, with its leading 0: c[0] = 0, c[i] = min(1, Σ_{j<i} p_j).
+    // The probabilities first (a loop without a carried sum, so its divisions run in
+    // vectors), then their running sum in place.
     cdf.clear();
     cdf.push(0.0);
+    cdf.extend(weights.iter().map(|w| (w + HISTOGRAM_PADDING + pad) / sum));
     let mut acc = 0.0;
-    for w in weights {
-        acc += (w + HISTOGRAM_PADDING + pad) / sum;
-        cdf.push(acc.min(1.0));
+    for c in &mut cdf[1..] {
+        acc += *c;
+        *c = acc.min(1.0);
     }
     let mut i = 0;
-    for k in 0..b {
-        let u = (k as f64 + 0.5) / b as f64;
+    for &u in u {
         // First index with c_i > u (u grows with k, so the search resumes).
         while i < cdf.len() && cdf[i] <= u {
             i += 1;
@@ -266,11 +278,12 @@ impl NerfactoField {
                 } + 1;
                 std::mem::swap(&mut s.edges, &mut s.prev_edges);
                 s.edges.clear();
+                quantiles(b, &mut s.quantiles);
                 for r in 0..rays.len() {
                     resample(
                         &s.prev_edges[r * (n + 1)..(r + 1) * (n + 1)],
                         &s.weights[r * n..(r + 1) * n],
-                        b,
+                        &s.quantiles,
                         &mut s.cdf,
                         &mut s.edges,
                     );
@@ -279,6 +292,14 @@ impl NerfactoField {
             }
             s.distances.clear();
             for (r, ray) in rays.iter().enumerate() {
+                // Iteration 0's edges are the same for every ray: so are its distances on
+                // rays of the same span (most often all of them).
+                if level == 0 && r > 0 && (ray.near, ray.far) == (rays[r - 1].near, rays[r - 1].far)
+                {
+                    s.distances
+                        .extend_from_within((r - 1) * (n + 1)..r * (n + 1));
+                    continue;
+                }
                 let span = s.span[r];
                 let mut prev = ray.near;
                 for &e in &s.edges[r * (n + 1)..(r + 1) * (n + 1)] {
@@ -327,32 +348,18 @@ impl NerfactoField {
         let mut first = 0;
         while !s.live.is_empty() && first < n {
             let last = (first + ROUND).min(n);
-            // The live rays' samples `first..last`, ray after ray.
-            s.points.clear();
-            for &r in &s.live {
-                let ray = &rays[r as usize];
-                let t = &s.distances[r as usize * (n + 1)..][first..=last];
-                s.points.extend(
-                    t.windows(2)
-                        .map(|t| (ray.origin + ray.dir * (0.5 * (t[0] + t[1]))).as_vec3()),
-                );
-            }
+            s.lay_midpoints(rays, n, first..last);
             s.sigma.resize(s.points.len(), 0.0);
             net.density(&s.points, &mut s.sigma, &mut s.density);
             queries += s.points.len() as u64;
             for (&r, sigma) in s.live.iter().zip(s.sigma.chunks_exact(last - first)) {
                 let r = r as usize;
-                let t = &s.distances[r * (n + 1)..][first..=last];
-                let weights = &mut s.weights[r * n + first..r * n + last];
-                let transmittance = &mut s.transmittance[r];
-                for ((w, t), &sigma) in weights.iter_mut().zip(t.windows(2)).zip(sigma) {
-                    // `α = 1 − e^{−σδ}` (as `−expm1`, exact for thin samples); the
-                    // transmittance carried as a product (`e^{−Σσδ}`, one exponential per
-                    // sample).
-                    let e = (-sanitised(sigma) * (t[1] - t[0])).exp_m1();
-                    *w = -e * *transmittance;
-                    *transmittance *= 1.0 + e;
-                }
+                weigh_run(
+                    sigma,
+                    &s.distances[r * (n + 1)..][first..=last],
+                    &mut s.transmittance[r],
+                    &mut s.weights[r * n + first..r * n + last],
+                );
             }
             let transmittance = &s.transmittance;
             s.live
@@ -397,35 +404,31 @@ impl NerfactoField {
         let mut first = 0;
         while !s.live.is_empty() && first < n {
             let last = (first + ROUND).min(n);
-            s.points.clear();
-            s.owners.clear();
-            for &r in &s.live {
-                let ray = &rays[r as usize];
-                for j in first..last {
-                    let p = &pieces[base + r as usize * n + j];
-                    s.points
-                        .push((ray.origin + ray.dir * (0.5 * (p.t0 + p.t1))).as_vec3());
-                    s.owners.push((r, j as u32));
-                }
-            }
+            s.lay_midpoints(rays, n, first..last);
             s.sigma.resize(s.points.len(), 0.0);
             s.features.resize(s.points.len() * n_geo, 0.0);
             self.density_features_unbounded(&s.points, &mut s.sigma, &mut s.features);
             stats.main_queries += s.points.len() as u64;
-            for (k, (&(r, j), &sigma)) in s.owners.iter().zip(&s.sigma).enumerate() {
-                let (r, j) = (r as usize, j as usize);
-                let p = &mut pieces[base + r * n + j];
-                stats.invalid_samples += u64::from(!sigma.is_finite());
-                p.sigma = sanitised(sigma) as f32;
-                let e = (-f64::from(p.sigma) * (p.t1 - p.t0)).exp_m1();
-                let w = -e * s.transmittance[r];
-                s.transmittance[r] *= 1.0 + e;
-                s.weights[r * n + j] = w;
-                if w > 0.0 {
-                    s.shade.push((r as u32, j as u32));
-                    s.shade_features
-                        .extend_from_slice(&s.features[k * n_geo..(k + 1) * n_geo]);
-                    s.dirs.push(rays[r].dir.as_vec3());
+            let runs = s.live.iter().zip(s.sigma.chunks_exact(last - first));
+            for (i, (&r, sigma)) in runs.enumerate() {
+                let r = r as usize;
+                let weights = &mut s.weights[r * n + first..r * n + last];
+                weigh_run(
+                    sigma,
+                    &s.distances[r * (n + 1)..][first..=last],
+                    &mut s.transmittance[r],
+                    weights,
+                );
+                for (j, (&sigma, &w)) in (first..).zip(sigma.iter().zip(weights.iter())) {
+                    stats.invalid_samples += u64::from(!sigma.is_finite());
+                    pieces[base + r * n + j].sigma = sanitised(sigma) as f32;
+                    if w > 0.0 {
+                        let k = i * (last - first) + j - first;
+                        s.shade.push((r as u32, j as u32));
+                        s.shade_features
+                            .extend_from_slice(&s.features[k * n_geo..(k + 1) * n_geo]);
+                        s.dirs.push(rays[r].dir.as_vec3());
+                    }
                 }
             }
             let transmittance = &s.transmittance;
@@ -445,6 +448,20 @@ impl NerfactoField {
 }
 
 impl SamplerScratch {
+    /// The midpoints of samples `samples` of the live rays (`n` per ray of this iteration),
+    /// ray after ray, into `points`.
+    fn lay_midpoints(&mut self, rays: &[SamplerRay], n: usize, samples: Range<usize>) {
+        self.points.clear();
+        for &r in &self.live {
+            let ray = &rays[r as usize];
+            let t = &self.distances[r as usize * (n + 1)..][samples.start..=samples.end];
+            self.points.extend(
+                t.windows(2)
+                    .map(|t| (ray.origin + ray.dir * (0.5 * (t[0] + t[1]))).as_vec3()),
+            );
+        }
+    }
+
     /// Drops from the samples to shade each ray's lightest ones, as many as keep their
     /// summed weight within [`COLOR_SKIP_BUDGET`] (`weights`: `n` per ray; `n_geo` features
     /// per sample). Kept samples stay in order, so their colours do not change.
@@ -495,16 +512,6 @@ fn lightest_within(weights: &mut [f64], budget: f64) -> f64 {
     f64::INFINITY
 }
 
-/// NaN, infinite or negative densities count as empty (as in the marcher).
-#[inline]
-fn sanitised(sigma: f32) -> f64 {
-    if sigma.is_finite() && sigma > 0.0 {
-        f64::from(sigma)
-    } else {
-        0.0
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -514,7 +521,9 @@ mod tests {
         // Equal weights: the CDF is linear, so B edges land at (k + ½)/B of the span.
         let edges: Vec<f64> = (0..=4).map(|j| j as f64 / 4.0).collect();
         let mut out = Vec::new();
-        resample(&edges, &[0.25; 4], 5, &mut Vec::new(), &mut out);
+        let mut u = Vec::new();
+        quantiles(5, &mut u);
+        resample(&edges, &[0.25; 4], &u, &mut Vec::new(), &mut out);
         for (k, e) in out.iter().enumerate() {
             assert!((e - (k as f64 + 0.5) / 5.0).abs() < 1e-12, "{k}: {e}");
         }
@@ -526,7 +535,9 @@ mod tests {
         // 0.01)/1.04; the 9 edges at u = (k + ½)/9 from k = 1 to 7 fall inside [0.5, 0.75].
         let edges: Vec<f64> = (0..=4).map(|j| j as f64 / 4.0).collect();
         let mut out = Vec::new();
-        resample(&edges, &[0.0, 0.0, 1.0, 0.0], 9, &mut Vec::new(), &mut out);
+        let mut u = Vec::new();
+        quantiles(9, &mut u);
+        resample(&edges, &[0.0, 0.0, 1.0, 0.0], &u, &mut Vec::new(), &mut out);
         let c1 = 0.02 / 1.04;
         // u = 1/18 lies in bin 2: 0.5 + 0.25·(u − c1)/(1.01/1.04).
         let want = 0.5 + 0.25 * (1.0 / 18.0 - c1) / (1.01 / 1.04);

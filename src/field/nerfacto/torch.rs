@@ -262,11 +262,18 @@ impl TorchHashGrid {
 
 /// Eight points' grid cells at one level, as the plain loop finds them
 /// ([`TorchHashGrid::encode_features`]): per axis the lower and upper corner's index times
-/// the hash's prime, and their trilinear weights `1 − frac` and `frac`.
+/// the hash's prime, and their trilinear weights `1 − frac` and `frac`; the x and y parts
+/// of the four corners of a z-face combined once for both faces (the same operations in
+/// the same order as per corner, so the same bits).
 #[cfg(target_arch = "x86_64")]
 struct Cells8 {
-    h: [[std::arch::x86_64::__m256i; 2]; 3],
-    w: [[std::arch::x86_64::__m256; 2]; 3],
+    /// Per corner of a face (bits: x, y upper) the xor of the x and y hashes and the product
+    /// of the x and y weights.
+    face_h: [std::arch::x86_64::__m256i; 4],
+    face_w: [std::arch::x86_64::__m256; 4],
+    /// The lower and upper z corner's hash and weight.
+    h_z: [std::arch::x86_64::__m256i; 2],
+    w_z: [std::arch::x86_64::__m256; 2],
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -279,10 +286,8 @@ impl Cells8 {
         let (zero, one, scale) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0), _mm256_set1_ps(s));
         // The hash's primes as i32 bit patterns (the products wrap as the u32 ones do).
         let primes = [1u32, 2_654_435_761, 805_459_861].map(|p| _mm256_set1_epi32(p as i32));
-        let mut cells = Cells8 {
-            h: [[_mm256_setzero_si256(); 2]; 3],
-            w: [[zero; 2]; 3],
-        };
+        let mut h = [[_mm256_setzero_si256(); 2]; 3];
+        let mut w = [[zero; 2]; 3];
         for a in 0..3 {
             let p = _mm256_mul_ps(u[a], scale);
             let lo = _mm256_cvttps_epi32(p);
@@ -290,8 +295,19 @@ impl Cells8 {
             // `hi = lo + (frac > 0)`: the comparison's mask is −1 where true.
             let up = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_GT_OQ>(frac, zero));
             let hi = _mm256_sub_epi32(lo, up);
-            cells.h[a] = [lo, hi].map(|k| _mm256_mullo_epi32(k, primes[a]));
-            cells.w[a] = [_mm256_sub_ps(one, frac), frac];
+            h[a] = [lo, hi].map(|k| _mm256_mullo_epi32(k, primes[a]));
+            w[a] = [_mm256_sub_ps(one, frac), frac];
+        }
+        let mut cells = Cells8 {
+            face_h: [_mm256_setzero_si256(); 4],
+            face_w: [zero; 4],
+            h_z: h[2],
+            w_z: w[2],
+        };
+        for corner in 0..4 {
+            let (a, b) = (corner & 1, corner >> 1);
+            cells.face_h[corner] = _mm256_xor_si256(h[0][a], h[1][b]);
+            cells.face_w[corner] = _mm256_mul_ps(w[0][a], w[1][b]);
         }
         cells
     }
@@ -302,10 +318,9 @@ impl Cells8 {
     #[inline]
     fn corner(&self, corner: usize, table_size: u32) -> ([u32; 8], std::arch::x86_64::__m256) {
         use std::arch::x86_64::*;
-        let (h, w) = (&self.h, &self.w);
-        let (a, b, c) = (corner & 1, corner >> 1 & 1, corner >> 2);
-        let weight = _mm256_mul_ps(_mm256_mul_ps(w[0][a], w[1][b]), w[2][c]);
-        let hash = _mm256_xor_si256(_mm256_xor_si256(h[0][a], h[1][b]), h[2][c]);
+        let (face, c) = (corner & 3, corner >> 2);
+        let weight = _mm256_mul_ps(self.face_w[face], self.w_z[c]);
+        let hash = _mm256_xor_si256(self.face_h[face], self.h_z[c]);
         let mask = _mm256_set1_epi32((table_size - 1) as i32);
         let mut r = [0u32; 8];
         // SAFETY: `r` has 8 values.

@@ -2,11 +2,18 @@
 
 use glam::Vec3;
 
-use super::refinement::step_change;
+use super::refinement::{change, step_curvature};
 use super::{Node, RayState};
 use crate::field::{Fragment, SPLAT_MIN_TRANSMITTANCE};
 use crate::render::composite::far_share;
 use crate::render::{MarchParams, Outputs};
+
+/// What the error rule aims a step's weighted error estimate at, as a fraction of the target
+/// ([`allowed_step`]): the curvature ahead is estimated from the round behind, and a step
+/// whose own estimate exceeds the target is bisected, so the curvature may double from the
+/// one to the other before a step costs a bisection (measured on the demo's Final: an
+/// eighth of the target lays 11 % more samples and costs 7 % more CPU time than a half).
+const STEP_SAFETY: f64 = 2.0;
 
 /// Composites a ray's nodes, in order, until it is opaque enough; distributes each piece's
 /// weight to its two nodes as the light it sends comes from along it ([`far_share`]: a thin
@@ -20,6 +27,8 @@ pub(super) fn integrate(
     budget_limited: &mut u64,
 ) {
     let min_t = params.min_transmittance as f64;
+    // The largest weighted error estimate per cubed step length of the round's exact steps.
+    let mut rate = 0.0f64;
     for i in 0..nodes.len() {
         let b = nodes[i];
         let stopped = if b.extent > 0.0 {
@@ -30,20 +39,27 @@ pub(super) fn integrate(
         } else if i > 0 && !b.starts_run {
             let a = nodes[i - 1];
             let sum = a.sigma + b.sigma;
+            let weight = (b.t - a.t) * state.pieces.transmittance();
+            let jump = (b.sigma - a.sigma).abs();
+            // The curvature is worked out where the error rule needs it (an exact run) or
+            // where it may decide the change: the jump bounds the change, and a jump that
+            // would leave the worst estimate as it is needs no more.
+            let curvature =
+                (a.exact || weight * jump > state.worst).then(|| step_curvature(nodes, i - 1));
             let error = if sum == 0.0 && !empty_is_known {
                 // Nothing seen at either end of a field that cannot say what lies between.
                 f64::INFINITY
+            } else if weight * jump > state.worst {
+                weight * curvature.map_or(jump, |c| change(jump, c))
             } else {
-                // The change is at most the jump: not worked out where even that would
-                // leave the worst estimate as it is.
-                let weight = (b.t - a.t) * state.pieces.transmittance();
-                if weight * (b.sigma - a.sigma).abs() > state.worst {
-                    weight * step_change(nodes, i - 1)
-                } else {
-                    0.0
-                }
+                0.0
             };
             state.worst = state.worst.max(error);
+            if let (true, Some([before, after])) = (a.exact, curvature) {
+                let delta = b.t - a.t;
+                let curvature = before.unwrap_or(0.0).max(after.unwrap_or(0.0));
+                rate = rate.max(weight * curvature / (delta * delta * delta));
+            }
             let (w, stopped) = composite_piece(state, [a.t, b.t], [a.sigma, b.sigma], outputs);
             if w > 0.0 {
                 // An empty end's colour is not asked for: the other end gets all the weight.
@@ -79,7 +95,21 @@ pub(super) fn integrate(
         state.live = false;
         *budget_limited += 1;
     }
+    state.allowed = allowed_step(rate, params);
     adapt_step(state, params);
+}
+
+/// The error rule's step in an exact run: the trapezoid rule's error over a step of length
+/// `δ` is `δ³·|σ''|/12` in optical depth, and a step's weighted error estimate is
+/// `e = w·δ²·|σ''|` ([`step_curvature`], the larger side; `w = δ·T`), so `e` grows as
+/// `rate·δ³`. The rule's step is estimated at `target / STEP_SAFETY` at the round's highest
+/// `rate`: `(target / (STEP_SAFETY·rate))^⅓`. Infinite where no step showed curvature.
+fn allowed_step(rate: f64, params: &MarchParams) -> f64 {
+    if rate > 0.0 && rate.is_finite() {
+        (params.error_target as f64 / (STEP_SAFETY * rate)).cbrt()
+    } else {
+        f64::INFINITY
+    }
 }
 
 /// Composites the piece `[t₀, t₁]` whose density goes linearly from `σ₀` to `σ₁` (the

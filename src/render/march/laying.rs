@@ -50,7 +50,7 @@ pub(super) fn growth(plan: &InstancePlan, lr: &LocalRay, t: f64) -> f64 {
 
 /// Lays the next chunk of regular nodes for ray `r` into `s.pending`: from each run's start
 /// to its end at the step policy's steps, or one node for a constant run. A run whose ends
-/// are a span's is sampled just inside them (see [`RayState::inset`]).
+/// are a span's is sampled just inside them (see [`RayState::inset`](super::RayState::inset)).
 pub(super) fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
     if !s.rays[r].live {
         return;
@@ -90,12 +90,23 @@ pub(super) fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, 
             floor_set = true;
             s.rays[r].finest = base * 0.5f64.powi(params.refine_depth.min(MAX_BISECTIONS) as i32);
         }
-        let next = if t >= run.end {
-            None
-        } else {
-            Some((t + step_at(base, t, s.rays[r].scale, params)).min(run.end))
-        };
         let state = &mut s.rays[r];
+        let step = if exact {
+            // An exact run holds no edge: its steps are the error rule's, growing at most
+            // twofold from node to node, from a base step where the run starts.
+            let reach = if starts_run {
+                base
+            } else {
+                2.0 * state.last_step
+            };
+            let longest = base * params.max_step_factor.max(1.0) as f64;
+            let step = reach.min(state.allowed).min(longest).max(state.finest);
+            state.last_step = step;
+            step.max(f64::MIN_POSITIVE)
+        } else {
+            step_at(base, t, state.scale, params)
+        };
+        let next = (t < run.end).then(|| (t + step).min(run.end));
         let at_end = match next {
             Some(n) if n > t => {
                 state.next_t = Some(n);

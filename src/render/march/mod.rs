@@ -78,12 +78,14 @@ pub(super) struct InstancePlan {
     encode: bool,
     /// How the field is marched beyond its core, when it is defined on all of space.
     unbounded: Option<Unbounded>,
-    /// Whether the field bounds its density over a region ([`Field::density_bounds`]): only
-    /// then can a step between two empty samples be known to hold nothing, and grow.
+    /// Whether the field bounds its density over a region
+    /// ([`Field::density_bounds`](crate::field::Field::density_bounds)): only then can a step
+    /// between two empty samples be known to hold nothing, and grow.
     bounded: bool,
     /// The side of an occupancy cell, field units, for a field that cannot bound its
-    /// density (infinite for the others): [`hides_gap`] probes a step with density at both
-    /// ends for gaps no finer than [`GAP_PROBES_PER_CELL`] to a cell.
+    /// density (infinite for the others): [`hides_gap`](hidden::hides_gap) probes a step
+    /// with density at both ends for gaps no finer than `hidden::GAP_PROBES_PER_CELL` to a
+    /// cell.
     cell: f64,
     /// A world sphere `(centre, radius)` around the field's bounds, for culling the instance
     /// from a tile's rays at once; `None` where the bounds are not finite.
@@ -107,14 +109,17 @@ struct Node {
     slot: u32,
     /// No piece joins this node to the one before it (a run starts here).
     starts_run: bool,
-    /// Its run's ends are the density's only edges and peaks ([`RunKind::Smooth`] and
-    /// [`RunKind::Constant`]): no edge, thin sheet or peak lies between its samples.
+    /// Its run's ends are the density's only edges and peaks
+    /// ([`RunKind::Smooth`](super::runs::RunKind::Smooth) and
+    /// [`RunKind::Constant`](super::runs::RunKind::Constant)): no edge, thin sheet or peak
+    /// lies between its samples.
     exact: bool,
     /// > 0: the node stands for the whole constant run `[t, t + extent]`, one piece.
     extent: f64,
     /// Colour weight gathered this round.
     weight: f64,
-    /// Optical depth from the round's first node to this one ([`lay_depths`]).
+    /// Optical depth from the round's first node to this one
+    /// ([`lay_depths`](refinement::lay_depths)).
     depth: f64,
 }
 
@@ -168,11 +173,16 @@ struct RayState {
     /// front to back, and the next one to composite.
     volume: Vec<Fragment>,
     next_volume: usize,
-    /// The next regular step as a multiple of the base step (see [`step_at`]), and whether
-    /// it doubles from node to node: the ray's last steps were all well within the error
-    /// target.
+    /// In searched runs: the next regular step as a multiple of the base step (see
+    /// `laying::step_at`), and whether it doubles from node to node: the ray's last steps
+    /// were all well within the error target.
     scale: f64,
     growing: bool,
+    /// In exact runs (whose steps the error rule sets, not `scale`): the longest step the
+    /// rule allows after the last round (`integration::allowed_step`), and the last step
+    /// laid (world units).
+    allowed: f64,
+    last_step: f64,
     /// Whether a step of this round was bisected, and the largest weighted error estimate
     /// of this round's steps.
     refined: bool,
@@ -212,7 +222,8 @@ impl RayState {
     }
 }
 
-/// One instance's steps along one ray ([`base_step_at`]), worked out once per ray.
+/// One instance's steps along one ray ([`base_step_at`](laying::base_step_at)), worked out
+/// once per ray.
 #[derive(Clone, Copy, Debug)]
 struct RaySteps {
     /// Where the ray is inside the instance (world distance).
@@ -261,7 +272,8 @@ pub(super) struct Scratch {
     ray_steps: Vec<RaySteps>,
     /// Per instance, the items (pending nodes, steps, rays) of one batched query.
     by_inst: Vec<Vec<u32>>,
-    /// Per instance, whether some ray of the tile may meet it ([`cull_instances`]).
+    /// Per instance, whether some ray of the tile may meet it
+    /// ([`cull_instances`](plan::cull_instances)).
     tile_insts: Vec<bool>,
     run_scratch: RunScratch,
     nodes: Vec<Vec<Node>>,

@@ -288,8 +288,13 @@ fn smooth_step(r: usize, a: &Node, b: &Node, plans: &[InstancePlan], s: &Scratch
 #[inline]
 pub(super) fn step_change(nodes: &[Node], i: usize) -> f64 {
     let (a, b) = (&nodes[i], &nodes[i + 1]);
-    let jump = (b.sigma - a.sigma).abs();
-    match step_curvature(nodes, i) {
+    change((b.sigma - a.sigma).abs(), step_curvature(nodes, i))
+}
+
+/// [`step_change`] from a step's jump and its curvature on either side.
+#[inline]
+pub(super) fn change(jump: f64, curvature: [Option<f64>; 2]) -> f64 {
+    match curvature {
         [Some(before), Some(after)] => jump.min(before.max(after)),
         _ => jump,
     }
@@ -312,7 +317,7 @@ pub(super) fn smooth_change(nodes: &[Node], i: usize) -> f64 {
 /// difference through the step's ends and the node before it, and through them and the one
 /// after it (steps may differ in length); `None` where the run has no such node.
 #[inline]
-fn step_curvature(nodes: &[Node], i: usize) -> [Option<f64>; 2] {
+pub(super) fn step_curvature(nodes: &[Node], i: usize) -> [Option<f64>; 2] {
     let (a, b) = (&nodes[i], &nodes[i + 1]);
     let h = b.t - a.t;
     let before = (i > 0 && !a.starts_run).then(|| &nodes[i - 1]);

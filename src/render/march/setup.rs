@@ -53,6 +53,8 @@ pub(super) fn setup_rays(
         state.skipped_weight = 0.0;
         state.scale = 1.0;
         state.growing = false;
+        state.allowed = f64::INFINITY;
+        state.last_step = 0.0;
         state.refined = false;
         state.worst = 0.0;
         state.samples = 0;

@@ -22,11 +22,15 @@ pub(super) enum RunKind {
     /// Constant throughout (every instance present there gave a span of constant density):
     /// one sample, one piece.
     Constant,
-    /// Continuous, the ends its only edges (every instance present gave a span, or its
-    /// mask's segments): sampled just inside its ends and stepped between; no edge, thin
-    /// sheet or peak to search for (a span has none; a masked field's density is a smooth
-    /// interpolant, whose bumps only the step rule resolves).
+    /// Continuous and without a peak of its own, the ends its only edges (every instance
+    /// present gave a span): sampled just inside its ends and stepped between; no edge, thin
+    /// sheet or peak to search for.
     Smooth,
+    /// Continuous, the ends its only edges, as [`RunKind::Smooth`], but with bumps of its
+    /// own (an instance present gave its mask's segments: a trained density, a smooth
+    /// interpolant inside its mask): stepped as a searched run is, its steps judged by
+    /// their jumps and curvature; no edge, thin sheet or gap to search for.
+    Masked,
     /// An occupied segment of an instance that gave no spans: edges are found by bisection.
     Searched,
 }
@@ -50,8 +54,8 @@ pub(super) struct RunScratch {
     occupied: Vec<[f32; 2]>,
     spans: Vec<Span>,
     mask: Vec<[f64; 2]>,
-    /// `(t, Δcovering, Δsearched, Δvarying, from a span)` per interval end.
-    events: Vec<(f64, i32, i32, i32, bool)>,
+    /// `(t, Δcovering, Δsearched, Δvarying, Δmasked, from a span)` per interval end.
+    events: Vec<(f64, i32, i32, i32, i32, bool)>,
 }
 
 /// Appends one instance's intervals along its local ray to `out` (world distance): its
@@ -103,7 +107,7 @@ pub(super) fn instance_runs(
             scratch
                 .mask
                 .iter()
-                .filter_map(|&[a, b]| run(a, b, RunKind::Smooth)),
+                .filter_map(|&[a, b]| run(a, b, RunKind::Masked)),
         );
     } else {
         return 0.0;
@@ -162,8 +166,8 @@ fn far_segments(
 /// Turns the instances' intervals of one ray (each instance's disjoint) into its runs:
 /// sorted, not overlapping. Without spans, the occupied segments' union (overlapping ones
 /// merged). With spans, the intervals are cut at every interval end and each piece covered
-/// by any is a run: searched if a searched segment covers it, else smooth if a varying span
-/// does, else constant; pieces of searched segments that meet at an end no span has are
+/// by any is a run: searched if a searched segment covers it, else masked if a mask's
+/// segment does, else smooth if a varying span does, else constant; pieces of searched segments that meet at an end no span has are
 /// joined, so searched fields march as they would alone.
 pub(super) fn merge(runs: &mut Vec<Run>, scratch: &mut RunScratch) {
     if runs.iter().all(|r| r.kind == RunKind::Searched) {
@@ -182,23 +186,25 @@ pub(super) fn merge(runs: &mut Vec<Run>, scratch: &mut RunScratch) {
     events.clear();
     for r in runs.iter() {
         let searched = i32::from(r.kind == RunKind::Searched);
-        let varies = i32::from(r.kind == RunKind::Smooth);
+        let varies = i32::from(matches!(r.kind, RunKind::Smooth | RunKind::Masked));
+        let masked = i32::from(r.kind == RunKind::Masked);
         let span = r.kind != RunKind::Searched;
-        events.push((r.start, 1, searched, varies, span));
-        events.push((r.end, -1, -searched, -varies, span));
+        events.push((r.start, 1, searched, varies, masked, span));
+        events.push((r.end, -1, -searched, -varies, -masked, span));
     }
     events.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     runs.clear();
-    let (mut covering, mut searched, mut varies) = (0, 0, 0);
+    let (mut covering, mut searched, mut varies, mut masked) = (0, 0, 0, 0);
     let mut i = 0;
     while i < events.len() {
         let x = events[i].0;
         let mut at_span_end = false;
         while i < events.len() && events[i].0 == x {
-            let (_, c, s, v, span) = events[i];
+            let (_, c, s, v, m, span) = events[i];
             covering += c;
             searched += s;
             varies += v;
+            masked += m;
             at_span_end |= span;
             i += 1;
         }
@@ -210,6 +216,8 @@ pub(super) fn merge(runs: &mut Vec<Run>, scratch: &mut RunScratch) {
         }
         let kind = if searched > 0 {
             RunKind::Searched
+        } else if masked > 0 {
+            RunKind::Masked
         } else if varies > 0 {
             RunKind::Smooth
         } else {

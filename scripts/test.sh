@@ -5,6 +5,7 @@
 #   libclang-dev   openfx-sys generates the OpenFX bindings from the official headers (bindgen)
 #   blender        the reference for camera alignment (Debian's 3.4, run headless)
 #   numpy, msgpack the independent NumPy references of the trained fields and splats
+#   mpmath         the quadrature reference of the renderer's far share of a linear piece
 #   python3-numpy  Blender's own Python (Debian's build uses the system's) for the add-on's
 #                  splat import
 #
@@ -40,13 +41,13 @@ if ((${#need_apt[@]})); then
     apt_install "${need_apt[@]}"
 fi
 
-if ! python3 -c "import numpy, msgpack" 2>/dev/null; then
-    echo "== installing numpy and msgpack for $(command -v python3)"
+if ! python3 -c "import numpy, msgpack, mpmath" 2>/dev/null; then
+    echo "== installing numpy, msgpack and mpmath for $(command -v python3)"
     # A pip-managed Python (pyenv, a venv) takes them from PyPI; Debian's own python3 refuses
     # pip (externally managed) and takes its packages.
-    python3 -m pip install --quiet numpy msgpack 2>/dev/null ||
-        apt_install python3-numpy python3-msgpack
-    python3 -c "import numpy, msgpack"
+    python3 -m pip install --quiet numpy msgpack mpmath 2>/dev/null ||
+        apt_install python3-numpy python3-msgpack python3-mpmath
+    python3 -c "import numpy, msgpack, mpmath"
 fi
 
 if ! blender -b --factory-startup --python-exit-code 1 --python-expr "import numpy" \

@@ -65,9 +65,11 @@ pub(super) fn setup_rays(
         state.inset = 0.0;
         s.nodes[r].clear();
         for (i, (inst, plan)) in scene.instances.iter().zip(plans).enumerate() {
-            let local = ray
-                .filter(|_| s.tile_insts[i])
-                .and_then(|ray| inst.local_ray(&ray, ray.near, ray.far));
+            if !s.tile_insts[i] {
+                s.local.push(None);
+                continue;
+            }
+            let local = ray.and_then(|ray| inst.local_ray(&ray, ray.near, ray.far));
             if let Some(lr) = &local {
                 let inset = instance_runs(
                     lr,

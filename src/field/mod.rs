@@ -216,6 +216,25 @@ pub trait Field: Send + Sync {
         false
     }
 
+    /// The exact intervals `[enter, exit]` of the ray `origin + t·dir`, `t ∈ [t0, t1]` (`dir`
+    /// a unit vector), where the field's occupancy mask is on, appended to `out` sorted and
+    /// apart (touching cells joined), for a field whose density is a smooth interpolant (see
+    /// [`Field::smooth_length`]) cut to zero by a mask of cells: the density is zero outside
+    /// them and has no jump inside them, so the marcher starts and ends its runs at their
+    /// ends instead of searching for the mask's edges between samples. `false` (the
+    /// default, `out` untouched): the field cannot say. The answer must be the same for
+    /// every ray: the marcher asks once per instance whether to march it by these segments.
+    fn mask_segments(
+        &self,
+        _origin: Vec3,
+        _dir: Vec3,
+        _t0: f64,
+        _t1: f64,
+        _out: &mut Vec<[f64; 2]>,
+    ) -> bool {
+        false
+    }
+
     /// Whether the density may be non-zero anywhere in `region`. Must be *conservative*:
     /// `false` only where the density is exactly zero throughout.
     fn may_be_occupied(&self, region: &Aabb) -> bool;

@@ -4,9 +4,12 @@
 //! An instance whose field gives its [spans](crate::field::Field::spans) (analytic fields)
 //! contributes them exactly: the density's edges are the spans' ends, so the marcher starts
 //! and ends its runs there and searches for none; a span of constant density is one piece,
-//! integrated from one sample. Any other instance contributes the segments its occupancy
-//! grid (and, beyond an unbounded field's grid, its empty-space test) finds occupied, in
-//! which the marcher finds edges by bisection. Over a ray the instances' intervals are cut
+//! integrated from one sample. So does one whose field gives the segments where its
+//! occupancy mask is on ([`Field::mask_segments`], instant-ngp's cascades): its density is
+//! a smooth interpolant cut to zero by the mask, so those ends are its only edges. Any
+//! other instance contributes the segments its occupancy grid (and, beyond an unbounded
+//! field's grid, its empty-space test) finds occupied, in which the marcher finds edges by
+//! bisection. Over a ray the instances' intervals are cut
 //! at every span end, so that inside a run each instance's density is continuous or
 //! searched, never jumping unseen.
 
@@ -23,6 +26,11 @@ pub(super) enum RunKind {
     /// present gave a span): sampled just inside its ends and stepped between; no edge, thin
     /// sheet or peak to search for.
     Smooth,
+    /// Continuous, the ends its only edges, as [`RunKind::Smooth`], but with bumps of its
+    /// own (an instance present gave its mask's segments: a trained density, a smooth
+    /// interpolant inside its mask): stepped as a searched run is, its steps judged by
+    /// their jumps and curvature; no edge, thin sheet or gap to search for.
+    Masked,
     /// An occupied segment of an instance that gave no spans: edges are found by bisection.
     Searched,
 }
@@ -45,14 +53,15 @@ const INSET: f64 = 1e-5;
 pub(super) struct RunScratch {
     occupied: Vec<[f32; 2]>,
     spans: Vec<Span>,
-    /// `(t, Δcovering, Δsearched, Δvarying, from a span)` per interval end.
-    events: Vec<(f64, i32, i32, i32, bool)>,
+    mask: Vec<[f64; 2]>,
+    /// `(t, Δcovering, Δsearched, Δvarying, Δmasked, from a span)` per interval end.
+    events: Vec<(f64, i32, i32, i32, i32, bool)>,
 }
 
 /// Appends one instance's intervals along its local ray to `out` (world distance): its
-/// spans when `spans` (the field gives them), else its occupied segments. Returns the world
-/// distance inside a span end at which that end's sample is taken for this instance (0 when
-/// it gave no spans).
+/// occupied segments when it has an `occupancy` grid, else its spans or its mask's
+/// segments. Returns the world distance inside a span's (or mask segment's) end at which
+/// that end's sample is taken for this instance (0 when it gave neither).
 pub(super) fn instance_runs(
     lr: &LocalRay,
     field: &dyn Field,
@@ -78,22 +87,31 @@ pub(super) fn instance_runs(
         }));
         return 0.0;
     }
+    let run = |start: f64, end: f64, kind: RunKind| {
+        let (start, end) = (world(start), world(end));
+        (start < end).then_some(Run { start, end, kind })
+    };
     scratch.spans.clear();
-    if !field.spans(lr.origin, lr.dir, 0.0, length, &mut scratch.spans) {
-        return 0.0;
-    }
-    out.extend(scratch.spans.iter().filter_map(|s| {
-        let (start, end) = (world(s.enter), world(s.exit));
-        (start < end).then_some(Run {
-            start,
-            end,
-            kind: if s.varies {
+    scratch.mask.clear();
+    if field.spans(lr.origin, lr.dir, 0.0, length, &mut scratch.spans) {
+        out.extend(scratch.spans.iter().filter_map(|s| {
+            let kind = if s.varies {
                 RunKind::Smooth
             } else {
                 RunKind::Constant
-            },
-        })
-    }));
+            };
+            run(s.enter, s.exit, kind)
+        }));
+    } else if field.mask_segments(lr.origin, lr.dir, 0.0, length, &mut scratch.mask) {
+        out.extend(
+            scratch
+                .mask
+                .iter()
+                .filter_map(|&[a, b]| run(a, b, RunKind::Masked)),
+        );
+    } else {
+        return 0.0;
+    }
     INSET * (lr.origin.abs().max_element() as f64 + length + 1.0) / k
 }
 
@@ -148,8 +166,8 @@ fn far_segments(
 /// Turns the instances' intervals of one ray (each instance's disjoint) into its runs:
 /// sorted, not overlapping. Without spans, the occupied segments' union (overlapping ones
 /// merged). With spans, the intervals are cut at every interval end and each piece covered
-/// by any is a run: searched if a searched segment covers it, else smooth if a varying span
-/// does, else constant; pieces of searched segments that meet at an end no span has are
+/// by any is a run: searched if a searched segment covers it, else masked if a mask's
+/// segment does, else smooth if a varying span does, else constant; pieces of searched segments that meet at an end no span has are
 /// joined, so searched fields march as they would alone.
 pub(super) fn merge(runs: &mut Vec<Run>, scratch: &mut RunScratch) {
     if runs.iter().all(|r| r.kind == RunKind::Searched) {
@@ -168,23 +186,25 @@ pub(super) fn merge(runs: &mut Vec<Run>, scratch: &mut RunScratch) {
     events.clear();
     for r in runs.iter() {
         let searched = i32::from(r.kind == RunKind::Searched);
-        let varies = i32::from(r.kind == RunKind::Smooth);
+        let varies = i32::from(matches!(r.kind, RunKind::Smooth | RunKind::Masked));
+        let masked = i32::from(r.kind == RunKind::Masked);
         let span = r.kind != RunKind::Searched;
-        events.push((r.start, 1, searched, varies, span));
-        events.push((r.end, -1, -searched, -varies, span));
+        events.push((r.start, 1, searched, varies, masked, span));
+        events.push((r.end, -1, -searched, -varies, -masked, span));
     }
     events.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     runs.clear();
-    let (mut covering, mut searched, mut varies) = (0, 0, 0);
+    let (mut covering, mut searched, mut varies, mut masked) = (0, 0, 0, 0);
     let mut i = 0;
     while i < events.len() {
         let x = events[i].0;
         let mut at_span_end = false;
         while i < events.len() && events[i].0 == x {
-            let (_, c, s, v, span) = events[i];
+            let (_, c, s, v, m, span) = events[i];
             covering += c;
             searched += s;
             varies += v;
+            masked += m;
             at_span_end |= span;
             i += 1;
         }
@@ -196,6 +216,8 @@ pub(super) fn merge(runs: &mut Vec<Run>, scratch: &mut RunScratch) {
         }
         let kind = if searched > 0 {
             RunKind::Searched
+        } else if masked > 0 {
+            RunKind::Masked
         } else if varies > 0 {
             RunKind::Smooth
         } else {

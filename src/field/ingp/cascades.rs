@@ -20,7 +20,7 @@
 //! applied from cascade 1 outwards), so a coarse cell is empty only where every finer cell
 //! inside it is. Its marcher climbs to the coarsest empty cell around a point to skip it.
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 /// Cells per axis of a cascade.
 pub(crate) const GRID: usize = 128;
@@ -156,8 +156,143 @@ impl Cascades {
     /// Whether `q` lies in an occupied cell.
     #[inline]
     pub(crate) fn occupied_at(&self, q: Vec3) -> bool {
-        self.cell(q)
-            .is_some_and(|(c, [x, y, z])| self.mips[c][0].get((z * GRID + y) * GRID + x))
+        self.cell(q).is_some_and(|(c, i)| self.occupied_cell(c, i))
+    }
+
+    /// Whether cell `[x, y, z]` of cascade `c` is occupied.
+    #[inline]
+    fn occupied_cell(&self, c: usize, [x, y, z]: [usize; 3]) -> bool {
+        self.mips[c][0].get((z * GRID + y) * GRID + x)
+    }
+
+    /// The intervals of the ray `q0 + t·v` (instant-ngp coordinates), `t ∈ [t0, t1]`, where
+    /// [`Cascades::occupied_at`] holds, appended to `out` sorted and apart (touching
+    /// intervals joined). The ray is cut where it crosses the cascades' cubes, and each
+    /// piece walks the cells of the cascade that owns its points, from face crossing to
+    /// face crossing (worked out in `f64`). An axis along which the ray does not move
+    /// takes its cell from `q0` as [`Cascades::cell`] does, so a ray lying in a cell's face
+    /// gets the cells its points are looked up in. Elsewhere a crossing may differ from the
+    /// face an `f32` point rounds to by the rounding of that point: a sample taken just
+    /// inside an interval's end lands inside it.
+    pub(crate) fn segments(&self, q0: Vec3, v: Vec3, t0: f64, t1: f64, out: &mut Vec<[f64; 2]>) {
+        let first = out.len();
+        let u0 = (q0 - Vec3::splat(0.5)).as_dvec3();
+        let v = v.as_dvec3();
+        // The part of [t0, t1] inside each cascade's cube; nested like the cubes.
+        let mut inside: Vec<Option<(f64, f64)>> = (0..self.count())
+            .map(|c| {
+                let h = f64::from(Self::half_width(c));
+                let (mut a, mut b) = (t0, t1);
+                for k in 0..3 {
+                    if v[k] == 0.0 {
+                        if u0[k].abs() >= h {
+                            return None;
+                        }
+                        continue;
+                    }
+                    let (p, q) = ((-h - u0[k]) / v[k], (h - u0[k]) / v[k]);
+                    a = a.max(p.min(q));
+                    b = b.min(p.max(q));
+                }
+                (a < b).then_some((a, b))
+            })
+            .collect();
+        for c in (1..inside.len()).rev() {
+            inside[c - 1] = match (inside[c], inside[c - 1]) {
+                (Some((a, b)), Some((ia, ib))) => {
+                    let (a, b) = (ia.max(a), ib.min(b));
+                    (a < b).then_some((a, b))
+                }
+                _ => None,
+            };
+        }
+        // The innermost cascade the ray meets; each outer one owns what lies between its
+        // cube and the next smaller one's, before and after it.
+        let Some(m) = inside.iter().position(Option::is_some) else {
+            return;
+        };
+        let at = |c: usize| inside[c].unwrap_or((t0, t0));
+        for c in (m + 1..inside.len()).rev() {
+            self.walk(c, u0, v, (at(c).0, at(c - 1).0), out, first);
+        }
+        self.walk(m, u0, v, at(m), out, first);
+        for c in m + 1..inside.len() {
+            self.walk(c, u0, v, (at(c - 1).1, at(c).1), out, first);
+        }
+    }
+
+    /// Appends the occupied cells of cascade `c` that the ray `0.5 + u0 + t·v` crosses over
+    /// `[ta, tb]` to `out` (joined to `out[first..]`'s last interval where they touch). The
+    /// cells of the next smaller cascade's cube are skipped: the walk meets them only where
+    /// rounding puts the start on the wrong side of that cube's face.
+    fn walk(
+        &self,
+        c: usize,
+        u0: DVec3,
+        v: DVec3,
+        (ta, tb): (f64, f64),
+        out: &mut Vec<[f64; 2]>,
+        first: usize,
+    ) {
+        if ta >= tb {
+            return;
+        }
+        let h = f64::from(Self::half_width(c));
+        // Grid units: g = 128·(u/2h + 1/2).
+        let per_unit = GRID as f64 / (2.0 * h);
+        let mut cell = [0i64; 3];
+        let mut next = [f64::INFINITY; 3];
+        for k in 0..3 {
+            cell[k] = if v[k] == 0.0 {
+                // As `cell` computes it, in f32.
+                let u = ((u0[k] as f32) * pow2(-(c as i32)) + 0.5) * GRID as f32;
+                (u as i64).clamp(0, GRID as i64 - 1)
+            } else {
+                let g = (u0[k] + v[k] * ta) * per_unit + 0.5 * GRID as f64;
+                (g.floor() as i64).clamp(0, GRID as i64 - 1)
+            };
+        }
+        let crossing = |k: usize, cell: i64| {
+            let face = if v[k] > 0.0 { cell + 1 } else { cell };
+            ((face as f64 - 0.5 * GRID as f64) / per_unit - u0[k]) / v[k]
+        };
+        for k in 0..3 {
+            if v[k] != 0.0 {
+                next[k] = crossing(k, cell[k]);
+            }
+        }
+        // A point is the smaller cascade's where it lies strictly inside its cube: along an
+        // axis the ray moves on, where its cell is a central one; along one it does not,
+        // where `cell` finds it so.
+        let inner =
+            c > 0 && (0..3).all(|k| v[k] != 0.0 || (u0[k] as f32).abs() < Self::half_width(c - 1));
+        let central =
+            |k: usize, i: i64| v[k] == 0.0 || (GRID as i64 / 4..3 * GRID as i64 / 4).contains(&i);
+        let mut t = ta;
+        loop {
+            let tn = next[0].min(next[1]).min(next[2]).min(tb);
+            let index = cell.map(|i| i as usize);
+            let owned = !(inner && (0..3).all(|k| central(k, cell[k])));
+            if tn > t && owned && self.occupied_cell(c, index) {
+                match out[first..].last_mut() {
+                    Some(last) if last[1] >= t => last[1] = last[1].max(tn),
+                    _ => out.push([t, tn]),
+                }
+            }
+            if tn >= tb {
+                return;
+            }
+            for k in 0..3 {
+                if next[k] == tn {
+                    cell[k] += if v[k] > 0.0 { 1 } else { -1 };
+                    if !(0..GRID as i64).contains(&cell[k]) {
+                        return;
+                    }
+                    next[k] = crossing(k, cell[k]);
+                }
+            }
+            t = t.max(tn);
+        }
     }
 
     /// Whether instant-ngp's marching bitfield has the cell of cascade `mip` holding `q`
@@ -395,6 +530,140 @@ mod tests {
         assert!(!c.march_occupied([-0.008, 0.001, 0.001], 0));
         assert_eq!(unmorton(morton(5, 6, 7)), [5, 6, 7]);
         assert_eq!(spread(0x7f), 0x49249);
+    }
+
+    /// Checks `segments` along the ray `q0 + t·v`, `t ∈ [t0, t1]`, against `occupied_at`
+    /// sampled densely at the `f32` points a marcher would ask: sorted, apart, and agreeing
+    /// with every sample farther than `slack` (in `t`) from a segment's end.
+    fn check_segments(c: &Cascades, q0: Vec3, v: Vec3, (t0, t1): (f64, f64), slack: f64) {
+        let mut segs = Vec::new();
+        c.segments(q0, v, t0, t1, &mut segs);
+        for s in &segs {
+            assert!(
+                t0 <= s[0] && s[0] < s[1] && s[1] <= t1,
+                "{s:?} outside [{t0}, {t1}]"
+            );
+        }
+        for w in segs.windows(2) {
+            assert!(w[0][1] < w[1][0], "not sorted and apart: {w:?}");
+        }
+        let n = 20_000;
+        for j in 0..=n {
+            let t = t0 + (t1 - t0) * j as f64 / n as f64;
+            let near_end = segs
+                .iter()
+                .any(|s| (t - s[0]).abs() < slack || (t - s[1]).abs() < slack);
+            if near_end {
+                continue;
+            }
+            let inside = segs.iter().any(|s| s[0] <= t && t <= s[1]);
+            let q = q0 + v * t as f32;
+            assert_eq!(
+                inside,
+                c.occupied_at(q),
+                "t = {t} (q = {q}) on the ray {q0} + t·{v}: segments {segs:?}"
+            );
+        }
+    }
+
+    /// Three cascades, a seeded fifth of their cells occupied.
+    fn seeded_cascades() -> Cascades {
+        let n3 = GRID * GRID * GRID;
+        let mut rng = crate::bench::rng::SplitMix64::new(11);
+        let v: Vec<f32> = (0..3 * n3)
+            .map(|_| if rng.unit() < 0.2 { 1.0 } else { 0.0 })
+            .collect();
+        Cascades::from_densities(&v).unwrap()
+    }
+
+    #[test]
+    fn mask_segments_agree_with_sampled_cells() {
+        let c = seeded_cascades();
+        let mut rng = crate::bench::rng::SplitMix64::new(5);
+        for _ in 0..40 {
+            // From outside every cascade (half width 2) or from inside one, in any direction.
+            let outside = rng.unit() < 0.5;
+            let reach = if outside { 3.0 } else { 1.5 };
+            let q0 = Vec3::new(
+                rng.range(0.5 - reach, 0.5 + reach),
+                rng.range(0.5 - reach, 0.5 + reach),
+                rng.range(0.5 - reach, 0.5 + reach),
+            );
+            let d = Vec3::new(
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+            )
+            .normalize();
+            check_segments(&c, q0, d, (0.0, 8.0), 1e-5);
+        }
+    }
+
+    #[test]
+    fn rays_along_faces_and_edges_get_the_cells_their_points_read() {
+        let c = seeded_cascades();
+        let face = |k: f32, cascade: i32| (k / GRID as f32 - 0.5) * 2f32.powi(cascade) + 0.5;
+        // In a cell face of cascade 0 (y), along x; along an edge (y and z) of cascade 1
+        // crossing cascade 0 too; along the faces of the cascades' own cubes.
+        let rays = [
+            (Vec3::new(-2.5, face(40.0, 0), 0.3), Vec3::X),
+            (Vec3::new(-2.5, face(40.0, 1), face(70.0, 1)), Vec3::X),
+            (Vec3::new(0.3, -2.5, face(0.0, 0)), Vec3::Y),
+            (Vec3::new(face(128.0, 1), face(20.0, 1), -2.5), Vec3::Z),
+            (Vec3::new(face(64.0, 0), -2.5, face(64.0, 0)), Vec3::Y),
+        ];
+        for (q0, d) in rays {
+            check_segments(&c, q0, d, (0.0, 6.0), 1e-5);
+        }
+    }
+
+    #[test]
+    fn a_ray_clipping_a_cell_corner_gets_its_sliver() {
+        // One occupied cell of cascade 0, (5, 6, 7); a ray in the plane z = its middle,
+        // cutting its (x, y) = (6, 7) corner 1e-4 of a cell deep: a sliver 2e-4 of a cell
+        // long along a 45° ray.
+        let n3 = GRID * GRID * GRID;
+        let mut v = vec![0.0f32; n3];
+        v[morton(5, 6, 7)] = 1.0;
+        let c = Cascades::from_densities(&v).unwrap();
+        let cell = 1.0 / GRID as f64;
+        let depth = 1e-4 * cell;
+        // The line x + y = 13·cell − depth, z = 7.5·cell.
+        let d = Vec3::new(1.0, -1.0, 0.0).normalize();
+        let q0 = Vec3::new(0.0, (13.0 * cell - depth) as f32, (7.5 * cell) as f32);
+        let mut segs = Vec::new();
+        c.segments(q0, d, 0.0, 2.0, &mut segs);
+        assert_eq!(segs.len(), 1, "{segs:?}");
+        let [a, b] = segs[0];
+        let expected = depth * std::f64::consts::SQRT_2;
+        assert!(
+            ((b - a) - expected).abs() < 0.05 * expected,
+            "{} vs {expected}",
+            b - a
+        );
+        assert!(c.occupied_at(q0 + d * (0.5 * (a + b)) as f32));
+        check_segments(&c, q0, d, (0.0, 2.0), 1e-6);
+        // A ray 1e-4 of a cell beyond the corner gets nothing.
+        let q1 = Vec3::new(0.0, (13.0 * cell + depth) as f32, (7.5 * cell) as f32);
+        segs.clear();
+        c.segments(q1, d, 0.0, 2.0, &mut segs);
+        assert!(segs.is_empty(), "{segs:?}");
+    }
+
+    #[test]
+    fn occupied_cells_across_a_cascade_face_join() {
+        // Every cell of both cascades occupied: a ray through them is one segment, from
+        // the outer cube's face to the other, its ends exact.
+        let c = Cascades::from_densities(&vec![1.0f32; 2 * GRID * GRID * GRID]).unwrap();
+        let mut segs = Vec::new();
+        c.segments(Vec3::new(-2.0, 0.45, 0.55), Vec3::X, 0.0, 10.0, &mut segs);
+        assert_eq!(segs, [[1.5, 3.5]]);
+        // A ray starting inside cascade 0 leaves through cascade 1.
+        segs.clear();
+        c.segments(Vec3::new(0.6, 0.5, 0.5), -Vec3::X, 0.0, 10.0, &mut segs);
+        assert_eq!(segs.len(), 1);
+        assert_eq!(segs[0][0], 0.0);
+        assert!((segs[0][1] - 1.1).abs() < 1e-6, "{segs:?}");
     }
 
     #[test]

@@ -663,6 +663,23 @@ impl Field for IngpField {
         self.cascades.may_be_occupied(a.min(b), a.max(b))
     }
 
+    /// The cells of the cascades the ray crosses, walked in instant-ngp coordinates
+    /// (`q = ngp_from_field(origin) + t·s·dir`, the axes cycled): the density is zero exactly
+    /// outside the occupied ones, and the networks' smooth interpolant inside them.
+    fn mask_segments(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t0: f64,
+        t1: f64,
+        out: &mut Vec<[f64; 2]>,
+    ) -> bool {
+        let v = Vec3::new(dir.y, dir.z, dir.x) * self.scale;
+        self.cascades
+            .segments(self.ngp_from_field(origin), v, t0, t1, out);
+        true
+    }
+
     /// The density's own mask: a point outside every occupied cell (of the smallest
     /// cascade holding it) is never given to the networks, so its density is zero. NaN
     /// points and points beyond the largest cascade lie in no cell.

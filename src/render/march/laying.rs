@@ -98,9 +98,11 @@ pub(super) fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, 
             s.rays[r].finest = base * 0.5f64.powi(params.refine_depth.min(MAX_BISECTIONS) as i32);
         }
         let state = &mut s.rays[r];
-        let step = if exact {
+        let step = if exact && run.kind != RunKind::Masked {
             // An exact run holds no edge: its steps are the error rule's, growing at most
-            // twofold from node to node, from a base step where the run starts.
+            // twofold from node to node, from a base step where the run starts. A masked
+            // run's density has bumps of its own, which the round behind cannot foresee:
+            // it is stepped as a searched run is.
             let reach = if starts_run {
                 base
             } else {

@@ -63,7 +63,8 @@ pub(super) struct PixelResult {
 /// Per instance, what the marcher needs that does not change per ray.
 pub(super) struct InstancePlan {
     /// The occupancy grid that finds the field's occupied segments; `None` for a field that
-    /// gives its [spans](crate::field::Field::spans) instead.
+    /// gives its [spans](crate::field::Field::spans) or
+    /// [mask segments](crate::field::Field::mask_segments) instead.
     occupancy: Option<Arc<Occupancy>>,
     /// Base step in field units.
     base_step: f64,
@@ -108,10 +109,11 @@ struct Node {
     slot: u32,
     /// No piece joins this node to the one before it (a run starts here).
     starts_run: bool,
-    /// Its run's ends are the density's only edges and peaks
-    /// ([`RunKind::Smooth`](super::runs::RunKind::Smooth) and
-    /// [`RunKind::Constant`](super::runs::RunKind::Constant)): no edge, thin sheet or peak
-    /// lies between its samples.
+    /// Its run's ends are the density's only edges
+    /// ([`RunKind::Smooth`](super::runs::RunKind::Smooth),
+    /// [`RunKind::Masked`](super::runs::RunKind::Masked) and
+    /// [`RunKind::Constant`](super::runs::RunKind::Constant)): no edge, thin sheet or gap
+    /// lies between its samples (nor a peak, but in a masked run).
     exact: bool,
     /// > 0: the node stands for the whole constant run `[t, t + extent]`, one piece.
     extent: f64,

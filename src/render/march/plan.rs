@@ -22,13 +22,18 @@ impl InstancePlan {
                 let spans =
                     inst.field()
                         .spans(Vec3::ZERO, Vec3::X, 0.0, 0.0, &mut Vec::<Span>::new());
+                let exact = spans
+                    || inst
+                        .field()
+                        .mask_segments(Vec3::ZERO, Vec3::X, 0.0, 0.0, &mut Vec::new());
                 let occupancy =
-                    (!spans).then(|| inst.handle().occupancy(params.occupancy_resolution));
+                    (!exact).then(|| inst.handle().occupancy(params.occupancy_resolution));
                 let bounded = inst
                     .field()
                     .density_bounds(&[inst.field().bounds()], &mut [0.0]);
-                // Without bounds, gaps may hide between samples: a field with spans has
-                // none unseen; one with an occupancy grid has its steps probed for them.
+                // Without bounds, gaps may hide between samples: a field with spans or
+                // mask segments has none unseen; one with an occupancy grid has its steps
+                // probed for them.
                 let cell = match &occupancy {
                     Some(o) if !bounded => {
                         o.bounds().size().min_element() as f64 / f64::from(o.resolution().max(1))

@@ -13,8 +13,11 @@ use crate::scene::Scene;
 /// Bisects the steps whose two ends disagree (`|σ_b − σ_a|·δ` above the tolerance) or
 /// between whose ends the fields' density bound rises well above both (a sheet thinner than
 /// a step), level by level, each level one batch across the tile. After the first level only
-/// the pairs next to the nodes just added can need it, so only those are looked at. Steps
-/// that cannot hold an edge of a smooth field are not bisected for their jump.
+/// the pairs next to the nodes just added can need it, and the pairs beyond those, whose
+/// curvature has a new neighbour (a run's first step has no node before it: its curvature
+/// is the one through the node after it, which may have moved closer), so only those are
+/// looked at. Steps that cannot hold an edge of a smooth field are not bisected for their
+/// jump.
 pub(super) fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
     s.candidates.clear();
     for &r in &s.active {
@@ -30,14 +33,15 @@ pub(super) fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams
             s.candidates.clear();
             for added in &s.pending {
                 let nodes = &s.nodes[added.ray as usize];
-                let i = nodes.partition_point(|n| n.t < added.t) as u32;
-                if i > 0 {
-                    s.candidates.push((added.ray, i - 1));
-                }
-                if (i as usize) + 1 < nodes.len() {
-                    s.candidates.push((added.ray, i));
+                let i = nodes.partition_point(|n| n.t < added.t);
+                // The two steps beside it, and the two beyond those, whose curvature it is a
+                // neighbour of.
+                for k in i.saturating_sub(2)..(i + 2).min(nodes.len().saturating_sub(1)) {
+                    s.candidates.push((added.ray, k as u32));
                 }
             }
+            s.candidates.sort_unstable();
+            s.candidates.dedup();
         }
         let mut last = None;
         for &(r, _) in &s.candidates {

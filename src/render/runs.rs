@@ -9,9 +9,8 @@
 //! a smooth interpolant cut to zero by the mask, so those ends are its only edges. Any
 //! other instance contributes the segments its occupancy grid (and, beyond an unbounded
 //! field's grid, its empty-space test) finds occupied, in which the marcher finds edges by
-//! bisection. Over a ray the instances' intervals are cut
-//! at every span end, so that inside a run each instance's density is continuous or
-//! searched, never jumping unseen.
+//! bisection. Over a ray the instances' intervals are cut at every span end, so that inside
+//! a run each instance's density is continuous or searched, never jumping unseen.
 
 use crate::field::{Aabb, Field, Occupancy, Span, Unbounded};
 use crate::scene::LocalRay;
@@ -167,8 +166,9 @@ fn far_segments(
 /// sorted, not overlapping. Without spans, the occupied segments' union (overlapping ones
 /// merged). With spans, the intervals are cut at every interval end and each piece covered
 /// by any is a run: searched if a searched segment covers it, else masked if a mask's
-/// segment does, else smooth if a varying span does, else constant; pieces of searched segments that meet at an end no span has are
-/// joined, so searched fields march as they would alone.
+/// segment does, else smooth if a varying span does, else constant; pieces of searched
+/// segments that meet at an end no span has are joined, so searched fields march as they
+/// would alone.
 pub(super) fn merge(runs: &mut Vec<Run>, scratch: &mut RunScratch) {
     if runs.iter().all(|r| r.kind == RunKind::Searched) {
         union_in_place(runs);

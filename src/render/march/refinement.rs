@@ -28,20 +28,26 @@ pub(super) fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams
     // A step grown by 2^k needs k more bisections to reach a base step's bracket.
     let grown_levels = params.max_step_factor.max(1.0).log2().ceil() as u32;
     let levels = (params.refine_depth + grown_levels).min(MAX_BISECTIONS);
+    // Where some field is smooth below a length (a trained field), steps are judged by their
+    // curvature alone, which a node added two steps away changes.
+    let beyond = usize::from(plans.iter().any(|p| p.smooth > 0.0));
     for level in 0..levels {
         if level > 0 {
             s.candidates.clear();
             for added in &s.pending {
                 let nodes = &s.nodes[added.ray as usize];
                 let i = nodes.partition_point(|n| n.t < added.t);
-                // The two steps beside it, and the two beyond those, whose curvature it is a
-                // neighbour of.
-                for k in i.saturating_sub(2)..(i + 2).min(nodes.len().saturating_sub(1)) {
+                // The two steps beside it, and (`beyond`) the two beyond those, whose
+                // curvature it is a neighbour of.
+                let last = nodes.len().saturating_sub(1).min(i + 1 + beyond);
+                for k in i.saturating_sub(1 + beyond)..last {
                     s.candidates.push((added.ray, k as u32));
                 }
             }
-            s.candidates.sort_unstable();
-            s.candidates.dedup();
+            if beyond > 0 {
+                s.candidates.sort_unstable();
+                s.candidates.dedup();
+            }
         }
         let mut last = None;
         for &(r, _) in &s.candidates {

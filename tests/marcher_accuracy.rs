@@ -17,6 +17,7 @@ use nerfx::field::{Aabb, Analytic, Field, Shape};
 use nerfx::image::{Plane, Planes, Window};
 use nerfx::render::{
     render, render_naive, render_with_progress, MarchParams, Outputs, Quality, RenderSettings,
+    RenderStats,
 };
 use nerfx::scene::{FieldHandle, Instance, Scene};
 
@@ -196,18 +197,8 @@ fn a_constant_span_takes_one_sample() {
     )]);
     let camera = camera_at(DVec3::new(4.0, -5.0, 3.0), DVec3::ZERO, 48, 36, 35.0);
     let want = reference_full(&scene, &camera);
-    let settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
-    let (got, stats) =
-        render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {})
-            .expect("render");
-    let crossing = want
-        .alpha
-        .as_ref()
-        .expect("alpha")
-        .data
-        .iter()
-        .filter(|&&a| a > 0.0)
-        .count() as u64;
+    let (got, stats) = render_final(&scene, &camera);
+    let crossing = covered(&want) as u64;
     assert!(crossing > 100, "the box must be in view");
     assert_eq!(stats.density_samples, crossing);
     assert!(stats.color_samples <= crossing && stats.color_samples > crossing / 2);
@@ -250,18 +241,8 @@ fn a_gaussian_is_marched_in_steps_its_curvature_allows() {
     let camera = camera_at(DVec3::new(0.0, -7.0, 0.0), DVec3::ZERO, 48, 36, 40.0);
     let want = reference_full(&scene, &camera);
     let params = Quality::Final.params();
-    let settings = RenderSettings::new(params, Outputs::all());
-    let (got, stats) =
-        render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {})
-            .expect("render");
-    let crossing = want
-        .alpha
-        .as_ref()
-        .expect("alpha")
-        .data
-        .iter()
-        .filter(|&&a| a > 0.0)
-        .count() as f64;
+    let (got, stats) = render_final(&scene, &camera);
+    let crossing = covered(&want) as f64;
     assert!(crossing > 500.0, "the Gaussian must fill much of the view");
     let base = f64::from(field.feature_size() / params.steps_per_feature);
     let diameter_steps = f64::from(2.0 * cutoff * sigma) / base;
@@ -278,6 +259,18 @@ fn a_gaussian_is_marched_in_steps_its_curvature_allows() {
         depth_rel: 1e-2,
     };
     assert_close("one Gaussian", &got, &want, target);
+}
+
+/// A Final render of the whole view, with its statistics.
+fn render_final(scene: &Scene, camera: &Camera) -> (Planes, RenderStats) {
+    let settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
+    render_with_progress(scene, camera, camera.full_window(), &settings, &|_| {}).expect("render")
+}
+
+/// The pixels with any coverage in a reference.
+fn covered(planes: &Planes) -> usize {
+    let alpha = planes.alpha.as_ref().expect("alpha");
+    alpha.data.iter().filter(|&&a| a > 0.0).count()
 }
 
 /// A seeded scene and camera that fill most of a 64×48 image.

@@ -1,5 +1,7 @@
-//! What a step may hide between its samples from a field that cannot bound its density:
-//! content inside an occupied cell it clips, gaps inside masked fog.
+//! What a step may hide between its samples from a field that cannot bound its density
+//! and is marched by an occupancy grid (one that gives its mask's segments has its runs end
+//! at the mask's edges, and hides neither): content inside an occupied cell it clips, gaps
+//! inside masked fog.
 
 use glam::Vec3;
 

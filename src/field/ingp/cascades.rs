@@ -36,6 +36,9 @@ pub(crate) struct Cascades {
     /// of byte `i / 8`), finer cascades max-pooled into the centre.
     march: Vec<Vec<u8>>,
     occupied: u64,
+    /// Per cascade, its lowest and highest occupied cell along each axis (`None`: none is):
+    /// [`Cascades::segments`] walks only the part of a ray inside that box.
+    occupied_box: Vec<Option<[[usize; 3]; 2]>>,
 }
 
 /// A fixed-size set of cells: bit `i % 64` of word `i / 64`.
@@ -101,20 +104,28 @@ impl Cascades {
         let threshold = MIN_THICKNESS.min(mean as f32);
         let march = march_bitfield(values, threshold);
         let mut occupied = 0;
+        let mut occupied_box = Vec::new();
         let mips = values
             .chunks_exact(n3)
             .map(|cascade| {
                 let mut base = Bits::new(n3);
+                let mut bounds: Option<[[usize; 3]; 2]> = None;
                 for z in 0..GRID {
                     for y in 0..GRID {
                         for x in 0..GRID {
                             if cascade[morton(x, y, z)] > threshold {
                                 base.set((z * GRID + y) * GRID + x);
                                 occupied += 1;
+                                let [lo, hi] = bounds.get_or_insert([[x, y, z]; 2]);
+                                for (k, i) in [x, y, z].into_iter().enumerate() {
+                                    lo[k] = lo[k].min(i);
+                                    hi[k] = hi[k].max(i);
+                                }
                             }
                         }
                     }
                 }
+                occupied_box.push(bounds);
                 pyramid(base)
             })
             .collect();
@@ -122,6 +133,7 @@ impl Cascades {
             mips,
             march,
             occupied,
+            occupied_box,
         })
     }
 
@@ -234,12 +246,24 @@ impl Cascades {
         out: &mut Vec<[f64; 2]>,
         first: usize,
     ) {
-        if ta >= tb {
+        let Some([lo, hi]) = self.occupied_box[c] else {
             return;
-        }
+        };
         let h = f64::from(Self::half_width(c));
         // Grid units: g = 128·(u/2h + 1/2).
         let per_unit = GRID as f64 / (2.0 * h);
+        // Only the part of the ray inside the box of occupied cells, widened by a cell on
+        // each side (so rounding at its faces loses nothing), can meet one.
+        let (mut ta, mut tb) = (ta, tb);
+        for k in (0..3).filter(|&k| v[k] != 0.0) {
+            let at = |g: f64| ((g - 0.5 * GRID as f64) / per_unit - u0[k]) / v[k];
+            let (a, b) = (at(lo[k] as f64 - 1.0), at(hi[k] as f64 + 2.0));
+            ta = ta.max(a.min(b));
+            tb = tb.min(a.max(b));
+        }
+        if ta >= tb {
+            return;
+        }
         let mut cell = [0i64; 3];
         let mut next = [f64::INFINITY; 3];
         for k in 0..3 {
@@ -251,6 +275,9 @@ impl Cascades {
                 let g = (u0[k] + v[k] * ta) * per_unit + 0.5 * GRID as f64;
                 (g.floor() as i64).clamp(0, GRID as i64 - 1)
             };
+        }
+        if (0..3).any(|k| v[k] == 0.0 && !(lo[k]..=hi[k]).contains(&(cell[k] as usize))) {
+            return;
         }
         let crossing = |k: usize, cell: i64| {
             let face = if v[k] > 0.0 { cell + 1 } else { cell };
@@ -596,6 +623,55 @@ mod tests {
             )
             .normalize();
             check_segments(&c, q0, d, (0.0, 8.0), 1e-5);
+        }
+    }
+
+    #[test]
+    fn mask_segments_of_small_clumps_agree_with_sampled_cells() {
+        // Per cascade, a ball of cells 6 across at a seeded place (the walk is clipped to
+        // the box of occupied cells): rays aimed at a clump's cells, from anywhere, and
+        // rays along the axes through them.
+        let n3 = GRID * GRID * GRID;
+        let mut rng = crate::bench::rng::SplitMix64::new(23);
+        let mut v = vec![0.0f32; 3 * n3];
+        let mut centres = Vec::new();
+        for cascade in 0..3 {
+            let centre = [0; 3].map(|_| rng.range(10.0, 118.0) as usize);
+            for (x, y, z) in (0..GRID)
+                .flat_map(|x| (0..GRID).flat_map(move |y| (0..GRID).map(move |z| (x, y, z))))
+            {
+                let d2 = [x, y, z]
+                    .iter()
+                    .zip(centre)
+                    .map(|(&i, c)| (i as f64 - c as f64).powi(2))
+                    .sum::<f64>();
+                if d2 <= 9.0 {
+                    v[cascade * n3 + morton(x, y, z)] = 1.0;
+                }
+            }
+            centres.push((cascade as i32, centre));
+        }
+        let c = Cascades::from_densities(&v).unwrap();
+        let at = |i: f64, cascade: i32| ((i / GRID as f64 - 0.5) * 2f64.powi(cascade) + 0.5) as f32;
+        for &(cascade, centre) in &centres {
+            let target = Vec3::from(centre.map(|i| at(i as f64 + 0.5, cascade)));
+            for _ in 0..20 {
+                let q0 = Vec3::new(
+                    rng.range(-2.5, 3.5),
+                    rng.range(-2.5, 3.5),
+                    rng.range(-2.5, 3.5),
+                );
+                let jitter = Vec3::new(
+                    rng.range(-0.02, 0.02),
+                    rng.range(-0.02, 0.02),
+                    rng.range(-0.02, 0.02),
+                );
+                let d = (target + jitter - q0).normalize();
+                check_segments(&c, q0, d, (0.0, 8.0), 1e-5);
+            }
+            for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+                check_segments(&c, target - 3.0 * axis, axis, (0.0, 6.0), 1e-5);
+            }
         }
     }
 

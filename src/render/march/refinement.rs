@@ -124,17 +124,24 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
             continue;
         }
         let smooth = any_smooth && smooth_step(r as usize, a, b, plans, s);
-        // The jump bounds `step_change`: the curvature is asked only where it may decide.
         let jump = (b.sigma - a.sigma).abs();
+        // A step of an exact run may straddle the slight peak two overlapping Gaussians make
+        // inside a span, its ends' densities equal: judged by its curvature where both sides
+        // give one (which bounds its `step_change`), else by the larger of its jump and the
+        // side it has; worked out once for both transmittances.
+        let exact_change = (a.exact && !smooth).then(|| match step_curvature(nodes, i as usize) {
+            [Some(before), Some(after)] => before.max(after),
+            sides => jump.max(larger_side(sides)),
+        });
         let change = |weight: f64| {
             if smooth {
                 smooth_change(nodes, i as usize) * weight > tolerance
+            } else if let Some(change) = exact_change {
+                change * weight > tolerance
             } else {
-                (jump * weight > tolerance && step_change(nodes, i as usize) * weight > tolerance)
-                    // A step of an exact run may straddle the slight peak two overlapping
-                    // Gaussians make inside a span, its ends' densities equal: its curvature
-                    // is judged too.
-                    || (a.exact && larger_side(step_curvature(nodes, i as usize)) * weight > tolerance)
+                // The jump bounds `step_change`: the curvature is asked only where it may
+                // decide.
+                jump * weight > tolerance && step_change(nodes, i as usize) * weight > tolerance
             }
         };
         // A grown step where density starts or ends is bisected back to an ungrown one

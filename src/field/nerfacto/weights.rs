@@ -181,15 +181,9 @@ mod tests {
         // unit intervals, in runs of every length modulo four (the last few through masked
         // loads): libm's `expm1` of the same exponents to within three units in the last
         // place.
-        let mut seed = 11u64;
+        let mut rng = crate::bench::rng::SplitMix64::new(11);
         let mut sigma: Vec<f32> = (0..1001)
-            .map(|_| {
-                seed = seed
-                    .wrapping_mul(6_364_136_223_846_793_005)
-                    .wrapping_add(1_442_695_040_888_963_407);
-                let u = (seed >> 11) as f64 / (1u64 << 53) as f64;
-                10f64.powf(-20.0 + 21.78 * u) as f32
-            })
+            .map(|_| 10f64.powf(-20.0 + 21.78 * f64::from(rng.unit())) as f32)
             .collect();
         sigma.extend([0.0, 0.3, 0.35, 40.0, 41.0, 745.0, 1e9]);
         sigma[3] = f32::NAN;
@@ -232,13 +226,8 @@ mod tests {
         // 37 seeded samples (longer than a run, not a multiple of it), invalid densities
         // among them: the same weights as the chain sample by sample with libm's expm1,
         // to rounding.
-        let mut seed = 5u64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::bench::rng::SplitMix64::new(5);
+        let mut next = || f64::from(rng.unit());
         let mut sigma: Vec<f32> = (0..37).map(|_| (20.0 * next()) as f32).collect();
         sigma[3] = f32::NAN;
         sigma[9] = -1.0;

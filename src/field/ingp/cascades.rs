@@ -637,16 +637,20 @@ mod tests {
         let mut centres = Vec::new();
         for cascade in 0..3 {
             let centre = [0; 3].map(|_| rng.range(10.0, 118.0) as usize);
-            for (x, y, z) in (0..GRID)
-                .flat_map(|x| (0..GRID).flat_map(move |y| (0..GRID).map(move |z| (x, y, z))))
-            {
-                let d2 = [x, y, z]
-                    .iter()
-                    .zip(centre)
-                    .map(|(&i, c)| (i as f64 - c as f64).powi(2))
-                    .sum::<f64>();
-                if d2 <= 9.0 {
-                    v[cascade * n3 + morton(x, y, z)] = 1.0;
+            // The cells within 3 of the centre, found in the cube of 7 around it.
+            let near = |i: usize| i - 3..=i + 3;
+            for x in near(centre[0]) {
+                for y in near(centre[1]) {
+                    for z in near(centre[2]) {
+                        let d2 = [x, y, z]
+                            .iter()
+                            .zip(centre)
+                            .map(|(&i, c)| (i as f64 - c as f64).powi(2))
+                            .sum::<f64>();
+                        if d2 <= 9.0 {
+                            v[cascade * n3 + morton(x, y, z)] = 1.0;
+                        }
+                    }
                 }
             }
             centres.push((cascade as i32, centre));

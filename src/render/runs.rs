@@ -42,11 +42,19 @@ pub(super) struct Run {
     pub kind: RunKind,
 }
 
-/// Relative distance inside a run's ends at which its end samples are taken: far above the
-/// rounding of a field-space position in f32 (~6e-8 relative), so a sample lands inside the
-/// span it stands for; far below any step.
-const INSET: f64 = 1e-5;
+/// How far inside a run's end its sample is taken, across the face the ray crosses there,
+/// relative to the field-space coordinates' size: 16 times the rounding of a field-space
+/// position in f32 (2^-24 relative), so the sample lands inside the span it stands for.
+/// Along a ray whose direction has a component `d` on the face's axis, that is `1/|d|`
+/// times as far.
+const INSET: f64 = 1e-6;
 
+/// The smallest component [`INSET`] is divided by: a ray that grazes a face more closely
+/// keeps ten times [`INSET`] along it (a smaller margin across the face). Not more: the
+/// sample stands for the run's end, and an opaque shell can be thinner than the inset (a
+/// dense instant-ngp blob's lies within ~1e-5 of its mask's face, and at ten times the
+/// inset a Preview ray's first sample was taken beyond its first bisected steps).
+const MIN_CROSSING: f32 = 0.1;
 /// Per-thread scratch for [`instance_runs`] and [`merge`].
 #[derive(Default)]
 pub(super) struct RunScratch {
@@ -111,7 +119,16 @@ pub(super) fn instance_runs(
     } else {
         return 0.0;
     }
-    INSET * (lr.origin.abs().max_element() as f64 + length + 1.0) / k
+    // Which face a run ends on is not known here: the most grazing one the ray can cross.
+    let crossing = lr
+        .dir
+        .abs()
+        .to_array()
+        .into_iter()
+        .filter(|&d| d > 0.0)
+        .fold(1.0f32, f32::min)
+        .max(MIN_CROSSING);
+    INSET * (lr.origin.abs().max_element() as f64 + length + 1.0) / (k * crossing as f64)
 }
 
 /// Appends to `out` the intervals of `[0, length]` (field units along the local ray) outside

@@ -125,18 +125,13 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         }
         let smooth = any_smooth && smooth_step(r as usize, a, b, plans, s);
         let jump = (b.sigma - a.sigma).abs();
-        // A step of an exact run may straddle the slight peak two overlapping Gaussians make
-        // inside a span, its ends' densities equal: judged by its curvature where both sides
-        // give one (which bounds its `step_change`), else by the larger of its jump and the
-        // side it has; worked out once for both transmittances.
-        let exact_change = (a.exact && !smooth).then(|| match step_curvature(nodes, i as usize) {
-            [Some(before), Some(after)] => before.max(after),
-            sides => jump.max(larger_side(sides)),
-        });
+        // Worked out once for both transmittances.
+        let exact_estimate =
+            (a.exact && !smooth).then(|| exact_change(nodes, i as usize, any_smooth));
         let change = |weight: f64| {
             if smooth {
                 smooth_change(nodes, i as usize) * weight > tolerance
-            } else if let Some(change) = exact_change {
+            } else if let Some(change) = exact_estimate {
                 change * weight > tolerance
             } else {
                 // The jump bounds `step_change`: the curvature is asked only where it may
@@ -328,6 +323,35 @@ pub(super) fn smooth_change(nodes: &[Node], i: usize) -> f64 {
         [None, None] => (nodes[i + 1].sigma - nodes[i].sigma).abs(),
         sides => larger_side(sides),
     }
+}
+
+/// How much the trapezoid rule may get a step of an exact run wrong that is longer than
+/// its field is smooth: such a step may straddle a bump its ends do not show (the slight
+/// peak two overlapping Gaussians make inside a span; a trained density's inside its
+/// mask), so it is judged by its curvature where both sides give one (which bounds its
+/// [`step_change`]), else by the larger of its jump and the side it has. With neither side,
+/// by its jump, but for a run's first step where some field is trained (`trained`):
+/// [`unmeasured_change`]. An analytic field's spans are split at their peaks; a trained
+/// field's mask segments are not, and a segment one step long shows nothing of what lies
+/// inside it (a step alone in a later round of its run follows measured curvatures).
+#[inline]
+pub(super) fn exact_change(nodes: &[Node], i: usize, trained: bool) -> f64 {
+    let (a, b) = (&nodes[i], &nodes[i + 1]);
+    match step_curvature(nodes, i) {
+        [Some(before), Some(after)] => before.max(after),
+        [None, None] if trained && a.starts_run => unmeasured_change(a, b),
+        sides => (b.sigma - a.sigma).abs().max(larger_side(sides)),
+    }
+}
+
+/// What a step whose curvature cannot be measured (a mask segment one step long) may get
+/// wrong: a bump as high as its denser end may lie between its ends, which their jump does
+/// not bound (on the dense blob a segment one Draft step long held a bump of nearly twice
+/// its ends' density, and the pixel's colour was off by 5.6e-2). One bisection gives both
+/// halves a neighbour.
+#[inline]
+fn unmeasured_change(a: &Node, b: &Node) -> f64 {
+    a.sigma.max(b.sigma)
 }
 
 /// The larger of a step's curvatures on its two sides ([`step_curvature`]), 0 for a side

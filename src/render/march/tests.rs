@@ -194,6 +194,30 @@ fn a_bump_between_ends_of_equal_density_is_judged_by_its_curvature() {
 }
 
 #[test]
+fn a_trained_run_one_step_long_is_judged_by_its_denser_end() {
+    // Equal ends, a run of their own: no jump and no curvature, yet a trained field's bump
+    // may lie between (an analytic field's spans end at its peaks: the jump bounds them).
+    let mut alone = [node(0.0, 4.0), node(1.0, 4.0)];
+    alone[0].starts_run = true;
+    assert_eq!(super::refinement::exact_change(&alone, 0, true), 4.0);
+    assert_eq!(super::refinement::exact_change(&alone, 0, false), 0.0);
+    // A step alone in a later round of its run keeps its jump.
+    alone[0].starts_run = false;
+    assert_eq!(super::refinement::exact_change(&alone, 0, true), 0.0);
+    // With a neighbour on one side, the larger of the jump and that side's curvature.
+    let one_side = [node(0.0, 1.0), node(1.0, 4.0), node(2.0, 4.0)];
+    assert_eq!(super::refinement::exact_change(&one_side, 1, true), 3.0);
+    // With both, the curvature alone: a steady slope has none.
+    let slope = [
+        node(0.0, 1.0),
+        node(1.0, 2.0),
+        node(2.0, 3.0),
+        node(3.0, 4.0),
+    ];
+    assert_eq!(super::refinement::exact_change(&slope, 1, true), 0.0);
+}
+
+#[test]
 fn transmittance_inside_a_round_goes_through_the_lower_end_of_each_step() {
     let mut nodes = [
         node(0.0, 0.0),

@@ -31,6 +31,7 @@ use glam::{DVec3, Vec3};
 
 use self::integration::integrate;
 use self::laying::lay_nodes;
+use self::plan::TileFields;
 use self::refinement::refine;
 use self::sampling::evaluate_pending;
 use self::setup::setup_rays;
@@ -90,6 +91,10 @@ pub(super) struct InstancePlan {
     /// A world sphere `(centre, radius)` around the field's bounds, for culling the instance
     /// from a tile's rays at once; `None` where the bounds are not finite.
     world_sphere: Option<(DVec3, f64)>,
+    /// For an analytic field that gives its spans, a world sphere around each primitive
+    /// (`None`: not finite), to cull the primitives from a tile's rays
+    /// ([`TileFields`](plan::TileFields)); empty for other fields.
+    primitive_spheres: Vec<Option<(DVec3, f64)>>,
 }
 
 /// Floats of field features per node: every instance's, side by side.
@@ -275,8 +280,9 @@ pub(super) struct Scratch {
     /// Per instance, the items (pending nodes, steps, rays) of one batched query.
     by_inst: Vec<Vec<u32>>,
     /// Per instance, whether some ray of the tile may meet it
-    /// ([`cull_instances`](plan::cull_instances)).
+    /// ([`cull_instances`](plan::cull_instances)), and the field its samples are asked of.
     tile_insts: Vec<bool>,
+    tile_fields: TileFields,
     run_scratch: RunScratch,
     nodes: Vec<Vec<Node>>,
     inst_sigma: Vec<f64>,

@@ -33,13 +33,7 @@ pub(super) fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Sc
             }
         }
     }
-    for (i, ((inst, plan), query)) in scene
-        .instances
-        .iter()
-        .zip(plans)
-        .zip(&mut s.queries)
-        .enumerate()
-    {
+    for (i, (plan, query)) in plans.iter().zip(&mut s.queries).enumerate() {
         if query.points.is_empty() {
             continue;
         }
@@ -47,8 +41,11 @@ pub(super) fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Sc
         s.field_out.resize(query.points.len(), 0.0);
         let f = plan.features;
         query.features.resize(query.points.len() * f, 0.0);
-        inst.field()
-            .density_with_features(&query.points, &mut s.field_out, &mut query.features);
+        s.tile_fields.field(scene, i).density_with_features(
+            &query.points,
+            &mut s.field_out,
+            &mut query.features,
+        );
         s.stats.density_samples += query.points.len() as u64;
         for (&(p, _), features) in query
             .owners

@@ -56,13 +56,13 @@ pub(super) fn shade(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
             }
         }
     }
-    for ((inst, plan), query) in scene.instances.iter().zip(plans).zip(&s.queries) {
+    for (i, (plan, query)) in plans.iter().zip(&s.queries).enumerate() {
         if query.points.is_empty() {
             continue;
         }
         s.rgb_out.clear();
         s.rgb_out.resize(query.points.len(), Vec3::ZERO);
-        inst.field().radiance_with_features(
+        s.tile_fields.field(scene, i).radiance_with_features(
             &query.points,
             &query.dirs,
             &query.features,

@@ -193,6 +193,53 @@ fn a_bump_between_ends_of_equal_density_is_judged_by_its_curvature() {
     assert_eq!(super::refinement::smooth_change(&slope[1..3], 0), 1.0);
 }
 
+/// A step's curvature is the same, bit for bit, whether its second differences are worked
+/// out afresh or kept from the step before ([`super::refinement::LastDifference`]): seeded
+/// rays of nodes (runs starting anywhere, repeated positions), their steps visited in order,
+/// backwards and at random, two rays interleaved on one memo.
+#[test]
+fn a_kept_second_difference_gives_the_curvature_worked_out_afresh() {
+    use super::refinement::{step_curvature, LastDifference};
+    use crate::bench::rng::SplitMix64;
+
+    let mut rng = SplitMix64::new(3);
+    let mut ray = || {
+        let mut t = 0.0;
+        (0..2 + rng.next_u64() % 14)
+            .map(|_| {
+                if rng.unit() > 0.1 {
+                    t += f64::from(rng.unit()) * 0.5;
+                }
+                let mut n = node(t, f64::from(rng.unit()) * 40.0);
+                n.starts_run = rng.unit() < 0.15;
+                n
+            })
+            .collect::<Vec<_>>()
+    };
+    let fresh = |nodes: &[super::Node], i| {
+        step_curvature(nodes, i, 0, &mut LastDifference::default()).map(|c| c.map(f64::to_bits))
+    };
+    for _ in 0..2000 {
+        let rays = [ray(), ray()];
+        let mut visits: Vec<(u32, usize)> = (0..2u32)
+            .flat_map(|r| (0..rays[r as usize].len() - 1).map(move |i| (r, i)))
+            .collect();
+        for order in 0..3 {
+            match order {
+                1 => visits.reverse(),
+                2 => visits.sort_by_key(|&(r, i)| (i * 7 + r as usize * 3) % 5),
+                _ => {}
+            }
+            let mut last = LastDifference::default();
+            for &(r, i) in &visits {
+                let nodes = &rays[r as usize];
+                let kept = step_curvature(nodes, i, r, &mut last).map(|c| c.map(f64::to_bits));
+                assert_eq!(kept, fresh(nodes, i), "ray {r} step {i}");
+            }
+        }
+    }
+}
+
 #[test]
 fn transmittance_inside_a_round_goes_through_the_lower_end_of_each_step() {
     let mut nodes = [

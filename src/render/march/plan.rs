@@ -11,14 +11,11 @@ use crate::scene::Scene;
 
 impl InstancePlan {
     pub(in crate::render) fn for_scene(scene: &Scene, params: &MarchParams) -> Vec<InstancePlan> {
-        let mut feature_offset = 0;
         let space = scene.composite_space();
         scene
             .instances
             .iter()
             .map(|inst| {
-                let features = inst.field().feature_count();
-                feature_offset += features;
                 let spans =
                     inst.field()
                         .spans(Vec3::ZERO, Vec3::X, 0.0, 0.0, &mut Vec::<Span>::new());
@@ -44,8 +41,7 @@ impl InstancePlan {
                     occupancy,
                     base_step: inst.field().feature_size() as f64
                         / params.steps_per_feature.max(1e-3) as f64,
-                    features,
-                    feature_offset: feature_offset - features,
+                    features: inst.field().feature_count(),
                     smooth: inst.field().smooth_length().max(0.0) as f64,
                     encode: space == ColorSpace::Srgb
                         && inst.field().color_space() == ColorSpace::Linear,
@@ -81,15 +77,17 @@ fn world_sphere(b: Aabb, world_from_field: glam::DMat4) -> Option<(DVec3, f64)> 
     (centre.is_finite() && radius.is_finite()).then_some((centre, radius))
 }
 
-/// Marks in `keep` the instances some ray of a tile may meet. The rays start within `ρ` of
-/// their mean origin `c` and point within `θ` of their mean direction `m`: such a ray meets
-/// a sphere `(b, R)` only if the ray from `c` along its direction meets `(b, R + ρ)`, which
-/// needs the angle between `m` and `b − c` to be at most `θ + asin((R + ρ)/|b − c|)`. A
-/// wide bundle (`θ` of 90° or more: panoramic tiles) and unbounded instances keep all.
-/// This makes a tile's setup cost per instance, not per instance and pixel.
-pub(super) fn cull_instances(plans: &[InstancePlan], rays: &[Option<Ray>], keep: &mut Vec<bool>) {
+/// Lists in `keep`, ascending, the instances some ray of a tile may meet. The rays start
+/// within `ρ` of their mean origin `c` and point within `θ` of their mean direction `m`:
+/// such a ray meets a sphere `(b, R)` only if the ray from `c` along its direction meets
+/// `(b, R + ρ)`, which needs the angle `α` between `m` and `b − c` to be at most `θ + β`,
+/// `β = asin((R + ρ)/|b − c|)`; as both sides lie in `[0, π)`, that is
+/// `cos α ≥ cos θ cos β − sin θ sin β`, no trigonometry per instance. A wide bundle (`θ` of
+/// 90° or more: panoramic tiles) and unbounded instances keep all. This makes a tile's
+/// setup cost per instance, not per instance and pixel.
+pub(super) fn cull_instances(plans: &[InstancePlan], rays: &[Option<Ray>], keep: &mut Vec<u32>) {
     keep.clear();
-    keep.resize(plans.len(), true);
+    keep.extend(0..plans.len() as u32);
     let (mut origin, mut dir, mut n) = (DVec3::ZERO, DVec3::ZERO, 0.0);
     for ray in rays.iter().flatten() {
         origin += ray.origin;
@@ -112,16 +110,35 @@ pub(super) fn cull_instances(plans: &[InstancePlan], rays: &[Option<Ray>], keep:
     }
     // A margin for rounding in the angles.
     let theta = cos_theta.min(1.0).acos() + 1e-6;
-    for (keep, plan) in keep.iter_mut().zip(plans) {
-        let Some((b, radius)) = plan.world_sphere else {
-            continue;
+    let (sin_theta, cos_theta) = theta.sin_cos();
+    keep.retain(|&i| {
+        let Some((b, radius)) = plans[i as usize].world_sphere else {
+            return true;
         };
         let v = b - c;
         let (l, reach) = (v.length(), radius + rho);
         if l <= reach * (1.0 + 1e-9) {
-            continue;
+            return true;
         }
-        let alpha = (v.dot(m) / l).clamp(-1.0, 1.0).acos();
-        *keep = alpha - (reach / l).min(1.0).asin() <= theta;
-    }
+        let sin_beta = reach / l;
+        let cos_beta = (1.0 - sin_beta * sin_beta).sqrt();
+        v.dot(m) / l >= cos_theta * cos_beta - sin_theta * sin_beta - 1e-9
+    });
+}
+
+/// Whether `ray` passes within the instance's world sphere (one without a sphere always
+/// may): conservative, like [`cull_instances`], and a few multiplications where
+/// [`Instance::local_ray`](crate::scene::Instance::local_ray) carries the ray into the
+/// field and clips it. Asked first, it makes a ray's setup cost per instance it meets (and
+/// the few whose spheres it grazes), not per instance its tile keeps.
+pub(super) fn may_meet(plan: &InstancePlan, ray: &Ray) -> bool {
+    let Some((b, radius)) = plan.world_sphere else {
+        return true;
+    };
+    // Squared distances times `|d|²`: of `b` behind the origin and from the line, against
+    // the radius with margins for rounding (here and in the field's frame).
+    let (v, d2) = (b - ray.origin, ray.dir.length_squared());
+    let along = v.dot(ray.dir);
+    let reach = (radius * radius * (1.0 + 1e-6) + 1e-12 * v.length_squared()) * d2;
+    (along >= 0.0 || along * along <= reach) && v.length_squared() * d2 - along * along <= reach
 }

@@ -16,14 +16,11 @@ const SAMPLE_ROUNDING: f64 = 1e-4;
 
 impl InstancePlan {
     pub(in crate::render) fn for_scene(scene: &Scene, params: &MarchParams) -> Vec<InstancePlan> {
-        let mut feature_offset = 0;
         let space = scene.composite_space();
         scene
             .instances
             .iter()
             .map(|inst| {
-                let features = inst.field().feature_count();
-                feature_offset += features;
                 let spans =
                     inst.field()
                         .spans(Vec3::ZERO, Vec3::X, 0.0, 0.0, &mut Vec::<Span>::new());
@@ -49,8 +46,7 @@ impl InstancePlan {
                     occupancy,
                     base_step: inst.field().feature_size() as f64
                         / params.steps_per_feature.max(1e-3) as f64,
-                    features,
-                    feature_offset: feature_offset - features,
+                    features: inst.field().feature_count(),
                     smooth: inst.field().smooth_length().max(0.0) as f64,
                     encode: space == ColorSpace::Srgb
                         && inst.field().color_space() == ColorSpace::Linear,
@@ -112,12 +108,13 @@ fn primitive_spheres(
 }
 
 /// A tile's rays as a cone: they start within `rho` of their mean origin and point within
-/// `theta` of their mean direction `axis`.
+/// `θ` of their mean direction `axis` (kept as `θ`'s sine and cosine).
 pub(super) struct Bundle {
     origin: DVec3,
     axis: DVec3,
     rho: f64,
-    theta: f64,
+    sin_theta: f64,
+    cos_theta: f64,
 }
 
 impl Bundle {
@@ -141,48 +138,65 @@ impl Bundle {
         if cos_theta.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) || !rho.is_finite() {
             return None;
         }
+        // A margin for rounding in the angles.
+        let (sin_theta, cos_theta) = (cos_theta.min(1.0).acos() + 1e-6).sin_cos();
         Some(Bundle {
             origin,
             axis,
             rho,
-            // A margin for rounding in the angles.
-            theta: cos_theta.min(1.0).acos() + 1e-6,
+            sin_theta,
+            cos_theta,
         })
     }
 
     /// Whether some ray of the bundle may meet the sphere `(b, R)`: a ray starting within
     /// `ρ` of the cone's origin `c` meets it only if the ray from `c` along its direction
-    /// meets `(b, R + ρ)`, which needs the angle between the cone's axis and `b − c` to be
-    /// at most `θ + asin((R + ρ)/|b − c|)`.
+    /// meets `(b, R + ρ)`, which needs the angle `α` between the cone's axis and `b − c` to
+    /// be at most `θ + β`, `β = asin((R + ρ)/|b − c|)`; as both sides lie in `[0, π)`, that
+    /// is `cos α ≥ cos θ cos β − sin θ sin β`, no trigonometry per sphere.
     pub(super) fn may_meet(&self, (b, radius): (DVec3, f64)) -> bool {
         let v = b - self.origin;
         let (l, reach) = (v.length(), radius + self.rho);
         if l <= reach * (1.0 + 1e-9) {
             return true;
         }
-        let alpha = (v.dot(self.axis) / l).clamp(-1.0, 1.0).acos();
-        alpha - (reach / l).min(1.0).asin() <= self.theta
+        let sin_beta = reach / l;
+        let cos_beta = (1.0 - sin_beta * sin_beta).sqrt();
+        v.dot(self.axis) / l >= self.cos_theta * cos_beta - self.sin_theta * sin_beta - 1e-9
     }
 }
 
-/// Marks in `keep` the instances some ray of a tile (its [`Bundle`]) may meet; without a
-/// bundle, and for unbounded instances, all. This makes a tile's setup cost per instance,
-/// not per instance and pixel.
-pub(super) fn cull_instances(
-    plans: &[InstancePlan],
-    bundle: Option<&Bundle>,
-    keep: &mut Vec<bool>,
-) {
+/// Lists in `keep`, ascending, the instances some ray of a tile (its [`Bundle`]) may meet;
+/// without a bundle, and for unbounded instances, all. This makes a tile's setup cost per
+/// instance, not per instance and pixel.
+pub(super) fn cull_instances(plans: &[InstancePlan], bundle: Option<&Bundle>, keep: &mut Vec<u32>) {
     keep.clear();
-    keep.resize(plans.len(), true);
+    keep.extend(0..plans.len() as u32);
     let Some(bundle) = bundle else {
         return;
     };
-    for (keep, plan) in keep.iter_mut().zip(plans) {
-        if let Some(sphere) = plan.world_sphere {
-            *keep = bundle.may_meet(sphere);
-        }
-    }
+    keep.retain(|&i| {
+        plans[i as usize]
+            .world_sphere
+            .is_none_or(|sphere| bundle.may_meet(sphere))
+    });
+}
+
+/// Whether `ray` passes within the instance's world sphere (one without a sphere always
+/// may): conservative, like [`cull_instances`], and a few multiplications where
+/// [`Instance::local_ray`](crate::scene::Instance::local_ray) carries the ray into the
+/// field and clips it. Asked first, it makes a ray's setup cost per instance it meets (and
+/// the few whose spheres it grazes), not per instance its tile keeps.
+pub(super) fn may_meet(plan: &InstancePlan, ray: &Ray) -> bool {
+    let Some((b, radius)) = plan.world_sphere else {
+        return true;
+    };
+    // Squared distances times `|d|²`: of `b` behind the origin and from the line, against
+    // the radius with margins for rounding (here and in the field's frame).
+    let (v, d2) = (b - ray.origin, ray.dir.length_squared());
+    let along = v.dot(ray.dir);
+    let reach = (radius * radius * (1.0 + 1e-6) + 1e-12 * v.length_squared()) * d2;
+    (along >= 0.0 || along * along <= reach) && v.length_squared() * d2 - along * along <= reach
 }
 
 /// Per instance, the field a tile's rays sample: an analytic field's primitives that some
@@ -198,13 +212,13 @@ pub(super) struct TileFields {
 }
 
 impl TileFields {
-    /// Picks the fields for a tile of `bundle`'s rays, whose instances `keep` are meant.
+    /// Picks the fields for a tile of `bundle`'s rays, whose instances `keep` lists.
     pub(super) fn cull(
         &mut self,
         scene: &Scene,
         plans: &[InstancePlan],
         bundle: Option<&Bundle>,
-        keep: &[bool],
+        keep: &[u32],
     ) {
         let n_inst = plans.len();
         self.culled.resize_with(n_inst, Analytic::default);
@@ -213,11 +227,12 @@ impl TileFields {
         let Some(bundle) = bundle else {
             return;
         };
-        for (i, (inst, plan)) in scene.instances.iter().zip(plans).enumerate() {
-            let Some(analytic) = inst.handle().as_analytic() else {
+        for &i in keep {
+            let (i, plan) = (i as usize, &plans[i as usize]);
+            let Some(analytic) = scene.instances[i].handle().as_analytic() else {
                 continue;
             };
-            if !keep[i] || plan.primitive_spheres.is_empty() {
+            if plan.primitive_spheres.is_empty() {
                 continue;
             }
             let culled = &mut self.culled[i].primitives;

@@ -3,9 +3,7 @@
 use super::hidden::{hides_content, hides_gap, split_point, HIDDEN_DEPTH};
 use super::laying::{base_step_at, growth};
 use super::sampling::evaluate_pending;
-use super::{
-    bucket_by_instance, instances_of, InstancePlan, Node, Pending, Scratch, MAX_BISECTIONS,
-};
+use super::{bucket_by_instance, met_by, InstancePlan, Node, Pending, Scratch, MAX_BISECTIONS};
 use crate::field::Aabb;
 use crate::render::MarchParams;
 use crate::scene::Scene;
@@ -196,21 +194,21 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
     bucket_by_instance(
         &mut s.by_inst,
         n_inst,
-        &s.ray_insts,
-        &s.ray_inst_at,
+        &s.tile_insts,
+        &s.met,
+        &s.met_at,
         s.unsure.iter().enumerate().map(|(u, n)| (u as u32, n.0)),
     );
-    for (k, inst) in scene.instances.iter().enumerate() {
+    for &k in &s.tile_insts {
+        let (inst, k) = (&scene.instances[k as usize], k as usize);
         if s.by_inst[k].is_empty() {
             continue;
         }
         s.regions.clear();
         s.owners.clear();
-        for &u in &s.by_inst[k] {
+        for &(u, e) in &s.by_inst[k] {
             let (r, i, _) = s.unsure[u as usize];
-            let Some(lr) = &s.local[r as usize * n_inst + k] else {
-                continue;
-            };
+            let lr = &s.met[e as usize].local;
             let nodes = &s.nodes[r as usize];
             let (a, b) = (
                 nodes[i as usize].t.max(lr.t_near),
@@ -282,19 +280,15 @@ pub(super) fn transmittance_at(t_round: f64, nodes: &[Node], i: usize) -> f64 {
 /// at either end has it at both and is smooth over the step's length (see
 /// [`Field::smooth_length`](crate::field::Field::smooth_length)).
 fn smooth_step(r: usize, a: &Node, b: &Node, plans: &[InstancePlan], s: &Scratch) -> bool {
-    let n_inst = plans.len();
-    instances_of(s, r).iter().all(|&i| {
-        let (i, plan) = (i as usize, &plans[i as usize]);
+    met_by(s, r).iter().enumerate().all(|(j, met)| {
+        let (plan, lr) = (&plans[met.inst as usize], &met.local);
         let (sa, sb) = (
-            s.inst_sigma[a.slot as usize + i],
-            s.inst_sigma[b.slot as usize + i],
+            s.inst_sigma[a.slot as usize + j],
+            s.inst_sigma[b.slot as usize + j],
         );
         if sa == 0.0 && sb == 0.0 {
             return true;
         }
-        let Some(lr) = &s.local[r * n_inst + i] else {
-            return true;
-        };
         let smooth = plan.smooth * growth(plan, lr, a.t).min(growth(plan, lr, b.t));
         sa > 0.0 && sb > 0.0 && (b.t - a.t) * lr.units_per_world as f64 <= smooth
     })

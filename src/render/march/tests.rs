@@ -299,14 +299,13 @@ fn rays_out_of_budget_stop_and_are_counted() {
     assert!(a.data.iter().zip(&b.data).any(|(s, f)| *s < f - 1e-3));
 }
 
-#[test]
-fn tile_culling_keeps_every_instance_a_ray_of_the_tile_meets() {
+/// An 8×8 grid of small balls facing a 64×48 camera, one ball behind it and one far to its
+/// side: tiles see a few balls each, and no tile sees the last two.
+fn ball_grid() -> (Scene, crate::camera::Camera) {
     use crate::camera::{Camera, Perspective, Projection};
     use crate::field::{Primitive, ShColor, Shape};
     use glam::{DMat4, DVec3};
 
-    // An 8×8 grid of small balls facing the camera, one ball behind it and one far to
-    // its side: tiles see a few balls each, and no tile sees the last two.
     let ball = FieldHandle::analytic(Analytic {
         primitives: vec![Primitive {
             shape: Shape::Sphere {
@@ -340,11 +339,16 @@ fn tile_culling_keeps_every_instance_a_ray_of_the_tile_meets() {
             .unwrap()
         })
         .collect();
-    let scene = Scene::new(instances);
-    let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
     let p = Perspective::from_vertical_fov(64, 48, 40.0).unwrap();
     let eye = crate::demo::look_at(DVec3::new(0.0, -4.0, 0.0), DVec3::ZERO);
     let camera = Camera::new(eye, Projection::Perspective(p)).unwrap();
+    (Scene::new(instances), camera)
+}
+
+#[test]
+fn tile_culling_keeps_every_instance_a_ray_of_the_tile_meets() {
+    let (scene, camera) = ball_grid();
+    let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
     let (mut keep, mut kept, mut met) = (Vec::new(), 0, 0);
     for (x0, y0) in (0..4).flat_map(|i| (0..3).map(move |j| (16 * i, 16 * j))) {
         let rays: Vec<_> = (0..256)
@@ -357,14 +361,15 @@ fn tile_culling_keeps_every_instance_a_ray_of_the_tile_meets() {
                 .iter()
                 .flatten()
                 .any(|r| inst.local_ray(r, r.near, r.far).is_some());
+            let kept_i = keep.contains(&(i as u32));
             assert!(
-                keep[i] || !meets,
+                kept_i || !meets,
                 "tile ({x0}, {y0}) culled instance {i}, which a ray meets"
             );
-            kept += usize::from(keep[i]);
+            kept += usize::from(kept_i);
             met += usize::from(meets);
         }
-        assert!(!keep[64] && !keep[65]);
+        assert!(!keep.contains(&64) && !keep.contains(&65));
     }
     // Conservative, yet close: a tile keeps a few balls per ball it meets (the sphere
     // around a ball's box, and the cone around the tile's rays, are wider than both).
@@ -481,6 +486,47 @@ fn a_tiles_culled_field_is_the_whole_field_along_its_rays() {
     }
     assert!(samples > 1000, "{samples} samples with density");
     assert!(kept < seen / 3, "kept {kept} of {seen}");
+}
+
+/// A ray's list of instances, which its nodes keep densities for, holds exactly those it
+/// meets: found through the tile's culling and [`may_meet`](super::plan::may_meet), the same
+/// as asking every instance. And `may_meet` stays close: few rays ask an instance's local
+/// ray without meeting it.
+#[test]
+fn a_ray_lists_exactly_the_instances_it_meets() {
+    let (scene, camera) = ball_grid();
+    let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
+    let mut s = super::Scratch::default();
+    let (mut met, mut asked) = (0, 0);
+    for (x0, y0) in (0..4).flat_map(|i| (0..3).map(move |j| (16 * i, 16 * j))) {
+        let tile = crate::image::Window::new(x0, y0, x0 + 16, y0 + 16);
+        super::setup::setup_rays(
+            &scene,
+            &plans,
+            None,
+            &camera,
+            tile,
+            &Outputs::rgba(),
+            &mut s,
+        );
+        for (r, ray) in s.world_rays.clone().iter().enumerate() {
+            let ray = ray.unwrap();
+            let listed: Vec<u32> = super::met_by(&s, r).iter().map(|m| m.inst).collect();
+            let meets: Vec<u32> = (0..scene.instances.len() as u32)
+                .filter(|&i| {
+                    let inst = &scene.instances[i as usize];
+                    inst.local_ray(&ray, ray.near, ray.far).is_some()
+                })
+                .collect();
+            assert_eq!(listed, meets, "ray {r} of tile ({x0}, {y0})");
+            met += meets.len();
+            asked += plans
+                .iter()
+                .filter(|p| super::plan::may_meet(p, &ray))
+                .count();
+        }
+    }
+    assert!(met > 0 && asked <= 5 * met, "asked {asked}, met {met}");
 }
 
 /// The median depth from a log cut where [`super::RayState::log_piece`] cuts it is the

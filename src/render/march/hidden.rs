@@ -6,7 +6,7 @@
 use glam::Vec3;
 
 use super::laying::growth;
-use super::{instances_of, InstancePlan, Node, Scratch};
+use super::{met_by, InstancePlan, Node, Scratch};
 use crate::field::{Aabb, Field};
 use crate::scene::{LocalRay, Scene};
 
@@ -45,23 +45,22 @@ pub(super) const HIDDEN_SEARCH_DEPTH: u32 = 24;
 pub(super) const HIDDEN_SEARCH_QUERIES: u32 = 24;
 
 /// The instances that cannot bound their density (the others are searched by their bounds)
-/// and that ray `r` is inside over some of `[t0, t1]`, with their local ray, the part of
-/// `[t0, t1]` inside them, and their index.
+/// and that ray `r` is inside over some of `[t0, t1]`, with their index, their place among
+/// the ray's instances ([`met_by`]), their local ray and the part of `[t0, t1]` inside them.
 fn unbounded_over<'a>(
     plans: &'a [InstancePlan],
     r: usize,
     t0: f64,
     t1: f64,
     s: &'a Scratch,
-) -> impl Iterator<Item = (usize, &'a LocalRay, f64, f64)> + 'a {
-    let n_inst = plans.len();
-    instances_of(s, r).iter().filter_map(move |&i| {
-        let i = i as usize;
-        let lr = s.local[r * n_inst + i]
-            .as_ref()
-            .filter(|_| !plans[i].bounded)?;
+) -> impl Iterator<Item = (usize, usize, &'a LocalRay, f64, f64)> + 'a {
+    met_by(s, r).iter().enumerate().filter_map(move |(j, met)| {
+        let (i, lr) = (met.inst as usize, &met.local);
+        if plans[i].bounded {
+            return None;
+        }
         let (a, b) = (t0.max(lr.t_near), t1.min(lr.t_far));
-        (a < b).then_some((i, lr, a, b))
+        (a < b).then_some((i, j, lr, a, b))
     })
 }
 
@@ -91,8 +90,8 @@ pub(super) fn hides_content(
     }
     let before = (!a.starts_run && k > 0).then(|| &nodes[k - 1]);
     let after = nodes.get(k + 2).filter(|n| !n.starts_run);
-    unbounded_over(plans, r, a.t, b.t, s).any(|(i, lr, t0, t1)| {
-        let sigma = |n: &Node| s.inst_sigma[n.slot as usize + i];
+    unbounded_over(plans, r, a.t, b.t, s).any(|(i, j, lr, t0, t1)| {
+        let sigma = |n: &Node| s.inst_sigma[n.slot as usize + j];
         if sigma(a) != 0.0 || sigma(b) != 0.0 || before.is_some_and(|n| sigma(n) > 0.0) {
             return false;
         }
@@ -125,7 +124,7 @@ pub(super) fn split_point(
         return mid;
     }
     unbounded_over(plans, r, a.t, b.t, s)
-        .find_map(|(i, lr, t0, t1)| {
+        .find_map(|(i, _, lr, t0, t1)| {
             let field = scene.instances[i].field();
             let (p, q) = (lr.at(t0), lr.at(t1));
             if !field.may_be_occupied(&Aabb::new(p.min(q), p.max(q))) {
@@ -195,10 +194,10 @@ pub(super) fn hides_gap(
     s: &Scratch,
 ) -> bool {
     let length = b.t - a.t;
-    unbounded_over(plans, r, a.t, b.t, s).any(|(i, lr, t0, t1)| {
+    unbounded_over(plans, r, a.t, b.t, s).any(|(i, j, lr, t0, t1)| {
         let (sa, sb) = (
-            s.inst_sigma[a.slot as usize + i],
-            s.inst_sigma[b.slot as usize + i],
+            s.inst_sigma[a.slot as usize + j],
+            s.inst_sigma[b.slot as usize + j],
         );
         // `δ·T·σ`: what a gap as long as the step could hide, times the share.
         let hidden = GAP_SHARE * length * transmittance * sa.max(sb);

@@ -1,6 +1,6 @@
 //! The step policy and the laying of a round's regular nodes along a ray's runs.
 
-use super::{InstancePlan, Pending, Scratch, MAX_BISECTIONS};
+use super::{met_by, InstancePlan, Pending, Scratch, MAX_BISECTIONS};
 use crate::render::runs::RunKind;
 use crate::render::MarchParams;
 use crate::scene::LocalRay;
@@ -29,17 +29,15 @@ fn longest_step(base: f64, params: &MarchParams) -> f64 {
 /// among the instances the ray is inside at `t` (each grown beyond an unbounded field's
 /// core).
 pub(super) fn base_step_at(r: usize, t: f64, plans: &[InstancePlan], s: &Scratch) -> f64 {
-    let n_inst = plans.len();
     let (mut here, mut anywhere) = (f64::INFINITY, f64::INFINITY);
-    let range = s.ray_inst_at[r] as usize..s.ray_inst_at[r + 1] as usize;
-    for (&i, steps) in s.ray_insts[range.clone()].iter().zip(&s.ray_steps[range]) {
-        anywhere = anywhere.min(steps.step);
-        if t >= steps.t_near && t <= steps.t_far {
-            if !steps.grows {
-                here = here.min(steps.step);
-            } else if let Some(lr) = &s.local[r * n_inst + i as usize] {
-                here = here.min(steps.step * growth(&plans[i as usize], lr, t));
-            }
+    for met in met_by(s, r) {
+        anywhere = anywhere.min(met.step);
+        if t >= met.local.t_near && t <= met.local.t_far {
+            here = here.min(if met.grows {
+                met.step * growth(&plans[met.inst as usize], &met.local, t)
+            } else {
+                met.step
+            });
         }
     }
     // Segments lie inside instances, so `here` is finite but for rounding at their ends.

@@ -31,6 +31,7 @@ use glam::{DVec3, Vec3};
 
 use self::integration::integrate;
 use self::laying::lay_nodes;
+use self::plan::TileFields;
 use self::refinement::refine;
 use self::sampling::evaluate_pending;
 use self::setup::setup_rays;
@@ -68,10 +69,8 @@ pub(super) struct InstancePlan {
     occupancy: Option<Arc<Occupancy>>,
     /// Base step in field units.
     base_step: f64,
-    /// Floats of per-sample state the field passes from its density to its colour query,
-    /// and where they start among a node's features (the instances' side by side).
+    /// Floats of per-sample state the field passes from its density to its colour query.
     features: usize,
-    feature_offset: usize,
     /// The field's [`smooth_length`](crate::field::Field::smooth_length), field units.
     smooth: f64,
     /// A linear field in a scene composited in sRGB-encoded space: its colours are encoded.
@@ -90,11 +89,16 @@ pub(super) struct InstancePlan {
     /// A world sphere `(centre, radius)` around the field's bounds, for culling the instance
     /// from a tile's rays at once; `None` where the bounds are not finite.
     world_sphere: Option<(DVec3, f64)>,
+    /// For an analytic field that gives its spans, a world sphere around each primitive
+    /// (`None`: not finite), to cull the primitives from a tile's rays
+    /// ([`TileFields`](plan::TileFields)); empty for other fields.
+    primitive_spheres: Vec<Option<(DVec3, f64)>>,
 }
 
-/// Floats of field features per node: every instance's, side by side.
-fn feature_stride(plans: &[InstancePlan]) -> usize {
-    plans.iter().map(|p| p.features).sum()
+/// Floats of field features kept per slot (a node and an instance its ray meets): the
+/// most any instance has, so a slot's features start at `slot · width`.
+fn feature_width(plans: &[InstancePlan]) -> usize {
+    plans.iter().map(|p| p.features).max().unwrap_or(0)
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -105,7 +109,9 @@ struct Node {
     probe: f64,
     /// Total density per world unit.
     sigma: f64,
-    /// Where this node's per-instance densities start in `Scratch::inst_sigma`.
+    /// Where this node's per-instance densities start in `Scratch::inst_sigma`: one slot
+    /// per instance its ray meets, in the order of [`met_by`] (features: see
+    /// [`feature_width`]).
     slot: u32,
     /// No piece joins this node to the one before it (a run starts here).
     starts_run: bool,
@@ -224,13 +230,15 @@ impl RayState {
     }
 }
 
-/// One instance's steps along one ray ([`base_step_at`](laying::base_step_at)), worked out
-/// once per ray.
+/// An instance a ray meets: its local ray, and its steps along it
+/// ([`base_step_at`](laying::base_step_at)), worked out once per ray.
 #[derive(Clone, Copy, Debug)]
-struct RaySteps {
-    /// Where the ray is inside the instance (world distance).
-    t_near: f64,
-    t_far: f64,
+struct Met {
+    /// The instance's index in the scene.
+    inst: u32,
+    /// The ray in the instance's field; where it is inside the instance
+    /// (`t_near..=t_far`).
+    local: LocalRay,
     /// The instance's base step in world units, before an unbounded field's growth.
     step: f64,
     /// The instance's steps grow with distance (an unbounded field).
@@ -263,25 +271,25 @@ pub(super) struct Scratch {
     rays: Vec<RayState>,
     /// The rays still marching, in pixel order.
     active: Vec<u32>,
-    /// `local[ray · n_instances + i]`.
-    local: Vec<Option<LocalRay>>,
-    /// Per ray, the instances it has a local ray in (`ray_insts[ray_inst_at[r]..
-    /// ray_inst_at[r + 1]]`, ascending): the only ones its samples visit, so a sample's cost
-    /// does not grow with the scene's instance count.
-    ray_insts: Vec<u32>,
-    ray_inst_at: Vec<u32>,
-    /// Per entry of `ray_insts`, that instance's steps along the ray.
-    ray_steps: Vec<RaySteps>,
-    /// Per instance, the items (pending nodes, steps, rays) of one batched query.
-    by_inst: Vec<Vec<u32>>,
-    /// Per instance, whether some ray of the tile may meet it
-    /// ([`cull_instances`](plan::cull_instances)).
-    tile_insts: Vec<bool>,
+    /// Per ray, the instances it has a local ray in (`met[met_at[r]..met_at[r + 1]]`,
+    /// ascending, see [`met_by`]): the only ones its samples visit and keep densities of, so
+    /// a sample's cost does not grow with the scene's instance count.
+    met: Vec<Met>,
+    met_at: Vec<u32>,
+    /// Per instance, the items (pending nodes, steps, rays) of one batched query, each with
+    /// its ray's entry in `met`.
+    by_inst: Vec<Vec<(u32, u32)>>,
+    /// The instances some ray of the tile may meet, ascending
+    /// ([`cull_instances`](plan::cull_instances)): the only ones a tile's rays look at, or
+    /// its rounds batch queries for.
+    tile_insts: Vec<u32>,
+    /// Per instance, the field its samples on the tile's rays are asked of.
+    tile_fields: TileFields,
     run_scratch: RunScratch,
     nodes: Vec<Vec<Node>>,
     inst_sigma: Vec<f64>,
     inst_sigma_prev: Vec<f64>,
-    /// Field features per node (`slot / n_instances · stride + offset`), and last round's.
+    /// Field features per slot ([`feature_width`]), and last round's.
     features: Vec<f32>,
     features_prev: Vec<f32>,
     pending: Vec<Pending>,
@@ -322,8 +330,7 @@ pub(super) fn march_tile(
     out: &mut Vec<PixelResult>,
 ) -> RenderStats {
     let (params, outputs) = (&settings.march, &settings.outputs);
-    let n_inst = scene.instances.len();
-    let stride = feature_stride(plans);
+    let width = feature_width(plans);
     let n_rays = tile.area();
     setup_rays(scene, plans, splats, camera, tile, outputs, s);
     let empty_is_known = plans.iter().all(|p| p.bounded);
@@ -341,13 +348,12 @@ pub(super) fn march_tile(
             let carried = s.nodes[r].last().copied().filter(|n| n.extent == 0.0);
             s.nodes[r].clear();
             if let Some(mut node) = carried {
-                let slot = node.slot as usize;
+                let (slot, n) = (node.slot as usize, met_by(s, r).len());
                 node.slot = s.inst_sigma.len() as u32;
                 s.inst_sigma
-                    .extend_from_slice(&s.inst_sigma_prev[slot..slot + n_inst]);
-                let f = slot / n_inst * stride;
+                    .extend_from_slice(&s.inst_sigma_prev[slot..slot + n]);
                 s.features
-                    .extend_from_slice(&s.features_prev[f..f + stride]);
+                    .extend_from_slice(&s.features_prev[slot * width..(slot + n) * width]);
                 node.weight = 0.0;
                 s.nodes[r].push(node);
             }
@@ -385,29 +391,33 @@ pub(super) fn march_tile(
     }
 }
 
-/// The instances ray `r` has a local ray in, ascending.
+/// The instances ray `r` has a local ray in, ascending: the `j`th keeps its densities in
+/// slot `node.slot + j` of each of the ray's nodes.
 #[inline]
-fn instances_of(s: &Scratch, r: usize) -> &[u32] {
-    &s.ray_insts[s.ray_inst_at[r] as usize..s.ray_inst_at[r + 1] as usize]
+fn met_by(s: &Scratch, r: usize) -> &[Met] {
+    &s.met[s.met_at[r] as usize..s.met_at[r + 1] as usize]
 }
 
 /// Sorts `items` (an item and its ray) into one list per instance the ray has a local ray
-/// in, keeping their order: a batched query per instance then visits only its own items.
+/// in, each with the ray's entry of `s.met` for it, keeping their order: a batched query per
+/// instance then visits only its own items. Only the tile's instances' lists are cleared
+/// and filled: no other is to be read.
 fn bucket_by_instance(
-    by_inst: &mut Vec<Vec<u32>>,
+    by_inst: &mut Vec<Vec<(u32, u32)>>,
     n_inst: usize,
-    ray_insts: &[u32],
-    ray_inst_at: &[u32],
+    tile_insts: &[u32],
+    met: &[Met],
+    met_at: &[u32],
     items: impl Iterator<Item = (u32, u32)>,
 ) {
     by_inst.resize_with(n_inst, Vec::new);
-    for list in by_inst.iter_mut() {
-        list.clear();
+    for &i in tile_insts {
+        by_inst[i as usize].clear();
     }
     for (item, r) in items {
         let r = r as usize;
-        for &i in &ray_insts[ray_inst_at[r] as usize..ray_inst_at[r + 1] as usize] {
-            by_inst[i as usize].push(item);
+        for e in met_at[r]..met_at[r + 1] {
+            by_inst[met[e as usize].inst as usize].push((item, e));
         }
     }
 }

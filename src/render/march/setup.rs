@@ -3,9 +3,9 @@
 use glam::DVec3;
 
 use super::integration::{composite_fragment, composite_fragments};
-use super::plan::cull_instances;
+use super::plan::{cull_instances, may_meet, Bundle};
 use super::RayState;
-use super::{InstancePlan, RaySteps, Scratch};
+use super::{InstancePlan, Met, Scratch};
 use crate::camera::Camera;
 use crate::field::Fragment;
 use crate::image::Window;
@@ -31,11 +31,9 @@ pub(super) fn setup_rays(
     let n_rays = tile.area();
     s.rays.resize_with(n_rays, RayState::default);
     s.nodes.resize_with(n_rays, Vec::new);
-    s.local.clear();
-    s.ray_insts.clear();
-    s.ray_steps.clear();
-    s.ray_inst_at.clear();
-    s.ray_inst_at.push(0);
+    s.met.clear();
+    s.met_at.clear();
+    s.met_at.push(0);
     s.active.clear();
     s.world_rays.clear();
     s.world_rays.extend((0..n_rays).map(|r| {
@@ -43,7 +41,10 @@ pub(super) fn setup_rays(
         let y = tile.y0 + (r / tile.width() as usize) as u32;
         camera.ray(x as f64 + 0.5, y as f64 + 0.5)
     }));
-    cull_instances(plans, &s.world_rays, &mut s.tile_insts);
+    let bundle = Bundle::of(&s.world_rays);
+    cull_instances(plans, bundle.as_ref(), &mut s.tile_insts);
+    s.tile_fields
+        .cull(scene, plans, bundle.as_ref(), &s.tile_insts);
     for (r, state) in s.rays.iter_mut().enumerate().take(n_rays) {
         let ray = s.world_rays[r];
         state.ray = ray;
@@ -64,33 +65,31 @@ pub(super) fn setup_rays(
         state.run = 0;
         state.inset = 0.0;
         s.nodes[r].clear();
-        for (i, (inst, plan)) in scene.instances.iter().zip(plans).enumerate() {
-            if !s.tile_insts[i] {
-                s.local.push(None);
+        for &i in &s.tile_insts {
+            let (inst, plan) = (&scene.instances[i as usize], &plans[i as usize]);
+            let Some(lr) = ray
+                .filter(|ray| may_meet(plan, ray))
+                .and_then(|ray| inst.local_ray(&ray, ray.near, ray.far))
+            else {
                 continue;
-            }
-            let local = ray.and_then(|ray| inst.local_ray(&ray, ray.near, ray.far));
-            if let Some(lr) = &local {
-                let inset = instance_runs(
-                    lr,
-                    inst.field(),
-                    plan.occupancy.as_deref(),
-                    plan.unbounded.as_ref(),
-                    &mut s.run_scratch,
-                    &mut state.runs,
-                );
-                state.inset = state.inset.max(inset);
-                s.ray_insts.push(i as u32);
-                s.ray_steps.push(RaySteps {
-                    t_near: lr.t_near,
-                    t_far: lr.t_far,
-                    step: plan.base_step / lr.units_per_world as f64,
-                    grows: plan.unbounded.is_some(),
-                });
-            }
-            s.local.push(local);
+            };
+            let inset = instance_runs(
+                &lr,
+                s.tile_fields.field(scene, i as usize),
+                plan.occupancy.as_deref(),
+                plan.unbounded.as_ref(),
+                &mut s.run_scratch,
+                &mut state.runs,
+            );
+            state.inset = state.inset.max(inset);
+            s.met.push(Met {
+                inst: i,
+                local: lr,
+                step: plan.base_step / lr.units_per_world as f64,
+                grows: plan.unbounded.is_some(),
+            });
         }
-        s.ray_inst_at.push(s.ray_insts.len() as u32);
+        s.met_at.push(s.met.len() as u32);
         merge(&mut state.runs, &mut s.run_scratch);
         state.fragments.clear();
         state.next_fragment = 0;

@@ -2,7 +2,7 @@
 
 use glam::{DVec3, Vec3};
 
-use super::{feature_stride, FieldQuery, InstancePlan, Scratch};
+use super::{feature_width, FieldQuery, InstancePlan, Scratch};
 use crate::field::linear_to_srgb;
 use crate::render::MarchParams;
 use crate::scene::Scene;
@@ -13,17 +13,17 @@ use crate::scene::Scene;
 /// bounded by that budget times its brightest radiance.
 pub(super) fn shade(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
     let n_inst = plans.len();
-    let stride = feature_stride(plans);
+    let width = feature_width(plans);
     let budget = params.color_skip_budget as f64;
     s.queries.resize_with(n_inst, FieldQuery::default);
-    for query in &mut s.queries {
-        query.clear();
+    for &i in &s.tile_insts {
+        s.queries[i as usize].clear();
     }
     // One pass over the rays' nodes fills every instance's query, in ray order.
     for &r in &s.active {
         let r = r as usize;
         let state = &mut s.rays[r];
-        let instances = &s.ray_insts[s.ray_inst_at[r] as usize..s.ray_inst_at[r + 1] as usize];
+        let met = &s.met[s.met_at[r] as usize..s.met_at[r + 1] as usize];
         for node in s.nodes[r].iter_mut() {
             if node.weight > 0.0 && state.skipped_weight + node.weight <= budget {
                 state.skipped_weight += node.weight;
@@ -32,13 +32,10 @@ pub(super) fn shade(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
             if node.weight <= 0.0 {
                 continue;
             }
-            for &i in instances {
-                let i = i as usize;
-                let Some(lr) = &s.local[r * n_inst + i] else {
-                    continue;
-                };
+            for (j, met) in met.iter().enumerate() {
+                let (i, lr, slot) = (met.inst as usize, &met.local, node.slot as usize + j);
                 // Only an instance with density here gets a share (tested before dividing).
-                let sigma = s.inst_sigma[node.slot as usize + i];
+                let sigma = s.inst_sigma[slot];
                 if sigma <= 0.0 {
                     continue;
                 }
@@ -48,7 +45,7 @@ pub(super) fn shade(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
                     query.points.push(lr.at(node.probe));
                     query.dirs.push(lr.dir);
                     query.owners.push((r as u32, share));
-                    let at = node.slot as usize / n_inst * stride + plan.feature_offset;
+                    let at = slot * width;
                     query
                         .features
                         .extend_from_slice(&s.features[at..at + plan.features]);
@@ -56,18 +53,16 @@ pub(super) fn shade(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
             }
         }
     }
-    for ((inst, plan), query) in scene.instances.iter().zip(plans).zip(&s.queries) {
+    for &i in &s.tile_insts {
+        let (plan, query) = (&plans[i as usize], &s.queries[i as usize]);
         if query.points.is_empty() {
             continue;
         }
         s.rgb_out.clear();
         s.rgb_out.resize(query.points.len(), Vec3::ZERO);
-        inst.field().radiance_with_features(
-            &query.points,
-            &query.dirs,
-            &query.features,
-            &mut s.rgb_out,
-        );
+        s.tile_fields
+            .field(scene, i as usize)
+            .radiance_with_features(&query.points, &query.dirs, &query.features, &mut s.rgb_out);
         s.stats.color_samples += query.points.len() as u64;
         for (&(r, share), c) in query.owners.iter().zip(&s.rgb_out) {
             let c = if plan.encode {

@@ -93,7 +93,7 @@ impl Cascades {
     /// From the snapshot's densities (`values.len()` a positive multiple of 128³).
     pub(crate) fn from_densities(values: &[f32]) -> Option<Self> {
         let n3 = GRID * GRID * GRID;
-        if values.is_empty() || values.len() % n3 != 0 {
+        if values.is_empty() || !values.len().is_multiple_of(n3) {
             return None;
         }
         let mean = values[..n3]

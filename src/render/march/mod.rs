@@ -91,7 +91,7 @@ pub(super) struct InstancePlan {
     world_sphere: Option<(DVec3, f64)>,
     /// For an analytic field that gives its spans, a world sphere around each primitive
     /// (`None`: not finite), to cull the primitives from a tile's rays
-    /// ([`TileFields`](plan::TileFields)); empty for other fields.
+    /// ([`TileFields`]); empty for other fields.
     primitive_spheres: Vec<Option<(DVec3, f64)>>,
 }
 

@@ -2,7 +2,7 @@
 
 use glam::Vec3;
 
-use super::refinement::{change, larger_side, step_curvature};
+use super::refinement::{change, larger_side, step_curvature, LastDifference};
 use super::{Node, RayState};
 use crate::field::{Fragment, SPLAT_MIN_TRANSMITTANCE};
 use crate::render::composite::far_share;
@@ -31,6 +31,8 @@ pub(super) fn integrate(
     // and whether any of them had a neighbour to measure its curvature through.
     let mut rate = 0.0f64;
     let mut measured = false;
+    // The pieces come in order: each shares a second difference with the one before.
+    let mut last_difference = LastDifference::default();
     for i in 0..nodes.len() {
         let b = nodes[i];
         let stopped = if b.extent > 0.0 {
@@ -46,8 +48,8 @@ pub(super) fn integrate(
             // The curvature is worked out where the error rule needs it (an exact run) or
             // where it may decide the change: the jump bounds the change, and a jump that
             // would leave the worst estimate as it is needs no more.
-            let curvature =
-                (a.exact || weight * jump > state.worst).then(|| step_curvature(nodes, i - 1));
+            let curvature = (a.exact || weight * jump > state.worst)
+                .then(|| step_curvature(nodes, i - 1, 0, &mut last_difference));
             let error = if sum == 0.0 && !empty_is_known {
                 // Nothing seen at either end of a field that cannot say what lies between.
                 f64::INFINITY

@@ -31,6 +31,7 @@ use glam::{DVec3, Vec3};
 
 use self::integration::integrate;
 use self::laying::lay_nodes;
+use self::plan::TileFields;
 use self::refinement::refine;
 use self::sampling::evaluate_pending;
 use self::setup::setup_rays;
@@ -88,6 +89,10 @@ pub(super) struct InstancePlan {
     /// A world sphere `(centre, radius)` around the field's bounds, for culling the instance
     /// from a tile's rays at once; `None` where the bounds are not finite.
     world_sphere: Option<(DVec3, f64)>,
+    /// For an analytic field that gives its spans, a world sphere around each primitive
+    /// (`None`: not finite), to cull the primitives from a tile's rays
+    /// ([`TileFields`](plan::TileFields)); empty for other fields.
+    primitive_spheres: Vec<Option<(DVec3, f64)>>,
 }
 
 /// Floats of field features kept per slot (a node and an instance its ray meets): the
@@ -278,6 +283,8 @@ pub(super) struct Scratch {
     /// ([`cull_instances`](plan::cull_instances)): the only ones a tile's rays look at, or
     /// its rounds batch queries for.
     tile_insts: Vec<u32>,
+    /// Per instance, the field its samples on the tile's rays are asked of.
+    tile_fields: TileFields,
     run_scratch: RunScratch,
     nodes: Vec<Vec<Node>>,
     inst_sigma: Vec<f64>,

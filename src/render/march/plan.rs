@@ -1,13 +1,18 @@
-//! What the marcher works out once per instance and frame, and which instances a tile's rays
-//! may meet.
+//! What the marcher works out once per instance and frame, and which instances (and which
+//! primitives of an analytic field) a tile's rays may meet.
 
 use glam::{DVec3, Vec3};
 
 use super::InstancePlan;
 use crate::camera::Ray;
-use crate::field::{Aabb, ColorSpace, Span};
+use crate::field::{Aabb, Analytic, ColorSpace, Field, Span};
 use crate::render::MarchParams;
 use crate::scene::Scene;
+
+/// How far a primitive's world sphere is widened, relative to the world radius of its
+/// field's bounds and origin: the marcher samples along a local ray kept in `f32`, which
+/// strays from the world ray by ~1e-7 of the field's coordinates.
+const SAMPLE_ROUNDING: f64 = 1e-4;
 
 impl InstancePlan {
     pub(in crate::render) fn for_scene(scene: &Scene, params: &MarchParams) -> Vec<InstancePlan> {
@@ -49,6 +54,12 @@ impl InstancePlan {
                     bounded,
                     cell,
                     world_sphere: world_sphere(inst.field().bounds(), inst.world_from_field()),
+                    primitive_spheres: match inst.handle().as_analytic() {
+                        Some(analytic) if spans => {
+                            primitive_spheres(analytic, inst.world_from_field())
+                        }
+                        _ => Vec::new(),
+                    },
                 }
             })
             .collect()
@@ -77,52 +88,97 @@ fn world_sphere(b: Aabb, world_from_field: glam::DMat4) -> Option<(DVec3, f64)> 
     (centre.is_finite() && radius.is_finite()).then_some((centre, radius))
 }
 
-/// Lists in `keep`, ascending, the instances some ray of a tile may meet. The rays start
-/// within `ρ` of their mean origin `c` and point within `θ` of their mean direction `m`:
-/// such a ray meets a sphere `(b, R)` only if the ray from `c` along its direction meets
-/// `(b, R + ρ)`, which needs the angle `α` between `m` and `b − c` to be at most `θ + β`,
-/// `β = asin((R + ρ)/|b − c|)`; as both sides lie in `[0, π)`, that is
-/// `cos α ≥ cos θ cos β − sin θ sin β`, no trigonometry per instance. A wide bundle (`θ` of
-/// 90° or more: panoramic tiles) and unbounded instances keep all. This makes a tile's
-/// setup cost per instance, not per instance and pixel.
-pub(super) fn cull_instances(plans: &[InstancePlan], rays: &[Option<Ray>], keep: &mut Vec<u32>) {
-    keep.clear();
-    keep.extend(0..plans.len() as u32);
-    let (mut origin, mut dir, mut n) = (DVec3::ZERO, DVec3::ZERO, 0.0);
-    for ray in rays.iter().flatten() {
-        origin += ray.origin;
-        dir += ray.dir;
-        n += 1.0;
+/// Per primitive of an analytic field, a world sphere around its support, widened for the
+/// rounding of the marcher's samples ([`SAMPLE_ROUNDING`]); `None` where it is not finite.
+fn primitive_spheres(
+    analytic: &Analytic,
+    world_from_field: glam::DMat4,
+) -> Vec<Option<(DVec3, f64)>> {
+    let b = analytic.bounds();
+    let reach = Aabb::new(b.min.min(Vec3::ZERO), b.max.max(Vec3::ZERO));
+    let margin = world_sphere(reach, world_from_field).map(|(_, r)| SAMPLE_ROUNDING * r);
+    analytic
+        .primitives
+        .iter()
+        .map(|p| {
+            let (centre, radius) = world_sphere(p.shape.bounds(), world_from_field)?;
+            Some((centre, radius + margin?))
+        })
+        .collect()
+}
+
+/// A tile's rays as a cone: they start within `rho` of their mean origin and point within
+/// `θ` of their mean direction `axis` (kept as `θ`'s sine and cosine).
+pub(super) struct Bundle {
+    origin: DVec3,
+    axis: DVec3,
+    rho: f64,
+    sin_theta: f64,
+    cos_theta: f64,
+}
+
+impl Bundle {
+    /// The cone around `rays`; `None` where it culls nothing: no rays, directions that
+    /// cancel out, or a wide bundle (`θ` of 90° or more: panoramic tiles).
+    pub(super) fn of(rays: &[Option<Ray>]) -> Option<Bundle> {
+        let (mut origin, mut dir, mut n) = (DVec3::ZERO, DVec3::ZERO, 0.0);
+        for ray in rays.iter().flatten() {
+            origin += ray.origin;
+            dir += ray.dir;
+            n += 1.0;
+        }
+        let axis = dir.try_normalize()?;
+        let origin = origin / n;
+        let (mut rho, mut cos_theta) = (0.0f64, 1.0f64);
+        for ray in rays.iter().flatten() {
+            rho = rho.max((ray.origin - origin).length());
+            cos_theta = cos_theta.min(ray.dir.dot(axis) / ray.dir.length());
+        }
+        // NaN directions fail this too.
+        if cos_theta.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) || !rho.is_finite() {
+            return None;
+        }
+        // A margin for rounding in the angles.
+        let (sin_theta, cos_theta) = (cos_theta.min(1.0).acos() + 1e-6).sin_cos();
+        Some(Bundle {
+            origin,
+            axis,
+            rho,
+            sin_theta,
+            cos_theta,
+        })
     }
-    // No rays, or directions that cancel out: nothing to cull by.
-    let Some(m) = dir.try_normalize() else {
-        return;
-    };
-    let c = origin / n;
-    let (mut rho, mut cos_theta) = (0.0f64, 1.0f64);
-    for ray in rays.iter().flatten() {
-        rho = rho.max((ray.origin - c).length());
-        cos_theta = cos_theta.min(ray.dir.dot(m) / ray.dir.length());
-    }
-    // NaN directions fail this too.
-    if cos_theta.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) || !rho.is_finite() {
-        return;
-    }
-    // A margin for rounding in the angles.
-    let theta = cos_theta.min(1.0).acos() + 1e-6;
-    let (sin_theta, cos_theta) = theta.sin_cos();
-    keep.retain(|&i| {
-        let Some((b, radius)) = plans[i as usize].world_sphere else {
-            return true;
-        };
-        let v = b - c;
-        let (l, reach) = (v.length(), radius + rho);
+
+    /// Whether some ray of the bundle may meet the sphere `(b, R)`: a ray starting within
+    /// `ρ` of the cone's origin `c` meets it only if the ray from `c` along its direction
+    /// meets `(b, R + ρ)`, which needs the angle `α` between the cone's axis and `b − c` to
+    /// be at most `θ + β`, `β = asin((R + ρ)/|b − c|)`; as both sides lie in `[0, π)`, that
+    /// is `cos α ≥ cos θ cos β − sin θ sin β`, no trigonometry per sphere.
+    pub(super) fn may_meet(&self, (b, radius): (DVec3, f64)) -> bool {
+        let v = b - self.origin;
+        let (l, reach) = (v.length(), radius + self.rho);
         if l <= reach * (1.0 + 1e-9) {
             return true;
         }
         let sin_beta = reach / l;
         let cos_beta = (1.0 - sin_beta * sin_beta).sqrt();
-        v.dot(m) / l >= cos_theta * cos_beta - sin_theta * sin_beta - 1e-9
+        v.dot(self.axis) / l >= self.cos_theta * cos_beta - self.sin_theta * sin_beta - 1e-9
+    }
+}
+
+/// Lists in `keep`, ascending, the instances some ray of a tile (its [`Bundle`]) may meet;
+/// without a bundle, and for unbounded instances, all. This makes a tile's setup cost per
+/// instance, not per instance and pixel.
+pub(super) fn cull_instances(plans: &[InstancePlan], bundle: Option<&Bundle>, keep: &mut Vec<u32>) {
+    keep.clear();
+    keep.extend(0..plans.len() as u32);
+    let Some(bundle) = bundle else {
+        return;
+    };
+    keep.retain(|&i| {
+        plans[i as usize]
+            .world_sphere
+            .is_none_or(|sphere| bundle.may_meet(sphere))
     });
 }
 
@@ -141,4 +197,64 @@ pub(super) fn may_meet(plan: &InstancePlan, ray: &Ray) -> bool {
     let along = v.dot(ray.dir);
     let reach = (radius * radius * (1.0 + 1e-6) + 1e-12 * v.length_squared()) * d2;
     (along >= 0.0 || along * along <= reach) && v.length_squared() * d2 - along * along <= reach
+}
+
+/// Per instance, the field a tile's rays sample: an analytic field's primitives that some
+/// ray of the tile may meet, where that is fewer than all, else the instance's own field.
+/// The primitives left out have no density on the tile's rays, and the others add theirs in
+/// the same order, so the spans, densities and colours are the whole field's, bit for bit,
+/// for less work: a tile of the demo sees two or three of its environment's primitives.
+#[derive(Default)]
+pub(super) struct TileFields {
+    culled: Vec<Analytic>,
+    /// Whether `culled[i]` is instance `i`'s field for this tile.
+    in_use: Vec<bool>,
+}
+
+impl TileFields {
+    /// Picks the fields for a tile of `bundle`'s rays, whose instances `keep` lists.
+    pub(super) fn cull(
+        &mut self,
+        scene: &Scene,
+        plans: &[InstancePlan],
+        bundle: Option<&Bundle>,
+        keep: &[u32],
+    ) {
+        let n_inst = plans.len();
+        self.culled.resize_with(n_inst, Analytic::default);
+        self.in_use.clear();
+        self.in_use.resize(n_inst, false);
+        let Some(bundle) = bundle else {
+            return;
+        };
+        for &i in keep {
+            let (i, plan) = (i as usize, &plans[i as usize]);
+            let Some(analytic) = scene.instances[i].handle().as_analytic() else {
+                continue;
+            };
+            if plan.primitive_spheres.is_empty() {
+                continue;
+            }
+            let culled = &mut self.culled[i].primitives;
+            culled.clear();
+            culled.extend(
+                analytic
+                    .primitives
+                    .iter()
+                    .zip(&plan.primitive_spheres)
+                    .filter(|(_, sphere)| sphere.is_none_or(|s| bundle.may_meet(s)))
+                    .map(|(p, _)| *p),
+            );
+            self.in_use[i] = culled.len() < analytic.primitives.len();
+        }
+    }
+
+    /// The field instance `i`'s samples on this tile's rays are asked of.
+    pub(super) fn field<'a>(&'a self, scene: &'a Scene, i: usize) -> &'a dyn Field {
+        if self.in_use[i] {
+            &self.culled[i]
+        } else {
+            scene.instances[i].field()
+        }
+    }
 }

@@ -78,6 +78,8 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
     let any_smooth = plans.iter().any(|p| p.smooth > 0.0);
     s.pending.clear();
     s.unsure.clear();
+    // Candidates come in order along their rays: most share a difference with the last.
+    let mut last_difference = LastDifference::default();
     for &(r, i) in &s.candidates {
         let nodes = &s.nodes[r as usize];
         let (a, b) = (&nodes[i as usize], &nodes[i as usize + 1]);
@@ -127,9 +129,11 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         // inside a span, its ends' densities equal: judged by its curvature where both sides
         // give one (which bounds its `step_change`), else by the larger of its jump and the
         // side it has; worked out once for both transmittances.
-        let exact_change = (a.exact && !smooth).then(|| match step_curvature(nodes, i as usize) {
-            [Some(before), Some(after)] => before.max(after),
-            sides => jump.max(larger_side(sides)),
+        let exact_change = (a.exact && !smooth).then(|| {
+            match step_curvature(nodes, i as usize, r, &mut last_difference) {
+                [Some(before), Some(after)] => before.max(after),
+                sides => jump.max(larger_side(sides)),
+            }
         });
         let change = |weight: f64| {
             if smooth {
@@ -299,7 +303,8 @@ fn smooth_step(r: usize, a: &Node, b: &Node, plans: &[InstancePlan], s: &Scratch
 #[inline]
 pub(super) fn step_change(nodes: &[Node], i: usize) -> f64 {
     let (a, b) = (&nodes[i], &nodes[i + 1]);
-    change((b.sigma - a.sigma).abs(), step_curvature(nodes, i))
+    let curvature = step_curvature(nodes, i, 0, &mut LastDifference::default());
+    change((b.sigma - a.sigma).abs(), curvature)
 }
 
 /// [`step_change`] from a step's jump and its curvature on either side.
@@ -318,7 +323,7 @@ pub(super) fn change(jump: f64, curvature: [Option<f64>; 2]) -> f64 {
 /// neighbour keeps its jump.
 #[inline]
 pub(super) fn smooth_change(nodes: &[Node], i: usize) -> f64 {
-    match step_curvature(nodes, i) {
+    match step_curvature(nodes, i, 0, &mut LastDifference::default()) {
         [None, None] => (nodes[i + 1].sigma - nodes[i].sigma).abs(),
         sides => larger_side(sides),
     }
@@ -331,27 +336,53 @@ pub(super) fn larger_side([before, after]: [Option<f64>; 2]) -> f64 {
     before.unwrap_or(0.0).max(after.unwrap_or(0.0))
 }
 
-/// `δ²·|σ''|` over the step from node `i` to `i + 1`, `σ''` estimated by the second divided
-/// difference through the step's ends and the node before it, and through them and the one
-/// after it (steps may differ in length); `None` where the run has no such node.
+/// `δ²·|σ''|` over the step from node `i` to `i + 1` of ray `ray`, `σ''` estimated by the
+/// second divided difference through the step's ends and the node before it, and through
+/// them and the one after it (steps may differ in length); `None` where the run has no such
+/// node. `last` keeps the last difference worked out ([`LastDifference`]).
 #[inline]
-pub(super) fn step_curvature(nodes: &[Node], i: usize) -> [Option<f64>; 2] {
+pub(super) fn step_curvature(
+    nodes: &[Node],
+    i: usize,
+    ray: u32,
+    last: &mut LastDifference,
+) -> [Option<f64>; 2] {
     let (a, b) = (&nodes[i], &nodes[i + 1]);
     let h = b.t - a.t;
-    let before = (i > 0 && !a.starts_run).then(|| &nodes[i - 1]);
-    let after = nodes.get(i + 2).filter(|n| !n.starts_run);
-    // 2·f[x0, x1, x2]·h², which is `σ0 − 2σ1 + σ2` for equal steps of length `h`.
-    let curvature = |x: &Node, y: &Node, z: &Node| {
-        let (h0, h1) = (y.t - x.t, z.t - y.t);
-        if h0 > 0.0 && h1 > 0.0 {
-            let d = (z.sigma - y.sigma) / h1 - (y.sigma - x.sigma) / h0;
-            (2.0 * d / (h0 + h1) * h * h).abs()
-        } else {
-            f64::INFINITY
+    // `2·f[x0, x1, x2]·h²`, which is `σ0 − 2σ1 + σ2` for equal steps of length `h`.
+    let side = |difference: Option<f64>| difference.map_or(f64::INFINITY, |k| (k * h * h).abs());
+    let before = (i > 0 && !a.starts_run).then(|| side(last.around(nodes, i, ray)));
+    let after = nodes
+        .get(i + 2)
+        .filter(|n| !n.starts_run)
+        .map(|_| side(last.around(nodes, i + 1, ray)));
+    [before, after]
+}
+
+/// The twice second divided difference `2·f[x0, x1, x2]` around a node that [`step_curvature`]
+/// worked out last, by ray and node: a step's `after` side is around the same node as the
+/// next step's `before`, so a pass over a ray's steps in order works each out once. Valid
+/// while the ray's nodes stay as they are.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct LastDifference(Option<(u32, usize, Option<f64>)>);
+
+impl LastDifference {
+    /// The difference through nodes `i − 1`, `i` and `i + 1` of ray `ray`; `None` where a
+    /// step between them is not longer than 0.
+    #[inline]
+    fn around(&mut self, nodes: &[Node], i: usize, ray: u32) -> Option<f64> {
+        if let Some((r, at, difference)) = self.0 {
+            if (r, at) == (ray, i) {
+                return difference;
+            }
         }
-    };
-    [
-        before.map(|p| curvature(p, a, b)),
-        after.map(|q| curvature(a, b, q)),
-    ]
+        let (x, y, z) = (&nodes[i - 1], &nodes[i], &nodes[i + 1]);
+        let (h0, h1) = (y.t - x.t, z.t - y.t);
+        let difference = (h0 > 0.0 && h1 > 0.0).then(|| {
+            let d = (z.sigma - y.sigma) / h1 - (y.sigma - x.sigma) / h0;
+            2.0 * d / (h0 + h1)
+        });
+        self.0 = Some((ray, i, difference));
+        difference
+    }
 }

@@ -35,7 +35,7 @@ pub(super) fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Sc
     s.inst_sigma.resize(slot, 0.0);
     s.features.resize(slot * width, 0.0);
     for &i in &s.tile_insts {
-        let (inst, plan) = (&scene.instances[i as usize], &plans[i as usize]);
+        let plan = &plans[i as usize];
         let query = &mut s.queries[i as usize];
         if query.points.is_empty() {
             continue;
@@ -44,7 +44,8 @@ pub(super) fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Sc
         s.field_out.resize(query.points.len(), 0.0);
         let f = plan.features;
         query.features.resize(query.points.len() * f, 0.0);
-        inst.field()
+        s.tile_fields
+            .field(scene, i as usize)
             .density_with_features(&query.points, &mut s.field_out, &mut query.features);
         s.stats.density_samples += query.points.len() as u64;
         for (&(slot, _), features) in query

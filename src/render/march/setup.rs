@@ -3,7 +3,7 @@
 use glam::DVec3;
 
 use super::integration::{composite_fragment, composite_fragments};
-use super::plan::{cull_instances, may_meet};
+use super::plan::{cull_instances, may_meet, Bundle};
 use super::RayState;
 use super::{InstancePlan, Met, Scratch};
 use crate::camera::Camera;
@@ -41,7 +41,10 @@ pub(super) fn setup_rays(
         let y = tile.y0 + (r / tile.width() as usize) as u32;
         camera.ray(x as f64 + 0.5, y as f64 + 0.5)
     }));
-    cull_instances(plans, &s.world_rays, &mut s.tile_insts);
+    let bundle = Bundle::of(&s.world_rays);
+    cull_instances(plans, bundle.as_ref(), &mut s.tile_insts);
+    s.tile_fields
+        .cull(scene, plans, bundle.as_ref(), &s.tile_insts);
     for (r, state) in s.rays.iter_mut().enumerate().take(n_rays) {
         let ray = s.world_rays[r];
         state.ray = ray;
@@ -72,7 +75,7 @@ pub(super) fn setup_rays(
             };
             let inset = instance_runs(
                 &lr,
-                inst.field(),
+                s.tile_fields.field(scene, i as usize),
                 plan.occupancy.as_deref(),
                 plan.unbounded.as_ref(),
                 &mut s.run_scratch,

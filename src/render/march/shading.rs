@@ -54,22 +54,15 @@ pub(super) fn shade(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         }
     }
     for &i in &s.tile_insts {
-        let (inst, plan, query) = (
-            &scene.instances[i as usize],
-            &plans[i as usize],
-            &s.queries[i as usize],
-        );
+        let (plan, query) = (&plans[i as usize], &s.queries[i as usize]);
         if query.points.is_empty() {
             continue;
         }
         s.rgb_out.clear();
         s.rgb_out.resize(query.points.len(), Vec3::ZERO);
-        inst.field().radiance_with_features(
-            &query.points,
-            &query.dirs,
-            &query.features,
-            &mut s.rgb_out,
-        );
+        s.tile_fields
+            .field(scene, i as usize)
+            .radiance_with_features(&query.points, &query.dirs, &query.features, &mut s.rgb_out);
         s.stats.color_samples += query.points.len() as u64;
         for (&(r, share), c) in query.owners.iter().zip(&s.rgb_out) {
             let c = if plan.encode {

@@ -193,6 +193,53 @@ fn a_bump_between_ends_of_equal_density_is_judged_by_its_curvature() {
     assert_eq!(super::refinement::smooth_change(&slope[1..3], 0), 1.0);
 }
 
+/// A step's curvature is the same, bit for bit, whether its second differences are worked
+/// out afresh or kept from the step before ([`super::refinement::LastDifference`]): seeded
+/// rays of nodes (runs starting anywhere, repeated positions), their steps visited in order,
+/// backwards and at random, two rays interleaved on one memo.
+#[test]
+fn a_kept_second_difference_gives_the_curvature_worked_out_afresh() {
+    use super::refinement::{step_curvature, LastDifference};
+    use crate::bench::rng::SplitMix64;
+
+    let mut rng = SplitMix64::new(3);
+    let mut ray = || {
+        let mut t = 0.0;
+        (0..2 + rng.next_u64() % 14)
+            .map(|_| {
+                if rng.unit() > 0.1 {
+                    t += f64::from(rng.unit()) * 0.5;
+                }
+                let mut n = node(t, f64::from(rng.unit()) * 40.0);
+                n.starts_run = rng.unit() < 0.15;
+                n
+            })
+            .collect::<Vec<_>>()
+    };
+    let fresh = |nodes: &[super::Node], i| {
+        step_curvature(nodes, i, 0, &mut LastDifference::default()).map(|c| c.map(f64::to_bits))
+    };
+    for _ in 0..2000 {
+        let rays = [ray(), ray()];
+        let mut visits: Vec<(u32, usize)> = (0..2u32)
+            .flat_map(|r| (0..rays[r as usize].len() - 1).map(move |i| (r, i)))
+            .collect();
+        for order in 0..3 {
+            match order {
+                1 => visits.reverse(),
+                2 => visits.sort_by_key(|&(r, i)| (i * 7 + r as usize * 3) % 5),
+                _ => {}
+            }
+            let mut last = LastDifference::default();
+            for &(r, i) in &visits {
+                let nodes = &rays[r as usize];
+                let kept = step_curvature(nodes, i, r, &mut last).map(|c| c.map(f64::to_bits));
+                assert_eq!(kept, fresh(nodes, i), "ray {r} step {i}");
+            }
+        }
+    }
+}
+
 #[test]
 fn transmittance_inside_a_round_goes_through_the_lower_end_of_each_step() {
     let mut nodes = [
@@ -307,7 +354,8 @@ fn tile_culling_keeps_every_instance_a_ray_of_the_tile_meets() {
         let rays: Vec<_> = (0..256)
             .map(|k| camera.ray((x0 + k % 16) as f64 + 0.5, (y0 + k / 16) as f64 + 0.5))
             .collect();
-        super::plan::cull_instances(&plans, &rays, &mut keep);
+        let bundle = super::plan::Bundle::of(&rays);
+        super::plan::cull_instances(&plans, bundle.as_ref(), &mut keep);
         for (i, inst) in scene.instances.iter().enumerate() {
             let meets = rays
                 .iter()
@@ -326,6 +374,118 @@ fn tile_culling_keeps_every_instance_a_ray_of_the_tile_meets() {
     // Conservative, yet close: a tile keeps a few balls per ball it meets (the sphere
     // around a ball's box, and the cone around the tile's rays, are wider than both).
     assert!(met > 0 && kept <= 3 * met, "kept {kept}, met {met}");
+}
+
+/// A tile's culled analytic field ([`super::plan::TileFields`]) gives the whole field's
+/// spans, densities and colours, bit for bit, along every ray of the tile as the marcher
+/// sees it (its `f32` local ray), and leaves out most primitives no ray meets: a scattered
+/// field of small balls, boxes and Gaussians, rotated, scaled and moved into the world,
+/// seen by tiles of a perspective camera.
+#[test]
+fn a_tiles_culled_field_is_the_whole_field_along_its_rays() {
+    use crate::bench::rng::SplitMix64;
+    use crate::camera::{Camera, Perspective, Projection};
+    use crate::field::{Primitive, ShColor, Shape};
+    use glam::{DMat4, DQuat, DVec3};
+
+    let mut rng = SplitMix64::new(5);
+    let primitives: Vec<_> = (0..48)
+        .map(|k| {
+            let c = Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 4.0 - 2.0;
+            let r = 0.05 + 0.1 * (k % 3) as f32;
+            let shape = match k % 3 {
+                0 => Shape::Sphere {
+                    center: c,
+                    radius: r,
+                },
+                1 => Shape::Box {
+                    min: c - r,
+                    max: c + r,
+                },
+                _ => Shape::Gaussian {
+                    center: c,
+                    sigma: 0.5 * r,
+                    cutoff: 3.0,
+                },
+            };
+            Primitive {
+                shape,
+                density: 1.0 + k as f32,
+                color: ShColor::constant(Vec3::new(1.0, 0.1 * (k % 7) as f32, 0.5)),
+            }
+        })
+        .collect();
+    let field = Analytic { primitives };
+    let world_from_field = DMat4::from_scale_rotation_translation(
+        DVec3::new(1.5, 0.7, 1.1),
+        DQuat::from_euler(glam::EulerRot::XYZ, 0.3, -0.5, 1.1),
+        DVec3::new(0.4, 0.2, -0.3),
+    );
+    let handle = FieldHandle::analytic(field.clone());
+    let scene = Scene::new(vec![Instance::new(
+        "scattered",
+        handle,
+        world_from_field,
+        None,
+    )
+    .unwrap()]);
+    let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
+    let p = Perspective::from_vertical_fov(96, 64, 50.0).unwrap();
+    let eye = crate::demo::look_at(DVec3::new(1.0, -7.0, 2.0), DVec3::ZERO);
+    let camera = Camera::new(eye, Projection::Perspective(p)).unwrap();
+    let (mut keep, mut tile_fields) = (Vec::new(), super::plan::TileFields::default());
+    let (mut kept, mut seen, mut samples) = (0, 0, 0);
+    for (x0, y0) in (0..6).flat_map(|i| (0..4).map(move |j| (16 * i, 16 * j))) {
+        let rays: Vec<_> = (0..256)
+            .map(|k| camera.ray((x0 + k % 16) as f64 + 0.5, (y0 + k / 16) as f64 + 0.5))
+            .collect();
+        let bundle = super::plan::Bundle::of(&rays);
+        super::plan::cull_instances(&plans, bundle.as_ref(), &mut keep);
+        tile_fields.cull(&scene, &plans, bundle.as_ref(), &keep);
+        let tile_field = tile_fields.field(&scene, 0);
+        for lr in rays
+            .iter()
+            .flatten()
+            .filter_map(|r| scene.instances[0].local_ray(r, r.near, r.far))
+        {
+            let length = (lr.t_far - lr.t_near) * lr.units_per_world as f64;
+            let (mut whole, mut culled) = (Vec::new(), Vec::new());
+            assert!(field.spans(lr.origin, lr.dir, 0.0, length, &mut whole));
+            assert!(tile_field.spans(lr.origin, lr.dir, 0.0, length, &mut culled));
+            assert_eq!(whole, culled);
+            let points: Vec<_> = (0..=256)
+                .map(|k| lr.at(lr.t_near + (lr.t_far - lr.t_near) * k as f64 / 256.0))
+                .collect();
+            let dirs = vec![lr.dir; points.len()];
+            let (mut a, mut b) = (vec![0.0; points.len()], vec![0.0; points.len()]);
+            field.density(&points, &mut a);
+            tile_field.density(&points, &mut b);
+            assert_eq!(a, b, "tile ({x0}, {y0})");
+            samples += a.iter().filter(|&&s| s > 0.0).count();
+            let (mut a, mut b) = (
+                vec![Vec3::ZERO; points.len()],
+                vec![Vec3::ZERO; points.len()],
+            );
+            field.radiance(&points, &dirs, &mut a);
+            tile_field.radiance(&points, &dirs, &mut b);
+            assert_eq!(a, b, "tile ({x0}, {y0})");
+        }
+        // A primitive is held where the tile's field has the whole one's density at its
+        // centre (few overlap).
+        for p in &field.primitives {
+            let centre = match p.shape {
+                Shape::Sphere { center, .. } | Shape::Gaussian { center, .. } => center,
+                Shape::Box { min, max } => 0.5 * (min + max),
+            };
+            let (mut a, mut b) = ([0.0], [0.0]);
+            field.density(&[centre], &mut a);
+            tile_field.density(&[centre], &mut b);
+            kept += usize::from(a == b);
+            seen += 1;
+        }
+    }
+    assert!(samples > 1000, "{samples} samples with density");
+    assert!(kept < seen / 3, "kept {kept} of {seen}");
 }
 
 /// A ray's list of instances, which its nodes keep densities for, holds exactly those it

@@ -403,7 +403,7 @@ fn only_field(full: &Planes, field: Field) -> Planes {
     let h = full.height;
     rgba(full.width, h, |x, y, c| {
         let ofx_row = h - 1 - y;
-        let lower = ofx_row % 2 == 0;
+        let lower = ofx_row.is_multiple_of(2);
         if lower == (field == Field::Lower) {
             at(full, x, y, c)
         } else {

@@ -1,8 +1,8 @@
 //! Compositing: small named pure functions on premultiplied float RGBA [`Planes`].
 //!
 //! Every function takes whole planes of one size (top row first) and returns new planes:
-//! [`over`], [`mix`], [`accumulation_matte`], [`shadow_catcher_merge`], [`depth_merge`],
-//! [`shutter_average`]. The
+//! [`over()`], [`mix()`], [`accumulation_matte()`], [`shadow_catcher_merge()`],
+//! [`depth_merge()`], [`shutter_average()`]. The
 //! per-pixel formula of each is in its docs with a three-pixel worked example.
 //!
 //! **Reading pixels** ([`rgba_pixels`]): missing RGB reads as black; missing alpha reads as 1
@@ -11,7 +11,7 @@
 //! **Non-finite input is sanitised, not passed through**: NaN and ±inf colour or alpha samples
 //! read as 0, so every output of these functions is finite (a NaN in one plate must not spread
 //! through a comp). Depth samples that are NaN, +inf or ≥ [`BACKGROUND_DEPTH`] mean "nothing
-//! there" and count as infinitely far (see [`depth_merge`]).
+//! there" and count as infinitely far (see [`depth_merge()`]).
 //!
 //! ```
 //! use nerfx::composite::{over, rgba_pixels, rgba_planes};

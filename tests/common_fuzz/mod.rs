@@ -247,7 +247,7 @@ fn msgpack_fields(b: &[u8]) -> MsgpackFields {
             }
             0xd4..=0xd8 => Some(i + 2 + (1 << (m - 0xd4))),
             0xdc..=0xdf => {
-                let w = if m % 2 == 0 { 2 } else { 4 };
+                let w = if m.is_multiple_of(2) { 2 } else { 4 };
                 lengths.push((i + 1, w));
                 Some(i + 1 + w)
             }

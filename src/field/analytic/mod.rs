@@ -379,7 +379,7 @@ impl Field for Analytic {
 
     /// Each primitive's interval in closed form, cut where any begins or ends; a span is
     /// constant unless a Gaussian is in it (see `spans.rs`). A field of more than
-    /// [`MAX_SPAN_PRIMITIVES`] primitives says nothing (the same for every ray), and the
+    /// `MAX_SPAN_PRIMITIVES` primitives says nothing (the same for every ray), and the
     /// marcher walks its occupancy grid instead.
     fn spans(&self, origin: Vec3, dir: Vec3, t0: f64, t1: f64, out: &mut Vec<Span>) -> bool {
         if self.active().nth(MAX_SPAN_PRIMITIVES).is_some() {

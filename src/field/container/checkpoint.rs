@@ -422,7 +422,7 @@ impl<'a> Machine<'a> {
         let Value::Dict(d) = target else {
             return Err(self.err(format!("SETITEMS on a {}", target.kind())));
         };
-        if items.len() % 2 != 0 {
+        if !items.len().is_multiple_of(2) {
             return Err(self.err("SETITEMS with an odd number of values"));
         }
         let mut d = d.borrow_mut();

@@ -24,6 +24,11 @@ use glam::{DVec3, Vec3};
 
 /// Cells per axis of a cascade.
 pub(crate) const GRID: usize = 128;
+/// The finest level of the OR pyramid whose empty blocks the mask walk skips whole
+/// ([`Cascades::walk`]): leaving a block takes a few face crossings, which saves nothing
+/// over stepping through a block of 2³ cell by cell (measured: the trained fog's fill
+/// series at its smallest ball, where the walk is most of a ray's setup).
+const SKIP_LEVEL: usize = 2;
 /// Instant-ngp's occupancy threshold on the density (optical thickness per cell).
 const MIN_THICKNESS: f32 = 0.01;
 
@@ -39,6 +44,10 @@ pub(crate) struct Cascades {
     /// Per cascade, its lowest and highest occupied cell along each axis (`None`: none is):
     /// [`Cascades::segments`] walks only the part of a ray inside that box.
     occupied_box: Vec<Option<[[usize; 3]; 2]>>,
+    /// Per cascade, a sphere `(centre, radius²)` around that box widened by a cell on each
+    /// side, in coordinates `q − 0.5`: a ray whose line misses it is not walked, found with
+    /// a few multiplications where clipping it to the box takes six divisions.
+    occupied_sphere: Vec<Option<(DVec3, f64)>>,
 }
 
 /// A fixed-size set of cells: bit `i % 64` of word `i / 64`.
@@ -93,7 +102,7 @@ impl Cascades {
     /// From the snapshot's densities (`values.len()` a positive multiple of 128³).
     pub(crate) fn from_densities(values: &[f32]) -> Option<Self> {
         let n3 = GRID * GRID * GRID;
-        if values.is_empty() || values.len() % n3 != 0 {
+        if values.is_empty() || !values.len().is_multiple_of(n3) {
             return None;
         }
         let mean = values[..n3]
@@ -129,11 +138,24 @@ impl Cascades {
                 pyramid(base)
             })
             .collect();
+        let occupied_sphere = occupied_box
+            .iter()
+            .enumerate()
+            .map(|(c, b)| {
+                let [lo, hi] = (*b)?;
+                // Grid units to `q − 0.5`: u = (g/128 − 1/2)·2h.
+                let to_u = |g: f64| (g / GRID as f64 - 0.5) * 2.0 * f64::from(Self::half_width(c));
+                let lo = DVec3::from_array(lo.map(|i| to_u(i as f64 - 1.0)));
+                let hi = DVec3::from_array(hi.map(|i| to_u(i as f64 + 2.0)));
+                Some((0.5 * (lo + hi), (0.5 * (hi - lo)).length_squared()))
+            })
+            .collect();
         Some(Cascades {
             mips,
             march,
             occupied,
             occupied_box,
+            occupied_sphere,
         })
     }
 
@@ -181,62 +203,83 @@ impl Cascades {
     /// [`Cascades::occupied_at`] holds, appended to `out` sorted and apart (touching
     /// intervals joined). The ray is cut where it crosses the cascades' cubes, and each
     /// piece walks the cells of the cascade that owns its points, from face crossing to
-    /// face crossing (worked out in `f64`). An axis along which the ray does not move
-    /// takes its cell from `q0` as [`Cascades::cell`] does, so a ray lying in a cell's face
-    /// gets the cells its points are looked up in. Elsewhere a crossing may differ from the
-    /// face an `f32` point rounds to by the rounding of that point: a sample taken just
-    /// inside an interval's end lands inside it.
+    /// face crossing (worked out in `f64`), skipping blocks of empty cells whole
+    /// ([`Cascades::walk`]). An axis along which the ray does not move takes its cell from
+    /// `q0` as [`Cascades::cell`] does, so a ray lying in a cell's face gets the cells its
+    /// points are looked up in. Elsewhere a crossing may differ from the face an `f32`
+    /// point rounds to by the rounding of that point: a sample taken just inside an
+    /// interval's end lands inside it. Nothing is allocated but what `out` grows by.
     pub(crate) fn segments(&self, q0: Vec3, v: Vec3, t0: f64, t1: f64, out: &mut Vec<[f64; 2]>) {
         let first = out.len();
         let u0 = (q0 - Vec3::splat(0.5)).as_dvec3();
         let v = v.as_dvec3();
-        // The part of [t0, t1] inside each cascade's cube; nested like the cubes.
-        let mut inside: Vec<Option<(f64, f64)>> = (0..self.count())
-            .map(|c| {
-                let h = f64::from(Self::half_width(c));
-                let (mut a, mut b) = (t0, t1);
-                for k in 0..3 {
-                    if v[k] == 0.0 {
-                        if u0[k].abs() >= h {
-                            return None;
-                        }
-                        continue;
-                    }
-                    let (p, q) = ((-h - u0[k]) / v[k], (h - u0[k]) / v[k]);
-                    a = a.max(p.min(q));
-                    b = b.min(p.max(q));
-                }
-                (a < b).then_some((a, b))
-            })
-            .collect();
-        for c in (1..inside.len()).rev() {
-            inside[c - 1] = match (inside[c], inside[c - 1]) {
-                (Some((a, b)), Some((ia, ib))) => {
-                    let (a, b) = (ia.max(a), ib.min(b));
-                    (a < b).then_some((a, b))
-                }
-                _ => None,
-            };
+        if !(0..self.count()).any(|c| self.may_meet_occupied(c, u0, v)) {
+            return;
         }
-        // The innermost cascade the ray meets; each outer one owns what lies between its
-        // cube and the next smaller one's, before and after it.
-        let Some(m) = inside.iter().position(Option::is_some) else {
+        let inside = |c: usize| Self::inside(c, u0, v, (t0, t1));
+        // From the outermost cascade in, each owns what lies between its cube and the next
+        // smaller one's, before and after it, down to the innermost the ray meets.
+        let Some(mut part) = self.count().checked_sub(1).and_then(inside) else {
             return;
         };
-        let at = |c: usize| inside[c].unwrap_or((t0, t0));
-        for c in (m + 1..inside.len()).rev() {
-            self.walk(c, u0, v, (at(c).0, at(c - 1).0), out, first);
+        let mut m = self.count() - 1;
+        while let Some(inner) = m.checked_sub(1).and_then(inside) {
+            self.walk(m, u0, v, (part.0, inner.0), out, first);
+            (m, part) = (m - 1, inner);
         }
-        self.walk(m, u0, v, at(m), out, first);
-        for c in m + 1..inside.len() {
-            self.walk(c, u0, v, (at(c - 1).1, at(c).1), out, first);
+        self.walk(m, u0, v, part, out, first);
+        for c in m + 1..self.count() {
+            let outer = inside(c).unwrap_or((t0, t0));
+            self.walk(c, u0, v, (part.1, outer.1), out, first);
+            part = outer;
         }
+    }
+
+    /// The part of `[t0, t1]` where the ray `0.5 + u0 + t·v` is inside cascade `c`'s cube;
+    /// `None` where it misses it. Nested like the cubes, exactly: each bound is a chain of
+    /// correctly rounded (so monotonic) operations on the half width, which doubles from
+    /// cascade to cascade, so a cube's part lies within the next larger one's.
+    fn inside(c: usize, u0: DVec3, v: DVec3, (t0, t1): (f64, f64)) -> Option<(f64, f64)> {
+        let h = f64::from(Self::half_width(c));
+        let (mut a, mut b) = (t0, t1);
+        for k in 0..3 {
+            if v[k] == 0.0 {
+                if u0[k].abs() >= h {
+                    return None;
+                }
+                continue;
+            }
+            let (p, q) = ((-h - u0[k]) / v[k], (h - u0[k]) / v[k]);
+            a = a.max(p.min(q));
+            b = b.min(p.max(q));
+        }
+        (a < b).then_some((a, b))
+    }
+
+    /// Whether the line `0.5 + u0 + t·v` passes within cascade `c`'s
+    /// [`occupied_sphere`](Cascades::occupied_sphere), with margins for rounding.
+    #[inline]
+    fn may_meet_occupied(&self, c: usize, u0: DVec3, v: DVec3) -> bool {
+        let Some((centre, radius2)) = self.occupied_sphere[c] else {
+            return false;
+        };
+        // Squared distance from the line, times `|v|²`.
+        let (w, v2) = (centre - u0, v.length_squared());
+        let along = w.dot(v);
+        w.length_squared() * v2 - along * along
+            <= (radius2 * (1.0 + 1e-6) + 1e-12 * w.length_squared()) * v2
     }
 
     /// Appends the occupied cells of cascade `c` that the ray `0.5 + u0 + t·v` crosses over
     /// `[ta, tb]` to `out` (joined to `out[first..]`'s last interval where they touch). The
     /// cells of the next smaller cascade's cube are skipped: the walk meets them only where
     /// rounding puts the start on the wrong side of that cube's face.
+    ///
+    /// The walk visits the cells one by one, but where a cell is empty it looks up the
+    /// largest block of the OR pyramid around it that is empty too, and goes to the face the
+    /// ray leaves that block by: from there, every axis is on the cell the one-by-one walk
+    /// would have reached (the cells are found from the same face crossings), so the
+    /// intervals are the same, and a ray through empty space costs per block, not per cell.
     fn walk(
         &self,
         c: usize,
@@ -249,14 +292,19 @@ impl Cascades {
         let Some([lo, hi]) = self.occupied_box[c] else {
             return;
         };
+        if !self.may_meet_occupied(c, u0, v) {
+            return;
+        }
         let h = f64::from(Self::half_width(c));
-        // Grid units: g = 128·(u/2h + 1/2).
+        // Grid units: g = 128·(u/2h + 1/2). Both factors are powers of two: multiplying by
+        // one is dividing by the other, exactly.
         let per_unit = GRID as f64 / (2.0 * h);
+        let cell_size = 2.0 * h / GRID as f64;
         // Only the part of the ray inside the box of occupied cells, widened by a cell on
         // each side (so rounding at its faces loses nothing), can meet one.
         let (mut ta, mut tb) = (ta, tb);
         for k in (0..3).filter(|&k| v[k] != 0.0) {
-            let at = |g: f64| ((g - 0.5 * GRID as f64) / per_unit - u0[k]) / v[k];
+            let at = |g: f64| ((g - 0.5 * GRID as f64) * cell_size - u0[k]) / v[k];
             let (a, b) = (at(lo[k] as f64 - 1.0), at(hi[k] as f64 + 2.0));
             ta = ta.max(a.min(b));
             tb = tb.min(a.max(b));
@@ -264,6 +312,7 @@ impl Cascades {
         if ta >= tb {
             return;
         }
+        let grid_at = |k: usize, t: f64| (u0[k] + v[k] * t) * per_unit + 0.5 * GRID as f64;
         let mut cell = [0i64; 3];
         let mut next = [f64::INFINITY; 3];
         for k in 0..3 {
@@ -272,16 +321,17 @@ impl Cascades {
                 let u = ((u0[k] as f32) * pow2(-(c as i32)) + 0.5) * GRID as f32;
                 (u as i64).clamp(0, GRID as i64 - 1)
             } else {
-                let g = (u0[k] + v[k] * ta) * per_unit + 0.5 * GRID as f64;
-                (g.floor() as i64).clamp(0, GRID as i64 - 1)
+                (grid_at(k, ta).floor() as i64).clamp(0, GRID as i64 - 1)
             };
         }
         if (0..3).any(|k| v[k] == 0.0 && !(lo[k]..=hi[k]).contains(&(cell[k] as usize))) {
             return;
         }
+        let step = v.to_array().map(|v| if v > 0.0 { 1 } else { -1 });
+        // Where the ray leaves cell `cell` along axis `k`.
         let crossing = |k: usize, cell: i64| {
             let face = if v[k] > 0.0 { cell + 1 } else { cell };
-            ((face as f64 - 0.5 * GRID as f64) / per_unit - u0[k]) / v[k]
+            ((face as f64 - 0.5 * GRID as f64) * cell_size - u0[k]) / v[k]
         };
         for k in 0..3 {
             if v[k] != 0.0 {
@@ -295,12 +345,65 @@ impl Cascades {
             c > 0 && (0..3).all(|k| v[k] != 0.0 || (u0[k] as f32).abs() < Self::half_width(c - 1));
         let central =
             |k: usize, i: i64| v[k] == 0.0 || (GRID as i64 / 4..3 * GRID as i64 / 4).contains(&i);
+        let in_grid = |i: i64| (0..GRID as i64).contains(&i);
         let mut t = ta;
         loop {
-            let tn = next[0].min(next[1]).min(next[2]).min(tb);
             let index = cell.map(|i| i as usize);
+            let occupied = self.occupied_cell(c, index);
+            if !occupied {
+                if let Some(m) = self.empty_block(c, index) {
+                    // The block's last cell along each axis, and where the ray leaves it.
+                    let last = |k: usize| {
+                        let block = (cell[k] >> m) << m;
+                        if v[k] > 0.0 {
+                            block + (1 << m) - 1
+                        } else {
+                            block
+                        }
+                    };
+                    let exit = (0..3)
+                        .filter(|&k| v[k] != 0.0)
+                        .map(|k| crossing(k, last(k)))
+                        .fold(tb, f64::min);
+                    if exit >= tb {
+                        return;
+                    }
+                    for k in 0..3 {
+                        if next[k] > exit {
+                            continue;
+                        }
+                        // The cell whose exit face is the first crossed after `exit`:
+                        // guessed from the position there, never behind the next cell,
+                        // then set by the crossings themselves.
+                        let guess = (grid_at(k, exit).floor() as i64).clamp(-1, GRID as i64);
+                        let ahead = cell[k] + step[k];
+                        let mut i = if step[k] > 0 {
+                            guess.max(ahead)
+                        } else {
+                            guess.min(ahead)
+                        };
+                        while i != ahead && crossing(k, i - step[k]) > exit {
+                            i -= step[k];
+                        }
+                        let leaves = loop {
+                            let leaves = crossing(k, i);
+                            if leaves > exit {
+                                break leaves;
+                            }
+                            i += step[k];
+                        };
+                        if !in_grid(i) {
+                            return;
+                        }
+                        (cell[k], next[k]) = (i, leaves);
+                    }
+                    t = t.max(exit);
+                    continue;
+                }
+            }
+            let tn = next[0].min(next[1]).min(next[2]).min(tb);
             let owned = !(inner && (0..3).all(|k| central(k, cell[k])));
-            if tn > t && owned && self.occupied_cell(c, index) {
+            if tn > t && owned && occupied {
                 match out[first..].last_mut() {
                     Some(last) if last[1] >= t => last[1] = last[1].max(tn),
                     _ => out.push([t, tn]),
@@ -311,8 +414,8 @@ impl Cascades {
             }
             for k in 0..3 {
                 if next[k] == tn {
-                    cell[k] += if v[k] > 0.0 { 1 } else { -1 };
-                    if !(0..GRID as i64).contains(&cell[k]) {
+                    cell[k] += step[k];
+                    if !in_grid(cell[k]) {
                         return;
                     }
                     next[k] = crossing(k, cell[k]);
@@ -320,6 +423,19 @@ impl Cascades {
             }
             t = t.max(tn);
         }
+    }
+
+    /// The level of the largest block of the OR pyramid around the empty cell `[x, y, z]`
+    /// of cascade `c` that is empty, `2^m` cells across; `None` where the cell's own block
+    /// of `(2^SKIP_LEVEL)³` is not (the walk then steps to the next cell).
+    #[inline]
+    fn empty_block(&self, c: usize, [x, y, z]: [usize; 3]) -> Option<usize> {
+        let levels = &self.mips[c];
+        let empty = |m: usize| {
+            let n = GRID >> m;
+            !levels[m].get((((z >> m) * n + (y >> m)) * n) + (x >> m))
+        };
+        (SKIP_LEVEL..levels.len()).take_while(|&m| empty(m)).last()
     }
 
     /// Whether instant-ngp's marching bitfield has the cell of cascade `mip` holding `q`
@@ -675,6 +791,53 @@ mod tests {
             }
             for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
                 check_segments(&c, target - 3.0 * axis, axis, (0.0, 6.0), 1e-5);
+            }
+        }
+    }
+
+    #[test]
+    fn a_lone_cell_next_to_large_empty_blocks_is_found_whole() {
+        // Cascade 0: a lone cell at the corner of the empty half x ≥ 64 (a block of 64³
+        // and smaller ones around it), with cells at two far corners so the walk's box is
+        // the whole grid; cascade 1: a lone cell just outside cascade 0's cube. Rays aimed
+        // at a lone cell's centre, corners and edges from anywhere (they cross empty blocks
+        // of every size, and graze the cell), and along the axes through it and in its faces.
+        let n3 = GRID * GRID * GRID;
+        let mut v = vec![0.0f32; 2 * n3];
+        for (cascade, [x, y, z]) in [
+            (0, [63, 64, 64]),
+            (0, [0, 0, 0]),
+            (0, [127, 127, 127]),
+            (1, [97, 64, 40]),
+        ] {
+            v[cascade * n3 + morton(x, y, z)] = 1.0;
+        }
+        let c = Cascades::from_densities(&v).unwrap();
+        let mut rng = crate::bench::rng::SplitMix64::new(31);
+        for (cascade, lone) in [(0, [63, 64, 64]), (1, [97, 64, 40])] {
+            let at = |i: [f64; 3]| {
+                Vec3::from(i.map(|i| ((i / GRID as f64 - 0.5) * 2f64.powi(cascade) + 0.5) as f32))
+            };
+            let centre = at(lone.map(|i| i as f64 + 0.5));
+            for j in 0..60 {
+                // A corner (j % 3 == 0), the middle of an edge (1) or the centre (2).
+                let offset = [0; 3].map(|_| match j % 3 {
+                    0 => f64::from(rng.unit() < 0.5),
+                    1 => [0.0, 0.5, 1.0][(rng.unit() * 3.0) as usize % 3],
+                    _ => 0.5,
+                });
+                let target = at([0, 1, 2].map(|k| lone[k] as f64 + offset[k]));
+                let q0 = Vec3::new(
+                    rng.range(-2.5, 3.5),
+                    rng.range(-2.5, 3.5),
+                    rng.range(-2.5, 3.5),
+                );
+                check_segments(&c, q0, (target - q0).normalize(), (0.0, 8.0), 1e-5);
+            }
+            let face = at(lone.map(|i| i as f64));
+            for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+                check_segments(&c, centre - 3.0 * axis, axis, (0.0, 6.0), 1e-5);
+                check_segments(&c, face - 3.0 * axis, axis, (0.0, 6.0), 1e-5);
             }
         }
     }

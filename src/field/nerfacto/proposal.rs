@@ -108,17 +108,23 @@ impl std::ops::AddAssign for SamplerStats {
 /// Reusable buffers for [`NerfactoField::sample_rays`].
 #[derive(Clone, Debug, Default)]
 pub struct SamplerScratch {
-    /// Spacing edges per ray (`n + 1` each) of this iteration and the last.
+    /// Spacing edges (rows of `n + 1`) of this iteration and the last, and where each
+    /// ray's row starts (iteration 0 has one row for every ray).
     edges: Vec<f64>,
     prev_edges: Vec<f64>,
+    edge_rows: Vec<usize>,
+    prev_edge_rows: Vec<usize>,
     /// Weights per ray (`n` each) of the last evaluated iteration, one ray's CDF of them,
     /// and where in it the next iteration's edges go.
     weights: Vec<f64>,
     cdf: Vec<f64>,
     quantiles: Vec<f64>,
-    /// `(g(near), g(far))` per ray, and the distances of this iteration's edges.
+    /// `(g(near), g(far))` per ray, the distances of this iteration's edges (rows of
+    /// `n + 1`) and where each ray's row starts (rays with the same edges and span share
+    /// one).
     span: Vec<[f64; 2]>,
     distances: Vec<f64>,
+    distance_rows: Vec<usize>,
     /// Transmittance so far, per ray; rays still being evaluated.
     transmittance: Vec<f64>,
     live: Vec<u32>,
@@ -263,12 +269,12 @@ impl NerfactoField {
             rays.iter()
                 .map(|r| [sampler.spacing(r.near), sampler.spacing(r.far)]),
         );
-        // Iteration 0: uniform in spacing.
+        // Iteration 0: uniform in spacing, the same edges for every ray.
         let mut n = settings.proposal_samples[0];
         s.edges.clear();
-        for _ in rays {
-            s.edges.extend((0..=n).map(|j| j as f64 / n as f64));
-        }
+        s.edges.extend((0..=n).map(|j| j as f64 / n as f64));
+        s.edge_rows.clear();
+        s.edge_rows.resize(rays.len(), 0);
         for level in 0..=iterations {
             if level > 0 {
                 let b = if level < iterations {
@@ -277,11 +283,15 @@ impl NerfactoField {
                     settings.nerf_samples
                 } + 1;
                 std::mem::swap(&mut s.edges, &mut s.prev_edges);
+                std::mem::swap(&mut s.edge_rows, &mut s.prev_edge_rows);
                 s.edges.clear();
+                s.edge_rows.clear();
+                s.edge_rows.extend((0..rays.len()).map(|r| r * b));
                 quantiles(b, &mut s.quantiles);
                 for r in 0..rays.len() {
+                    let row = s.prev_edge_rows[r];
                     resample(
-                        &s.prev_edges[r * (n + 1)..(r + 1) * (n + 1)],
+                        &s.prev_edges[row..row + n + 1],
                         &s.weights[r * n..(r + 1) * n],
                         &s.quantiles,
                         &mut s.cdf,
@@ -291,18 +301,22 @@ impl NerfactoField {
                 n = b - 1;
             }
             s.distances.clear();
+            s.distance_rows.clear();
             for (r, ray) in rays.iter().enumerate() {
                 // Iteration 0's edges are the same for every ray: so are its distances on
-                // rays of the same span (most often all of them).
-                if level == 0 && r > 0 && (ray.near, ray.far) == (rays[r - 1].near, rays[r - 1].far)
+                // rays of the same span (most often all of them), kept once.
+                let row = s.edge_rows[r];
+                if r > 0
+                    && row == s.edge_rows[r - 1]
+                    && (ray.near, ray.far) == (rays[r - 1].near, rays[r - 1].far)
                 {
-                    s.distances
-                        .extend_from_within((r - 1) * (n + 1)..r * (n + 1));
+                    s.distance_rows.push(s.distance_rows[r - 1]);
                     continue;
                 }
+                s.distance_rows.push(s.distances.len());
                 let span = s.span[r];
                 let mut prev = ray.near;
-                for &e in &s.edges[r * (n + 1)..(r + 1) * (n + 1)] {
+                for &e in &s.edges[row..row + n + 1] {
                     // Kept within the ray's span and in order (rounding in `g⁻¹`).
                     let t = sampler.distance(e, span).clamp(prev, ray.far);
                     s.distances.push(t);
@@ -320,10 +334,10 @@ impl NerfactoField {
         Some(stats)
     }
 
-    /// Interval `j` of ray `r` (`n` intervals per ray) of the current iteration.
+    /// Interval `j` of ray `r` of the current iteration.
     #[inline]
-    fn interval(s: &SamplerScratch, r: usize, j: usize, n: usize) -> (f64, f64) {
-        let at = r * (n + 1) + j;
+    fn interval(s: &SamplerScratch, r: usize, j: usize) -> (f64, f64) {
+        let at = s.distance_rows[r] + j;
         (s.distances[at], s.distances[at + 1])
     }
 
@@ -348,7 +362,7 @@ impl NerfactoField {
         let mut first = 0;
         while !s.live.is_empty() && first < n {
             let last = (first + ROUND).min(n);
-            s.lay_midpoints(rays, n, first..last);
+            s.lay_midpoints(rays, first..last);
             s.sigma.resize(s.points.len(), 0.0);
             net.density(&s.points, &mut s.sigma, &mut s.density);
             queries += s.points.len() as u64;
@@ -356,7 +370,7 @@ impl NerfactoField {
                 let r = r as usize;
                 weigh_run(
                     sigma,
-                    &s.distances[r * (n + 1)..][first..=last],
+                    &s.distances[s.distance_rows[r]..][first..=last],
                     &mut s.transmittance[r],
                     &mut s.weights[r * n + first..r * n + last],
                 );
@@ -384,7 +398,7 @@ impl NerfactoField {
         pieces.resize(base + rays.len() * n, Piece::default());
         for r in 0..rays.len() {
             for j in 0..n {
-                let (t0, t1) = Self::interval(s, r, j, n);
+                let (t0, t1) = Self::interval(s, r, j);
                 pieces[base + r * n + j] = Piece {
                     t0,
                     t1,
@@ -404,7 +418,7 @@ impl NerfactoField {
         let mut first = 0;
         while !s.live.is_empty() && first < n {
             let last = (first + ROUND).min(n);
-            s.lay_midpoints(rays, n, first..last);
+            s.lay_midpoints(rays, first..last);
             s.sigma.resize(s.points.len(), 0.0);
             s.features.resize(s.points.len() * n_geo, 0.0);
             self.density_features_unbounded(&s.points, &mut s.sigma, &mut s.features);
@@ -415,7 +429,7 @@ impl NerfactoField {
                 let weights = &mut s.weights[r * n + first..r * n + last];
                 weigh_run(
                     sigma,
-                    &s.distances[r * (n + 1)..][first..=last],
+                    &s.distances[s.distance_rows[r]..][first..=last],
                     &mut s.transmittance[r],
                     weights,
                 );
@@ -448,13 +462,13 @@ impl NerfactoField {
 }
 
 impl SamplerScratch {
-    /// The midpoints of samples `samples` of the live rays (`n` per ray of this iteration),
-    /// ray after ray, into `points`.
-    fn lay_midpoints(&mut self, rays: &[SamplerRay], n: usize, samples: Range<usize>) {
+    /// The midpoints of samples `samples` of the live rays (of this iteration), ray after
+    /// ray, into `points`.
+    fn lay_midpoints(&mut self, rays: &[SamplerRay], samples: Range<usize>) {
         self.points.clear();
         for &r in &self.live {
             let ray = &rays[r as usize];
-            let t = &self.distances[r as usize * (n + 1)..][samples.start..=samples.end];
+            let t = &self.distances[self.distance_rows[r as usize]..][samples.start..=samples.end];
             self.points.extend(
                 t.windows(2)
                     .map(|t| (ray.origin + ray.dir * (0.5 * (t[0] + t[1]))).as_vec3()),

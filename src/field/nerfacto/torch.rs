@@ -156,6 +156,49 @@ impl TorchHashGrid {
         }
     }
 
+    /// The number of levels `L`.
+    #[cfg(target_arch = "x86_64")]
+    pub(super) fn n_levels(&self) -> usize {
+        self.scales.len()
+    }
+
+    /// Level `level` of eight unit-cube points (`u`: their x, y and z lanes), feature by
+    /// feature (lane `k` point `k`), as [`Self::encode8_avx2`] gives that level (the same
+    /// operations in the same order, so the same bits): each corner's eight rows of two
+    /// features in one 64-bit AVX-512 gather, each point's weight twice beside them, the
+    /// features separated once at the end. Only where [`Self::has_encode8_avx2`] and the
+    /// CPU has AVX-512 F and VL; `level < L`.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512vl,avx2")]
+    #[inline]
+    pub(super) fn encode8_level_avx512(
+        &self,
+        u: [std::arch::x86_64::__m256; 3],
+        level: usize,
+    ) -> [std::arch::x86_64::__m256; 2] {
+        use std::arch::x86_64::*;
+        let rows = self.table_size as usize;
+        let twice = _mm512_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7);
+        let apart = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 1, 3, 5, 7, 9, 11, 13, 15);
+        let table = &self.table[level * rows * 2..(level + 1) * rows * 2];
+        let cells = Cells8::new(u, self.scales[level]);
+        let mut acc = _mm512_setzero_ps();
+        for corner in 0..8 {
+            let (r, weight) = cells.corner_lanes(corner, self.table_size);
+            // SAFETY: every row is below `rows`, and the level's table has `2·rows` values
+            // (a row is one f64's bytes, `f32` rows need no more than 4-byte alignment for
+            // a gather).
+            let v = unsafe { _mm512_i32gather_pd::<8>(r, table.as_ptr().cast()) };
+            let w = _mm512_permutexvar_ps(twice, _mm512_castps256_ps512(weight));
+            acc = _mm512_add_ps(acc, _mm512_mul_ps(w, _mm512_castpd_ps(v)));
+        }
+        let f = _mm512_castps_pd(_mm512_permutexvar_ps(apart, acc));
+        [
+            _mm256_castpd_ps(_mm512_castpd512_pd256(f)),
+            _mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(f)),
+        ]
+    }
+
     /// [`Self::encode_features`] for two features, eight points per step with the same
     /// operations in the same order (so the same bits): the corners' hashes and weights as
     /// vectors, the rows fetched four at a time ([`pairs4`]). The last `len mod 8` points go through the plain loop.
@@ -318,14 +361,27 @@ impl Cells8 {
     #[inline]
     fn corner(&self, corner: usize, table_size: u32) -> ([u32; 8], std::arch::x86_64::__m256) {
         use std::arch::x86_64::*;
+        let (rows, weight) = self.corner_lanes(corner, table_size);
+        let mut r = [0u32; 8];
+        // SAFETY: `r` has 8 values.
+        unsafe { _mm256_storeu_si256(r.as_mut_ptr().cast(), rows) };
+        (r, weight)
+    }
+
+    /// [`Self::corner`] with the rows left in a vector (for a gather).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn corner_lanes(
+        &self,
+        corner: usize,
+        table_size: u32,
+    ) -> (std::arch::x86_64::__m256i, std::arch::x86_64::__m256) {
+        use std::arch::x86_64::*;
         let (face, c) = (corner & 3, corner >> 2);
         let weight = _mm256_mul_ps(self.face_w[face], self.w_z[c]);
         let hash = _mm256_xor_si256(self.face_h[face], self.h_z[c]);
         let mask = _mm256_set1_epi32((table_size - 1) as i32);
-        let mut r = [0u32; 8];
-        // SAFETY: `r` has 8 values.
-        unsafe { _mm256_storeu_si256(r.as_mut_ptr().cast(), _mm256_and_si256(hash, mask)) };
-        (r, weight)
+        (_mm256_and_si256(hash, mask), weight)
     }
 }
 

@@ -119,7 +119,7 @@ trait Feature: Copy + Default + FeatureLoad {
 
     /// [`Self::blend`] for each lane of a block: lane `p`'s features go to
     /// `rows[p·width + at..][..N]`, for the `rows.len() / width` lanes given. `AVX`: through
-    /// [`simd::Load::blend_block`] (f16 pairs eight lanes at once), with the same bits.
+    /// `simd::Load::blend_block_avx` (f16 pairs eight lanes at once), with the same bits.
     #[inline(always)]
     fn blend_block<const N: usize, const AVX: bool>(
         table: &[Self],

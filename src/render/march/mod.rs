@@ -91,14 +91,8 @@ pub(super) struct InstancePlan {
     world_sphere: Option<(DVec3, f64)>,
     /// For an analytic field that gives its spans, a world sphere around each primitive
     /// (`None`: not finite), to cull the primitives from a tile's rays
-    /// ([`TileFields`](plan::TileFields)); empty for other fields.
+    /// ([`TileFields`]); empty for other fields.
     primitive_spheres: Vec<Option<(DVec3, f64)>>,
-}
-
-/// Floats of field features kept per slot (a node and an instance its ray meets): the
-/// most any instance has, so a slot's features start at `slot · width`.
-fn feature_width(plans: &[InstancePlan]) -> usize {
-    plans.iter().map(|p| p.features).max().unwrap_or(0)
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -111,7 +105,7 @@ struct Node {
     sigma: f64,
     /// Where this node's per-instance densities start in `Scratch::inst_sigma`: one slot
     /// per instance its ray meets, in the order of [`met_by`] (features: see
-    /// [`feature_width`]).
+    /// [`Scratch::feature_width`]).
     slot: u32,
     /// No piece joins this node to the one before it (a run starts here).
     starts_run: bool,
@@ -283,13 +277,18 @@ pub(super) struct Scratch {
     /// ([`cull_instances`](plan::cull_instances)): the only ones a tile's rays look at, or
     /// its rounds batch queries for.
     tile_insts: Vec<u32>,
-    /// Per instance, the field its samples on the tile's rays are asked of.
+    /// Floats of field features kept per slot (a node and an instance its ray meets): the
+    /// most any of the tile's instances has, so a slot's features start at
+    /// `slot · feature_width`, and a tile that meets only featureless fields keeps none.
+    feature_width: usize,
+    /// Per instance, the field its spans, densities and colours on the tile's rays are asked
+    /// of ([`TileFields`]); its bounds and density bounds are the instance's own field's.
     tile_fields: TileFields,
     run_scratch: RunScratch,
     nodes: Vec<Vec<Node>>,
     inst_sigma: Vec<f64>,
     inst_sigma_prev: Vec<f64>,
-    /// Field features per slot ([`feature_width`]), and last round's.
+    /// Field features per slot (`feature_width` each), and last round's.
     features: Vec<f32>,
     features_prev: Vec<f32>,
     pending: Vec<Pending>,
@@ -330,9 +329,9 @@ pub(super) fn march_tile(
     out: &mut Vec<PixelResult>,
 ) -> RenderStats {
     let (params, outputs) = (&settings.march, &settings.outputs);
-    let width = feature_width(plans);
     let n_rays = tile.area();
     setup_rays(scene, plans, splats, camera, tile, outputs, s);
+    let width = s.feature_width;
     let empty_is_known = plans.iter().all(|p| p.bounded);
 
     while !s.active.is_empty() {

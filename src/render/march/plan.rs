@@ -152,8 +152,9 @@ impl Bundle {
     /// Whether some ray of the bundle may meet the sphere `(b, R)`: a ray starting within
     /// `ρ` of the cone's origin `c` meets it only if the ray from `c` along its direction
     /// meets `(b, R + ρ)`, which needs the angle `α` between the cone's axis and `b − c` to
-    /// be at most `θ + β`, `β = asin((R + ρ)/|b − c|)`; as both sides lie in `[0, π)`, that
-    /// is `cos α ≥ cos θ cos β − sin θ sin β`, no trigonometry per sphere.
+    /// be at most `θ + β`, `β = asin((R + ρ)/|b − c|)`; as both sides lie in `[0, π]` (`θ + β`
+    /// may pass π by `θ`'s rounding margin, which the slack below covers), that is
+    /// `cos α ≥ cos θ cos β − sin θ sin β`, no trigonometry per sphere.
     pub(super) fn may_meet(&self, (b, radius): (DVec3, f64)) -> bool {
         let v = b - self.origin;
         let (l, reach) = (v.length(), radius + self.rho);
@@ -167,7 +168,7 @@ impl Bundle {
 }
 
 /// Lists in `keep`, ascending, the instances some ray of a tile (its [`Bundle`]) may meet;
-/// without a bundle, and for unbounded instances, all. This makes a tile's setup cost per
+/// without a bundle, and for instances without finite bounds, all. This makes a tile's setup cost per
 /// instance, not per instance and pixel.
 pub(super) fn cull_instances(plans: &[InstancePlan], bundle: Option<&Bundle>, keep: &mut Vec<u32>) {
     keep.clear();
@@ -232,7 +233,8 @@ impl TileFields {
             let Some(analytic) = scene.instances[i].handle().as_analytic() else {
                 continue;
             };
-            if plan.primitive_spheres.is_empty() {
+            // A lone primitive's sphere holds the instance's, which the tile kept.
+            if plan.primitive_spheres.len() <= 1 {
                 continue;
             }
             let culled = &mut self.culled[i].primitives;
@@ -242,14 +244,19 @@ impl TileFields {
                     .primitives
                     .iter()
                     .zip(&plan.primitive_spheres)
-                    .filter(|(_, sphere)| sphere.is_none_or(|s| bundle.may_meet(s)))
+                    // Primitives without density add nothing anywhere.
+                    .filter(|(p, sphere)| {
+                        p.density > 0.0 && sphere.is_none_or(|s| bundle.may_meet(s))
+                    })
                     .map(|(p, _)| *p),
             );
             self.in_use[i] = culled.len() < analytic.primitives.len();
         }
     }
 
-    /// The field instance `i`'s samples on this tile's rays are asked of.
+    /// The field instance `i`'s spans, densities and colours on this tile's rays are asked
+    /// of. Its bounds and density bounds are not the instance's: ask the instance's own
+    /// field for those.
     pub(super) fn field<'a>(&'a self, scene: &'a Scene, i: usize) -> &'a dyn Field {
         if self.in_use[i] {
             &self.culled[i]

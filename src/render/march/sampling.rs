@@ -1,6 +1,6 @@
 //! Density sampling: a round's pending nodes asked of each field in one batch.
 
-use super::{feature_width, met_by, FieldQuery, InstancePlan, Node, Scratch};
+use super::{met_by, FieldQuery, InstancePlan, Node, Scratch};
 use crate::scene::Scene;
 
 /// Evaluates every pending node's density (one batched call per instance) and inserts the
@@ -8,7 +8,7 @@ use crate::scene::Scene;
 /// meets, in the order of [`met_by`]; one its probe is outside keeps a density of zero.
 pub(super) fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
     let n_inst = plans.len();
-    let width = feature_width(plans);
+    let width = s.feature_width;
     let first_slot = s.inst_sigma.len();
     s.queries.resize_with(n_inst, FieldQuery::default);
     for &i in &s.tile_insts {

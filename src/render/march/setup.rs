@@ -43,6 +43,10 @@ pub(super) fn setup_rays(
     }));
     let bundle = Bundle::of(&s.world_rays);
     cull_instances(plans, bundle.as_ref(), &mut s.tile_insts);
+    s.feature_width = (s.tile_insts.iter())
+        .map(|&i| plans[i as usize].features)
+        .max()
+        .unwrap_or(0);
     s.tile_fields
         .cull(scene, plans, bundle.as_ref(), &s.tile_insts);
     for (r, state) in s.rays.iter_mut().enumerate().take(n_rays) {

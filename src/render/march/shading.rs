@@ -2,7 +2,7 @@
 
 use glam::{DVec3, Vec3};
 
-use super::{feature_width, FieldQuery, InstancePlan, Scratch};
+use super::{FieldQuery, InstancePlan, Scratch};
 use crate::field::linear_to_srgb;
 use crate::render::MarchParams;
 use crate::scene::Scene;
@@ -13,7 +13,7 @@ use crate::scene::Scene;
 /// bounded by that budget times its brightest radiance.
 pub(super) fn shade(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
     let n_inst = plans.len();
-    let width = feature_width(plans);
+    let width = s.feature_width;
     let budget = params.color_skip_budget as f64;
     s.queries.resize_with(n_inst, FieldQuery::default);
     for &i in &s.tile_insts {

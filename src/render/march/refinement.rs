@@ -128,7 +128,9 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         // Worked out once for both transmittances.
         let exact_estimate = (a.exact && !smooth).then(|| {
             let sides = step_curvature(nodes, i as usize, r, &mut last_difference);
-            exact_change(a, b, sides, any_smooth)
+            let trained = any_smooth
+                && (met_by(s, r as usize).iter()).any(|m| plans[m.inst as usize].smooth > 0.0);
+            exact_change(a, b, sides, trained)
         });
         let change = |weight: f64| {
             if smooth {
@@ -329,9 +331,8 @@ pub(super) fn smooth_change(nodes: &[Node], i: usize) -> f64 {
 /// peak two overlapping Gaussians make inside a span; a trained density's inside its
 /// mask), so it is judged by its curvature (`sides`, [`step_curvature`]) where both sides
 /// give one (which bounds its [`step_change`]), else by the larger of its jump and the side
-/// it has. With neither side,
-/// by its jump, but for a run's first step where some field is trained (`trained`):
-/// [`unmeasured_change`]. An analytic field's spans are split at their peaks; a trained
+/// it has. With neither side, by its jump, but for a run's first step on a ray that meets a
+/// trained field (`trained`): [`unmeasured_change`]. An analytic field's spans are split at their peaks; a trained
 /// field's mask segments are not, and a segment one step long shows nothing of what lies
 /// inside it (a step alone in a later round of its run follows measured curvatures).
 #[inline]

@@ -29,4 +29,11 @@ impl SplitMix64 {
     pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
         lo + (hi - lo) * self.unit()
     }
+
+    /// A point uniform in the cube `[lo, hi)³`: x, then y, then z drawn by [`Self::range`].
+    pub fn in_cube(&mut self, lo: f32, hi: f32) -> glam::Vec3 {
+        let x = self.range(lo, hi);
+        let y = self.range(lo, hi);
+        glam::Vec3::new(x, y, self.range(lo, hi))
+    }
 }

@@ -373,16 +373,8 @@ mod tests {
         let mut pts = Vec::new();
         let mut sigma = Vec::new();
         for _ in 0..200 {
-            let o = Vec3::new(
-                rng.range(-3.0, 3.0),
-                rng.range(-3.0, 3.0),
-                rng.range(-3.0, 3.0),
-            );
-            let target = Vec3::new(
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-            );
+            let o = rng.in_cube(-3.0, 3.0);
+            let target = rng.in_cube(-1.0, 1.0);
             let d = (target - o).normalize();
             let s = spans_of(&f, o, d, 0.0, 8.0);
             for w in s.windows(2) {

@@ -727,17 +727,8 @@ mod tests {
             // From outside every cascade (half width 2) or from inside one, in any direction.
             let outside = rng.unit() < 0.5;
             let reach = if outside { 3.0 } else { 1.5 };
-            let q0 = Vec3::new(
-                rng.range(0.5 - reach, 0.5 + reach),
-                rng.range(0.5 - reach, 0.5 + reach),
-                rng.range(0.5 - reach, 0.5 + reach),
-            );
-            let d = Vec3::new(
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-            )
-            .normalize();
+            let q0 = rng.in_cube(0.5 - reach, 0.5 + reach);
+            let d = rng.in_cube(-1.0, 1.0).normalize();
             check_segments(&c, q0, d, (0.0, 8.0), 1e-5);
         }
     }
@@ -776,16 +767,8 @@ mod tests {
         for &(cascade, centre) in &centres {
             let target = Vec3::from(centre.map(|i| at(i as f64 + 0.5, cascade)));
             for _ in 0..20 {
-                let q0 = Vec3::new(
-                    rng.range(-2.5, 3.5),
-                    rng.range(-2.5, 3.5),
-                    rng.range(-2.5, 3.5),
-                );
-                let jitter = Vec3::new(
-                    rng.range(-0.02, 0.02),
-                    rng.range(-0.02, 0.02),
-                    rng.range(-0.02, 0.02),
-                );
+                let q0 = rng.in_cube(-2.5, 3.5);
+                let jitter = rng.in_cube(-0.02, 0.02);
                 let d = (target + jitter - q0).normalize();
                 check_segments(&c, q0, d, (0.0, 8.0), 1e-5);
             }
@@ -827,11 +810,7 @@ mod tests {
                     _ => 0.5,
                 });
                 let target = at([0, 1, 2].map(|k| lone[k] as f64 + offset[k]));
-                let q0 = Vec3::new(
-                    rng.range(-2.5, 3.5),
-                    rng.range(-2.5, 3.5),
-                    rng.range(-2.5, 3.5),
-                );
+                let q0 = rng.in_cube(-2.5, 3.5);
                 check_segments(&c, q0, (target - q0).normalize(), (0.0, 8.0), 1e-5);
             }
             let face = at(lone.map(|i| i as f64));

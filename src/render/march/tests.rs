@@ -411,7 +411,7 @@ fn a_tiles_culled_field_is_the_whole_field_along_its_rays() {
     let mut rng = SplitMix64::new(5);
     let primitives: Vec<_> = (0..48)
         .map(|k| {
-            let c = Vec3::new(rng.unit(), rng.unit(), rng.unit()) * 4.0 - 2.0;
+            let c = rng.in_cube(-2.0, 2.0);
             let r = 0.05 + 0.1 * (k % 3) as f32;
             let shape = match k % 3 {
                 0 => Shape::Sphere {

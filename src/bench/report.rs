@@ -134,11 +134,11 @@ fn target_note(scene: &SceneReport) -> String {
         None => s += "Compared: every pixel, against the exact integral.\n",
         Some(e) => {
             s += &format!(
-                "Compared: every {ROW_STRIDE}th row, against a finer nerfx march, which is not \
-                 exact: against a march twice as fine again (on every {CHECK_STRIDE}th of those \
-                 rows) it is off by up to {:.2e} in alpha and {:.2e} in colour, so a preset \
-                 missing its target by less than that may be the reference's miss.\n",
-                e.max_alpha_error, e.max_color_error
+                "Compared: every {ROW_STRIDE}th row, against the reference above, which is not \
+                 exact: against {} (on every {CHECK_STRIDE}th of those rows) it is off by up \
+                 to {:.2e} in alpha and {:.2e} in colour, so a preset missing its target by \
+                 less than that may be the reference's miss.\n",
+                scene.reference_check, e.max_alpha_error, e.max_color_error
             );
         }
     }

@@ -60,6 +60,9 @@ pub enum Truth {
     Exact,
     /// A much finer nerfx march (trained fields have no closed form).
     FineMarch,
+    /// An adaptive f64 quadrature of the trained field between its mask's crossings
+    /// ([`crate::reference::render_trained`]), which shares no code with the marcher.
+    Quadrature,
     /// None: splats are rasterised, not marched, exactly as gsplat's classic mode (checked
     /// against a NumPy rasteriser in the tests); the presets do not change them.
     Rasterised,
@@ -134,7 +137,7 @@ pub fn build(
                 d.to_string(),
                 scene,
                 framed(DVec3::new(2.2, -1.6, 0.8))?,
-                Truth::FineMarch,
+                Truth::Quadrature,
             )
         }
         SceneKind::Splats => {

@@ -3,19 +3,22 @@
 //! heap.
 //!
 //! References: analytic scenes have the exact closed form for every pixel. Trained fields
-//! have none; their reference is a much finer nerfx march ([`fine_params`]) of every
-//! [`ROW_STRIDE`]-th row of the frame (a full fine frame would take longer than the rest of
-//! the suite), and renders are compared on those rows. The naive marcher, which neither skips
+//! have none; their reference is taken on every [`ROW_STRIDE`]-th row of the frame (a full
+//! reference frame would take longer than the rest of the suite), and renders are compared
+//! on those rows: a much finer nerfx march ([`fine_params`]), or, for a dense field whose
+//! opaque shells a march cannot be trusted to judge (it shares the marcher's refinement),
+//! an adaptive f64 quadrature of the field between its mask's crossings
+//! ([`reference::render_trained`], to [`QUADRATURE_TOLERANCE`]). The naive marcher, which neither skips
 //! empty space nor stops early, is timed on the same rows of trained scenes and its time
 //! scaled to a frame (`baseline_row`; a second reference for trained fields, such as
 //! instant-ngp's own marcher, is one more such row, compared on the same rows). Splats are
 //! rasterised, not marched: they have neither reference nor naive row.
 //!
 //! Each preset promises a per-pixel error ([`MarchParams::error_target`], alpha and
-//! premultiplied colour): a row says whether it keeps it over the pixels compared. A fine
-//! march is no exact reference, so its own error is estimated too, against a march twice as
-//! fine ([`finer_params`]) on every [`CHECK_STRIDE`]-th reference row: a preset missing its
-//! target by less than that may be the reference's miss.
+//! premultiplied colour): a row says whether it keeps it over the pixels compared. Neither
+//! row reference is exact, so its own error is estimated too, against one twice as fine
+//! ([`finer_params`], or a quarter of the tolerance) on every [`CHECK_STRIDE`]-th reference
+//! row: a preset missing its target by less than that may be the reference's miss.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -42,6 +45,10 @@ pub const ROW_STRIDE: u32 = 16;
 
 /// A fine reference's own error is estimated on every this many of its rows.
 pub const CHECK_STRIDE: usize = 4;
+
+/// What the quadrature reference lets one interval of a ray get wrong (in alpha and each
+/// premultiplied colour channel): far below Final's target, so that the reference judges it.
+pub const QUADRATURE_TOLERANCE: f64 = 1e-6;
 
 /// Naive step sizes, as fractions of the scene's largest bounding-box diagonal: analytic
 /// scenes, then trained ones (whose naive run only covers the reference rows).
@@ -103,9 +110,11 @@ pub struct SceneReport {
     pub truth: String,
     /// Time of the reference, milliseconds (0 when there is none).
     pub reference_ms: f64,
-    /// A fine reference's own error: against [`finer_params`] on every [`CHECK_STRIDE`]-th
+    /// A row reference's own error: against one twice as fine on every [`CHECK_STRIDE`]-th
     /// of its rows (`None` for exact references and scenes without one).
     pub reference_error: Option<ErrorReport>,
+    /// What that finer one is (empty without one).
+    pub reference_check: String,
     /// Heap the loaded scene and its occupancy grids hold, where measured.
     pub scene_heap: Option<usize>,
     /// Peak heap of a one-tile (16×16) Final render once the occupancy is built: the tile's
@@ -277,6 +286,22 @@ fn measure_scene(
                 ),
             )
         }
+        Truth::Quadrature => {
+            let fine = render_rows(camera, &rows, |w| {
+                reference::render_trained(scene, camera, w, QUADRATURE_TOLERANCE)
+            })?;
+            (
+                Reference::Rows(fine),
+                format!(
+                    "an adaptive f64 quadrature of the trained field between its mask's \
+                     crossings (no code shared with the marcher; every interval converged to \
+                     {QUADRATURE_TOLERANCE:.0e} in alpha and colour) of every {ROW_STRIDE}th \
+                     row ({} of {}); all errors are over those rows",
+                    rows.len(),
+                    full.height()
+                ),
+            )
+        }
         Truth::Rasterised => (
             Reference::None,
             "none: splats are rasterised exactly as gsplat's classic mode (checked against \
@@ -289,14 +314,23 @@ fn measure_scene(
         "{}: reference {reference_ms:.0} ms",
         b.kind.name()
     ));
-    let reference_error = match &truth {
+    let (reference_error, reference_check) = match &truth {
         Reference::Rows(fine) => {
             let started = Instant::now();
             let checked: Vec<&(u32, Planes)> = fine.iter().step_by(CHECK_STRIDE).collect();
             let ys: Vec<u32> = checked.iter().map(|(y, _)| *y).collect();
-            let finer = render_rows(camera, &ys, |w| {
-                render_frame(scene, camera, w, finer_params(), outputs).map(|(p, _)| p)
-            })?;
+            let (finer, check) = if b.truth == Truth::Quadrature {
+                let tolerance = 0.25 * QUADRATURE_TOLERANCE;
+                let finer = render_rows(camera, &ys, |w| {
+                    reference::render_trained(scene, camera, w, tolerance)
+                })?;
+                (finer, format!("the quadrature to {tolerance:.1e}"))
+            } else {
+                let finer = render_rows(camera, &ys, |w| {
+                    render_frame(scene, camera, w, finer_params(), outputs).map(|(p, _)| p)
+                })?;
+                (finer, "a march twice as fine again".to_string())
+            };
             let e = combine(
                 finer
                     .iter()
@@ -308,9 +342,9 @@ fn measure_scene(
                 b.kind.name(),
                 started.elapsed().as_secs_f64() * 1e3
             ));
-            Some(e)
+            (Some(e), check)
         }
-        _ => None,
+        _ => (None, String::new()),
     };
 
     let mut report_rows = Vec::new();
@@ -339,7 +373,7 @@ fn measure_scene(
 
     let naive_steps: &[f64] = match b.truth {
         Truth::Exact => &NAIVE_STEPS_PER_DIAGONAL[0],
-        Truth::FineMarch => &NAIVE_STEPS_PER_DIAGONAL[1],
+        Truth::FineMarch | Truth::Quadrature => &NAIVE_STEPS_PER_DIAGONAL[1],
         Truth::Rasterised => &[],
     };
     let diagonal = scene
@@ -381,6 +415,7 @@ fn measure_scene(
         truth: reference_note,
         reference_ms,
         reference_error,
+        reference_check,
         scene_heap,
         tile_heap: tile_heap.map(|h| h.peak),
         rows: report_rows,

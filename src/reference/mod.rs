@@ -11,20 +11,24 @@
 //! `∫ t σ T dt / A`, median depth where `1 − T(t) = A/2`.
 //!
 //! [`render`] does this for every pixel of a window; [`metrics`] compares two renders.
+//! Trained fields have no closed form: [`render_trained`] integrates those cut by an
+//! occupancy mask by an adaptive quadrature, to a stated tolerance.
 
 mod closed_form;
 mod integrator;
 pub mod metrics;
 mod quadrature;
 mod segments;
+mod trained;
 
 pub use integrator::RayResult;
 pub use metrics::ErrorReport;
 pub use segments::ReferenceScene;
+pub use trained::TrainedReference;
 
 use rayon::prelude::*;
 
-use crate::camera::Camera;
+use crate::camera::{Camera, Ray};
 use crate::error::Result;
 use crate::image::{Plane, Planes, Window};
 use crate::scene::Scene;
@@ -38,6 +42,36 @@ use integrator::Sweep;
 /// [`crate::Error::Unsupported`] when an instance's field is not analytic.
 pub fn render(scene: &Scene, camera: &Camera, window: Window) -> Result<Planes> {
     let reference = ReferenceScene::new(scene)?;
+    render_rays(camera, window, Sweep::default, |ray, sweep| {
+        reference.integrate_with(ray, sweep)
+    })
+}
+
+/// [`render`] for scenes of trained fields cut by an occupancy mask (instant-ngp), which
+/// have no closed form: an adaptive f64 quadrature of each ray between its mask's
+/// crossings ([`TrainedReference`]), each interval converged to `tolerance`.
+///
+/// [`crate::Error::Unsupported`] when an instance's field gives no mask segments.
+pub fn render_trained(
+    scene: &Scene,
+    camera: &Camera,
+    window: Window,
+    tolerance: f64,
+) -> Result<Planes> {
+    let reference = TrainedReference::new(scene, tolerance)?;
+    render_rays(camera, window, trained::Scratch::default, |ray, scratch| {
+        reference.integrate_with(ray, scratch)
+    })
+}
+
+/// Every pixel of `window` by `integrate` (with per-thread scratch from `scratch`), rows
+/// in parallel, as planes.
+fn render_rays<S>(
+    camera: &Camera,
+    window: Window,
+    scratch: impl Fn() -> S + Sync + Send,
+    integrate: impl Fn(&Ray, &mut S) -> RayResult + Sync + Send,
+) -> Result<Planes> {
     let window = camera.clamp_window(window)?;
     let (width, height) = (window.width(), window.height());
     let mut pixels = vec![(RayResult::EMPTY, 1.0); window.area()];
@@ -45,12 +79,12 @@ pub fn render(scene: &Scene, camera: &Camera, window: Window) -> Result<Planes> 
         pixels
             .par_chunks_mut(width as usize)
             .enumerate()
-            .for_each_init(Sweep::default, |sweep, (row, out)| {
+            .for_each_init(&scratch, |s, (row, out)| {
                 let y = (window.y0 as usize + row) as f64 + 0.5;
                 for (col, pixel) in out.iter_mut().enumerate() {
                     let x = (window.x0 as usize + col) as f64 + 0.5;
                     if let Some(ray) = camera.ray(x, y) {
-                        *pixel = (reference.integrate_with(&ray, sweep), ray.z_per_t);
+                        *pixel = (integrate(&ray, s), ray.z_per_t);
                     }
                 }
             });

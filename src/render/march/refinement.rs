@@ -80,6 +80,8 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
     s.unsure.clear();
     // Candidates come in order along their rays: most share a difference with the last.
     let mut last_difference = LastDifference::default();
+    // The densest node of the ray the last candidates were on (see `coarse` below).
+    let mut densest: Option<(u32, f64)> = None;
     for &(r, i) in &s.candidates {
         let nodes = &s.nodes[r as usize];
         let (a, b) = (&nodes[i as usize], &nodes[i as usize + 1]);
@@ -130,7 +132,29 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
             let sides = step_curvature(nodes, i as usize, r, &mut last_difference);
             let trained = any_smooth
                 && (met_by(s, r as usize).iter()).any(|m| plans[m.inst as usize].smooth > 0.0);
-            exact_change(a, b, sides, trained)
+            let change = exact_change(a, b, sides, trained);
+            // A trained field's step longer than its smooth length may straddle a thin shell
+            // its ends and their curvature do not show (on the dense blob, ends of density
+            // ~9 one Draft step apart held a shell of ~400 between them). Its finest detail
+            // is a smooth length wide: the step is judged as if a shell that wide, as dense
+            // as the densest node its ray has shown, lay inside.
+            match trained
+                .then(|| unresolved_detail(r as usize, a, b, plans, s))
+                .flatten()
+            {
+                Some(width) => {
+                    let peak = match densest {
+                        Some((ray, peak)) if ray == r => peak,
+                        _ => {
+                            let peak = nodes.iter().fold(0.0f64, |m, n| m.max(n.sigma));
+                            densest = Some((r, peak));
+                            peak
+                        }
+                    };
+                    change.max(peak * width / (b.t - a.t))
+                }
+                None => change,
+            }
         });
         let change = |weight: f64| {
             if smooth {
@@ -289,6 +313,31 @@ fn smooth_step(r: usize, a: &Node, b: &Node, plans: &[InstancePlan], s: &Scratch
         let smooth = plan.smooth * growth(plan, lr, a.t).min(growth(plan, lr, b.t));
         sa > 0.0 && sb > 0.0 && (b.t - a.t) * lr.units_per_world as f64 <= smooth
     })
+}
+
+/// The shortest smooth length (see
+/// [`Field::smooth_length`](crate::field::Field::smooth_length), world units) that the step
+/// from `a` to `b` on ray `r` is longer than, of the trained instances with density at
+/// either end: between two such samples the density may hold detail that narrow.
+fn unresolved_detail(
+    r: usize,
+    a: &Node,
+    b: &Node,
+    plans: &[InstancePlan],
+    s: &Scratch,
+) -> Option<f64> {
+    let mut shortest = None;
+    for (j, met) in met_by(s, r).iter().enumerate() {
+        let (plan, lr) = (&plans[met.inst as usize], &met.local);
+        let dense =
+            s.inst_sigma[a.slot as usize + j] > 0.0 || s.inst_sigma[b.slot as usize + j] > 0.0;
+        let k = lr.units_per_world as f64;
+        let smooth = plan.smooth * growth(plan, lr, a.t).min(growth(plan, lr, b.t)) / k;
+        if dense && smooth > 0.0 && b.t - a.t > smooth {
+            shortest = Some(shortest.map_or(smooth, |s: f64| s.min(smooth)));
+        }
+    }
+    shortest
 }
 
 /// How much the density changes across the step from node `i` to `i + 1` in a way the

@@ -292,6 +292,8 @@ pub(super) struct Scratch {
     features: Vec<f32>,
     features_prev: Vec<f32>,
     pending: Vec<Pending>,
+    /// The new nodes of one ray while they are merged in among its others.
+    settling: Vec<Node>,
     /// Pairs `(ray, first node)` to test for refinement.
     candidates: Vec<(u32, u32)>,
     /// Candidates that passed the jump test, with their density bound.

@@ -94,6 +94,7 @@ pub(super) fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Sc
                 extent: pending.extent,
                 weight: 0.0,
                 depth: 0.0,
+                difference: f64::NAN,
             });
             slot += met;
         }
@@ -105,12 +106,16 @@ pub(super) fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Sc
 /// Moves `nodes[laid..]`, in the order they were laid, into place among `nodes[..laid]`
 /// (sorted by distance) as inserting them one by one would: each after every node at the
 /// same or a smaller distance. In one pass, not one shift of the nodes behind per node:
-/// a level's midpoints of a ray are merged in at once.
+/// a level's midpoints of a ray are merged in at once. A node with a new neighbour forgets
+/// its [`Node::difference`].
 fn settle(nodes: &mut [Node], laid: usize, scratch: &mut Vec<Node>) {
     let in_order = nodes[laid.saturating_sub(1)..]
         .windows(2)
         .all(|w| w[0].t <= w[1].t);
     if in_order {
+        if let Some(last) = laid.checked_sub(1).and_then(|k| nodes.get_mut(k)) {
+            last.difference = f64::NAN;
+        }
         return;
     }
     scratch.clear();
@@ -128,14 +133,27 @@ fn settle(nodes: &mut [Node], laid: usize, scratch: &mut Vec<Node>) {
     // ...merged with the others from the back, a new node behind an old one at the same
     // distance.
     let (mut old, mut new, mut to) = (laid, scratch.len(), nodes.len());
+    // Whether the node placed last was new: the one placed next is its neighbour.
+    let mut beside_new = false;
     while new > 0 {
         to -= 1;
-        if old > 0 && nodes[old - 1].t > scratch[new - 1].t {
-            nodes[to] = nodes[old - 1];
-            old -= 1;
-        } else {
-            nodes[to] = scratch[new - 1];
+        let is_new = !(old > 0 && nodes[old - 1].t > scratch[new - 1].t);
+        if is_new {
             new -= 1;
+            nodes[to] = scratch[new];
+            if let Some(next) = nodes.get_mut(to + 1) {
+                next.difference = f64::NAN;
+            }
+        } else {
+            old -= 1;
+            nodes[to] = nodes[old];
+            if beside_new {
+                nodes[to].difference = f64::NAN;
+            }
         }
+        beside_new = is_new;
+    }
+    if let Some(before) = to.checked_sub(1).filter(|_| beside_new) {
+        nodes[before].difference = f64::NAN;
     }
 }

@@ -8,11 +8,11 @@
 //! on those rows: a much finer nerfx march ([`fine_params`]), or, for a dense field whose
 //! opaque shells a march cannot be trusted to judge (it shares the marcher's refinement),
 //! an adaptive f64 quadrature of the field between its mask's crossings
-//! ([`reference::render_trained`], to [`QUADRATURE_TOLERANCE`]). The naive marcher, which neither skips
-//! empty space nor stops early, is timed on the same rows of trained scenes and its time
-//! scaled to a frame (`baseline_row`; a second reference for trained fields, such as
-//! instant-ngp's own marcher, is one more such row, compared on the same rows). Splats are
-//! rasterised, not marched: they have neither reference nor naive row.
+//! ([`reference::render_trained`], to [`QUADRATURE_TOLERANCE`]). The naive marcher, which
+//! neither skips empty space nor stops early, is timed on the same rows of trained scenes
+//! and its time scaled to a frame (`baseline_row`; a second reference for trained fields,
+//! such as instant-ngp's own marcher, is one more such row, compared on the same rows).
+//! Splats are rasterised, not marched: they have neither reference nor naive row.
 //!
 //! Each preset promises a per-pixel error ([`MarchParams::error_target`], alpha and
 //! premultiplied colour): a row says whether it keeps it over the pixels compared. Neither

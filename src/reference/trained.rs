@@ -3,17 +3,19 @@
 //! marcher but the field's own queries.
 //!
 //! Such a field's density is zero outside its mask and a smooth interpolant inside
-//! ([`Field::mask_segments`], [`Field::smooth_length`]), so along a ray the only edges are
-//! the mask's crossings. Between them, the ray is laid with nodes a quarter of the field's
-//! smooth length apart (no detail lies between them but curvature), a chunk at a time from
-//! the camera. Each interval is then halved while halving changes what it adds to the pixel
-//! (its absorbed fraction and premultiplied colour, entered with the transmittance before
-//! it) by more than the tolerance; every interval is composited with
+//! ([`Field::mask_segments`](crate::field::Field::mask_segments),
+//! [`Field::smooth_length`](crate::field::Field::smooth_length)), so along a ray the only
+//! edges are the mask's crossings. Between them, the ray is laid with nodes a quarter of
+//! the field's smooth length apart (no detail lies between them but curvature), a chunk at
+//! a time from the camera. Each interval is then halved while halving changes what it adds
+//! to the pixel (its absorbed fraction and premultiplied colour, entered with the
+//! transmittance before it) by more than the tolerance; every interval is composited with
 //! the density and the density-weighted colour linear between its ends, its optical depth
 //! exactly `δ·(σ_a + σ_b)/2`. A ray stops once its transmittance is below
 //! [`STOP_TRANSMITTANCE`]. A scene composited in sRGB has its pixels decoded to linear
-//! light, as renders have by default. The error per interval is then about a third of the tolerance;
-//! [`render_trained`] with a lower tolerance tells how far the result is from converged.
+//! light, as renders have by default. The error per interval is then about a third of the
+//! tolerance; [`render_trained`](super::render_trained) with a lower tolerance tells how
+//! far the result is from converged.
 
 use glam::{DVec3, Vec3};
 

@@ -287,19 +287,6 @@ impl IngpField {
         Ok(IngpField { bounds, ..field })
     }
 
-    /// The field with its networks evaluated in bf16 (when `bf16`, where the CPU has
-    /// AVX-512 BF16: twice the multiply-adds per instruction, each layer's weights and
-    /// inputs rounded to 8 significant bits) or in f32 (as loaded). Not used by the
-    /// renderer: on the blob at Final it moves colours by 4.4e-3, four times the target.
-    pub fn with_bf16_networks(self, bf16: bool) -> Self {
-        IngpField {
-            density_mlp: self.density_mlp.with_bf16_kernel(bf16),
-            sigma_mlp: self.sigma_mlp.with_bf16_kernel(bf16),
-            rgb_mlp: self.rgb_mlp.with_bf16_kernel(bf16),
-            ..self
-        }
-    }
-
     /// Instant-ngp coordinates of a field-space point.
     #[inline]
     fn ngp_from_field(&self, p: Vec3) -> Vec3 {

@@ -21,13 +21,6 @@
 //! the same bits as `y[o] = b[o] + Σᵢ x[i]·W[o][i]` summed left to right. The fast kernel (AVX2 with FMA, chosen once per call at run time;
 //! 16 samples × 4 outputs per tile) fuses each multiply-add, so it differs from the plain
 //! one by f32 rounding only.
-//!
-//! **bf16.** [`Mlp::with_bf16_kernel`] opts a network into a third kernel where the CPU has
-//! AVX-512 BF16 ([`bf16`]): weights and activations rounded to bf16, sums in f32, twice the
-//! multiply-adds per instruction of the f32 kernel, off from it by about 2⁻⁸ of each layer's
-//! terms. Networks that do not opt in give the same bits as before.
-
-mod bf16;
 
 use glam::Vec3;
 
@@ -110,8 +103,6 @@ pub struct Mlp {
     /// The first layer reads the `n_inputs` used inputs only (the padding is zero); the last
     /// keeps the used outputs only.
     layers: Vec<Layer>,
-    /// The layers' weights as bf16 pairs, where the network opted into the bf16 kernel.
-    bf16: Option<Vec<bf16::PairedLayer>>,
 }
 
 /// Which kernel evaluates a batch.
@@ -122,14 +113,10 @@ enum Kernel {
     /// AVX2 + FMA, 16 samples per block (two vectors), 4 outputs per tile.
     #[cfg(target_arch = "x86_64")]
     Avx2,
-    /// AVX-512 BF16: weights and activations in bf16, 16 samples per block, 16 outputs per
-    /// tile; only for a network with bf16 weights ([`Mlp::with_bf16_kernel`]).
-    #[cfg(target_arch = "x86_64")]
-    Bf16,
 }
 
 impl Kernel {
-    /// The fastest f32 kernel this CPU runs.
+    /// The fastest kernel this CPU runs.
     fn detect() -> Self {
         #[cfg(target_arch = "x86_64")]
         {
@@ -138,20 +125,6 @@ impl Kernel {
             }
         }
         Kernel::Plain
-    }
-
-    /// Whether this CPU runs [`Kernel::Bf16`].
-    fn has_bf16() -> bool {
-        #[cfg(target_arch = "x86_64")]
-        {
-            is_x86_feature_detected!("avx2")
-                && is_x86_feature_detected!("fma")
-                && is_x86_feature_detected!("avx512f")
-                && is_x86_feature_detected!("avx512bw")
-                && is_x86_feature_detected!("avx512bf16")
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        false
     }
 }
 
@@ -178,11 +151,7 @@ impl Mlp {
                 Layer::new(used_in, kept, n_in, w, None)
             })
             .collect();
-        Some(Mlp {
-            config,
-            layers,
-            bf16: None,
-        })
+        Some(Mlp { config, layers })
     }
 
     /// A torch MLP from `(W, b)` per layer, `W` row-major `[out][in]`, the first reading
@@ -210,28 +179,7 @@ impl Mlp {
         Some(Mlp {
             config,
             layers: out,
-            bf16: None,
         })
-    }
-
-    /// The MLP evaluated, when `bf16` and where the CPU has AVX-512 BF16, by the bf16 kernel
-    /// (its weights rounded to bf16 once here, each layer's inputs rounded to bf16 as it
-    /// reads them, the sums in f32), else by the f32 kernels. Call it last:
-    /// [`Self::with_last_inputs`] and [`Self::split_last_inputs`] return networks on the
-    /// f32 kernels.
-    pub fn with_bf16_kernel(mut self, bf16: bool) -> Self {
-        self.bf16 = (bf16 && Kernel::has_bf16())
-            .then(|| self.layers.iter().map(bf16::PairedLayer::new).collect());
-        self
-    }
-
-    /// The kernel that evaluates this network's batches.
-    fn kernel(&self) -> Kernel {
-        #[cfg(target_arch = "x86_64")]
-        if self.bf16.is_some() {
-            return Kernel::Bf16;
-        }
-        Kernel::detect()
     }
 
     /// The MLP with its last `values.len()` inputs fixed at `values`: their products with
@@ -239,7 +187,6 @@ impl Mlp {
     /// carries only the inputs that vary. `None` when there are fewer inputs than values.
     pub fn with_last_inputs(&self, values: &[f32]) -> Option<Mlp> {
         let mut m = self.clone();
-        m.bf16 = None;
         let first = m.layers.first_mut()?;
         let keep = first.n_in.checked_sub(values.len())?;
         for o in 0..first.n_out {
@@ -264,7 +211,6 @@ impl Mlp {
     /// (each row starts from them), so the MLP returned is for `forward_from` only.
     pub fn split_last_inputs(&self, n: usize) -> Option<(Mlp, LastInputs)> {
         let mut m = self.clone();
-        m.bf16 = None;
         let first = m.layers.first_mut()?;
         let keep = first.n_in.checked_sub(n)?;
         let last = LastInputs {
@@ -286,7 +232,7 @@ impl Mlp {
     /// Evaluates the MLP on `n` inputs, `inputs[k·n_inputs ..][.. n_inputs]`, writing
     /// `outputs[k·n_outputs ..][.. n_outputs]`.
     pub fn forward(&self, inputs: &[f32], outputs: &mut [f32]) {
-        self.forward_with(self.kernel(), inputs, None, outputs);
+        self.forward_with(Kernel::detect(), inputs, None, outputs);
     }
 
     /// [`Self::forward`] of an MLP from [`Self::split_last_inputs`]: sample `k`'s first
@@ -297,7 +243,7 @@ impl Mlp {
             rows: starts,
             row_of,
         };
-        self.forward_with(self.kernel(), inputs, Some(starts), out);
+        self.forward_with(Kernel::detect(), inputs, Some(starts), out);
     }
 
     fn forward_with(
@@ -312,22 +258,6 @@ impl Mlp {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `Kernel::detect` chose these only where the CPU has the features.
             Kernel::Avx2 => unsafe { self.forward_avx2(inputs, starts, outputs) },
-            #[cfg(target_arch = "x86_64")]
-            Kernel::Bf16 => match &self.bf16 {
-                // SAFETY: `with_bf16_kernel` paired the weights only where the CPU has the
-                // features.
-                Some(layers) => unsafe {
-                    bf16::forward(
-                        layers,
-                        self.config.n_inputs,
-                        self.config.n_outputs,
-                        inputs,
-                        starts,
-                        outputs,
-                    )
-                },
-                None => self.forward_with(Kernel::detect(), inputs, starts, outputs),
-            },
         }
     }
 
@@ -1010,78 +940,6 @@ mod tests {
             head.forward_from(&varying, &rows, &row_of, &mut got);
             assert_close(&got, &want, scale);
             assert!(mlp.split_last_inputs(33).is_none());
-        }
-    }
-
-    /// Dyadic values `k/16`, `|k| ≤ 2`: products and the sums of a few dozen of them hold
-    /// in bf16's 8 significant bits exactly.
-    fn dyadic(n: usize, seed: u64) -> Vec<f32> {
-        seeded(n, seed)
-            .into_iter()
-            .map(|v| (v * 5.0).round() / 16.0)
-            .collect()
-    }
-
-    #[test]
-    fn bf16_kernel_is_exact_where_bf16_holds_every_value() {
-        if !Kernel::has_bf16() {
-            eprintln!("no AVX-512 BF16 on this CPU: the bf16 kernel is not tested");
-            return;
-        }
-        // One hidden layer (the density network's shape and a ragged one): the inputs are
-        // integers up to 2 and the weights k/16, so the hidden values are multiples of 1/16
-        // up to 4, exact in bf16, and the outputs multiples of 1/256 up to 32, exact in
-        // f32: the bf16 kernel must give the plain kernel's bits.
-        for (ni, width, no, n) in [(32, 64, 16, 37), (7, 24, 5, 16), (32, 64, 1, 3)] {
-            let c = MlpConfig {
-                n_inputs: ni,
-                width,
-                n_hidden_layers: 1,
-                n_outputs: no,
-                output_alignment: 16,
-            };
-            let mlp = Mlp::new(c, &dyadic(c.n_params(), ni as u64)).unwrap();
-            let x: Vec<f32> = dyadic(n * ni, 9).iter().map(|v| v * 16.0).collect();
-            let mut plain = vec![f32::NAN; n * no];
-            mlp.forward_with(Kernel::Plain, &x, None, &mut plain);
-            let mut bf16 = vec![f32::NAN; n * no];
-            mlp.clone().with_bf16_kernel(true).forward(&x, &mut bf16);
-            assert_eq!(bf16, plain, "{ni} -> {width} -> {no}");
-        }
-    }
-
-    #[test]
-    fn bf16_kernel_stays_within_bf16_rounding_of_the_f32_one() {
-        if !Kernel::has_bf16() {
-            eprintln!("no AVX-512 BF16 on this CPU: the bf16 kernel is not tested");
-            return;
-        }
-        for (ni, width, hidden, no, n) in
-            [(32, 64, 1, 16, 37), (32, 64, 2, 3, 100), (7, 24, 3, 5, 1)]
-        {
-            let c = MlpConfig {
-                n_inputs: ni,
-                width,
-                n_hidden_layers: hidden,
-                n_outputs: no,
-                output_alignment: 16,
-            };
-            let mlp = Mlp::new(c, &seeded(c.n_params(), 3 + ni as u64)).unwrap();
-            let x: Vec<f32> = seeded(n * ni, 9).iter().map(|v| 4.0 * v).collect();
-            let mut plain = vec![0.0; n * no];
-            mlp.forward_with(Kernel::Plain, &x, None, &mut plain);
-            let mut bf16 = vec![f32::NAN; n * no];
-            mlp.clone().with_bf16_kernel(true).forward(&x, &mut bf16);
-            // Each product is off by up to 2·2⁻⁹ of itself (weight and input rounded), so a
-            // layer's outputs by about 2⁻⁸ of their terms' magnitudes: three layers stay
-            // within 2⁻⁶ of the largest output (the seeded networks give 0.3–0.5 %).
-            let scale = plain.iter().fold(1.0f32, |m, v| m.max(v.abs()));
-            for (i, (a, b)) in bf16.iter().zip(&plain).enumerate() {
-                assert!(
-                    (a - b).abs() <= scale / 64.0,
-                    "{ni} -> {no}, output {i}: {a} vs {b}"
-                );
-            }
         }
     }
 

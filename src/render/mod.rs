@@ -287,19 +287,37 @@ struct Band<'a> {
 impl Band<'_> {
     /// Writes a tile's pixels (row by row, `tile_width` wide) at column `x` of the band;
     /// `decode`: the colours were composited in sRGB-encoded space and are wanted linear.
+    /// Each plane is written a tile row at a time: one stretch of a band's row per plane.
     fn write(&mut self, x: u32, tile_width: u32, pixels: &[PixelResult], decode: bool) {
-        for (i, px) in pixels.iter().enumerate() {
-            let (dx, dy) = (i as u32 % tile_width, i as u32 / tile_width);
-            let at = dy as usize * self.width + (x + dx) as usize;
-            let [r, g, b] = if decode && self.planes[0].is_some() {
-                srgb_composite_to_linear(px.rgb, px.alpha)
-            } else {
-                px.rgb
-            };
-            let values = [r, g, b, px.alpha, px.depth_z, px.depth_ray, px.depth_median];
-            for (plane, v) in self.planes.iter_mut().zip(values) {
-                if let Some(plane) = plane {
-                    plane[at] = v;
+        let tile_width = tile_width.max(1) as usize;
+        for (dy, row) in pixels.chunks(tile_width).enumerate() {
+            let start = dy * self.width + x as usize;
+            let span = start..start + row.len();
+            if let [Some(r), Some(g), Some(b), ..] = &mut self.planes {
+                let (r, g, b) = (
+                    &mut r[span.clone()],
+                    &mut g[span.clone()],
+                    &mut b[span.clone()],
+                );
+                for (i, px) in row.iter().enumerate() {
+                    [r[i], g[i], b[i]] = if decode {
+                        srgb_composite_to_linear(px.rgb, px.alpha)
+                    } else {
+                        px.rgb
+                    };
+                }
+            }
+            for (k, plane) in self.planes.iter_mut().enumerate().skip(3) {
+                let Some(plane) = plane else {
+                    continue;
+                };
+                for (v, px) in plane[span.clone()].iter_mut().zip(row) {
+                    *v = match k {
+                        3 => px.alpha,
+                        4 => px.depth_z,
+                        5 => px.depth_ray,
+                        _ => px.depth_median,
+                    };
                 }
             }
         }

@@ -123,6 +123,10 @@ struct Node {
     /// Optical depth from the round's first node to this one
     /// ([`lay_depths`](refinement::lay_depths)).
     depth: f64,
+    /// The twice second divided difference of the density through this node and its two
+    /// neighbours ([`lay_differences`](refinement::lay_differences)); NaN until it is worked
+    /// out, and again once a neighbour changes.
+    difference: f64,
 }
 
 /// A node to be evaluated (fields as in [`Node`]).
@@ -293,6 +297,8 @@ pub(super) struct Scratch {
     features: Vec<f32>,
     features_prev: Vec<f32>,
     pending: Vec<Pending>,
+    /// The new nodes of one ray while they are merged in among its others.
+    settling: Vec<Node>,
     /// Pairs `(ray, first node)` to test for refinement.
     candidates: Vec<(u32, u32)>,
     /// Candidates that passed the jump test, with their density bound.
@@ -355,6 +361,7 @@ pub(super) fn march_tile(
                 s.features
                     .extend_from_slice(&s.features_prev[slot * width..(slot + n) * width]);
                 node.weight = 0.0;
+                node.difference = f64::NAN;
                 s.nodes[r].push(node);
             }
             lay_nodes(r, plans, params, s);

@@ -52,6 +52,7 @@ pub(super) fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams
             if last != Some(r) {
                 last = Some(r);
                 lay_depths(&mut s.nodes[r as usize]);
+                lay_differences(&mut s.nodes[r as usize]);
             }
         }
         split_candidates(scene, plans, params, s);
@@ -384,6 +385,33 @@ pub(super) fn step_curvature(
     [before, after]
 }
 
+/// The twice second divided difference `2·f[x0, x1, x2]` of the density through three
+/// consecutive nodes; `None` where a step between them is not longer than 0.
+#[inline]
+fn difference(nodes: &[Node]) -> Option<f64> {
+    let (x, y, z) = (&nodes[0], &nodes[1], &nodes[2]);
+    let (h0, h1) = (y.t - x.t, z.t - y.t);
+    (h0 > 0.0 && h1 > 0.0).then(|| {
+        let d = (z.sigma - y.sigma) / h1 - (y.sigma - x.sigma) / h0;
+        2.0 * d / (h0 + h1)
+    })
+}
+
+/// Works out the [`Node::difference`]s not yet known of the nodes inside an exact run, with
+/// a neighbour in it on either side: every step of such a run is judged by its curvature
+/// ([`step_curvature`]), in each level of refinement that looks at it and again when it is
+/// integrated, and those read them.
+pub(super) fn lay_differences(nodes: &mut [Node]) {
+    for i in 1..nodes.len().saturating_sub(1) {
+        let (y, z) = (&nodes[i], &nodes[i + 1]);
+        if y.exact && !y.starts_run && !z.starts_run && y.difference.is_nan() {
+            if let Some(d) = difference(&nodes[i - 1..=i + 1]) {
+                nodes[i].difference = d;
+            }
+        }
+    }
+}
+
 /// The twice second divided difference `2·f[x0, x1, x2]` around a node that [`step_curvature`]
 /// worked out last, by ray and node: a step's `after` side is around the same node as the
 /// next step's `before`, so a pass over a ray's steps in order works each out once. Valid
@@ -392,8 +420,9 @@ pub(super) fn step_curvature(
 pub(super) struct LastDifference(Option<(u32, usize, Option<f64>)>);
 
 impl LastDifference {
-    /// The difference through nodes `i − 1`, `i` and `i + 1` of ray `ray`; `None` where a
-    /// step between them is not longer than 0.
+    /// The difference through nodes `i − 1`, `i` and `i + 1` of ray `ray` (node `i`'s own
+    /// where it is known, [`lay_differences`]); `None` where a step between them is not
+    /// longer than 0.
     #[inline]
     fn around(&mut self, nodes: &[Node], i: usize, ray: u32) -> Option<f64> {
         if let Some((r, at, difference)) = self.0 {
@@ -401,12 +430,12 @@ impl LastDifference {
                 return difference;
             }
         }
-        let (x, y, z) = (&nodes[i - 1], &nodes[i], &nodes[i + 1]);
-        let (h0, h1) = (y.t - x.t, z.t - y.t);
-        let difference = (h0 > 0.0 && h1 > 0.0).then(|| {
-            let d = (z.sigma - y.sigma) / h1 - (y.sigma - x.sigma) / h0;
-            2.0 * d / (h0 + h1)
-        });
+        let cached = nodes[i].difference;
+        let difference = if cached.is_nan() {
+            difference(&nodes[i - 1..=i + 1])
+        } else {
+            Some(cached)
+        };
         self.0 = Some((ray, i, difference));
         difference
     }

@@ -70,30 +70,90 @@ pub(super) fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Sc
             s.inst_sigma[slot as usize] = sigma;
         }
     }
+    // The nodes go in a ray at a time (a round's nodes of a ray come together, a level's
+    // midpoints mostly do), each after every node at the same or a smaller distance.
     let mut slot = first_slot;
-    for pending in &s.pending {
-        let r = pending.ray as usize;
-        s.rays[r].samples += 1;
+    let mut k = 0;
+    while k < s.pending.len() {
+        let r = s.pending[k].ray as usize;
+        let count = (s.pending[k..].iter())
+            .take_while(|p| p.ray as usize == r)
+            .count();
         let met = met_by(s, r).len();
-        let sigma = s.inst_sigma[slot..slot + met].iter().sum();
-        let node = Node {
-            t: pending.t,
-            probe: pending.probe,
-            sigma,
-            slot: slot as u32,
-            starts_run: pending.starts_run,
-            exact: pending.exact,
-            extent: pending.extent,
-            weight: 0.0,
-            depth: 0.0,
-        };
-        slot += met;
+        s.rays[r].samples += count as u32;
         let nodes = &mut s.nodes[r];
-        if nodes.last().is_none_or(|last| last.t <= node.t) {
-            nodes.push(node);
-        } else {
-            let at = nodes.partition_point(|n| n.t <= node.t);
-            nodes.insert(at, node);
+        let laid = nodes.len();
+        for pending in &s.pending[k..k + count] {
+            nodes.push(Node {
+                t: pending.t,
+                probe: pending.probe,
+                sigma: s.inst_sigma[slot..slot + met].iter().sum(),
+                slot: slot as u32,
+                starts_run: pending.starts_run,
+                exact: pending.exact,
+                extent: pending.extent,
+                weight: 0.0,
+                depth: 0.0,
+                difference: f64::NAN,
+            });
+            slot += met;
         }
+        settle(nodes, laid, &mut s.settling);
+        k += count;
+    }
+}
+
+/// Moves `nodes[laid..]`, in the order they were laid, into place among `nodes[..laid]`
+/// (sorted by distance) as inserting them one by one would: each after every node at the
+/// same or a smaller distance. In one pass, not one shift of the nodes behind per node:
+/// a level's midpoints of a ray are merged in at once. A node with a new neighbour forgets
+/// its [`Node::difference`].
+fn settle(nodes: &mut [Node], laid: usize, scratch: &mut Vec<Node>) {
+    let in_order = nodes[laid.saturating_sub(1)..]
+        .windows(2)
+        .all(|w| w[0].t <= w[1].t);
+    if in_order {
+        if let Some(last) = laid.checked_sub(1).and_then(|k| nodes.get_mut(k)) {
+            last.difference = f64::NAN;
+        }
+        return;
+    }
+    scratch.clear();
+    scratch.extend_from_slice(&nodes[laid..]);
+    // A stable insertion sort of the new nodes (a handful)...
+    for k in 1..scratch.len() {
+        let node = scratch[k];
+        let mut at = k;
+        while at > 0 && scratch[at - 1].t > node.t {
+            scratch[at] = scratch[at - 1];
+            at -= 1;
+        }
+        scratch[at] = node;
+    }
+    // ...merged with the others from the back, a new node behind an old one at the same
+    // distance.
+    let (mut old, mut new, mut to) = (laid, scratch.len(), nodes.len());
+    // Whether the node placed last was new: the one placed next is its neighbour.
+    let mut beside_new = false;
+    while new > 0 {
+        to -= 1;
+        let is_new = !(old > 0 && nodes[old - 1].t > scratch[new - 1].t);
+        if is_new {
+            new -= 1;
+            nodes[to] = scratch[new];
+            if let Some(next) = nodes.get_mut(to + 1) {
+                next.difference = f64::NAN;
+            }
+        } else {
+            old -= 1;
+            nodes[to] = nodes[old];
+            if beside_new {
+                nodes[to].difference = f64::NAN;
+            }
+        }
+        beside_new = is_new;
+    }
+    if let Some(before) = to.checked_sub(1).filter(|_| beside_new) {
+        nodes[before].difference = f64::NAN;
     }
 }

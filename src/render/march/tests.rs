@@ -166,6 +166,7 @@ fn node(t: f64, sigma: f64) -> super::Node {
         extent: 0.0,
         weight: 0.0,
         depth: 0.0,
+        difference: f64::NAN,
     }
 }
 

@@ -123,6 +123,15 @@ pub trait Field: Send + Sync {
     /// A box outside of which the density is exactly zero.
     fn bounds(&self) -> Aabb;
 
+    /// A box, within [`Field::bounds`], outside of which the density is zero at every
+    /// point the marcher samples (a trained field's occupied cells, where its mask zeroes
+    /// the rest); the renderer skips the rays that miss it, but still lays a ray that meets
+    /// it within [`Field::bounds`], so its samples stay where they were. By default the
+    /// bounds.
+    fn occupied_bounds(&self) -> Aabb {
+        self.bounds()
+    }
+
     /// For a field defined on all of space through a contraction, how to march it (see
     /// [`Unbounded`]); `None` (the default): a bounded field, marched within
     /// [`Field::bounds`] at the base step.

@@ -142,11 +142,7 @@ impl Cascades {
             .iter()
             .enumerate()
             .map(|(c, b)| {
-                let [lo, hi] = (*b)?;
-                // Grid units to `q − 0.5`: u = (g/128 − 1/2)·2h.
-                let to_u = |g: f64| (g / GRID as f64 - 0.5) * 2.0 * f64::from(Self::half_width(c));
-                let lo = DVec3::from_array(lo.map(|i| to_u(i as f64 - 1.0)));
-                let hi = DVec3::from_array(hi.map(|i| to_u(i as f64 + 2.0)));
+                let (lo, hi) = Self::widened_box(c, (*b)?);
                 Some((0.5 * (lo + hi), (0.5 * (hi - lo)).length_squared()))
             })
             .collect();
@@ -157,6 +153,27 @@ impl Cascades {
             occupied_box,
             occupied_sphere,
         })
+    }
+
+    /// Cascade `c`'s box of occupied cells `[lo, hi]` (grid units) widened by a cell on each
+    /// side, in coordinates `q − 0.5`.
+    fn widened_box(c: usize, [lo, hi]: [[usize; 3]; 2]) -> (DVec3, DVec3) {
+        // Grid units to `q − 0.5`: u = (g/128 − 1/2)·2h.
+        let to_u = |g: f64| (g / GRID as f64 - 0.5) * 2.0 * f64::from(Self::half_width(c));
+        (
+            DVec3::from_array(lo.map(|i| to_u(i as f64 - 1.0))),
+            DVec3::from_array(hi.map(|i| to_u(i as f64 + 2.0))),
+        )
+    }
+
+    /// The box, in instant-ngp coordinates `q`, of every cascade's occupied cells widened
+    /// by a cell on each side: outside it the mask holds no cell. `None` where none is
+    /// occupied.
+    pub(crate) fn occupied_extent(&self) -> Option<(Vec3, Vec3)> {
+        let boxes = self.occupied_box.iter().enumerate();
+        let boxes = boxes.filter_map(|(c, b)| Some(Self::widened_box(c, (*b)?)));
+        let (lo, hi) = boxes.reduce(|(a, b), (lo, hi)| (a.min(lo), b.max(hi)))?;
+        Some(((lo + 0.5).as_vec3(), (hi + 0.5).as_vec3()))
     }
 
     /// Number of cascades.
@@ -626,6 +643,45 @@ mod tests {
         assert!(!c.may_be_occupied(Vec3::splat(0.5), Vec3::splat(0.9)));
         // The cascade-1 cell is found from a box that reaches it.
         assert!(c.may_be_occupied(Vec3::new(1.4, -0.5, 0.4), Vec3::new(1.5, -0.4, 0.6)));
+    }
+
+    #[test]
+    fn the_occupied_extent_holds_every_occupied_cell_and_a_cell_more() {
+        // Cascade 0's cell (5, 6, 7) spans q = g/128, cascade 1's (127, 0, 64) q = g/64 − 1/2,
+        // each widened by a cell: the union of [4, 7]/128, [5, 8]/128, [6, 9]/128 and
+        // [126, 129]/64, [−1, 2]/64, [63, 66]/64 less 1/2.
+        let (lo, hi) = two_cascades().occupied_extent().unwrap();
+        assert_eq!(lo, Vec3::new(4.0 / 128.0, -1.0 / 64.0 - 0.5, 6.0 / 128.0));
+        assert_eq!(
+            hi,
+            Vec3::new(129.0 / 64.0 - 0.5, 8.0 / 128.0, 66.0 / 64.0 - 0.5)
+        );
+        // Two clumps in cascade 0 and a cell of cascade 1: the box is theirs, and every
+        // occupied point drawn around it lies inside.
+        let n3 = GRID * GRID * GRID;
+        let mut v = vec![0.0f32; 2 * n3];
+        for (c, [x, y, z]) in [(0, [40, 50, 60]), (0, [44, 52, 61]), (1, [70, 66, 64])] {
+            v[c * n3 + morton_by_hand(x, y, z)] = 1.0;
+        }
+        let c = Cascades::from_densities(&v).unwrap();
+        let (lo, hi) = c.occupied_extent().unwrap();
+        assert_eq!(lo, Vec3::new(39.0, 49.0, 59.0) / 128.0);
+        assert_eq!(hi, Vec3::new(72.0, 68.0, 66.0) / 64.0 - 0.5);
+        let mut rng = crate::bench::rng::SplitMix64::new(3);
+        let mut found = 0;
+        for _ in 0..200_000 {
+            let q = rng.in_cube(lo.min_element() - 0.1, hi.max_element() + 0.1);
+            if c.occupied_at(q) {
+                found += 1;
+                assert!(
+                    q.cmpge(lo).all() && q.cmple(hi).all(),
+                    "{q} outside {lo} {hi}"
+                );
+            }
+        }
+        assert!(found > 0);
+        let empty = Cascades::from_densities(&vec![0.0; n3]).unwrap();
+        assert_eq!(empty.occupied_extent(), None);
     }
 
     #[test]

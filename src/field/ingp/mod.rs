@@ -564,6 +564,16 @@ impl Field for IngpField {
         self.bounds
     }
 
+    /// The box of the occupancy mask's cells (widened by a cell), within the bounds.
+    fn occupied_bounds(&self) -> Aabb {
+        let Some((lo, hi)) = self.cascades.occupied_extent() else {
+            return self.bounds;
+        };
+        let (a, b) = (self.field_from_ngp(lo), self.field_from_ngp(hi));
+        let within = &self.bounds;
+        Aabb::new(a.min(b).max(within.min), a.max(b).min(within.max))
+    }
+
     fn color_space(&self) -> ColorSpace {
         if self.hdr {
             ColorSpace::Linear

@@ -86,8 +86,9 @@ pub(super) struct InstancePlan {
     /// with density at both ends for gaps no finer than `hidden::GAP_PROBES_PER_CELL` to a
     /// cell.
     cell: f64,
-    /// A world sphere `(centre, radius)` around the field's bounds, for culling the instance
-    /// from a tile's rays at once; `None` where the bounds are not finite.
+    /// A world sphere `(centre, radius)` around the field's occupied bounds, for culling the
+    /// instance from a tile's rays at once and from each ray; `None` where they are empty
+    /// or not finite.
     world_sphere: Option<(DVec3, f64)>,
     /// For an analytic field that gives its spans, a world sphere around each primitive
     /// (`None`: not finite), to cull the primitives from a tile's rays

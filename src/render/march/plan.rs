@@ -53,7 +53,10 @@ impl InstancePlan {
                     unbounded: inst.field().unbounded(),
                     bounded,
                     cell,
-                    world_sphere: world_sphere(inst.field().bounds(), inst.world_from_field()),
+                    world_sphere: world_sphere(
+                        inst.field().occupied_bounds(),
+                        inst.world_from_field(),
+                    ),
                     primitive_spheres: match inst.handle().as_analytic() {
                         Some(analytic) if spans => {
                             primitive_spheres(analytic, inst.world_from_field())

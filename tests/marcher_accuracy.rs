@@ -218,6 +218,26 @@ fn draft_keeps_its_target_where_a_thin_shell_lies_between_two_nodes() {
     assert_close("blob at 1080p, Draft", &got, &want, within_target(params));
 }
 
+/// Preview on the blob at 1080p where rays enter it opaque: density ~7e4 right at its
+/// mask's face, so a pixel's light comes from the first ~1e-5 units of the run. Its first
+/// node must be probed at the face (and the full inset inside only where that rounds out of
+/// the mask): probed the inset (~1.7e-5) inside, past the shell, pixel (711, 312)'s blue
+/// was off by 1.7e-2 against the quadrature reference.
+#[test]
+fn preview_keeps_its_target_where_an_opaque_shell_is_thinner_than_the_inset() {
+    let dir = tempfile::tempdir().unwrap();
+    let bench = build(SceneKind::Blob, 1920, 1080, dir.path(), None).expect("the blob");
+    let window = Window::new(703, 304, 719, 320);
+    let want =
+        nerfx::reference::render_trained(&bench.scene, &bench.camera, window, QUADRATURE_TOLERANCE)
+            .expect("the quadrature");
+    let params = Quality::Preview.params();
+    let settings = RenderSettings::new(params, Outputs::all());
+    let got = render(&bench.scene, &bench.camera, window, &settings).expect("a render");
+    assert_sane("blob at 1080p, Preview", &got);
+    assert_close("blob at 1080p, Preview", &got, &want, within_target(params));
+}
+
 /// A preset's promise: every pixel's alpha and premultiplied colour channels within its
 /// error target (depth is not part of it).
 fn within_target(params: MarchParams) -> Tol {

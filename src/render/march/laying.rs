@@ -53,6 +53,11 @@ pub(super) fn growth(plan: &InstancePlan, lr: &LocalRay, t: f64) -> f64 {
         .map_or(1.0, |u| f64::from(u.step_growth(lr.at(t))))
 }
 
+/// The share of a run's inset (see [`RayState::inset`](super::RayState::inset)) a masked
+/// run's face is probed at first: a sixteenth, one unit of an `f32` field-space position's
+/// rounding across the face.
+const FACE_PROBE: f64 = 1.0 / 16.0;
+
 /// Lays the next chunk of regular nodes for ray `r` into `s.pending`: from each run's start
 /// to its end at the step policy's steps, or one node for a constant run. A run whose ends
 /// are a span's is sampled just inside them (see [`RayState::inset`](super::RayState::inset)).
@@ -79,6 +84,7 @@ pub(super) fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, 
                 ray: r as u32,
                 t: run.start,
                 probe: 0.5 * (run.start + run.end),
+                inward: 0.5 * (run.start + run.end),
                 starts_run: true,
                 exact,
                 extent: run.end - run.start,
@@ -136,17 +142,26 @@ pub(super) fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, 
         } else {
             0.0
         };
-        let probe = if starts_run {
-            t + inset
-        } else if at_end {
-            t - inset
+        // A masked run's face is probed first within a unit of rounding of it, where its
+        // density is (an opaque shell can be thinner than the inset), and only where that
+        // rounds out of the mask the full inset inside.
+        let near = if run.kind == RunKind::Masked {
+            inset * FACE_PROBE
         } else {
-            t
+            inset
+        };
+        let (probe, inward) = if starts_run {
+            (t + near, t + inset)
+        } else if at_end {
+            (t - near, t - inset)
+        } else {
+            (t, t)
         };
         s.pending.push(Pending {
             ray: r as u32,
             t,
             probe,
+            inward,
             starts_run,
             exact,
             extent: 0.0,

@@ -135,6 +135,9 @@ struct Pending {
     ray: u32,
     t: f64,
     probe: f64,
+    /// Where the node is probed instead if `probe` reads no density (`probe` itself
+    /// where none is).
+    inward: f64,
     starts_run: bool,
     exact: bool,
     extent: f64,
@@ -147,6 +150,7 @@ impl Pending {
             ray,
             t,
             probe: t,
+            inward: t,
             starts_run: false,
             exact: a.exact,
             extent: 0.0,

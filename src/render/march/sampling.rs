@@ -1,11 +1,14 @@
 //! Density sampling: a round's pending nodes asked of each field in one batch.
 
-use super::{met_by, FieldQuery, InstancePlan, Node, Scratch};
+use super::{met_by, FieldQuery, InstancePlan, Met, Node, Scratch};
 use crate::scene::Scene;
 
 /// Evaluates every pending node's density (one batched call per instance) and inserts the
 /// nodes, in order, into their rays' node lists. A node gets a slot per instance its ray
 /// meets, in the order of [`met_by`]; one its probe is outside keeps a density of zero.
+/// A node whose probe reads no density where [`Pending::inward`] is elsewhere (a masked
+/// run's face, its position rounded out of the mask) is probed there instead, in a second
+/// batch.
 pub(super) fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
     let n_inst = plans.len();
     let width = s.feature_width;
@@ -20,20 +23,87 @@ pub(super) fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Sc
     for pending in &s.pending {
         let r = pending.ray as usize;
         let met = &s.met[s.met_at[r] as usize..s.met_at[r + 1] as usize];
-        for (j, met) in met.iter().enumerate() {
-            let lr = &met.local;
-            if pending.probe >= lr.t_near && pending.probe <= lr.t_far {
-                let query = &mut s.queries[met.inst as usize];
-                query.points.push(lr.at(pending.probe));
-                query
-                    .owners
-                    .push(((slot + j) as u32, lr.units_per_world as f64));
-            }
-        }
+        queue(met, pending.probe, slot, &mut s.queries);
         slot += met.len();
     }
     s.inst_sigma.resize(slot, 0.0);
     s.features.resize(slot * width, 0.0);
+    ask_fields(scene, plans, s);
+    let mut retried = false;
+    let mut slot = first_slot;
+    for pending in &mut s.pending {
+        let r = pending.ray as usize;
+        let met = &s.met[s.met_at[r] as usize..s.met_at[r + 1] as usize];
+        let read = s.inst_sigma[slot..slot + met.len()]
+            .iter()
+            .any(|&sigma| sigma > 0.0);
+        if !read && pending.inward != pending.probe {
+            if !retried {
+                for &i in &s.tile_insts {
+                    s.queries[i as usize].clear();
+                }
+                retried = true;
+            }
+            pending.probe = pending.inward;
+            queue(met, pending.probe, slot, &mut s.queries);
+        }
+        slot += met.len();
+    }
+    if retried {
+        ask_fields(scene, plans, s);
+    }
+    // The nodes go in a ray at a time (a round's nodes of a ray come together, a level's
+    // midpoints mostly do), each after every node at the same or a smaller distance.
+    let mut slot = first_slot;
+    let mut k = 0;
+    while k < s.pending.len() {
+        let r = s.pending[k].ray as usize;
+        let count = (s.pending[k..].iter())
+            .take_while(|p| p.ray as usize == r)
+            .count();
+        let met = met_by(s, r).len();
+        s.rays[r].samples += count as u32;
+        let nodes = &mut s.nodes[r];
+        let laid = nodes.len();
+        for pending in &s.pending[k..k + count] {
+            nodes.push(Node {
+                t: pending.t,
+                probe: pending.probe,
+                sigma: s.inst_sigma[slot..slot + met].iter().sum(),
+                slot: slot as u32,
+                starts_run: pending.starts_run,
+                exact: pending.exact,
+                extent: pending.extent,
+                weight: 0.0,
+                depth: 0.0,
+                difference: f64::NAN,
+            });
+            slot += met;
+        }
+        settle(nodes, laid, &mut s.settling);
+        k += count;
+    }
+}
+
+/// Adds the point at world distance `probe` of a node whose first slot is `slot` to the
+/// query of each instance in `met` whose local ray holds it.
+fn queue(met: &[Met], probe: f64, slot: usize, queries: &mut [FieldQuery]) {
+    for (j, met) in met.iter().enumerate() {
+        let lr = &met.local;
+        if probe >= lr.t_near && probe <= lr.t_far {
+            let query = &mut queries[met.inst as usize];
+            query.points.push(lr.at(probe));
+            query
+                .owners
+                .push(((slot + j) as u32, lr.units_per_world as f64));
+        }
+    }
+}
+
+/// Asks each instance's field for the densities and features of its query's points, into
+/// their slots.
+fn ask_fields(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
+    let width = s.feature_width;
     for &i in &s.tile_insts {
         let plan = &plans[i as usize];
         let query = &mut s.queries[i as usize];
@@ -69,37 +139,6 @@ pub(super) fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Sc
             };
             s.inst_sigma[slot as usize] = sigma;
         }
-    }
-    // The nodes go in a ray at a time (a round's nodes of a ray come together, a level's
-    // midpoints mostly do), each after every node at the same or a smaller distance.
-    let mut slot = first_slot;
-    let mut k = 0;
-    while k < s.pending.len() {
-        let r = s.pending[k].ray as usize;
-        let count = (s.pending[k..].iter())
-            .take_while(|p| p.ray as usize == r)
-            .count();
-        let met = met_by(s, r).len();
-        s.rays[r].samples += count as u32;
-        let nodes = &mut s.nodes[r];
-        let laid = nodes.len();
-        for pending in &s.pending[k..k + count] {
-            nodes.push(Node {
-                t: pending.t,
-                probe: pending.probe,
-                sigma: s.inst_sigma[slot..slot + met].iter().sum(),
-                slot: slot as u32,
-                starts_run: pending.starts_run,
-                exact: pending.exact,
-                extent: pending.extent,
-                weight: 0.0,
-                depth: 0.0,
-                difference: f64::NAN,
-            });
-            slot += met;
-        }
-        settle(nodes, laid, &mut s.settling);
-        k += count;
     }
 }
 

@@ -159,13 +159,13 @@ fn bench_reports_errors_heap_and_plots_per_scene() {
     }
     assert!(report.contains("every 16th row (2 of 32)"), "{report}");
     // What "within target" compared: every pixel against the exact integral for the demo; the
-    // blob's rows against a fine march, whose own error is estimated.
+    // blob's rows against its quadrature, whose own error is estimated by a tighter one.
     assert!(
         report.contains("Compared: every pixel, against the exact integral."),
         "{report}"
     );
     assert!(
-        report.contains("against a march twice as fine again"),
+        report.contains("against the quadrature to 2.5e-7"),
         "{report}"
     );
     let header: Vec<&str> = report

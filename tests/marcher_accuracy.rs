@@ -205,17 +205,7 @@ fn draft_keeps_its_target_where_a_dense_mask_segment_is_one_step_long() {
 /// shell went unseen and the pixel's colour was off by 0.12.
 #[test]
 fn draft_keeps_its_target_where_a_thin_shell_lies_between_two_nodes() {
-    let dir = tempfile::tempdir().unwrap();
-    let bench = build(SceneKind::Blob, 1920, 1080, dir.path(), None).expect("the blob");
-    let window = Window::new(994, 320, 1010, 336);
-    let want =
-        nerfx::reference::render_trained(&bench.scene, &bench.camera, window, QUADRATURE_TOLERANCE)
-            .expect("the quadrature");
-    let params = Quality::Draft.params();
-    let settings = RenderSettings::new(params, Outputs::all());
-    let got = render(&bench.scene, &bench.camera, window, &settings).expect("a render");
-    assert_sane("blob at 1080p, Draft", &got);
-    assert_close("blob at 1080p, Draft", &got, &want, within_target(params));
+    assert_blob_window_within_target(Window::new(994, 320, 1010, 336), Quality::Draft);
 }
 
 /// Preview on the blob at 1080p where rays enter it opaque: density ~7e4 right at its
@@ -225,17 +215,23 @@ fn draft_keeps_its_target_where_a_thin_shell_lies_between_two_nodes() {
 /// was off by 1.7e-2 against the quadrature reference.
 #[test]
 fn preview_keeps_its_target_where_an_opaque_shell_is_thinner_than_the_inset() {
+    assert_blob_window_within_target(Window::new(703, 304, 719, 320), Quality::Preview);
+}
+
+/// Renders `window` of the bench's dense blob at 1920×1080 at `quality` and holds it to the
+/// preset's error target against the quadrature reference.
+fn assert_blob_window_within_target(window: Window, quality: Quality) {
     let dir = tempfile::tempdir().unwrap();
     let bench = build(SceneKind::Blob, 1920, 1080, dir.path(), None).expect("the blob");
-    let window = Window::new(703, 304, 719, 320);
     let want =
         nerfx::reference::render_trained(&bench.scene, &bench.camera, window, QUADRATURE_TOLERANCE)
             .expect("the quadrature");
-    let params = Quality::Preview.params();
+    let params = quality.params();
     let settings = RenderSettings::new(params, Outputs::all());
     let got = render(&bench.scene, &bench.camera, window, &settings).expect("a render");
-    assert_sane("blob at 1080p, Preview", &got);
-    assert_close("blob at 1080p, Preview", &got, &want, within_target(params));
+    let what = format!("blob at 1080p, {quality:?}");
+    assert_sane(&what, &got);
+    assert_close(&what, &got, &want, within_target(params));
 }
 
 /// A preset's promise: every pixel's alpha and premultiplied colour channels within its

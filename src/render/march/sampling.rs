@@ -6,9 +6,9 @@ use crate::scene::Scene;
 /// Evaluates every pending node's density (one batched call per instance) and inserts the
 /// nodes, in order, into their rays' node lists. A node gets a slot per instance its ray
 /// meets, in the order of [`met_by`]; one its probe is outside keeps a density of zero.
-/// A node whose probe reads no density where [`Pending::inward`] is elsewhere (a masked
-/// run's face, its position rounded out of the mask) is probed there instead, in a second
-/// batch.
+/// A node whose probe reads no density where [`Pending::inward`](super::Pending::inward)
+/// is elsewhere (a masked run's face, its position rounded out of the mask) is probed there
+/// instead, in a second batch.
 pub(super) fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
     let n_inst = plans.len();
     let width = s.feature_width;

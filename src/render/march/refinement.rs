@@ -6,7 +6,7 @@ use super::sampling::evaluate_pending;
 use super::{bucket_by_instance, met_by, InstancePlan, Node, Pending, Scratch, MAX_BISECTIONS};
 use crate::field::Aabb;
 use crate::render::MarchParams;
-use crate::scene::Scene;
+use crate::scene::{LocalRay, Scene};
 
 /// Bisects the steps whose two ends disagree (`|σ_b − σ_a|·δ` above the tolerance) or
 /// between whose ends the fields' density bound rises well above both (a sheet thinner than
@@ -81,7 +81,7 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
     s.unsure.clear();
     // Candidates come in order along their rays: most share a difference with the last.
     let mut last_difference = LastDifference::default();
-    // The densest node of the ray the last candidates were on (see `coarse` below).
+    // The densest node of the ray the last candidates were on (see the shell rule below).
     let mut densest: Option<(u32, f64)> = None;
     for &(r, i) in &s.candidates {
         let nodes = &s.nodes[r as usize];
@@ -311,9 +311,17 @@ fn smooth_step(r: usize, a: &Node, b: &Node, plans: &[InstancePlan], s: &Scratch
         if sa == 0.0 && sb == 0.0 {
             return true;
         }
-        let smooth = plan.smooth * growth(plan, lr, a.t).min(growth(plan, lr, b.t));
-        sa > 0.0 && sb > 0.0 && (b.t - a.t) * lr.units_per_world as f64 <= smooth
+        sa > 0.0
+            && sb > 0.0
+            && (b.t - a.t) * lr.units_per_world as f64 <= smooth_over(plan, lr, a, b)
     })
+}
+
+/// The instance's smooth length over the step from `a` to `b` (field units): its
+/// [`Field::smooth_length`](crate::field::Field::smooth_length), grown as its steps grow
+/// where it is unbounded, the less of the two ends.
+fn smooth_over(plan: &InstancePlan, lr: &LocalRay, a: &Node, b: &Node) -> f64 {
+    plan.smooth * growth(plan, lr, a.t).min(growth(plan, lr, b.t))
 }
 
 /// The shortest smooth length (see
@@ -332,8 +340,7 @@ fn unresolved_detail(
         let (plan, lr) = (&plans[met.inst as usize], &met.local);
         let dense =
             s.inst_sigma[a.slot as usize + j] > 0.0 || s.inst_sigma[b.slot as usize + j] > 0.0;
-        let k = lr.units_per_world as f64;
-        let smooth = plan.smooth * growth(plan, lr, a.t).min(growth(plan, lr, b.t)) / k;
+        let smooth = smooth_over(plan, lr, a, b) / lr.units_per_world as f64;
         if dense && smooth > 0.0 && b.t - a.t > smooth {
             shortest = Some(shortest.map_or(smooth, |s: f64| s.min(smooth)));
         }

@@ -232,23 +232,23 @@ impl Primitive {
     }
 
     /// Adds this primitive's density at each point to `sigma` (the concrete shape is chosen
-    /// once, outside the loop).
+    /// once, outside the loop). A sphere or box adds `k` inside and 0 outside without a
+    /// branch (a batch's points straddle its surface, and the branch was mispredicted): the
+    /// same sums, since `sigma` starts at +0 and only grows.
     fn add_density(&self, points: &[Vec3], sigma: &mut [f32]) {
         let k = self.density;
         match self.shape {
             Shape::Sphere { center, radius } => {
                 let r2 = radius * radius;
                 for (p, s) in points.iter().zip(sigma.iter_mut()) {
-                    if (*p - center).length_squared() <= r2 {
-                        *s += k;
-                    }
+                    let inside = (*p - center).length_squared() <= r2;
+                    *s += if inside { k } else { 0.0 };
                 }
             }
             Shape::Box { min, max } => {
                 for (p, s) in points.iter().zip(sigma.iter_mut()) {
-                    if p.cmpge(min).all() && p.cmple(max).all() {
-                        *s += k;
-                    }
+                    let inside = (p.cmpge(min) & p.cmple(max)).all();
+                    *s += if inside { k } else { 0.0 };
                 }
             }
             Shape::Gaussian {

@@ -208,13 +208,38 @@ impl Camera {
     /// `i + 0.5`), or `None` where the projection has none.
     pub fn ray(&self, x: f64, y: f64) -> Option<Ray> {
         let r = self.projection.camera_ray(x, y)?;
+        Some(self.world_ray(r, self.world_from_camera.transform_point3(r.origin)))
+    }
+
+    /// Replaces `out` with the world rays through the pixel centres of `window`, row by row:
+    /// the same rays as [`Self::ray`] gives, with what they share (a perspective camera's
+    /// origin, its columns' and rows' slopes) worked out once.
+    pub fn window_rays(&self, window: Window, out: &mut Vec<Option<Ray>>) {
+        out.clear();
+        match &self.projection {
+            Projection::Perspective(p) => {
+                let origin = self.world_from_camera.transform_point3(DVec3::ZERO);
+                p.window_rays(window, |r| {
+                    out.push(r.map(|r| self.world_ray(r, origin)));
+                });
+            }
+            _ => out.extend((window.y0..window.y1).flat_map(|y| {
+                (window.x0..window.x1)
+                    .map(move |x| self.ray(f64::from(x) + 0.5, f64::from(y) + 0.5))
+            })),
+        }
+    }
+
+    /// The camera ray `r` in the world, its origin placed there already (`origin`).
+    #[inline]
+    fn world_ray(&self, r: CameraRay, origin: DVec3) -> Ray {
         let [start, end] = self.clip;
-        Some(Ray {
-            origin: self.world_from_camera.transform_point3(r.origin),
+        Ray {
+            origin,
             dir: self.world_from_camera.transform_vector3(r.dir),
             z_per_t: r.z_per_t,
             near: start / r.z_per_t,
             far: end / r.z_per_t,
-        })
+        }
     }
 }

@@ -25,6 +25,7 @@ use serde::{Deserialize, Serialize};
 
 use super::CameraRay;
 use crate::error::{Error, Result};
+use crate::image::Window;
 
 /// The largest image side nerfx accepts (Blender's own limit is 65536).
 const MAX_SIDE: u64 = 65536;
@@ -230,7 +231,39 @@ impl Perspective {
     /// `((x − cx)/fx, −(y − cy)/fy, −1)`, `z_per_t = −dir.z`. Raster positions outside the
     /// image still have rays (overscan); `None` only for non-finite input.
     pub fn camera_ray(&self, x: f64, y: f64) -> Option<CameraRay> {
-        let d = DVec3::new((x - self.cx) / self.fx, -(y - self.cy) / self.fy, -1.0);
+        Self::through(self.column(x), self.row(y))
+    }
+
+    /// The camera rays through the pixel centres of `window`, row by row: each column's and
+    /// row's slope worked out once (the same numbers [`Self::camera_ray`] gives).
+    pub(super) fn window_rays(&self, window: Window, mut emit: impl FnMut(Option<CameraRay>)) {
+        let columns: Vec<f64> = (window.x0..window.x1)
+            .map(|x| self.column(f64::from(x) + 0.5))
+            .collect();
+        for y in window.y0..window.y1 {
+            let row = self.row(f64::from(y) + 0.5);
+            for &column in &columns {
+                emit(Self::through(column, row));
+            }
+        }
+    }
+
+    /// Camera-space X per unit of depth at raster `x`.
+    #[inline]
+    fn column(&self, x: f64) -> f64 {
+        (x - self.cx) / self.fx
+    }
+
+    /// Camera-space Y per unit of depth at raster `y` (down the image, so up is negative).
+    #[inline]
+    fn row(&self, y: f64) -> f64 {
+        -(y - self.cy) / self.fy
+    }
+
+    /// The ray through the camera-space point `(column, row, −1)`.
+    #[inline]
+    fn through(column: f64, row: f64) -> Option<CameraRay> {
+        let d = DVec3::new(column, row, -1.0);
         if !d.is_finite() {
             return None;
         }

@@ -35,12 +35,7 @@ pub(super) fn setup_rays(
     s.met_at.clear();
     s.met_at.push(0);
     s.active.clear();
-    s.world_rays.clear();
-    s.world_rays.extend((0..n_rays).map(|r| {
-        let x = tile.x0 + (r % tile.width() as usize) as u32;
-        let y = tile.y0 + (r / tile.width() as usize) as u32;
-        camera.ray(x as f64 + 0.5, y as f64 + 0.5)
-    }));
+    camera.window_rays(tile, &mut s.world_rays);
     let bundle = Bundle::of(&s.world_rays);
     cull_instances(plans, bundle.as_ref(), &mut s.tile_insts);
     s.feature_width = (s.tile_insts.iter())

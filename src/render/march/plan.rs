@@ -132,11 +132,13 @@ impl Bundle {
         }
         let axis = dir.try_normalize()?;
         let origin = origin / n;
-        let (mut rho, mut cos_theta) = (0.0f64, 1.0f64);
+        // The farthest origin's distance is the root of the largest squared one (one root).
+        let (mut rho2, mut cos_theta) = (0.0f64, 1.0f64);
         for ray in rays.iter().flatten() {
-            rho = rho.max((ray.origin - origin).length());
+            rho2 = rho2.max((ray.origin - origin).length_squared());
             cos_theta = cos_theta.min(ray.dir.dot(axis) / ray.dir.length());
         }
+        let rho = rho2.sqrt();
         // NaN directions fail this too.
         if cos_theta.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) || !rho.is_finite() {
             return None;

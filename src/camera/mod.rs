@@ -243,3 +243,46 @@ impl Camera {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use glam::DQuat;
+
+    use super::*;
+
+    /// A window's rays, worked out together, are the rays [`Camera::ray`] gives pixel by
+    /// pixel, bit for bit, for a perspective camera (the shared path) and a panoramic one.
+    #[test]
+    fn window_rays_are_the_pixels_rays() {
+        let placement = DMat4::from_rotation_translation(
+            DQuat::from_euler(glam::EulerRot::XYZ, 1.1, -0.3, 0.7),
+            DVec3::new(3.0, -4.5, 2.25),
+        );
+        let intrinsics = BlenderIntrinsics {
+            lens: 35.0,
+            shift_x: 0.1,
+            resolution_x: 97,
+            resolution_y: 61,
+            ..BlenderIntrinsics::default()
+        };
+        let projections = [
+            Projection::Perspective(Perspective::from_blender(&intrinsics).unwrap()),
+            Projection::Equirect(Equirect::new(64, 32).unwrap()),
+        ];
+        let window = Window::new(13, 7, 29, 24);
+        let mut rays = Vec::new();
+        for projection in projections {
+            let camera = Camera::new(placement, projection)
+                .unwrap()
+                .with_clip(0.1, 100.0)
+                .unwrap();
+            camera.window_rays(window, &mut rays);
+            let expected: Vec<_> = (window.y0..window.y1)
+                .flat_map(|y| (window.x0..window.x1).map(move |x| (x, y)))
+                .map(|(x, y)| camera.ray(f64::from(x) + 0.5, f64::from(y) + 0.5))
+                .collect();
+            assert_eq!(rays.len(), window.area());
+            assert_eq!(rays, expected);
+        }
+    }
+}

@@ -539,6 +539,43 @@ mod tests {
         assert!(crossing_depth(&[[1.0, 0.1, 0.1, 0.1, 1.0]], 0.5).is_infinite());
     }
 
+    /// A log as the marcher keeps it (seeded pieces, thin to opaque, constant and linear)
+    /// crosses where the plain search, an exponential for every piece, finds it: the pieces
+    /// skipped on their successors' entries are the ones that do not cross.
+    #[test]
+    fn median_crossing_skips_only_pieces_that_do_not_cross() {
+        let plain = |pieces: &[[f64; 5]], target: f64| {
+            let t_star = 1.0 - target;
+            pieces
+                .iter()
+                .position(|&[_, _, x0, x1, t_enter]| {
+                    t_enter * (-0.5 * (x0 + x1)).exp() <= t_star && t_enter > 0.0
+                })
+                .map_or(f64::INFINITY, |i| crossing_depth(&pieces[i..=i], target))
+        };
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut uniform = move || {
+            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..200 {
+            let (mut pieces, mut log, mut t) = (Pieces::new(), Vec::new(), 0.0);
+            for _ in 0..40 {
+                let delta = 0.01 + uniform();
+                let (s0, s1) = (uniform().powi(4) * 3.0, uniform().powi(4) * 3.0);
+                let t_enter = pieces.transmittance();
+                if pieces.add(t, delta, 0.5 * (s0 + s1)) > 0.0 {
+                    log.push([t, delta, s0 * delta, s1 * delta, t_enter]);
+                }
+                t += delta;
+            }
+            let alpha = pieces.accumulation();
+            for target in [0.5 * alpha, 0.1 * alpha, 0.9 * alpha, 0.999 * alpha] {
+                assert_eq!(crossing_depth(&log, target), plain(&log, target));
+            }
+        }
+    }
+
     #[test]
     fn median_crossing_inside_a_linear_piece() {
         // σ(t) = 2(t − 1) on [1, 2]: optical depth (t − 1)², accumulation 0.5 at 1 + √ln 2.

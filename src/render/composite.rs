@@ -324,17 +324,17 @@ impl Pieces {
 ///
 /// The pieces are as composited: each entered with the transmittance the one before it left
 /// (or less, where something unlogged lay between), up to rounding. So a piece followed by
-/// one entered clearly above `1 − target` does not cross, and its exit transmittance (an
-/// exponential) is not worked out.
+/// one entered clearly above `1 − target` does not cross; as transmittance only falls, those
+/// pieces are the log's first ones, passed over by bisection, their exit transmittances (an
+/// exponential each) not worked out.
 pub fn crossing_depth(pieces: &[[f64; 5]], target: f64) -> f64 {
     let t_star = 1.0 - target;
     // Far above the rounding of `T − T·α` against `T·e^{−x}` (~1e-16 relative) at `T ≥ ½`.
     let clearly_above = t_star * (1.0 + 1e-9);
-    for (i, &[t, delta, x0, x1, t_enter]) in pieces.iter().enumerate() {
-        let next_enter = pieces.get(i + 1).map_or(f64::NEG_INFINITY, |next| next[4]);
-        if t_enter > t_star && next_enter > clearly_above {
-            continue;
-        }
+    let passed = (pieces.get(1..)).map_or(0, |next| {
+        next.partition_point(|&[.., t_enter]| t_enter > clearly_above)
+    });
+    for &[t, delta, x0, x1, t_enter] in &pieces[passed..] {
         let t_exit = t_enter * (-0.5 * (x0 + x1)).exp();
         if t_exit <= t_star && t_enter > 0.0 {
             if t_enter <= t_star || delta == 0.0 {

@@ -109,17 +109,11 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
                     s,
                 )
         };
-        // Every test below grows with the transmittance, and the round's bounds the step's:
-        // the step's own (an exponential, [`transmittance_at`]) is worked out only where the
-        // round's says split.
-        let exact_t = || transmittance_at(t_round, nodes, i as usize);
-        let confirmed = |test: &dyn Fn(f64) -> bool| {
-            test(t_round) && (nodes[i as usize].depth == 0.0 || test(exact_t()))
-        };
+        // Every test below grows with the transmittance: see [`confirmed`].
         if b.t - a.t <= 1.5 * s.rays[r as usize].finest {
             // Shorter than bisection may leave: only what the step may wholly hide is
             // searched for.
-            if confirmed(&hides) {
+            if confirmed(&hides, t_round, nodes, i as usize) {
                 let t = split_point(scene, plans, r as usize, i as usize, s);
                 s.pending.push(Pending::between(r, t, a));
             }
@@ -203,7 +197,7 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
                         s,
                     ))
         };
-        if edge || confirmed(&split) {
+        if edge || confirmed(&split, t_round, nodes, i as usize) {
             s.rays[r as usize].refined = true;
             let t = split_point(scene, plans, r as usize, i as usize, s);
             s.pending.push(Pending::between(r, t, a));
@@ -299,6 +293,14 @@ pub(super) fn lay_depths_and_differences(nodes: &mut [Node]) {
             }
         }
     }
+}
+
+/// Whether `test`, which grows with the transmittance, holds at the step from node `i`:
+/// at the round's transmittance `t_round` first, which bounds the step's, and only where
+/// that says so at the step's own (an exponential, [`transmittance_at`]).
+#[inline]
+fn confirmed(test: impl Fn(f64) -> bool, t_round: f64, nodes: &[Node], i: usize) -> bool {
+    test(t_round) && (nodes[i].depth == 0.0 || test(transmittance_at(t_round, nodes, i)))
 }
 
 /// The transmittance a ray entered the round with, `t_round`, carried to node `i` of its

@@ -113,7 +113,7 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         if b.t - a.t <= 1.5 * s.rays[r as usize].finest {
             // Shorter than bisection may leave: only what the step may wholly hide is
             // searched for.
-            if confirmed(&hides, t_round, nodes, i as usize) {
+            if confirmed(hides, t_round, nodes, i as usize) {
                 let t = split_point(scene, plans, r as usize, i as usize, s);
                 s.pending.push(Pending::between(r, t, a));
             }
@@ -197,7 +197,7 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
                         s,
                     ))
         };
-        if edge || confirmed(&split, t_round, nodes, i as usize) {
+        if edge || confirmed(split, t_round, nodes, i as usize) {
             s.rays[r as usize].refined = true;
             let t = split_point(scene, plans, r as usize, i as usize, s);
             s.pending.push(Pending::between(r, t, a));

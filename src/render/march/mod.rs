@@ -35,7 +35,7 @@ use self::plan::TileFields;
 use self::refinement::refine;
 use self::sampling::evaluate_pending;
 use self::setup::setup_rays;
-use self::shading::shade;
+use self::shading::{clear_colour_queries, queue_colours, shade};
 use super::composite::{crossing_depth, Pieces};
 use super::ngp::NgpFill;
 use super::proposal::ProposalScratch;
@@ -121,11 +121,11 @@ struct Node {
     /// Colour weight gathered this round.
     weight: f64,
     /// Optical depth from the round's first node to this one
-    /// ([`lay_depths`](refinement::lay_depths)).
+    /// ([`lay_depths_and_differences`](refinement::lay_depths_and_differences)).
     depth: f64,
     /// The twice second divided difference of the density through this node and its two
-    /// neighbours ([`lay_differences`](refinement::lay_differences)); NaN until it is worked
-    /// out, and again once a neighbour changes.
+    /// neighbours ([`lay_depths_and_differences`](refinement::lay_depths_and_differences));
+    /// NaN until it is worked out, and again once a neighbour changes.
     difference: f64,
 }
 
@@ -374,9 +374,12 @@ pub(super) fn march_tile(
 
         refine(scene, plans, params, s);
 
-        // Integrate the pieces, in order.
-        for &r in &s.active {
-            let r = r as usize;
+        // Integrate the pieces, in order, and queue colour where their weight matters.
+        if outputs.rgb {
+            clear_colour_queries(plans.len(), s);
+        }
+        for a in 0..s.active.len() {
+            let r = s.active[a] as usize;
             integrate(
                 &mut s.rays[r],
                 &mut s.nodes[r],
@@ -385,10 +388,12 @@ pub(super) fn march_tile(
                 empty_is_known,
                 &mut s.stats.budget_limited_rays,
             );
+            if outputs.rgb {
+                queue_colours(r, plans, params, s);
+            }
         }
-
         if outputs.rgb {
-            shade(scene, plans, params, s);
+            shade(scene, plans, s);
         }
         let rays = &s.rays;
         s.active.retain(|&r| rays[r as usize].live);

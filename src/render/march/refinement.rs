@@ -51,8 +51,7 @@ pub(super) fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams
         for &(r, _) in &s.candidates {
             if last != Some(r) {
                 last = Some(r);
-                lay_depths(&mut s.nodes[r as usize]);
-                lay_differences(&mut s.nodes[r as usize]);
+                lay_depths_and_differences(&mut s.nodes[r as usize]);
             }
         }
         split_candidates(scene, plans, params, s);
@@ -110,17 +109,11 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
                     s,
                 )
         };
-        // Every test below grows with the transmittance, and the round's bounds the step's:
-        // the step's own (an exponential, [`transmittance_at`]) is worked out only where the
-        // round's says split.
-        let exact_t = || transmittance_at(t_round, nodes, i as usize);
-        let confirmed = |test: &dyn Fn(f64) -> bool| {
-            test(t_round) && (nodes[i as usize].depth == 0.0 || test(exact_t()))
-        };
+        // Every test below grows with the transmittance: see [`confirmed`].
         if b.t - a.t <= 1.5 * s.rays[r as usize].finest {
             // Shorter than bisection may leave: only what the step may wholly hide is
             // searched for.
-            if confirmed(&hides) {
+            if confirmed(hides, t_round, nodes, i as usize) {
                 let t = split_point(scene, plans, r as usize, i as usize, s);
                 s.pending.push(Pending::between(r, t, a));
             }
@@ -204,7 +197,7 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
                         s,
                     ))
         };
-        if edge || confirmed(&split) {
+        if edge || confirmed(split, t_round, nodes, i as usize) {
             s.rays[r as usize].refined = true;
             let t = split_point(scene, plans, r as usize, i as usize, s);
             s.pending.push(Pending::between(r, t, a));
@@ -273,24 +266,45 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
     }
 }
 
-/// Lays each node's [`Node::depth`]: the optical depth of a round's steps before it, each at
-/// the lower of its two densities (an edge inside a step may lie anywhere in it), constant
-/// runs whole.
-pub(super) fn lay_depths(nodes: &mut [Node]) {
+/// Lays each node's [`Node::depth`] and, where it is not known, [`Node::difference`], in one
+/// pass over a ray's nodes.
+///
+/// The depth is the optical depth of a round's steps before the node, each at the lower of
+/// its two densities (an edge inside a step may lie anywhere in it), constant runs whole.
+///
+/// The difference is worked out for the nodes inside an exact run, with a neighbour in it on
+/// either side: every step of such a run is judged by its curvature ([`step_curvature`]), in
+/// each level of refinement that looks at it and again when it is integrated, and those read
+/// them.
+pub(super) fn lay_depths_and_differences(nodes: &mut [Node]) {
     let mut depth = 0.0;
     for k in 0..nodes.len() {
         nodes[k].depth = depth;
         let a = &nodes[k];
+        let next = nodes.get(k + 1).filter(|b| !b.starts_run);
         if a.extent > 0.0 {
             depth += a.extent * a.sigma;
-        } else if let Some(b) = nodes.get(k + 1).filter(|b| !b.starts_run) {
+        } else if let Some(b) = next {
             depth += (b.t - a.t) * a.sigma.min(b.sigma);
+        }
+        if k > 0 && next.is_some() && a.exact && !a.starts_run && a.difference.is_nan() {
+            if let Some(d) = difference(&nodes[k - 1..=k + 1]) {
+                nodes[k].difference = d;
+            }
         }
     }
 }
 
+/// Whether `test`, which grows with the transmittance, holds at the step from node `i`:
+/// at the round's transmittance `t_round` first, which bounds the step's, and only where
+/// that says so at the step's own (an exponential, [`transmittance_at`]).
+#[inline]
+fn confirmed(test: impl Fn(f64) -> bool, t_round: f64, nodes: &[Node], i: usize) -> bool {
+    test(t_round) && (nodes[i].depth == 0.0 || test(transmittance_at(t_round, nodes, i)))
+}
+
 /// The transmittance a ray entered the round with, `t_round`, carried to node `i` of its
-/// round's nodes through the steps before it ([`lay_depths`]).
+/// round's nodes through the steps before it ([`lay_depths_and_differences`]).
 pub(super) fn transmittance_at(t_round: f64, nodes: &[Node], i: usize) -> f64 {
     match nodes[i].depth {
         0.0 => t_round,
@@ -453,21 +467,6 @@ fn difference(nodes: &[Node]) -> Option<f64> {
     })
 }
 
-/// Works out the [`Node::difference`]s not yet known of the nodes inside an exact run, with
-/// a neighbour in it on either side: every step of such a run is judged by its curvature
-/// ([`step_curvature`]), in each level of refinement that looks at it and again when it is
-/// integrated, and those read them.
-pub(super) fn lay_differences(nodes: &mut [Node]) {
-    for i in 1..nodes.len().saturating_sub(1) {
-        let (y, z) = (&nodes[i], &nodes[i + 1]);
-        if y.exact && !y.starts_run && !z.starts_run && y.difference.is_nan() {
-            if let Some(d) = difference(&nodes[i - 1..=i + 1]) {
-                nodes[i].difference = d;
-            }
-        }
-    }
-}
-
 /// The twice second divided difference `2·f[x0, x1, x2]` around a node that [`step_curvature`]
 /// worked out last, by ray and node: a step's `after` side is around the same node as the
 /// next step's `before`, so a pass over a ray's steps in order works each out once. Valid
@@ -477,8 +476,8 @@ pub(super) struct LastDifference(Option<(u32, usize, Option<f64>)>);
 
 impl LastDifference {
     /// The difference through nodes `i − 1`, `i` and `i + 1` of ray `ray` (node `i`'s own
-    /// where it is known, [`lay_differences`]); `None` where a step between them is not
-    /// longer than 0.
+    /// where it is known, [`lay_depths_and_differences`]); `None` where a step between them
+    /// is not longer than 0.
     #[inline]
     fn around(&mut self, nodes: &[Node], i: usize, ray: u32) -> Option<f64> {
         if let Some((r, at, difference)) = self.0 {

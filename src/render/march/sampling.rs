@@ -20,37 +20,20 @@ pub(super) fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Sc
     // One pass over the pending nodes fills every instance's query, in their order: each
     // node goes to the instances its ray is inside at its probe.
     let mut slot = first_slot;
+    // Whether some node may be probed again (only a masked run's faces can be).
+    let mut may_retry = false;
     for pending in &s.pending {
         let r = pending.ray as usize;
         let met = &s.met[s.met_at[r] as usize..s.met_at[r + 1] as usize];
         queue(met, pending.probe, slot, &mut s.queries);
+        may_retry |= pending.inward != pending.probe;
         slot += met.len();
     }
     s.inst_sigma.resize(slot, 0.0);
     s.features.resize(slot * width, 0.0);
     ask_fields(scene, plans, s);
-    let mut retried = false;
-    let mut slot = first_slot;
-    for pending in &mut s.pending {
-        let r = pending.ray as usize;
-        let met = &s.met[s.met_at[r] as usize..s.met_at[r + 1] as usize];
-        let read = s.inst_sigma[slot..slot + met.len()]
-            .iter()
-            .any(|&sigma| sigma > 0.0);
-        if !read && pending.inward != pending.probe {
-            if !retried {
-                for &i in &s.tile_insts {
-                    s.queries[i as usize].clear();
-                }
-                retried = true;
-            }
-            pending.probe = pending.inward;
-            queue(met, pending.probe, slot, &mut s.queries);
-        }
-        slot += met.len();
-    }
-    if retried {
-        ask_fields(scene, plans, s);
+    if may_retry {
+        retry_unread(scene, plans, first_slot, s);
     }
     // The nodes go in a ray at a time (a round's nodes of a ray come together, a level's
     // midpoints mostly do), each after every node at the same or a smaller distance.
@@ -82,6 +65,35 @@ pub(super) fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Sc
         }
         settle(nodes, laid, &mut s.settling);
         k += count;
+    }
+}
+
+/// Probes again, at [`Pending::inward`](super::Pending::inward), each pending node from the
+/// one with slot `first_slot` on whose probe no field read any density where that is
+/// elsewhere (a masked run's face, its position rounded out of the mask), in a second batch.
+fn retry_unread(scene: &Scene, plans: &[InstancePlan], first_slot: usize, s: &mut Scratch) {
+    let mut retried = false;
+    let mut slot = first_slot;
+    for pending in &mut s.pending {
+        let r = pending.ray as usize;
+        let met = &s.met[s.met_at[r] as usize..s.met_at[r + 1] as usize];
+        let read = s.inst_sigma[slot..slot + met.len()]
+            .iter()
+            .any(|&sigma| sigma > 0.0);
+        if !read && pending.inward != pending.probe {
+            if !retried {
+                for &i in &s.tile_insts {
+                    s.queries[i as usize].clear();
+                }
+                retried = true;
+            }
+            pending.probe = pending.inward;
+            queue(met, pending.probe, slot, &mut s.queries);
+        }
+        slot += met.len();
+    }
+    if retried {
+        ask_fields(scene, plans, s);
     }
 }
 

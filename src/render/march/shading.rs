@@ -7,52 +7,63 @@ use crate::field::linear_to_srgb;
 use crate::render::MarchParams;
 use crate::scene::Scene;
 
-/// Evaluates colour where the weight matters and adds it to the rays' colours. The lightest
-/// nodes of a ray go unshaded while their weights add up to at most
-/// [`MarchParams::color_skip_budget`], so the colour error a ray can get from skipping is
-/// bounded by that budget times its brightest radiance.
-pub(super) fn shade(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
-    let n_inst = plans.len();
-    let width = s.feature_width;
-    let budget = params.color_skip_budget as f64;
+/// Empties each of the tile's instances' colour queries, for [`queue_colours`] to fill.
+pub(super) fn clear_colour_queries(n_inst: usize, s: &mut Scratch) {
     s.queries.resize_with(n_inst, FieldQuery::default);
     for &i in &s.tile_insts {
         s.queries[i as usize].clear();
     }
-    // One pass over the rays' nodes fills every instance's query, in ray order.
-    for &r in &s.active {
-        let r = r as usize;
-        let state = &mut s.rays[r];
-        let met = &s.met[s.met_at[r] as usize..s.met_at[r + 1] as usize];
-        for node in s.nodes[r].iter_mut() {
-            if node.weight > 0.0 && state.skipped_weight + node.weight <= budget {
-                state.skipped_weight += node.weight;
-                node.weight = 0.0;
-            }
-            if node.weight <= 0.0 {
+}
+
+/// Queues colour queries of ray `r`'s nodes whose weight matters, each instance with density
+/// at a node asked for its share of the node's weight. The lightest nodes of a ray go
+/// unshaded while their weights add up to at most [`MarchParams::color_skip_budget`], so the
+/// colour error a ray can get from skipping is bounded by that budget times its brightest
+/// radiance. Called for the rays in order, right after each is integrated (its nodes are
+/// still at hand), then [`shade`] asks the fields.
+pub(super) fn queue_colours(
+    r: usize,
+    plans: &[InstancePlan],
+    params: &MarchParams,
+    s: &mut Scratch,
+) {
+    let width = s.feature_width;
+    let budget = params.color_skip_budget as f64;
+    let state = &mut s.rays[r];
+    let met = &s.met[s.met_at[r] as usize..s.met_at[r + 1] as usize];
+    for node in s.nodes[r].iter_mut() {
+        if node.weight > 0.0 && state.skipped_weight + node.weight <= budget {
+            state.skipped_weight += node.weight;
+            node.weight = 0.0;
+        }
+        if node.weight <= 0.0 {
+            continue;
+        }
+        for (j, met) in met.iter().enumerate() {
+            let (i, lr, slot) = (met.inst as usize, &met.local, node.slot as usize + j);
+            // Only an instance with density here gets a share (tested before dividing).
+            let sigma = s.inst_sigma[slot];
+            if sigma <= 0.0 {
                 continue;
             }
-            for (j, met) in met.iter().enumerate() {
-                let (i, lr, slot) = (met.inst as usize, &met.local, node.slot as usize + j);
-                // Only an instance with density here gets a share (tested before dividing).
-                let sigma = s.inst_sigma[slot];
-                if sigma <= 0.0 {
-                    continue;
-                }
-                let share = node.weight * sigma / node.sigma;
-                if share > 0.0 {
-                    let (plan, query) = (&plans[i], &mut s.queries[i]);
-                    query.points.push(lr.at(node.probe));
-                    query.dirs.push(lr.dir);
-                    query.owners.push((r as u32, share));
-                    let at = slot * width;
-                    query
-                        .features
-                        .extend_from_slice(&s.features[at..at + plan.features]);
-                }
+            let share = node.weight * sigma / node.sigma;
+            if share > 0.0 {
+                let (plan, query) = (&plans[i], &mut s.queries[i]);
+                query.points.push(lr.at(node.probe));
+                query.dirs.push(lr.dir);
+                query.owners.push((r as u32, share));
+                let at = slot * width;
+                query
+                    .features
+                    .extend_from_slice(&s.features[at..at + plan.features]);
             }
         }
     }
+}
+
+/// Evaluates the colours [`queue_colours`] queued, one batched call per instance, and adds
+/// them to the rays' colours.
+pub(super) fn shade(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
     for &i in &s.tile_insts {
         let (plan, query) = (&plans[i as usize], &s.queries[i as usize]);
         if query.points.is_empty() {

@@ -270,7 +270,7 @@ fn transmittance_inside_a_round_goes_through_the_lower_end_of_each_step() {
         node(2.0, 1.0),
     ];
     let mut cut = nodes;
-    super::refinement::lay_depths(&mut nodes);
+    super::refinement::lay_depths_and_differences(&mut nodes);
     assert_eq!(super::refinement::transmittance_at(0.5, &nodes, 0), 0.5);
     // The first step may hold its edge anywhere: no depth from it.
     assert_eq!(super::refinement::transmittance_at(0.5, &nodes, 1), 0.5);
@@ -278,7 +278,7 @@ fn transmittance_inside_a_round_goes_through_the_lower_end_of_each_step() {
     assert!((super::refinement::transmittance_at(0.5, &nodes, 3) - want).abs() < 1e-15);
     // A run's start joins nothing to the node before it.
     cut[2].starts_run = true;
-    super::refinement::lay_depths(&mut cut);
+    super::refinement::lay_depths_and_differences(&mut cut);
     let want = 0.5 * (-(0.5 * 1.0f64)).exp();
     assert!((super::refinement::transmittance_at(0.5, &cut, 3) - want).abs() < 1e-15);
 }

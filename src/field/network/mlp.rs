@@ -943,6 +943,112 @@ mod tests {
         }
     }
 
+    /// Independent chains of 256-bit fused multiply-adds, `n` rounds of ten (more than the
+    /// two pipes' latency needs): the core's peak rate of `f32` multiply-adds.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn fma_chains(n: usize) -> f32 {
+        use std::arch::x86_64::{_mm256_fmadd_ps, _mm256_set1_ps, _mm256_storeu_ps};
+        let (a, b) = (_mm256_set1_ps(0.999_999), _mm256_set1_ps(1e-7));
+        let mut acc = [_mm256_set1_ps(1.0); 10];
+        for _ in 0..n {
+            for x in &mut acc {
+                *x = _mm256_fmadd_ps(*x, a, b);
+            }
+        }
+        let mut lanes = [0.0f32; 8];
+        let mut sum = 0.0;
+        for x in acc {
+            // SAFETY: `lanes` holds the eight values stored.
+            unsafe { _mm256_storeu_ps(lanes.as_mut_ptr(), x) };
+            sum += lanes.iter().sum::<f32>();
+        }
+        sum
+    }
+
+    /// Multiply-adds per nanosecond of CPU time of `work` (which does `macs` of them per
+    /// call), on `threads` threads at once calling it for about a second each: a core's rate
+    /// however busy the machine is (its cores run one thread each).
+    fn macs_per_cpu_ns(threads: usize, macs: f64, work: &(dyn Fn() -> f32 + Sync)) -> f64 {
+        let cpu = crate::bench::field::process_cpu_seconds;
+        let before = cpu().unwrap_or(f64::NAN);
+        let calls: u64 = std::thread::scope(|scope| {
+            let runs: Vec<_> = (0..threads)
+                .map(|_| {
+                    scope.spawn(|| {
+                        let t = std::time::Instant::now();
+                        let (mut calls, mut sink) = (0u64, 0.0f32);
+                        while t.elapsed().as_secs_f64() < 1.0 {
+                            sink += work();
+                            calls += 1;
+                        }
+                        std::hint::black_box(sink);
+                        calls
+                    })
+                })
+                .collect();
+            runs.into_iter().map(|r| r.join().unwrap_or(0)).sum()
+        });
+        let seconds = cpu().unwrap_or(f64::NAN) - before;
+        calls as f64 * macs / seconds / 1e9
+    }
+
+    /// What bounds a shaded instant-ngp sample (8×4 grid): the networks' multiply-adds as the
+    /// kernel does them (the density network 32 → 64 → 16, the colour network's head 16 →
+    /// 64 → 64 → 3 once its direction part is split off, four outputs to a tile), timed on an
+    /// in-cache batch against the core's peak; the samples per second they alone allow,
+    /// whatever the encoding costs.
+    #[test]
+    #[ignore]
+    #[cfg(target_arch = "x86_64")]
+    fn bench_networks_against_the_fma_peak() {
+        if !(is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")) {
+            println!("no AVX2 and FMA: nothing to measure");
+            return;
+        }
+        let config = |n_inputs, n_hidden_layers, n_outputs| MlpConfig {
+            n_inputs,
+            width: 64,
+            n_hidden_layers,
+            n_outputs,
+            output_alignment: 16,
+        };
+        let density = config(32, 1, 16);
+        let colour = config(16, 2, 3);
+        let [density, colour] =
+            [density, colour].map(|c| Mlp::new(c, &seeded(c.n_params(), 5)).unwrap());
+        let n = 256;
+        let (x_density, x_colour) = (seeded(n * 32, 6), seeded(n * 16, 7));
+        let per_sample = [
+            32.0 * 64.0 + 64.0 * 16.0,
+            16.0 * 64.0 + 64.0 * 64.0 + 64.0 * 4.0,
+        ];
+        let rounds = 1 << 20;
+        for threads in [1, 2] {
+            // SAFETY: the CPU has AVX2 and FMA (checked above).
+            let peak = macs_per_cpu_ns(threads, rounds as f64 * 80.0, &|| unsafe {
+                fma_chains(rounds)
+            });
+            let shaded =
+                macs_per_cpu_ns(threads, n as f64 * (per_sample[0] + per_sample[1]), &|| {
+                    let (mut sigma, mut rgb) = (vec![0.0; n * 16], vec![0.0; n * 3]);
+                    density.forward(&x_density, &mut sigma);
+                    colour.forward(&x_colour, &mut rgb);
+                    sigma[0] + rgb[0]
+                });
+            let total = per_sample[0] + per_sample[1];
+            println!(
+                "{threads} thread(s): a core's peak {peak:.1} multiply-adds per CPU ns; the \
+                 networks {shaded:.1} ({:.0} % of it), {total} per shaded sample: at most \
+                 {:.2} M shaded samples per CPU second from the networks alone ({:.2} M at \
+                 the peak)",
+                100.0 * shaded / peak,
+                shaded * 1e3 / total,
+                peak * 1e3 / total,
+            );
+        }
+    }
+
     #[test]
     fn wrong_counts_are_refused() {
         let c = MlpConfig {

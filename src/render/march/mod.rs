@@ -202,7 +202,8 @@ struct RayState {
     samples: u32,
     /// The shortest step bisection may leave this round: the base step where the round's
     /// nodes start, halved `refine_depth` times (a grown step may be bisected further than
-    /// its own `refine_depth` halvings, never below this).
+    /// its own `refine_depth` halvings, never below this, but a step that can hold no edge,
+    /// see `refinement::split_candidates`).
     finest: f64,
 }
 

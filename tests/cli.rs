@@ -157,7 +157,11 @@ fn bench_reports_errors_heap_and_plots_per_scene() {
     for scene in ["### demo", "### blob"] {
         assert!(report.contains(scene), "{report}");
     }
-    assert!(report.contains("every 16th row (2 of 32)"), "{report}");
+    assert!(report.contains("every 4th row (8 of 32)"), "{report}");
+    assert!(
+        report.contains("timed and compared on every 16th row only"),
+        "{report}"
+    );
     // What "within target" compared: every pixel against the exact integral for the demo; the
     // blob's rows against its quadrature, whose own error is estimated by a tighter one.
     assert!(

@@ -824,13 +824,11 @@ fn the_clipping_range_cuts_rays_at_constant_depth() {
 #[test]
 #[ignore = "diagnostic"]
 fn blob_worst_pixels_at_1080p() {
-    use nerfx::bench::suite::ROW_STRIDE;
+    use nerfx::bench::suite::{sampled_rows, QUADRATURE_ROW_STRIDE};
     use rayon::prelude::*;
     let dir = tempfile::tempdir().unwrap();
     let bench = build(SceneKind::Blob, 1920, 1080, dir.path(), None).expect("the blob");
-    let ys: Vec<u32> = (0..1080 / ROW_STRIDE)
-        .map(|k| k * ROW_STRIDE + ROW_STRIDE / 2)
-        .collect();
+    let ys = sampled_rows(1080, QUADRATURE_ROW_STRIDE);
     let row = |y: u32| Window::new(0, y, 1920, y + 1);
     let want: Vec<Vec<f32>> = ys
         .par_iter()

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use super::plot::{plot_png, Series};
 use super::scaling;
-use super::suite::{Report, Row, SceneReport, CHECK_STRIDE, ROW_STRIDE};
+use super::suite::{Report, Row, SceneReport, CHECK_ROW_STRIDE, ROW_STRIDE};
 use crate::error::{Error, Result};
 use crate::render::Quality;
 
@@ -108,7 +108,10 @@ fn scene_markdown(scene: &SceneReport) -> String {
     }
     s += "\n";
     if scene.rows.iter().any(|r| r.on_rows) {
-        s += "¹ timed on the reference rows only, scaled to a frame.\n";
+        s += &format!(
+            "¹ timed and compared on every {}th row only (reference rows), scaled to a frame.\n",
+            ROW_STRIDE.max(scene.row_stride)
+        );
     }
     s += &target_note(scene);
     s
@@ -134,11 +137,11 @@ fn target_note(scene: &SceneReport) -> String {
         None => s += "Compared: every pixel, against the exact integral.\n",
         Some(e) => {
             s += &format!(
-                "Compared: every {ROW_STRIDE}th row, against the reference above, which is not \
-                 exact: against {} (on every {CHECK_STRIDE}th of those rows) it is off by up \
+                "Compared: every {}th row, against the reference above, which is not \
+                 exact: against {} (on every {CHECK_ROW_STRIDE}th row) it is off by up \
                  to {:.2e} in alpha and {:.2e} in colour, so a preset missing its target by \
                  less than that may be the reference's miss.\n",
-                scene.reference_check, e.max_alpha_error, e.max_color_error
+                scene.row_stride, scene.reference_check, e.max_alpha_error, e.max_color_error
             );
         }
     }

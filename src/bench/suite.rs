@@ -3,8 +3,9 @@
 //! heap.
 //!
 //! References: analytic scenes have the exact closed form for every pixel. Trained fields
-//! have none; their reference is taken on every [`ROW_STRIDE`]-th row of the frame (a full
-//! reference frame would take longer than the rest of the suite), and renders are compared
+//! have none; their reference is taken on every [`ROW_STRIDE`]-th row of the frame, or
+//! every [`QUADRATURE_ROW_STRIDE`]-th for the quadrature (a full reference frame would take
+//! longer than the rest of the suite), and renders are compared
 //! on those rows: a much finer nerfx march ([`fine_params`]), or, for a dense field whose
 //! opaque shells a march cannot be trusted to judge (it shares the marcher's refinement),
 //! an adaptive f64 quadrature of the field between its mask's crossings
@@ -17,8 +18,8 @@
 //! Each preset promises a per-pixel error ([`MarchParams::error_target`], alpha and
 //! premultiplied colour): a row says whether it keeps it over the pixels compared. Neither
 //! row reference is exact, so its own error is estimated too, against one twice as fine
-//! ([`finer_params`], or a quarter of the tolerance) on every [`CHECK_STRIDE`]-th reference
-//! row: a preset missing its target by less than that may be the reference's miss.
+//! ([`finer_params`], or a quarter of the tolerance) on every [`CHECK_ROW_STRIDE`]-th row of
+//! the frame: a preset missing its target by less than that may be the reference's miss.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -40,11 +41,17 @@ use crate::render::{
 use crate::scene::Scene;
 
 /// Trained scenes are compared on every this many rows (starting at the middle of the
-/// first band).
+/// first band), but where the quadrature is their reference ([`QUADRATURE_ROW_STRIDE`]).
 pub const ROW_STRIDE: u32 = 16;
 
-/// A fine reference's own error is estimated on every this many of its rows.
-pub const CHECK_STRIDE: usize = 4;
+/// The quadrature's rows are this many apart: it is cheap enough (9.4 s for every 16th row
+/// of the dense blob at 1920×1080), and a dense field's misses lie in single pixels (a
+/// sharp peak that one ray's steps straddle), which a sparser sample passes over.
+pub const QUADRATURE_ROW_STRIDE: u32 = 4;
+
+/// A row reference's own error is estimated on every this many rows of the frame (a
+/// multiple of both row strides).
+pub const CHECK_ROW_STRIDE: u32 = 64;
 
 /// What the quadrature reference lets one interval of a ray get wrong (in alpha and each
 /// premultiplied colour channel): far below Final's target, so that the reference judges it.
@@ -110,11 +117,13 @@ pub struct SceneReport {
     pub truth: String,
     /// Time of the reference, milliseconds (0 when there is none).
     pub reference_ms: f64,
-    /// A row reference's own error: against one twice as fine on every [`CHECK_STRIDE`]-th
-    /// of its rows (`None` for exact references and scenes without one).
+    /// A row reference's own error: against one twice as fine on every
+    /// [`CHECK_ROW_STRIDE`]-th row (`None` for exact references and scenes without one).
     pub reference_error: Option<ErrorReport>,
     /// What that finer one is (empty without one).
     pub reference_check: String,
+    /// Compared on every this many rows (1: every pixel; 0 without a reference).
+    pub row_stride: u32,
     /// Heap the loaded scene and its occupancy grids hold, where measured.
     pub scene_heap: Option<usize>,
     /// Peak heap of a one-tile (16×16) Final render once the occupancy is built: the tile's
@@ -236,7 +245,13 @@ fn measure_scene(
     let (scene, camera) = (&b.scene, &b.camera);
     let outputs = Outputs::all();
     let full = camera.full_window();
-    let rows = sampled_rows(full.height());
+    let row_stride = match b.truth {
+        Truth::Exact => 1,
+        Truth::FineMarch => ROW_STRIDE,
+        Truth::Quadrature => QUADRATURE_ROW_STRIDE,
+        Truth::Rasterised => 0,
+    };
+    let rows = sampled_rows(full.height(), row_stride.max(1));
 
     // Occupancy grids are built on first use: a small render per preset builds them, so
     // the timed frames measure rendering alone.
@@ -277,7 +292,7 @@ fn measure_scene(
                 Reference::Rows(fine),
                 format!(
                     "a finer nerfx march ({} steps per feature, stop at transmittance {:.0e}, \
-                     every sample shaded) of every {ROW_STRIDE}th row ({} of {}); all errors \
+                     every sample shaded) of every {row_stride}th row ({} of {}); all errors \
                      are over those rows",
                     p.steps_per_feature,
                     p.min_transmittance,
@@ -295,7 +310,7 @@ fn measure_scene(
                 format!(
                     "an adaptive f64 quadrature of the trained field between its mask's \
                      crossings (no code shared with the marcher; every interval converged to \
-                     {QUADRATURE_TOLERANCE:.0e} in alpha and colour) of every {ROW_STRIDE}th \
+                     {QUADRATURE_TOLERANCE:.0e} in alpha and colour) of every {row_stride}th \
                      row ({} of {}); all errors are over those rows",
                     rows.len(),
                     full.height()
@@ -317,7 +332,8 @@ fn measure_scene(
     let (reference_error, reference_check) = match &truth {
         Reference::Rows(fine) => {
             let started = Instant::now();
-            let checked: Vec<&(u32, Planes)> = fine.iter().step_by(CHECK_STRIDE).collect();
+            let every = (CHECK_ROW_STRIDE / row_stride) as usize;
+            let checked: Vec<&(u32, Planes)> = fine.iter().step_by(every).collect();
             let ys: Vec<u32> = checked.iter().map(|(y, _)| *y).collect();
             let (finer, check) = if b.truth == Truth::Quadrature {
                 let tolerance = 0.25 * QUADRATURE_TOLERANCE;
@@ -382,15 +398,20 @@ fn measure_scene(
         .map(|i| i.field().bounds().diagonal() as f64)
         .fold(0.0, f64::max);
     // Baselines and further references (such as instant-ngp's own marcher on trained
-    // fields) are taken like the reference: on its rows where it has rows.
+    // fields) are taken like the reference: on its rows where it has rows, but no more
+    // often than every [`ROW_STRIDE`]th (a naive march of the quadrature's rows would cost
+    // three times the presets' frames).
     let on_rows = matches!(truth, Reference::Rows(_));
+    let baseline_rows: Vec<u32> = (rows.iter().copied())
+        .step_by((ROW_STRIDE / row_stride.max(1)).max(1) as usize)
+        .collect();
     for &steps in naive_steps {
         let step = diagonal / steps;
         let row = baseline_row(
             format!("naive (step diag/{steps})"),
             &truth,
             camera,
-            on_rows.then_some(&rows[..]),
+            on_rows.then_some(&baseline_rows[..]),
             |w| render_naive(scene, camera, w, step, &outputs),
         )?;
         log(&format!("{}: {}", b.kind.name(), row_line(&row)));
@@ -402,7 +423,7 @@ fn measure_scene(
             "instant-ngp's own marcher".to_string(),
             &truth,
             camera,
-            on_rows.then_some(&rows[..]),
+            on_rows.then_some(&baseline_rows[..]),
             |w| render_frame(native, camera, w, Quality::Final.params(), outputs),
         )?;
         log(&format!("{}: {}", b.kind.name(), row_line(&row)));
@@ -416,6 +437,7 @@ fn measure_scene(
         reference_ms,
         reference_error,
         reference_check,
+        row_stride,
         scene_heap,
         tile_heap: tile_heap.map(|h| h.peak),
         rows: report_rows,
@@ -484,10 +506,10 @@ fn render_frame(
     render_with_progress(scene, camera, window, &settings, &|_| {})
 }
 
-/// The rows references are taken on: the middle row of each band of [`ROW_STRIDE`].
-fn sampled_rows(height: u32) -> Vec<u32> {
-    (0..height.div_ceil(ROW_STRIDE))
-        .map(|k| (k * ROW_STRIDE + ROW_STRIDE / 2).min(height - 1))
+/// The rows references are taken on: the middle row of each band `stride` rows high.
+pub fn sampled_rows(height: u32, stride: u32) -> Vec<u32> {
+    (0..height.div_ceil(stride))
+        .map(|k| (k * stride + stride / 2).min(height - 1))
         .collect()
 }
 
@@ -528,19 +550,27 @@ fn compare(truth: &Reference, test: &Planes) -> Result<Option<ErrorReport>> {
     })
 }
 
-/// Errors of a render taken like the reference (the same rows, or a full frame).
+/// Errors of a render taken like the reference (on some of its rows, or a full frame).
 fn compare_references(truth: &Reference, test: &Reference) -> Result<Option<ErrorReport>> {
+    let unmatched = || {
+        Error::invalid(
+            "benchmark",
+            "a render on rows compared with a reference that lacks them",
+        )
+    };
     match (truth, test) {
         (_, Reference::Frame(p)) => compare(truth, p),
-        (Reference::Rows(t), Reference::Rows(p)) if t.len() == p.len() => Ok(Some(combine(
-            t.iter()
-                .zip(p)
-                .map(|((_, t), (_, p))| ErrorReport::compare(t, p)),
-        ))),
-        _ => Err(Error::invalid(
-            "benchmark",
-            "a render on rows compared with a reference that is not",
-        )),
+        (Reference::Rows(t), Reference::Rows(p)) => {
+            let parts = p
+                .iter()
+                .map(|(y, p)| {
+                    let (_, t) = t.iter().find(|(ty, _)| ty == y).ok_or_else(unmatched)?;
+                    Ok(ErrorReport::compare(t, p))
+                })
+                .collect::<Result<Vec<_>>>()?;
+            Ok(Some(combine(parts.into_iter())))
+        }
+        _ => Err(unmatched()),
     }
 }
 
@@ -689,8 +719,14 @@ mod tests {
 
     #[test]
     fn sampled_rows_are_the_middles_of_bands_within_the_image() {
-        assert_eq!(sampled_rows(40), vec![8, 24, 39]);
-        assert_eq!(sampled_rows(1), vec![0]);
-        assert_eq!(sampled_rows(1080).len(), 68);
+        assert_eq!(sampled_rows(40, 16), vec![8, 24, 39]);
+        assert_eq!(sampled_rows(1, 16), vec![0]);
+        assert_eq!(sampled_rows(1080, 16).len(), 68);
+        assert_eq!(sampled_rows(10, 4), vec![2, 6, 9]);
+        assert_eq!(sampled_rows(1080, QUADRATURE_ROW_STRIDE).len(), 270);
+        // The reference's own check takes whole rows of either sample.
+        for stride in [ROW_STRIDE, QUADRATURE_ROW_STRIDE] {
+            assert_eq!(CHECK_ROW_STRIDE % stride, 0);
+        }
     }
 }

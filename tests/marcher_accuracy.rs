@@ -268,6 +268,23 @@ fn a_rounds_first_step_is_judged_by_its_jump_too() {
     assert_blob_window_within_target(Window::new(1197, 192, 1213, 208), Quality::Preview);
 }
 
+/// Preview on the blob at 1080p where a later round's first step, longer than the field's
+/// smooth length, straddles a peak far denser than any node of its round: at pixel
+/// (650, 266) a step of 1.9 smooth lengths between nodes of 107 and 63 (the round's densest
+/// 107) held a peak of 2700 (optical depth 1.41, the trapezoid's 0.23), and alpha was off by
+/// 9.2e-3; at (1133, 918) and (1238, 846) by 6.5e-3 and 5.1e-3. The step's shell is as
+/// dense as the densest node of the ray's rounds so far (there 1183), not of its round only.
+#[test]
+fn preview_keeps_its_target_where_a_rounds_first_step_straddles_a_dense_peak() {
+    for window in [
+        Window::new(642, 258, 658, 274),
+        Window::new(1125, 910, 1141, 926),
+        Window::new(1230, 838, 1246, 854),
+    ] {
+        assert_blob_window_within_target(window, Quality::Preview);
+    }
+}
+
 /// Renders `window` of the bench's dense blob at 1920×1080 at `quality` and holds it to the
 /// preset's error target against the quadrature reference.
 fn assert_blob_window_within_target(window: Window, quality: Quality) {

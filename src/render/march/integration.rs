@@ -35,6 +35,7 @@ pub(super) fn integrate(
     let mut last_difference = LastDifference::default();
     for i in 0..nodes.len() {
         let b = nodes[i];
+        state.densest = state.densest.max(b.sigma);
         let stopped = if b.extent > 0.0 {
             // A constant run: one piece, its weight all this node's.
             let (w, stopped) = composite_piece(state, [b.t, b.t + b.extent], [b.sigma; 2], outputs);

@@ -205,6 +205,10 @@ struct RayState {
     /// its own `refine_depth` halvings, never below this, but a step that can hold no edge,
     /// see `refinement::split_candidates`).
     finest: f64,
+    /// The densest node of the ray's rounds so far, for the shell rule of a trained field's
+    /// long steps (`refinement::split_candidates`): a round's nodes may all lie past the
+    /// density that the surface it is inside reaches.
+    densest: f64,
 }
 
 impl RayState {

@@ -157,7 +157,8 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
                     let peak = match densest {
                         Some((ray, peak)) if ray == r => peak,
                         _ => {
-                            let peak = nodes.iter().fold(0.0f64, |m, n| m.max(n.sigma));
+                            let before = s.rays[r as usize].densest;
+                            let peak = nodes.iter().fold(before, |m, n| m.max(n.sigma));
                             densest = Some((r, peak));
                             peak
                         }

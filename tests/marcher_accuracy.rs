@@ -227,12 +227,13 @@ fn preview_keeps_its_target_where_an_opaque_shell_is_thinner_than_the_inset() {
 /// the floor, their alpha was off by 5.7e-2 and 5.3e-2.
 #[test]
 fn draft_keeps_its_target_where_a_step_at_the_floor_leaves_a_dense_face() {
-    for window in [
-        Window::new(725, 992, 741, 1008),
-        Window::new(1134, 160, 1150, 176),
-    ] {
-        assert_blob_window_within_target(window, Quality::Draft);
-    }
+    assert_blob_windows_within_target(
+        &[
+            Window::new(725, 992, 741, 1008),
+            Window::new(1134, 160, 1150, 176),
+        ],
+        Quality::Draft,
+    );
 }
 
 /// Preview on the blob at 1080p where a ray grazes a mask and its segment there is one step
@@ -243,13 +244,14 @@ fn draft_keeps_its_target_where_a_step_at_the_floor_leaves_a_dense_face() {
 /// 1.0e-2 and 9.4e-3.
 #[test]
 fn preview_keeps_its_target_where_a_smooth_mask_segment_is_one_step_long() {
-    for window in [
-        Window::new(554, 784, 570, 800),
-        Window::new(1259, 224, 1275, 240),
-        Window::new(893, 992, 909, 1008),
-    ] {
-        assert_blob_window_within_target(window, Quality::Preview);
-    }
+    assert_blob_windows_within_target(
+        &[
+            Window::new(554, 784, 570, 800),
+            Window::new(1259, 224, 1275, 240),
+            Window::new(893, 992, 909, 1008),
+        ],
+        Quality::Preview,
+    );
 }
 
 /// Final and Preview on the blob at 1080p where a bump lies in a round's first step: the
@@ -276,13 +278,14 @@ fn a_rounds_first_step_is_judged_by_its_jump_too() {
 /// dense as the densest node of the ray's rounds so far (there 1183), not of its round only.
 #[test]
 fn preview_keeps_its_target_where_a_rounds_first_step_straddles_a_dense_peak() {
-    for window in [
-        Window::new(642, 258, 658, 274),
-        Window::new(1125, 910, 1141, 926),
-        Window::new(1230, 838, 1246, 854),
-    ] {
-        assert_blob_window_within_target(window, Quality::Preview);
-    }
+    assert_blob_windows_within_target(
+        &[
+            Window::new(642, 258, 658, 274),
+            Window::new(1125, 910, 1141, 926),
+            Window::new(1230, 838, 1246, 854),
+        ],
+        Quality::Preview,
+    );
 }
 
 /// Renders `window` of the bench's dense blob at 1920×1080 at `quality` and holds it to the
@@ -299,6 +302,13 @@ fn assert_blob_window_within_target(window: Window, quality: Quality) {
     let what = format!("blob at 1080p, {quality:?}");
     assert_sane(&what, &got);
     assert_close(&what, &got, &want, within_target(params));
+}
+
+/// [`assert_blob_window_within_target`] for each of `windows`.
+fn assert_blob_windows_within_target(windows: &[Window], quality: Quality) {
+    for &window in windows {
+        assert_blob_window_within_target(window, quality);
+    }
 }
 
 /// A preset's promise: every pixel's alpha and premultiplied colour channels within its

@@ -52,6 +52,11 @@ const GAUSS_4: ([f64; 4], [f64; 4]) = (
     ],
 );
 
+/// What share of the error target the expected depth is held to, relative: the target
+/// bounds alpha and colour, and the marcher's depths at Draft and Preview are off by about
+/// a fifth of it (relative), which the closed form does not do worse than.
+const DEPTH_SHARE: f64 = 0.125;
+
 /// A Gaussian piece is integrated only up to where its light has all but gone
 /// ([`Piece::integrate`]) once its optical depth is this many times what that takes.
 const OPAQUE: f64 = 4.0;
@@ -449,9 +454,14 @@ impl<'a> Piece<'a> {
     }
 
     /// The piece's weight `1 − e^{−τ}`, colour and depth moment (`∫tσT dt`), relative to
-    /// the transmittance it is entered with. The weight is exact; with one profile alone so
-    /// is the colour; the rest comes from [`quadrature`](Self::quadrature) held to the error
-    /// target, the moment only when `depth` is asked for (else `a` times the weight).
+    /// the transmittance it is entered with. The weight is exact, and so is the colour of a
+    /// profile alone. The rest comes from [`quadrature`](Self::quadrature) held to the error
+    /// target where it can matter: a colour split only where the profiles' colours differ by
+    /// more than the target (any split is off by at most that spread), the moment (asked for
+    /// with `depth`) only where half the piece's length is more than [`DEPTH_SHARE`] of the
+    /// target times `a` (the mean depth inside it lies between `a` and `b`, so its middle is
+    /// off by at most that half). Else the colour is the density-weighted one at the middle, the moment the
+    /// middle's.
     fn integrate(
         &self,
         b: f64,
@@ -465,11 +475,23 @@ impl<'a> Piece<'a> {
         if w.is_nan() || w <= 0.0 {
             return (0.0, DVec3::ZERO, 0.0);
         }
-        let alone = (self.active.len() == 1).then(|| self.colours[self.active[0] as usize]);
-        if let (Some(colour), false) = (alone, depth) {
-            return (w, w * colour, self.a * w);
-        }
         let target = f64::from(error_target);
+        let middle = 0.5 * (self.a + b);
+        let split = self.spread() > target;
+        let moment = depth && b - middle > DEPTH_SHARE * target * self.a;
+        // Any mean of the colours is within their spread; a density that underflows at
+        // the middle (a blob's far tail) leaves the plain mean.
+        let mix = || {
+            let (sigma, rgb, _) = self.sample(middle);
+            if sigma > 0.0 {
+                rgb / sigma
+            } else {
+                self.each().map(|(_, c)| c).sum::<DVec3>() / self.active.len() as f64
+            }
+        };
+        if !split && !moment {
+            return (w, w * mix(), w * middle);
+        }
         // Where the optical depth passes `cut`, 1e-3 of the target is left. A piece far
         // more opaque than that (σ of 1e9) is integrated up to there only: its light comes
         // from a sliver at its start, which panels over the whole piece could all miss.
@@ -479,22 +501,30 @@ impl<'a> Piece<'a> {
         } else {
             b
         };
-        let sums = self.quadrature(end, target * w, alone.is_none(), depth, budget, panels);
+        let sums = self.quadrature(end, target * w, split, moment, budget, panels);
         if sums.weight.is_nan() || sums.weight <= 0.0 {
-            // Every node underflowed (the budget ran out at once): the colour at `a`.
-            let colour = alone.unwrap_or_else(|| {
-                let (sigma, rgb, _) = self.sample(self.a);
-                if sigma > 0.0 {
-                    rgb / sigma
-                } else {
-                    DVec3::ZERO
-                }
-            });
-            return (w, w * colour, self.a * w);
+            // Every node underflowed (the budget ran out at once).
+            return (w, w * mix(), w * middle);
         }
+        // Scaled to the exact weight.
         let scale = w / sums.weight;
-        let colour = alone.map_or(scale * sums.rgb, |c| w * c);
-        (w, colour, self.a * w + scale * sums.moment)
+        let colour = if split { scale * sums.rgb } else { w * mix() };
+        let moment = if moment {
+            self.a * w + scale * sums.moment
+        } else {
+            w * middle
+        };
+        (w, colour, moment)
+    }
+
+    /// The largest difference between the piece's profiles' colours in any channel (0 for
+    /// one profile alone).
+    fn spread(&self) -> f64 {
+        let (lo, hi) = self.each().fold(
+            (DVec3::INFINITY, DVec3::NEG_INFINITY),
+            |(lo, hi), (_, c)| (lo.min(c), hi.max(c)),
+        );
+        (hi - lo).max_element()
     }
 
     /// The integrands at `t`, with `T` from the closed-form optical depth.
@@ -532,15 +562,16 @@ impl<'a> Piece<'a> {
 
     /// The piece's [`Sums`] over `[a, end]` by adaptive Gauss–Legendre panels: a panel's
     /// 4-point sum is taken once it differs from its 3-point sum by at most the panel's
-    /// share (by length) of `tolerance` in the weight and every colour channel (when
-    /// `colour` is asked for: a lone profile's is exact without), and, when `depth` is
-    /// asked for, of
-    /// `tolerance·(a + end)` in the moment; else the panel is bisected. That difference
+    /// share (by length) of `tolerance` in the weight, in every colour channel (when
+    /// `colour` is asked for) and of `DEPTH_SHARE·tolerance·a` in the moment (when `depth`
+    /// is);
+    /// else the panel is bisected. That difference
     /// bounds the error of the 3-point sum (exact to degree 5), far above the 4-point
     /// one's (degree 7), so the colour the piece adds is off by at most `tolerance` (its
     /// weight times the error target: over the ray, at most the target) and its moment by
-    /// its weight times the target times twice its mean distance (over the ray, the expected
-    /// depth by about twice the target, relative). A panel bisected [`MAX_BISECTIONS`]
+    /// its weight times [`DEPTH_SHARE`] of the target times `a` (over the ray, as `Σ wᵢaᵢ` is
+    /// at most the alpha times the expected depth, that depth by at most that share of the
+    /// target, relative). A panel bisected [`MAX_BISECTIONS`]
     /// times, or the ray's node budget spent, is taken as it is (the latter marks the ray
     /// budget-limited).
     fn quadrature(
@@ -555,7 +586,17 @@ impl<'a> Piece<'a> {
         let length = end - self.a;
         let finest = length * 0.5f64.powi(MAX_BISECTIONS as i32);
         panels.clear();
-        panels.push((self.a, end, Sums::default()));
+        // A blob's peak inside the piece starts a panel: each side of it is a half bell.
+        let mut from = self.a;
+        for (p, _) in self.each() {
+            if let Density::Gaussian { centre, .. } = p.density {
+                if centre > from && centre < end {
+                    panels.push((from, centre, Sums::default()));
+                    from = centre;
+                }
+            }
+        }
+        panels.push((from, end, Sums::default()));
         let mut total = Sums::default();
         while let Some((p, q, coarse)) = panels.pop() {
             if !budget.take(7) {
@@ -567,10 +608,10 @@ impl<'a> Piece<'a> {
             let share = (q - p) / length;
             let colour_ok =
                 !colour || (four.rgb - three.rgb).abs().max_element() <= tolerance * share;
-            // The weight sets the scale of the colour and the moment (`integrate`).
+            // The weight sets the scale of the colour and moment (`integrate`).
             let weight_ok = (four.weight - three.weight).abs() <= tolerance * share;
-            let moment_ok =
-                !depth || (four.moment - three.moment).abs() <= tolerance * (end + self.a) * share;
+            let moment_ok = !depth
+                || (four.moment - three.moment).abs() <= DEPTH_SHARE * tolerance * self.a * share;
             if (colour_ok && weight_ok && moment_ok) || q - p <= finest {
                 total = total + four;
             } else {

@@ -10,7 +10,8 @@
 //!   weight `T(1 − e^{−Kℓ})` and its depth moment ([`Pieces::add`]).
 //! - A piece holding a Gaussian has a closed-form optical depth (erf), so its weight
 //!   `T_a − T_b` is exact too, and so is its colour when it holds one primitive alone. With
-//!   several, the colour `∫T Σσᵢcᵢ dt` (and the depth moment `∫tσT dt`) come from
+//!   several, the colour `∫T Σσᵢcᵢ dt` (and the depth moment, by parts
+//!   `∫ₐᵇ tσT dt = a·w + ∫ₐᵇ T dt − (b − a)·T_b`) come from
 //!   Gauss–Legendre panels ([`Piece::quadrature`]), scaled so that their weight is the exact
 //!   one.
 //! - Median depth: where `1 − T(t) = A/2`, `A` the ray's final alpha, found in the piece that
@@ -51,6 +52,10 @@ const GAUSS_4: ([f64; 4], [f64; 4]) = (
         0.347_854_845_137_453_85,
     ],
 );
+
+/// How close to it a median depth is found, relative: below the resolution of the `f32` it
+/// is written as.
+const MEDIAN_RESOLUTION: f64 = 1e-9;
 
 /// What share of the error target the expected depth is held to, relative: the target
 /// bounds alpha and colour, and the marcher's depths at Draft and Preview are off by about
@@ -361,8 +366,12 @@ fn median_depth(s: &mut RayScratch, alpha: f64, budget: &mut Budget) -> f64 {
     let depth = (t_a / t_star).ln();
     match constant(profiles, &s.colours, &s.active) {
         Some((k, _)) => (a + depth / k).min(b),
-        None => Piece::new(a, profiles, &s.colours, &s.active, &mut s.anchors)
-            .depth_reaching(depth, b, budget),
+        None => Piece::new(a, profiles, &s.colours, &s.active, &mut s.anchors).depth_reaching(
+            depth,
+            b,
+            MEDIAN_RESOLUTION * b,
+            budget,
+        ),
     }
 }
 
@@ -390,12 +399,12 @@ struct Piece<'a> {
 }
 
 /// A Gaussian piece's integrals from `a`, relative to the transmittance it is entered with:
-/// colour `∫T Σσᵢcᵢ dt`, weight `∫σT dt` and moment `∫(t − a)σT dt`.
+/// colour `∫T Σσᵢcᵢ dt`, weight `∫σT dt` and transmittance `∫T dt`.
 #[derive(Clone, Copy, Debug, Default)]
 struct Sums {
     rgb: DVec3,
     weight: f64,
-    moment: f64,
+    transmittance: f64,
 }
 
 impl std::ops::Add for Sums {
@@ -405,7 +414,7 @@ impl std::ops::Add for Sums {
         Sums {
             rgb: self.rgb + o.rgb,
             weight: self.weight + o.weight,
-            moment: self.moment + o.moment,
+            transmittance: self.transmittance + o.transmittance,
         }
     }
 }
@@ -497,20 +506,23 @@ impl<'a> Piece<'a> {
         // from a sliver at its start, which panels over the whole piece could all miss.
         let cut = (1e3 / target).ln();
         let end = if tau > OPAQUE * cut {
-            self.depth_reaching(cut, b, budget)
+            self.depth_reaching(cut, b, 1e-2 * (b - self.a), budget)
         } else {
             b
         };
         let sums = self.quadrature(end, target * w, split, moment, budget, panels);
-        if sums.weight.is_nan() || sums.weight <= 0.0 {
-            // Every node underflowed (the budget ran out at once).
-            return (w, w * mix(), w * middle);
-        }
-        // Scaled to the exact weight.
-        let scale = w / sums.weight;
-        let colour = if split { scale * sums.rgb } else { w * mix() };
+        // Scaled to the exact weight; every node underflowing (the budget ran out at once)
+        // leaves the middle's colour.
+        let colour = if split && sums.weight > 0.0 {
+            (w / sums.weight) * sums.rgb
+        } else {
+            w * mix()
+        };
+        // By parts, from `T` alone (which falls smoothly from 1, where `σT` may be a sharp
+        // bell); past `end` the light left is taken at `end`.
         let moment = if moment {
-            self.a * w + scale * sums.moment
+            let by_parts = sums.transmittance - (end - self.a) * (1.0 - w);
+            self.a * w + by_parts.clamp(0.0, (b - self.a) * w)
         } else {
             w * middle
         };
@@ -536,7 +548,7 @@ impl<'a> Piece<'a> {
         Sums {
             rgb: transmittance * rgb,
             weight,
-            moment: (t - self.a) * weight,
+            transmittance,
         }
     }
 
@@ -549,12 +561,12 @@ impl<'a> Piece<'a> {
                 let n = self.node(mid + half * x);
                 sum.rgb += w * n.rgb;
                 sum.weight += w * n.weight;
-                sum.moment += w * n.moment;
+                sum.transmittance += w * n.transmittance;
             }
             Sums {
                 rgb: half * sum.rgb,
                 weight: half * sum.weight,
-                moment: half * sum.moment,
+                transmittance: half * sum.transmittance,
             }
         };
         (rule(&GAUSS_3.0, &GAUSS_3.1), rule(&GAUSS_4.0, &GAUSS_4.1))
@@ -562,18 +574,16 @@ impl<'a> Piece<'a> {
 
     /// The piece's [`Sums`] over `[a, end]` by adaptive Gauss–Legendre panels: a panel's
     /// 4-point sum is taken once it differs from its 3-point sum by at most the panel's
-    /// share (by length) of `tolerance` in the weight, in every colour channel (when
-    /// `colour` is asked for) and of `DEPTH_SHARE·tolerance·a` in the moment (when `depth`
-    /// is);
-    /// else the panel is bisected. That difference
-    /// bounds the error of the 3-point sum (exact to degree 5), far above the 4-point
-    /// one's (degree 7), so the colour the piece adds is off by at most `tolerance` (its
-    /// weight times the error target: over the ray, at most the target) and its moment by
-    /// its weight times [`DEPTH_SHARE`] of the target times `a` (over the ray, as `Σ wᵢaᵢ` is
-    /// at most the alpha times the expected depth, that depth by at most that share of the
-    /// target, relative). A panel bisected [`MAX_BISECTIONS`]
-    /// times, or the ray's node budget spent, is taken as it is (the latter marks the ray
-    /// budget-limited).
+    /// share (by length) of `tolerance` in the weight and every colour channel (when
+    /// `colour` is asked for), and of `DEPTH_SHARE·tolerance·a` in `∫T dt` (when `depth`
+    /// is); else the panel is bisected. That difference bounds the error of the 3-point sum
+    /// (exact to degree 5), far above the 4-point one's (degree 7), so the colour the piece
+    /// adds is off by at most `tolerance` (its weight times the error target: over the ray,
+    /// at most the target) and its moment by its weight times [`DEPTH_SHARE`] of the target
+    /// times `a` (over the ray, as `Σ wᵢaᵢ` is at most the alpha times the expected depth,
+    /// that depth by at most that share of the target, relative). A panel bisected
+    /// [`MAX_BISECTIONS`] times, or the ray's node budget spent, is taken as it is (the
+    /// latter marks the ray budget-limited).
     fn quadrature(
         &self,
         end: f64,
@@ -608,10 +618,11 @@ impl<'a> Piece<'a> {
             let share = (q - p) / length;
             let colour_ok =
                 !colour || (four.rgb - three.rgb).abs().max_element() <= tolerance * share;
-            // The weight sets the scale of the colour and moment (`integrate`).
-            let weight_ok = (four.weight - three.weight).abs() <= tolerance * share;
+            // The weight sets the scale of the colour (`integrate`).
+            let weight_ok = !colour || (four.weight - three.weight).abs() <= tolerance * share;
             let moment_ok = !depth
-                || (four.moment - three.moment).abs() <= DEPTH_SHARE * tolerance * self.a * share;
+                || (four.transmittance - three.transmittance).abs()
+                    <= DEPTH_SHARE * tolerance * self.a * share;
             if (colour_ok && weight_ok && moment_ok) || q - p <= finest {
                 total = total + four;
             } else {
@@ -620,7 +631,7 @@ impl<'a> Piece<'a> {
                 let half = Sums {
                     rgb: 0.5 * four.rgb,
                     weight: 0.5 * four.weight,
-                    moment: 0.5 * four.moment,
+                    transmittance: 0.5 * four.transmittance,
                 };
                 panels.push((p, m, half));
                 panels.push((m, q, half));
@@ -629,11 +640,12 @@ impl<'a> Piece<'a> {
         total
     }
 
-    /// Where in `[a, b]` the optical depth from `a` reaches `depth` (`b` if it does not):
-    /// Newton steps on the closed-form optical depth, kept inside a bracket that each step
-    /// narrows, bisecting where a step would leave it or would not halve the one before
-    /// (a Newton step can bounce between the two sides of a density's sharp rise).
-    fn depth_reaching(&self, depth: f64, b: f64, budget: &mut Budget) -> f64 {
+    /// Where in `[a, b]` the optical depth from `a` reaches `depth` (`b` if it does not), to
+    /// within `resolution`: Newton steps on the closed-form optical depth, kept inside a
+    /// bracket that each step narrows, bisecting where a step would leave it or would not
+    /// halve the one before (a Newton step can bounce between the two sides of a density's
+    /// sharp rise).
+    fn depth_reaching(&self, depth: f64, b: f64, resolution: f64, budget: &mut Budget) -> f64 {
         let total = self.sample(b).2;
         if total.is_nan() || total <= depth {
             return b;
@@ -664,7 +676,7 @@ impl<'a> Piece<'a> {
                 step = 0.5 * (hi - lo);
                 lo + step
             };
-            if step <= 1e-15 * t.abs().max(hi - lo) {
+            if step <= resolution {
                 return next;
             }
             t = next;

@@ -9,11 +9,12 @@
 //! - A piece of constant densities (total `K`, colour `Σkᵢcᵢ/K`) is exact:
 //!   weight `T(1 − e^{−Kℓ})` and its depth moment ([`Pieces::add`]).
 //! - A piece holding a Gaussian has a closed-form optical depth (erf), so its weight
-//!   `T_a − T_b` is exact too, and so is its colour when it holds one primitive alone. With
-//!   several, the colour `∫T Σσᵢcᵢ dt` (and the depth moment, by parts
-//!   `∫ₐᵇ tσT dt = a·w + ∫ₐᵇ T dt − (b − a)·T_b`) come from
-//!   Gauss–Legendre panels ([`Piece::quadrature`]), scaled so that their weight is the exact
-//!   one.
+//!   `w = T_a − T_b` is exact too, and so is its colour when it holds one primitive alone.
+//!   Where they can change the pixel by more than the error target allows
+//!   ([`Piece::integrate`]), the colour split `∫T Σσᵢcᵢ dt` between several primitives and
+//!   the depth moment (by parts, `∫ₐᵇ tσT dt = a·w + ∫ₐᵇ T dt − (b − a)·T_b`) come from
+//!   Gauss–Legendre panels ([`Piece::quadrature`]); the split is scaled so that its weight
+//!   is the exact one.
 //! - Median depth: where `1 − T(t) = A/2`, `A` the ray's final alpha, found in the piece that
 //!   crosses it, exactly in a constant piece, by safeguarded Newton steps on the closed-form
 //!   optical depth in a Gaussian one.
@@ -70,8 +71,8 @@ const OPAQUE: f64 = 4.0;
 /// 1e-14, past any profile's scale.
 const MAX_BISECTIONS: u32 = 48;
 
-/// Newton steps at most when solving for a depth inside a piece; each halves the bracket at
-/// least, so 64 reach the resolution of an `f64` distance.
+/// Newton steps at most when solving for a depth inside a piece: far more than a solve takes,
+/// as each step is either at most half the one before or a bisection of the bracket.
 const MAX_NEWTON_STEPS: u32 = 64;
 
 /// Whether `scene` is integrated in closed form with `params`: the dial is on, every
@@ -112,12 +113,12 @@ struct RayScratch {
     anchors: Vec<Anchor>,
     /// The pieces composited, `(a, b, T_a, T_b)`, for the median depth.
     log: Vec<[f64; 4]>,
-    /// Panels waiting to be bisected: `(p, q, their sums)`.
+    /// Panels waiting to be integrated: `(p, q, the sums taken for them if the ray's node
+    /// budget runs out)`.
     panels: Vec<(f64, f64, Sums)>,
 }
 
 /// Integrates one tile in closed form. `out` receives the tile's pixels row by row.
-#[allow(clippy::too_many_arguments)]
 pub(super) fn integrate_tile(
     scene: &Scene,
     plans: &[InstancePlan],
@@ -271,11 +272,16 @@ impl Context<'_> {
             let Some(local) = inst.local_ray(ray, ray.near, ray.far) else {
                 continue;
             };
+            // The line in f64 (the local ray keeps its origin and direction in f32, for
+            // samples): `velocity` is field units per world unit, unnormalised.
+            let field_from_world = inst.field_from_world();
+            let velocity = field_from_world.transform_vector3(ray.dir);
+            let origin = field_from_world.transform_point3(ray.origin) + local.t_near * velocity;
             let first = s.profiles.len();
             let prims = &self.prims[self.prim_at[j] as usize..self.prim_at[j + 1] as usize];
             analytic.profiles(
-                local.origin.as_dvec3(),
-                local.dir.as_dvec3() * f64::from(local.units_per_world),
+                origin,
+                velocity,
                 [local.t_near, local.t_far],
                 prims.iter().copied(),
                 &mut s.profiles,

@@ -151,3 +151,25 @@ impl Quality {
     /// All presets, coarse to fine.
     pub const ALL: [Quality; 3] = [Quality::Draft, Quality::Preview, Quality::Final];
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Settings serialised before the closed-form dial existed still read, with it on.
+    #[test]
+    fn settings_without_the_closed_form_dial_read_with_it_on() {
+        let mut json = serde_json::to_value(Quality::Draft.params()).unwrap();
+        json.as_object_mut().unwrap().remove("closed_form");
+        let old: MarchParams = serde_json::from_value(json).unwrap();
+        assert_eq!(old, Quality::Draft.params());
+        assert!(Quality::ALL.iter().all(|q| q.params().closed_form));
+        let off = MarchParams {
+            closed_form: false,
+            ..Quality::Final.params()
+        };
+        let back: MarchParams =
+            serde_json::from_str(&serde_json::to_string(&off).unwrap()).unwrap();
+        assert_eq!(back, off);
+    }
+}

@@ -14,7 +14,9 @@
 //!   ([`Piece::integrate`]), the colour split `∫T Σσᵢcᵢ dt` between several primitives and
 //!   the depth moment (by parts, `∫ₐᵇ tσT dt = a·w + ∫ₐᵇ T dt − (b − a)·T_b`) come from
 //!   Gauss–Legendre panels ([`Piece::quadrature`]); the split is scaled so that its weight
-//!   is the exact one.
+//!   is the exact one. A piece thin enough (small optical depth `τ`) has both in closed
+//!   form: the split as the profiles' optical depths' ratio, `∫T dt` from the integral of
+//!   the optical depth, each off by a bound in `τ` that is checked against the target.
 //! - Median depth: where `1 − T(t) = A/2`, `A` the ray's final alpha, found in the piece that
 //!   crosses it, exactly in a constant piece, by safeguarded Newton steps on the closed-form
 //!   optical depth in a Gaussian one.
@@ -460,12 +462,25 @@ impl<'a> Piece<'a> {
     fn sample(&self, t: f64) -> (f64, DVec3, f64) {
         let (mut sigma, mut rgb, mut depth) = (0.0, DVec3::ZERO, 0.0);
         for ((p, c), anchor) in self.each().zip(self.anchors) {
-            let (s, d) = p.density.sample_from(anchor, self.a, t);
+            let (s, d, _) = p.density.sample_from(anchor, self.a, t);
             sigma += s;
             rgb += s * c;
             depth += d;
         }
         (sigma, rgb, depth)
+    }
+
+    /// Over `[a, b]`: the optical depth `τ`, the colour sum `Στᵢcᵢ` of the profiles' own
+    /// optical depths, and the integral of the optical depth from `a`, `∫ₐᵇ τ(t) dt`.
+    fn thin(&self, b: f64) -> (f64, DVec3, f64) {
+        let (mut tau, mut rgb, mut integral) = (0.0, DVec3::ZERO, 0.0);
+        for ((p, c), anchor) in self.each().zip(self.anchors) {
+            let (_, d, i) = p.density.sample_from(anchor, self.a, b);
+            tau += d;
+            rgb += d * c;
+            integral += i;
+        }
+        (tau, rgb, integral)
     }
 
     /// The piece's weight `1 − e^{−τ}`, colour and depth moment (`∫tσT dt`), relative to
@@ -475,8 +490,9 @@ impl<'a> Piece<'a> {
     /// more than the target (any split is off by at most that spread), the moment (asked for
     /// with `depth`) only where half the piece's length is more than [`DEPTH_SHARE`] of the
     /// target times `a` (the mean depth inside it lies between `a` and `b`, so its middle is
-    /// off by at most that half). Else the colour is the density-weighted one at the middle, the moment the
-    /// middle's.
+    /// off by at most that half), and in either case only where the thin piece's closed
+    /// forms (below) are not already that close. Else the colour is the one weighed by the
+    /// profiles' optical depths, the moment the middle's.
     fn integrate(
         &self,
         b: f64,
@@ -485,27 +501,42 @@ impl<'a> Piece<'a> {
         budget: &mut Budget,
         panels: &mut Vec<(f64, f64, Sums)>,
     ) -> (f64, DVec3, f64) {
-        let tau = self.sample(b).2;
+        let (tau, rgb_tau, integral) = self.thin(b);
         let w = opacity(tau);
         if w.is_nan() || w <= 0.0 {
             return (0.0, DVec3::ZERO, 0.0);
         }
         let target = f64::from(error_target);
         let middle = 0.5 * (self.a + b);
-        let split = self.spread() > target;
+        let spread = self.spread();
         let moment = depth && b - middle > DEPTH_SHARE * target * self.a;
-        // Any mean of the colours is within their spread; a density that underflows at
-        // the middle (a blob's far tail) leaves the plain mean.
-        let mix = || {
-            let (sigma, rgb, _) = self.sample(middle);
-            if sigma > 0.0 {
-                rgb / sigma
-            } else {
-                self.each().map(|(_, c)| c).sum::<DVec3>() / self.active.len() as f64
-            }
+        // A thin piece in closed form. Its colour split is the profiles' optical depths'
+        // ratio: `T` lies in `[e^{−τ}, 1]`, so each share is within a factor `e^{±τ}` of
+        // that and the colour within `spread·(e^τ − 1)/2`. Its `∫ₐᵇ T dt` is
+        // `∫ e^{−τ(t)} dt`, which `1 − x ≤ e^{−x} ≤ 1 − x + x·τ/2` (`x ≤ τ`) puts in
+        // `[ℓ − I, ℓ − I + τ·I/2]`, `I = ∫τ dt`: the middle of that is off by `τ·I/4` at most.
+        // Each is taken where that is within what the quadrature would be held to.
+        let split = spread > target && 0.5 * spread * tau.exp_m1() > target;
+        let length = b - self.a;
+        let thin_moment = 0.25 * tau * integral <= DEPTH_SHARE * target * w * self.a;
+        let quadrature_moment = moment && !thin_moment;
+        // The colours weighed by the profiles' optical depths: any mean of them is within
+        // their spread, and this one is the split of a thin piece.
+        let mix = rgb_tau / tau;
+        let by_parts = |transmittance: f64, end: f64| {
+            let by_parts = transmittance - (end - self.a) * (1.0 - w);
+            self.a * w + by_parts.clamp(0.0, length * w)
         };
-        if !split && !moment {
-            return (w, w * mix(), w * middle);
+        let thin = |colour: DVec3| {
+            let moment = if moment {
+                by_parts(length - integral + 0.25 * tau * integral, b)
+            } else {
+                w * middle
+            };
+            (w, w * colour, moment)
+        };
+        if !split && !quadrature_moment {
+            return thin(mix);
         }
         // Where the optical depth passes `cut`, 1e-3 of the target is left. A piece far
         // more opaque than that (σ of 1e9) is integrated up to there only: its light comes
@@ -516,21 +547,20 @@ impl<'a> Piece<'a> {
         } else {
             b
         };
-        let sums = self.quadrature(end, target * w, split, moment, budget, panels);
+        let sums = self.quadrature(end, target * w, split, quadrature_moment, budget, panels);
         // Scaled to the exact weight; every node underflowing (the budget ran out at once)
         // leaves the middle's colour.
         let colour = if split && sums.weight > 0.0 {
             (w / sums.weight) * sums.rgb
         } else {
-            w * mix()
+            w * mix
         };
         // By parts, from `T` alone (which falls smoothly from 1, where `σT` may be a sharp
         // bell); past `end` the light left is taken at `end`.
-        let moment = if moment {
-            let by_parts = sums.transmittance - (end - self.a) * (1.0 - w);
-            self.a * w + by_parts.clamp(0.0, (b - self.a) * w)
+        let moment = if quadrature_moment {
+            by_parts(sums.transmittance, end)
         } else {
-            w * middle
+            thin(DVec3::ZERO).2
         };
         (w, colour, moment)
     }

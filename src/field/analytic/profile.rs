@@ -57,23 +57,33 @@ impl Density {
             Density::Constant(_) => Anchor::default(),
             Density::Gaussian { centre, width, .. } => {
                 let z = (a - centre) * (FRAC_1_SQRT_2 / width);
-                let [erf, erfc] = erf_pair(z.abs());
-                Anchor { z, erf, erfc }
+                let bell = (-z * z).exp();
+                let [erf, erfc] = erf_pair(z.abs(), bell);
+                Anchor {
+                    z,
+                    erf,
+                    erfc,
+                    bell,
+                }
             }
         }
     }
 
-    /// The density at `t` and the optical depth `∫ₐᵗ σ dt` from the point `a` that `anchor`
-    /// was taken at (`a ≤ t`). A Gaussian's optical depth is
-    /// `peak·width·√(π/2)·(erf(z_t) − erf(z_a))`, `z = (t − centre)/(√2·width)`, taken as a
-    /// difference of `erfc`s where both ends lie on one side of the centre, so that it keeps
-    /// its relative precision far out in the tails (where both `erf`s round to ±1); one
-    /// exponential `e^{−z_t²}` serves the density and `erfc(|z_t|) = e^{−z_t²}·erfcx(|z_t|)`.
-    /// Peak 2 and width 0.5 over the whole line: `2·0.5·√(2π) = 2.5066…`.
+    /// The density at `t`, the optical depth `τ(t) = ∫ₐᵗ σ ds` from the point `a` that
+    /// `anchor` was taken at (`a ≤ t`), and its integral `∫ₐᵗ τ ds = ∫ₐᵗ (t − s)·σ(s) ds`.
+    ///
+    /// A Gaussian's optical depth is `peak·width·√(π/2)·(erf(z_t) − erf(z_a))`,
+    /// `z = (t − centre)/(√2·width)`, taken as a difference of `erfc`s where both ends lie on
+    /// one side of the centre, so that it keeps its relative precision far out in the tails
+    /// (where both `erf`s round to ±1); one exponential `e^{−z_t²}` serves the density and
+    /// `erfc(|z_t|) = e^{−z_t²}·erfcx(|z_t|)`. Peak 2 and width 0.5 over the whole line:
+    /// `2·0.5·√(2π) = 2.5066…`. The integral of the optical depth is
+    /// `(t − centre)·τ(t) − ∫ₐᵗ (s − centre)·σ(s) ds`, the latter
+    /// `peak·width²·(e^{−z_a²} − e^{−z_t²})`: closed form too.
     #[inline]
-    pub fn sample_from(&self, anchor: &Anchor, a: f64, t: f64) -> (f64, f64) {
+    pub fn sample_from(&self, anchor: &Anchor, a: f64, t: f64) -> (f64, f64, f64) {
         match *self {
-            Density::Constant(k) => (k, k * (t - a)),
+            Density::Constant(k) => (k, k * (t - a), 0.5 * k * (t - a) * (t - a)),
             Density::Gaussian {
                 peak,
                 centre,
@@ -89,34 +99,34 @@ impl Density {
                 } else {
                     (1.0 - erfc) + anchor.erf
                 };
-                (
-                    peak * e,
-                    peak * width * (0.5 * PI).sqrt() * difference.max(0.0),
-                )
+                let depth = peak * width * (0.5 * PI).sqrt() * difference.max(0.0);
+                let integral = (t - centre) * depth - peak * width * width * (anchor.bell - e);
+                (peak * e, depth, integral.max(0.0))
             }
         }
     }
 }
 
 /// A Gaussian's error functions at the start of an interval of the ray: `erf` and `erfc` of
-/// `|z|` ([`Density::anchor`]).
+/// `|z|`, and its bell `e^{−z²}` ([`Density::anchor`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(crate) struct Anchor {
     z: f64,
     erf: f64,
     erfc: f64,
+    bell: f64,
 }
 
-/// `[erf(x), erfc(x)]` for `x ≥ 0` from one error function: the smaller of the two is
-/// computed (`erf` below ½, `erfc` above), the other is 1 minus it, above ½ either way so
-/// exact to rounding.
+/// `[erf(x), erfc(x)]` for `x ≥ 0` and its bell `e^{−x²}`, from one error function: the
+/// smaller of the two is computed (`erf` below ½, `erfc = e^{−x²}·erfcx(x)` above), the other
+/// is 1 minus it, above ½ either way so exact to rounding.
 #[inline]
-fn erf_pair(x: f64) -> [f64; 2] {
+fn erf_pair(x: f64, bell: f64) -> [f64; 2] {
     if x < 0.5 {
         let erf = RealErrorFunctions::erf(x);
         [erf, 1.0 - erf]
     } else {
-        let erfc = RealErrorFunctions::erfc(x);
+        let erfc = bell * RealErrorFunctions::erfcx(x);
         [1.0 - erfc, erfc]
     }
 }
@@ -180,6 +190,10 @@ mod tests {
             self.sample_from(&self.anchor(a), a, b).1
         }
 
+        fn depth_integral(&self, a: f64, b: f64) -> f64 {
+            self.sample_from(&self.anchor(a), a, b).2
+        }
+
         fn at(&self, t: f64) -> f64 {
             self.sample_from(&self.anchor(t), t, t).0
         }
@@ -211,6 +225,31 @@ mod tests {
             "{far} {mirrored}"
         );
         assert_eq!(Density::Constant(3.0).optical_depth(1.0, 1.5), 1.5);
+    }
+
+    /// The integral of the optical depth against a midpoint sum of it (20 000 slices).
+    #[test]
+    fn integral_of_the_optical_depth_matches_a_sum_of_it() {
+        let g = Density::Gaussian {
+            peak: 2.0,
+            centre: 1.0,
+            width: 0.5,
+        };
+        for density in [g, Density::Constant(3.0)] {
+            for (a, b) in [(-3.0, 5.0), (0.2, 0.9), (1.0, 1.7), (2.0, 2.1), (0.999, 1.001)] {
+                let n = 20_000;
+                let h = (b - a) / f64::from(n);
+                let sum: f64 = (0..n)
+                    .map(|i| density.optical_depth(a, a + (f64::from(i) + 0.5) * h))
+                    .sum();
+                let want = sum * h;
+                let got = density.depth_integral(a, b);
+                assert!(
+                    (got - want).abs() < 1e-7 * want,
+                    "{density:?} {a} {b}: {got} vs {want}"
+                );
+            }
+        }
     }
 
     /// Profiles along a line through a scaled frame: the density they give at world `t`

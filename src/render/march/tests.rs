@@ -190,8 +190,8 @@ fn a_bump_between_ends_of_equal_density_is_judged_by_its_curvature() {
         node(3.0, 4.0),
     ];
     assert_eq!(super::refinement::smooth_change(&slope, 1), 0.0);
-    // Without neighbours, the jump.
-    assert_eq!(super::refinement::smooth_change(&slope[1..3], 0), 1.0);
+    // Without neighbours, the denser end.
+    assert_eq!(super::refinement::smooth_change(&slope[1..3], 0), 3.0);
 }
 
 /// A step's curvature is the same, bit for bit, whether its second differences are worked
@@ -250,9 +250,9 @@ fn a_trained_run_one_step_long_is_judged_by_its_denser_end() {
     a.starts_run = true;
     assert_eq!(exact_change(&a, &b, [None, None], true), 4.0);
     assert_eq!(exact_change(&a, &b, [None, None], false), 0.0);
-    // A step alone in a later round of its run keeps its jump.
+    // So is a step alone in a later round of its run.
     a.starts_run = false;
-    assert_eq!(exact_change(&a, &b, [None, None], true), 0.0);
+    assert_eq!(exact_change(&a, &b, [None, None], true), 4.0);
     // With a neighbour on one side, the larger of the jump and that side's curvature.
     let c = node(2.0, 5.0);
     assert_eq!(exact_change(&b, &c, [Some(0.5), None], true), 1.0);

@@ -481,6 +481,39 @@ pub(super) fn step_curvature(
     [before, after]
 }
 
+/// The trapezoid rule's bias over the step from node `i` to `i + 1` of ray `ray`, in
+/// optical depth: `δ·(σ_a + σ_b)/2` exceeds the integral by `δ³·σ''(ξ)/12` for some `ξ` in
+/// the step, estimated at its middle from the cubic through its ends and their outer
+/// neighbours (their two second differences, [`step_curvature`]'s, interpolated there; exact
+/// for a cubic density). Its size is at most a twelfth of the step's [`step_curvature`] (the
+/// larger side) times `δ`. `None` where the run has no node on either side, or where those
+/// four nodes span more than `smooth` (world units): a trained field is a smooth curve only
+/// within its [smooth length](crate::field::Field::smooth_length), and a cubic through
+/// nodes further apart spans kinks between its cells that it does not model.
+#[inline]
+pub(super) fn trapezoid_bias(
+    nodes: &[Node],
+    i: usize,
+    ray: u32,
+    last: &mut LastDifference,
+    smooth: f64,
+) -> Option<f64> {
+    let (a, b) = (&nodes[i], &nodes[i + 1]);
+    let after = nodes.get(i + 2).filter(|n| !n.starts_run)?;
+    if i == 0 || a.starts_run || after.t - nodes[i - 1].t > smooth {
+        return None;
+    }
+    let before = &nodes[i - 1];
+    let near = last.around(nodes, i, ray)?;
+    let far = last.around(nodes, i + 1, ray)?;
+    // Each second difference is the cubic's `σ''` at the mean of its three nodes; the
+    // step's middle lies between those two means.
+    let (m0, m1) = ((before.t + a.t + b.t) / 3.0, (a.t + b.t + after.t) / 3.0);
+    let middle = near + (far - near) * (0.5 * (a.t + b.t) - m0) / (m1 - m0);
+    let delta = b.t - a.t;
+    Some(delta * delta * delta * middle / 12.0)
+}
+
 /// The twice second divided difference `2·f[x0, x1, x2]` of the density through three
 /// consecutive nodes; `None` where a step between them is not longer than 0.
 #[inline]

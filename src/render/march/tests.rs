@@ -194,6 +194,40 @@ fn a_bump_between_ends_of_equal_density_is_judged_by_its_curvature() {
     assert_eq!(super::refinement::smooth_change(&slope[1..3], 0), 3.0);
 }
 
+/// On a cubic density the trapezoid rule's bias is exact, steps of any lengths: the
+/// trapezoid's optical depth less it is the integral, to rounding. Without a node on either
+/// side in the run, or over nodes further apart than the smooth length, there is none.
+#[test]
+fn a_steps_trapezoid_bias_is_exact_for_a_cubic() {
+    use super::refinement::{trapezoid_bias, LastDifference};
+    let bias = |nodes: &[super::Node], i, smooth| {
+        trapezoid_bias(nodes, i, 0, &mut LastDifference::default(), smooth)
+    };
+    let cubic = |t: f64| 2.0 + t - 0.5 * t * t + 0.3 * t * t * t;
+    let integral = |t: f64| 2.0 * t + 0.5 * t * t - t * t * t / 6.0 + 0.075 * t.powi(4);
+    let nodes: Vec<_> = [0.0, 0.5, 1.5, 2.25]
+        .iter()
+        .map(|&t| node(t, cubic(t)))
+        .collect();
+    let (a, b) = (&nodes[1], &nodes[2]);
+    let trapezoid = 0.5 * (b.t - a.t) * (a.sigma + b.sigma);
+    let exact = integral(b.t) - integral(a.t);
+    assert!(
+        (trapezoid - exact).abs() > 1e-3,
+        "the cubic bends over the step"
+    );
+    let unbiased = trapezoid - bias(&nodes, 1, 2.25).unwrap();
+    assert!((unbiased - exact).abs() < 1e-12, "{unbiased} ≠ {exact}");
+    // Four nodes further apart than the field is smooth, or a run cut short: none.
+    assert_eq!(bias(&nodes, 1, 2.2), None);
+    assert_eq!((bias(&nodes, 0, 9.0), bias(&nodes, 2, 9.0)), (None, None));
+    for k in [1, 3] {
+        let mut cut = nodes.clone();
+        cut[k].starts_run = true;
+        assert_eq!(bias(&cut, 1, 9.0), None, "a run starts at node {k}");
+    }
+}
+
 /// A step's curvature is the same, bit for bit, whether its second differences are worked
 /// out afresh or kept from the step before ([`super::refinement::LastDifference`]): seeded
 /// rays of nodes (runs starting anywhere, repeated positions), their steps visited in order,

@@ -134,7 +134,8 @@ fn bad_input_fails_with_a_message_naming_the_file() {
 
 /// `nerfx bench` on a tiny frame of an analytic and a trained scene: the report has a table
 /// per scene with measured errors (the exact reference for the demo, the finer march on
-/// sampled rows for the blob), whether Final keeps its error target, what was compared,
+/// sampled rows for the blob), whether Final keeps its error target, the demo's presets
+/// marched as well as in closed form, what was compared,
 /// heap figures from the binary's counting allocator (not `n/a`), and a plot per scene; the
 /// generated snapshot is gone from the output folder.
 #[test]
@@ -209,6 +210,17 @@ fn bench_reports_errors_heap_and_plots_per_scene() {
             .parse()
             .expect("a measured peak heap");
         assert!(heap > 0.0, "{row}");
+    }
+    // The demo, integrated in closed form by the presets, is marched with them too, and the
+    // marcher keeps the same targets on it.
+    let marched: Vec<&str> = report
+        .lines()
+        .filter(|l| l.contains(" (marched) |"))
+        .collect();
+    assert_eq!(marched.len(), 3, "{report}");
+    for row in marched {
+        let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+        assert_eq!(cells[column("within target")], "yes", "{row}");
     }
     for png in ["time_vs_psnr_demo.png", "time_vs_psnr_blob.png"] {
         assert!(dir.join(png).is_file(), "{png}");

@@ -62,7 +62,7 @@ fn random_scenes_match_the_reference(quality: Quality, tol: Tol) {
         let scene = random_scene(&mut rng);
         let camera = random_camera(&mut rng, W, H);
         let want = reference_full(&scene, &camera);
-        let got = render_full(&scene, &camera, quality.params());
+        let got = render_full(&scene, &camera, marched(quality.params()));
         let what = format!("{quality:?}, random scene {seed}");
         assert_sane(&what, &got);
         assert_close(&what, &got, &want, tol);
@@ -90,7 +90,7 @@ fn draft_matches_the_reference_on_random_scenes() {
 fn demo_scene_final_matches_the_reference() {
     let (scene, camera) = nerfx::demo::scene_and_camera(96, 54).expect("demo scene");
     let want = reference_full(&scene, &camera);
-    let got = render_full(&scene, &camera, Quality::Final.params());
+    let got = render_full(&scene, &camera, marched(Quality::Final.params()));
     assert_sane("demo, Final", &got);
     assert_close("demo, Final", &got, &want, FINAL);
 }
@@ -149,7 +149,7 @@ fn final_without_spans_matches_the_reference_on_random_scenes() {
         let scene = random_scene(&mut rng);
         let camera = random_camera(&mut rng, W, H);
         let want = reference_full(&scene, &camera);
-        let got = render_full(&searched(&scene), &camera, Quality::Final.params());
+        let got = render_full(&searched(&scene), &camera, marched(Quality::Final.params()));
         let what = format!("Final without spans, random scene {seed}");
         assert_sane(&what, &got);
         assert_close(&what, &got, &want, FINAL);
@@ -167,7 +167,7 @@ fn every_preset_keeps_its_error_target_on_the_demo_and_thin_sheets() {
         let bench = build(kind, 96, 54, &dir, None).expect("an analytic bench scene");
         let want = reference_full(&bench.scene, &bench.camera);
         for quality in Quality::ALL {
-            let params = quality.params();
+            let params = marched(quality.params());
             let got = render_full(&bench.scene, &bench.camera, params);
             let what = format!("{}, {quality:?}", kind.name());
             assert_sane(&what, &got);
@@ -191,8 +191,8 @@ fn draft_keeps_its_target_where_a_dense_mask_segment_is_one_step_long() {
         let settings = RenderSettings::new(params, Outputs::all());
         render(&bench.scene, &bench.camera, window, &settings).expect("a render")
     };
-    let want = march(fine_params());
-    let params = Quality::Draft.params();
+    let want = march(marched(fine_params()));
+    let params = marched(Quality::Draft.params());
     let got = march(params);
     assert_sane("blob, Draft", &got);
     assert_close("blob, Draft", &got, &want, within_target(params));
@@ -340,7 +340,7 @@ fn assert_blob_window_within_target_at(
     let want =
         nerfx::reference::render_trained(&bench.scene, &bench.camera, window, QUADRATURE_TOLERANCE)
             .expect("the quadrature");
-    let params = quality.params();
+    let params = marched(quality.params());
     let settings = RenderSettings::new(params, Outputs::all());
     let got = render(&bench.scene, &bench.camera, window, &settings).expect("a render");
     let what = format!("blob at {width}×{height}, {quality:?}");
@@ -430,7 +430,7 @@ fn a_gaussian_is_marched_in_steps_its_curvature_allows() {
     )]);
     let camera = camera_at(DVec3::new(0.0, -7.0, 0.0), DVec3::ZERO, 48, 36, 40.0);
     let want = reference_full(&scene, &camera);
-    let params = Quality::Final.params();
+    let params = marched(Quality::Final.params());
     let (got, stats) = render_final(&scene, &camera);
     let crossing = covered(&want) as f64;
     assert!(crossing > 500.0, "the Gaussian must fill much of the view");
@@ -453,7 +453,7 @@ fn a_gaussian_is_marched_in_steps_its_curvature_allows() {
 
 /// A Final render of the whole view, with its statistics.
 fn render_final(scene: &Scene, camera: &Camera) -> (Planes, RenderStats) {
-    let settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
+    let settings = RenderSettings::new(marched(Quality::Final.params()), Outputs::all());
     render_with_progress(scene, camera, camera.full_window(), &settings, &|_| {}).expect("render")
 }
 
@@ -474,7 +474,7 @@ fn seeded_view(seed: u64) -> (Scene, Camera) {
 fn render_tiled(scene: &Scene, camera: &Camera, window: Window, tile_size: u32) -> Planes {
     let settings = RenderSettings {
         tile_size,
-        ..RenderSettings::new(Quality::Final.params(), Outputs::all())
+        ..RenderSettings::new(marched(Quality::Final.params()), Outputs::all())
     };
     render(scene, camera, window, &settings).expect("render")
 }
@@ -578,7 +578,7 @@ fn rays_with_no_samples_are_empty() {
     );
     let empty = filled(W, H, 0.0, 0.0, f32::INFINITY);
     for quality in Quality::ALL {
-        let got = render_full(&scene, &away, quality.params());
+        let got = render_full(&scene, &away, marched(quality.params()));
         assert_close(
             &format!("{quality:?}, looking away"),
             &got,
@@ -607,7 +607,7 @@ fn rays_with_no_samples_are_empty() {
         12,
         20.0,
     );
-    let got = render_full(&hollow, &between, Quality::Final.params());
+    let got = render_full(&hollow, &between, marched(Quality::Final.params()));
     assert_close(
         "inside empty bounds",
         &got,
@@ -620,9 +620,9 @@ fn rays_with_no_samples_are_empty() {
 #[test]
 fn requesting_fewer_outputs_changes_nothing_in_the_rest() {
     let (scene, camera) = seeded_view(7);
-    let all = render_full(&scene, &camera, Quality::Final.params());
+    let all = render_full(&scene, &camera, marched(Quality::Final.params()));
     let only = |outputs: Outputs| {
-        let settings = RenderSettings::new(Quality::Final.params(), outputs);
+        let settings = RenderSettings::new(marched(Quality::Final.params()), outputs);
         render(&scene, &camera, camera.full_window(), &settings).expect("render")
     };
     let none = Outputs {
@@ -763,11 +763,17 @@ fn joint_rendering_matches_the_reference_and_separate_compositing_does_not() {
     let camera = camera_at(DVec3::new(1.0, -5.0, 1.5), DVec3::ZERO, W, H, 40.0);
     let joint = Scene::new(vec![box_inst.clone(), sphere_inst.clone()]);
     let want = reference_full(&joint, &camera);
-    let got = render_full(&joint, &camera, Quality::Final.params());
+    let got = render_full(&joint, &camera, marched(Quality::Final.params()));
     assert_sane("joint", &got);
     assert_close("joint, Final", &got, &want, FINAL);
 
-    let alone = |inst| render_full(&Scene::new(vec![inst]), &camera, Quality::Final.params());
+    let alone = |inst| {
+        render_full(
+            &Scene::new(vec![inst]),
+            &camera,
+            marched(Quality::Final.params()),
+        )
+    };
     let (haze, ball) = (alone(box_inst), alone(sphere_inst));
     let rgba = |p: &Planes| Planes {
         depth_z: None,
@@ -805,7 +811,7 @@ fn finer_custom_params_converge_further() {
         error_target: Quality::Final.params().error_target / 10.0,
         min_transmittance: 1e-6,
         color_skip_budget: 1e-7,
-        ..Quality::Final.params()
+        ..marched(Quality::Final.params())
     };
     let settings = RenderSettings::new(fine, Outputs::all());
     let got = render(&scene, &camera, window, &settings).expect("render");
@@ -857,7 +863,7 @@ fn a_dense_sheet_inside_fog_is_not_missed() {
             None,
         )]);
         let want = reference_full(&scene, &camera);
-        let got = render_full(&scene, &camera, Quality::Final.params());
+        let got = render_full(&scene, &camera, marched(Quality::Final.params()));
         assert_sane("sheet", &got);
         assert_close(&format!("sheet at z = {c}"), &got, &want, FINAL);
     }
@@ -879,7 +885,7 @@ fn the_clipping_range_cuts_rays_at_constant_depth() {
         .with_clip(5.5, 100.0)
         .expect("clip range");
     let want = reference_full(&scene, &camera);
-    let got = render_full(&scene, &camera, Quality::Final.params());
+    let got = render_full(&scene, &camera, marched(Quality::Final.params()));
     assert_sane("clipped", &got);
     assert_close("clipped", &got, &want, FINAL);
     let centre = want.alpha.as_ref().expect("alpha").get(16, 16) as f64;
@@ -924,7 +930,7 @@ fn blob_worst_pixels_at_1080p() {
         })
         .collect();
     for quality in Quality::ALL {
-        let params = quality.params();
+        let params = marched(quality.params());
         let target = f64::from(params.error_target);
         let settings = RenderSettings::new(params, Outputs::all());
         let mut worst = Vec::new();

@@ -81,9 +81,9 @@ fn far_from_the_origin_renders_as_at_the_origin() {
     let far = DMat4::from_translation(DVec3::new(1e5, -1e5, 1e5));
     for seed in 0..4 {
         let (scene, camera) = seeded(seed);
-        let here = render_full(&scene, &camera, Quality::Final.params());
+        let here = render_full(&scene, &camera, marched(Quality::Final.params()));
         let (scene_far, camera_far) = (moved_scene(&scene, far), moved_camera(&camera, far));
-        let there = render_full(&scene_far, &camera_far, Quality::Final.params());
+        let there = render_full(&scene_far, &camera_far, marched(Quality::Final.params()));
         let what = format!("random scene {seed} moved by 1e5");
         assert_sane(&what, &there);
         let f32_rounding = Tol {
@@ -117,11 +117,11 @@ fn far_from_the_origin_renders_as_at_the_origin() {
 fn world_scale_only_scales_depth() {
     for seed in [1, 5] {
         let (scene, camera) = seeded(seed);
-        let unit = render_full(&scene, &camera, Quality::Final.params());
+        let unit = render_full(&scene, &camera, marched(Quality::Final.params()));
         for s in [1e-3, 1e3] {
             let m = DMat4::from_scale(DVec3::splat(s));
             let (scene_s, camera_s) = (moved_scene(&scene, m), moved_camera(&camera, m));
-            let got = render_full(&scene_s, &camera_s, Quality::Final.params());
+            let got = render_full(&scene_s, &camera_s, marched(Quality::Final.params()));
             let what = format!("random scene {seed} scaled by {s}");
             assert_sane(&what, &got);
             let rounding_flips = Tol {
@@ -170,7 +170,7 @@ fn a_huge_density_is_opaque_with_the_surface_depth() {
     let camera = axis_camera(DVec3::new(0.0, 0.0, 5.0), 33, 25, 40.0);
     let scene = single(prim(cube([-1.0; 3], [1.0; 3]), 1e8, [0.3, 0.6, 0.9]));
     for quality in Quality::ALL {
-        let got = render_full(&scene, &camera, quality.params());
+        let got = render_full(&scene, &camera, marched(quality.params()));
         let what = format!("σ = 1e8, {quality:?}");
         assert_sane(&what, &got);
         let want = reference_full(&scene, &camera);
@@ -203,7 +203,7 @@ fn a_huge_density_is_opaque_with_the_surface_depth() {
     }
     // A sphere: the same on its centre pixel, where the surface is at camera Z 4.
     let ball = single(prim(sphere([0.0; 3], 1.0), 1e8, [1.0, 1.0, 1.0]));
-    let got = render_full(&ball, &camera, Quality::Final.params());
+    let got = render_full(&ball, &camera, marched(Quality::Final.params()));
     assert_sane("σ = 1e8 sphere", &got);
     assert_eq!(got.alpha.as_ref().expect("alpha").get(16, 12), 1.0);
     let z = got.depth_z.as_ref().expect("z").get(16, 12);
@@ -236,7 +236,7 @@ fn a_tiny_density_keeps_its_tiny_alpha() {
         (Quality::Preview, 0.05),
         (Quality::Draft, 0.25),
     ] {
-        let got = render_full(&scene, &camera, quality.params());
+        let got = render_full(&scene, &camera, marched(quality.params()));
         let what = format!("σ = 1e-8, {quality:?}");
         assert_sane(&what, &got);
         let (a, ra) = (
@@ -286,7 +286,7 @@ fn tiny_steps_still_converge() {
     let (scene, camera) = seeded(2);
     let tiny = MarchParams {
         steps_per_feature: 1e5,
-        ..Quality::Final.params()
+        ..marched(Quality::Final.params())
     };
     let settings = RenderSettings::new(tiny, Outputs::all());
     // A 4 × 3 window around the most opaque pixel.
@@ -341,7 +341,7 @@ fn grazing_rays_match_the_reference() {
         assert_eq!((ray.origin.y, ray.dir.y), (1.0, 0.0), "{what}: set-up");
         let want = reference_full(&scene, &camera);
         for quality in Quality::ALL {
-            let got = render_full(&scene, &camera, quality.params());
+            let got = render_full(&scene, &camera, marched(quality.params()));
             assert_sane(&format!("{what}, {quality:?}"), &got);
             if quality == Quality::Final {
                 assert_close(what, &got, &want, grazing);
@@ -387,7 +387,7 @@ fn cameras_inside_fields_match_the_reference() {
     ];
     for (what, scene, camera) in &cases {
         let want = reference_full(scene, camera);
-        let got = render_full(scene, camera, Quality::Final.params());
+        let got = render_full(scene, camera, marched(Quality::Final.params()));
         assert_sane(what, &got);
         assert_close(what, &got, &want, FINAL);
     }
@@ -399,7 +399,7 @@ fn cameras_inside_fields_match_the_reference() {
         Projection::Equirect(Equirect::new(32, 16).expect("equirect")),
     )
     .expect("camera");
-    let got = render_full(scene, &pano, Quality::Final.params());
+    let got = render_full(scene, &pano, marched(Quality::Final.params()));
     assert_sane("panorama inside a sphere", &got);
     let alpha = 1.0 - (-2.0f64).exp();
     let depth = (1.0 - 3.0 * (-2.0f64).exp()) / alpha;
@@ -510,7 +510,7 @@ fn non_finite_matrices_and_crop_boxes_are_refused_with_a_reason() {
 #[test]
 fn degenerate_windows_render_nothing() {
     let (scene, camera) = seeded(4);
-    let settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
+    let settings = RenderSettings::new(marched(Quality::Final.params()), Outputs::all());
     for window in [
         Window::new(10, 10, 10, 20),
         Window::new(10, 10, 20, 10),
@@ -551,7 +551,7 @@ fn degenerate_windows_render_nothing() {
 fn an_absurd_window_is_refused() {
     let (scene, _) = seeded(0);
     let huge = camera_at(DVec3::new(6.0, 0.0, 1.0), DVec3::ZERO, 65536, 65536, 40.0);
-    let settings = RenderSettings::new(Quality::Draft.params(), Outputs::all());
+    let settings = RenderSettings::new(marched(Quality::Draft.params()), Outputs::all());
     let e = message(
         "render",
         render(&scene, &huge, huge.full_window(), &settings),
@@ -606,7 +606,7 @@ fn a_density_of_1e9_underflows_transmittance_cleanly() {
     for quality in Quality::ALL {
         let params = MarchParams {
             min_transmittance: 0.0,
-            ..quality.params()
+            ..marched(quality.params())
         };
         let got = render_full(&scene, &camera, params);
         let what = format!("σ = 1e9, no early stop, {quality:?}");
@@ -651,7 +651,7 @@ fn a_tenth_of_a_micrometre_field_marches_with_nanometre_steps() {
         "set-up: the ball must be seen"
     );
     for quality in Quality::ALL {
-        let got = render_full(&scene, &camera, quality.params());
+        let got = render_full(&scene, &camera, marched(quality.params()));
         assert_sane(&format!("a 1e-7 ball, {quality:?}"), &got);
         if quality == Quality::Final {
             assert_close("a 1e-7 ball, Final", &got, &want, FINAL);
@@ -687,7 +687,7 @@ fn rays_along_occupancy_cell_planes_match_the_reference() {
     };
     let want = reference_full(&scene, &camera);
     for quality in Quality::ALL {
-        let got = render_full(&scene, &camera, quality.params());
+        let got = render_full(&scene, &camera, marched(quality.params()));
         assert_sane(&format!("on cell planes, {quality:?}"), &got);
         if quality == Quality::Final {
             assert_close("on cell planes, Final", &got, &want, grazing);
@@ -776,7 +776,7 @@ fn non_finite_fields_give_an_error_or_empty_samples_never_nan() {
             }
         };
         for quality in Quality::ALL {
-            let settings = RenderSettings::new(quality.params(), Outputs::all());
+            let settings = RenderSettings::new(marched(quality.params()), Outputs::all());
             let got = render(&scene, &camera, camera.full_window(), &settings);
             check(format!("{fault:?}, {quality:?}"), got);
         }

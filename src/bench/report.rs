@@ -6,7 +6,7 @@ use std::path::Path;
 
 use super::plot::{plot_png, Series};
 use super::scaling;
-use super::suite::{Report, Row, SceneReport, CHECK_ROW_STRIDE, ROW_STRIDE};
+use super::suite::{marched_name, Report, Row, SceneReport, CHECK_ROW_STRIDE, ROW_STRIDE};
 use crate::error::{Error, Result};
 use crate::render::Quality;
 
@@ -58,11 +58,15 @@ impl Report {
                     .collect(),
             };
             let preset = |name: &str| Quality::ALL.iter().any(|q| q.name() == name);
+            let marched = |name: &str| Quality::ALL.iter().any(|&q| marched_name(q) == name);
             let naive = |name: &str| name.starts_with("naive");
             let series = [
                 series("nerfx presets", &preset),
+                series("nerfx presets, marched", &marched),
                 series("naive uniform steps", &naive),
-                series("trainer's own marcher", &|n| !preset(n) && !naive(n)),
+                series("trainer's own marcher", &|n| {
+                    !preset(n) && !marched(n) && !naive(n)
+                }),
             ];
             if series.iter().all(|s| s.points.is_empty()) {
                 continue;

@@ -2,6 +2,10 @@
 //! uniform-step marcher, measured for time, work, error against the scene's reference and
 //! heap.
 //!
+//! Analytic scenes, which the presets integrate in closed form, are also marched with each
+//! preset's dials, so that the marcher's cost and error on their edges and sheets stay
+//! measured.
+//!
 //! References: analytic scenes have the exact closed form for every pixel. Trained fields
 //! have none; their reference is taken on every [`ROW_STRIDE`]-th row of the frame, or
 //! every [`QUADRATURE_ROW_STRIDE`]-th for the quadrature (a full reference frame would take
@@ -365,21 +369,21 @@ fn measure_scene(
     };
 
     let mut report_rows = Vec::new();
-    for quality in Quality::ALL {
+    for (name, params) in configurations(b.truth) {
         let mut timed = Vec::new();
         for _ in 0..repeats.max(1) {
-            let (out, heap) = peak_during(|| timed_frame(scene, camera, quality.params()));
+            let (out, heap) = peak_during(|| timed_frame(scene, camera, params));
             let (planes, stats, ms, cpu) = out?;
             timed.push((ms, cpu, planes, stats, heap));
         }
         timed.sort_by(|a, b| a.0.total_cmp(&b.0));
         let (ms, cpu, planes, stats, heap) = timed.swap_remove(timed.len() / 2);
         let row = Row {
-            name: quality.name().to_string(),
+            name,
             ms_per_frame: ms,
             cpu_s_per_frame: cpu,
             error: compare(&truth, &planes)?,
-            error_target: Some(f64::from(quality.params().error_target)),
+            error_target: Some(f64::from(params.error_target)),
             peak_heap: heap.map(|h| h.peak),
             on_rows: false,
             ..counts(&stats)
@@ -443,6 +447,32 @@ fn measure_scene(
         tile_heap: tile_heap.map(|h| h.peak),
         rows: report_rows,
     })
+}
+
+/// The name a preset's row has where the scene, which the renderer would integrate in
+/// closed form, is marched instead.
+pub(super) fn marched_name(quality: Quality) -> String {
+    format!("{} (marched)", quality.name())
+}
+
+/// The configurations a scene's rows are timed with: each preset, and where the scene is
+/// analytic (so the presets integrate it in closed form, [`MarchParams::closed_form`]) each
+/// preset again with the marcher, which holds the same targets on it (the marcher's cost
+/// on hard edges and thin sheets stays measured).
+fn configurations(truth: Truth) -> Vec<(String, MarchParams)> {
+    let presets = Quality::ALL.map(|q| (q.name().to_string(), q.params()));
+    let marched = Quality::ALL.map(|q| {
+        let params = MarchParams {
+            closed_form: false,
+            ..q.params()
+        };
+        (marched_name(q), params)
+    });
+    let mut all = presets.to_vec();
+    if truth == Truth::Exact {
+        all.extend(marched);
+    }
+    all
 }
 
 /// A row of `render` measured against `truth`: on `rows` (each a one-row window, its time

@@ -292,6 +292,14 @@ impl Pieces {
         w
     }
 
+    /// Composites a piece integrated elsewhere (a closed-form integrator's): its weight
+    /// `w = T_enter − T_exit` and its first moment `∫ t σ T dt`.
+    #[inline]
+    pub(super) fn add_integrated(&mut self, weight: f64, moment: f64) {
+        self.depth_moment += moment;
+        self.transmittance = (self.transmittance - weight).max(0.0);
+    }
+
     /// Transmittance `T` after the pieces so far.
     #[inline]
     pub fn transmittance(&self) -> f64 {

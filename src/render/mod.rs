@@ -1,10 +1,13 @@
 //! The tiled ray marcher.
 //!
 //! [`render`] splits the window into tiles and marches them in parallel (rayon), each with
-//! per-thread scratch (module `march`); module `composite` holds the pure compositing formulas;
+//! per-thread scratch (module `march`), or, for scenes of analytic fields, integrates their
+//! rays in closed form (module `closed_form`, [`MarchParams::closed_form`]); module
+//! `composite` holds the pure compositing formulas;
 //! [`Quality`] presets set the dials; [`render_naive`] is the uniform-step baseline the
 //! benchmark compares against.
 
+mod closed_form;
 mod composite;
 mod march;
 mod naive;
@@ -30,6 +33,7 @@ use crate::error::Result;
 use crate::field::ColorSpace;
 use crate::image::{Plane, Planes, Window};
 use crate::scene::Scene;
+use closed_form::ClosedScratch;
 use march::{march_tile, InstancePlan, PixelResult, Scratch};
 
 /// Which planes to produce. Work for planes nobody asked for is not done (no colour
@@ -121,9 +125,12 @@ impl RenderSettings {
 pub struct RenderStats {
     /// Pixels rendered.
     pub pixels: u64,
-    /// Density queries (regular and refinement samples, summed over instances).
+    /// Density queries (regular and refinement samples, summed over instances). Where a
+    /// scene is integrated in closed form ([`MarchParams::closed_form`]): one per piece
+    /// between the primitives' support ends, plus every quadrature node and Newton step in
+    /// pieces that hold Gaussian blobs.
     pub density_samples: u64,
-    /// Radiance queries.
+    /// Radiance queries; in closed form, one colour per primitive a ray meets.
     pub color_samples: u64,
     /// Splat fragments met by the pixels.
     pub splat_fragments: u64,
@@ -200,6 +207,7 @@ pub fn render_with_progress(
 ) -> Result<(Planes, RenderStats)> {
     let window = camera.clamp_window(window)?;
     let plans = InstancePlan::for_scene(scene, &settings.march);
+    let closed = closed_form::applies(scene, &settings.march);
     let splats = splats::splat_layer(scene, camera, window, &settings.outputs)?;
     let size = settings.tile_size.max(1);
     let decode =
@@ -212,19 +220,31 @@ pub fn render_with_progress(
     let stats = tiles(window, size)
         .into_par_iter()
         .map_init(
-            || (Scratch::default(), Vec::new()),
-            |(scratch, out), tile| {
+            || (Scratch::default(), ClosedScratch::default(), Vec::new()),
+            |(scratch, closed_scratch, out), tile| {
                 out.clear();
-                let stats = march_tile(
-                    scene,
-                    &plans,
-                    splats.as_ref(),
-                    camera,
-                    tile,
-                    settings,
-                    scratch,
-                    out,
-                );
+                let stats = if closed {
+                    closed_form::integrate_tile(
+                        scene,
+                        &plans,
+                        camera,
+                        tile,
+                        settings,
+                        closed_scratch,
+                        out,
+                    )
+                } else {
+                    march_tile(
+                        scene,
+                        &plans,
+                        splats.as_ref(),
+                        camera,
+                        tile,
+                        settings,
+                        scratch,
+                        out,
+                    )
+                };
                 let band = &bands[((tile.y0 - window.y0) / size) as usize];
                 // Writing a tile cannot panic, so the lock is never poisoned; if it were,
                 // the rows are still whole.

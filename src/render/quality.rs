@@ -64,6 +64,22 @@ pub struct MarchParams {
     /// [`RenderStats::budget_limited_rays`](super::RenderStats::budget_limited_rays): its
     /// pixel may miss the target.
     pub max_samples: u32,
+    /// Integrate scenes of analytic fields in closed form; false: march them like any
+    /// field. A scene qualifies when every instance's field is analytic and it holds no
+    /// splats and no instance sampled by its trainer's estimator; its rays are then
+    /// integrated exactly, piece by piece between the primitives' support ends (module
+    /// `closed_form`), and only the quadrature of the colour and depth inside pieces that
+    /// hold Gaussian blobs follows [`error_target`](Self::error_target) (with
+    /// [`max_samples`](Self::max_samples) as its node budget). Absent from older
+    /// serialised settings: on.
+    #[serde(default = "closed_form_by_default")]
+    pub closed_form: bool,
+}
+
+/// Settings serialised before [`MarchParams::closed_form`] existed integrate in closed form,
+/// as every preset does.
+fn closed_form_by_default() -> bool {
+    true
 }
 
 impl Quality {
@@ -80,6 +96,7 @@ impl Quality {
                 refine_depth: 4,
                 color_skip_budget: 1e-3,
                 max_samples: 1024,
+                closed_form: true,
             },
             Quality::Preview => MarchParams {
                 steps_per_feature: 2.0,
@@ -91,6 +108,7 @@ impl Quality {
                 refine_depth: 6,
                 color_skip_budget: 1e-4,
                 max_samples: 4096,
+                closed_form: true,
             },
             Quality::Final => MarchParams {
                 steps_per_feature: 8.0,
@@ -104,6 +122,7 @@ impl Quality {
                 refine_depth: 11,
                 color_skip_budget: 1e-5,
                 max_samples: 16384,
+                closed_form: true,
             },
         }
     }
@@ -131,4 +150,26 @@ impl Quality {
 
     /// All presets, coarse to fine.
     pub const ALL: [Quality; 3] = [Quality::Draft, Quality::Preview, Quality::Final];
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Settings serialised before the closed-form dial existed still read, with it on.
+    #[test]
+    fn settings_without_the_closed_form_dial_read_with_it_on() {
+        let mut json = serde_json::to_value(Quality::Draft.params()).unwrap();
+        json.as_object_mut().unwrap().remove("closed_form");
+        let old: MarchParams = serde_json::from_value(json).unwrap();
+        assert_eq!(old, Quality::Draft.params());
+        assert!(Quality::ALL.iter().all(|q| q.params().closed_form));
+        let off = MarchParams {
+            closed_form: false,
+            ..Quality::Final.params()
+        };
+        let back: MarchParams =
+            serde_json::from_str(&serde_json::to_string(&off).unwrap()).unwrap();
+        assert_eq!(back, off);
+    }
 }

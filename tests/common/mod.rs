@@ -144,6 +144,15 @@ pub fn random_camera(rng: &mut SplitMix64, width: u32, height: u32) -> Camera {
     camera_at(eye, target, width, height, rng.uniform(40.0, 60.0))
 }
 
+/// `params` with [`MarchParams::closed_form`] off: the tests of the marcher's accuracy and
+/// stability march analytic scenes as they would march any field.
+pub fn marched(params: MarchParams) -> MarchParams {
+    MarchParams {
+        closed_form: false,
+        ..params
+    }
+}
+
 /// Renders the camera's full image with `march`, every plane, 16-pixel tiles.
 pub fn render_full(scene: &Scene, camera: &Camera, march: MarchParams) -> Planes {
     let settings = RenderSettings::new(march, Outputs::all());

@@ -20,9 +20,11 @@
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
+mod profile;
 mod sh;
 mod spans;
 
+pub(crate) use profile::{Anchor, Density, Profile};
 pub use sh::ShColor;
 
 use super::{Aabb, Field, Span};

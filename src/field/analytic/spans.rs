@@ -18,17 +18,17 @@ use crate::field::Span;
 /// The line `o + t·d` (f64, from the f32 ray), with the reciprocals every primitive's
 /// interval needs worked out once per ray: a multiplication where each primitive would
 /// divide (results move by an ulp at most).
-struct Line {
-    o: DVec3,
-    d: DVec3,
+pub(super) struct Line {
+    pub(super) o: DVec3,
+    pub(super) d: DVec3,
     /// `1/d` per axis (infinite on an axis the line is parallel to, where it is not used).
     inv_d: DVec3,
     /// `1/|d|²`.
-    inv_len2: f64,
+    pub(super) inv_len2: f64,
 }
 
 impl Line {
-    fn new(o: DVec3, d: DVec3) -> Line {
+    pub(super) fn new(o: DVec3, d: DVec3) -> Line {
         Line {
             o,
             d,
@@ -40,7 +40,7 @@ impl Line {
 
 /// The closed interval of `t ∈ [t0, t1]` where the line lies in the primitive's support, if
 /// it is longer than 0.
-fn interval(p: &Primitive, line: &Line, t0: f64, t1: f64) -> Option<[f64; 2]> {
+pub(super) fn interval(p: &Primitive, line: &Line, t0: f64, t1: f64) -> Option<[f64; 2]> {
     let [enter, exit] = match p.shape {
         Shape::Sphere { center, radius } => ball(center, radius, line)?,
         Shape::Gaussian {

@@ -34,6 +34,7 @@ use glam::{DVec3, Vec3};
 use self::integration::integrate;
 use self::laying::lay_nodes;
 use self::plan::TileFields;
+pub(super) use self::plan::{cull_instances, may_meet, Bundle};
 use self::refinement::refine;
 use self::sampling::evaluate_pending;
 use self::setup::setup_rays;

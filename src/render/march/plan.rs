@@ -67,6 +67,12 @@ impl InstancePlan {
             })
             .collect()
     }
+
+    /// For an analytic field that gives its spans, a world sphere around each primitive
+    /// (`None`: not finite); empty for other fields.
+    pub(in crate::render) fn primitive_spheres(&self) -> &[Option<(DVec3, f64)>] {
+        &self.primitive_spheres
+    }
 }
 
 /// The smallest world sphere around the world box of a field's bounds `b` (its eight
@@ -112,7 +118,7 @@ fn primitive_spheres(
 
 /// A tile's rays as a cone: they start within `rho` of their mean origin and point within
 /// `θ` of their mean direction `axis` (kept as `θ`'s sine and cosine).
-pub(super) struct Bundle {
+pub(in crate::render) struct Bundle {
     origin: DVec3,
     axis: DVec3,
     rho: f64,
@@ -123,7 +129,7 @@ pub(super) struct Bundle {
 impl Bundle {
     /// The cone around `rays`; `None` where it culls nothing: no rays, directions that
     /// cancel out, or a wide bundle (`θ` of 90° or more: panoramic tiles).
-    pub(super) fn of(rays: &[Option<Ray>]) -> Option<Bundle> {
+    pub(in crate::render) fn of(rays: &[Option<Ray>]) -> Option<Bundle> {
         let (mut origin, mut dir, mut n) = (DVec3::ZERO, DVec3::ZERO, 0.0);
         for ray in rays.iter().flatten() {
             origin += ray.origin;
@@ -160,7 +166,7 @@ impl Bundle {
     /// be at most `θ + β`, `β = asin((R + ρ)/|b − c|)`; as both sides lie in `[0, π]` (`θ + β`
     /// may pass π by `θ`'s rounding margin, which the slack below covers), that is
     /// `cos α ≥ cos θ cos β − sin θ sin β`, no trigonometry per sphere.
-    pub(super) fn may_meet(&self, (b, radius): (DVec3, f64)) -> bool {
+    pub(in crate::render) fn may_meet(&self, (b, radius): (DVec3, f64)) -> bool {
         let v = b - self.origin;
         let (l, reach) = (v.length(), radius + self.rho);
         if l <= reach * (1.0 + 1e-9) {
@@ -175,7 +181,11 @@ impl Bundle {
 /// Lists in `keep`, ascending, the instances some ray of a tile (its [`Bundle`]) may meet;
 /// without a bundle, and for instances without finite bounds, all. This makes a tile's setup cost per
 /// instance, not per instance and pixel.
-pub(super) fn cull_instances(plans: &[InstancePlan], bundle: Option<&Bundle>, keep: &mut Vec<u32>) {
+pub(in crate::render) fn cull_instances(
+    plans: &[InstancePlan],
+    bundle: Option<&Bundle>,
+    keep: &mut Vec<u32>,
+) {
     keep.clear();
     keep.extend(0..plans.len() as u32);
     let Some(bundle) = bundle else {
@@ -193,7 +203,7 @@ pub(super) fn cull_instances(plans: &[InstancePlan], bundle: Option<&Bundle>, ke
 /// [`Instance::local_ray`](crate::scene::Instance::local_ray) carries the ray into the
 /// field and clips it. Asked first, it makes a ray's setup cost per instance it meets (and
 /// the few whose spheres it grazes), not per instance its tile keeps.
-pub(super) fn may_meet(plan: &InstancePlan, ray: &Ray) -> bool {
+pub(in crate::render) fn may_meet(plan: &InstancePlan, ray: &Ray) -> bool {
     let Some((b, radius)) = plan.world_sphere else {
         return true;
     };

@@ -638,7 +638,12 @@ fn features_reach_the_colour_query_of_their_own_samples() {
     // The object instance echoes its features, the environment does not: offsets into
     // a node's features must keep them apart.
     let (echo, _) = demo_with(|a| Arc::new(Echo(a)));
-    let settings = RenderSettings::new(Quality::Preview.params(), Outputs::rgba());
+    // Both marched: the plain demo's fields are analytic.
+    let params = MarchParams {
+        closed_form: false,
+        ..Quality::Preview.params()
+    };
+    let settings = RenderSettings::new(params, Outputs::rgba());
     let want = render(&plain, &camera, camera.full_window(), &settings).unwrap();
     let got = render(&echo, &camera, camera.full_window(), &settings).unwrap();
     assert_eq!(got, want);

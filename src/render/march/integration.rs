@@ -2,7 +2,7 @@
 
 use glam::Vec3;
 
-use super::refinement::{change, larger_side, step_curvature, LastDifference};
+use super::refinement::{change, larger_side, step_curvature, trapezoid_bias, LastDifference};
 use super::{Node, RayState};
 use crate::field::{Fragment, SPLAT_MIN_TRANSMITTANCE};
 use crate::render::composite::far_share;
@@ -67,7 +67,13 @@ pub(super) fn integrate(
                     rate = rate.max(weight * larger_side(sides) / (delta * delta * delta));
                 }
             }
-            let (w, stopped) = composite_piece(state, [a.t, b.t], [a.sigma, b.sigma], outputs);
+            let ends = if a.exact {
+                let bias = trapezoid_bias(nodes, i - 1, 0, &mut last_difference, state.smooth);
+                unbiased_ends(&a, &b, bias)
+            } else {
+                [a.sigma, b.sigma]
+            };
+            let (w, stopped) = composite_piece(state, [a.t, b.t], ends, outputs);
             if w > 0.0 {
                 // An empty end's colour is not asked for: the other end gets all the weight.
                 let far = if a.sigma == 0.0 {
@@ -106,6 +112,38 @@ pub(super) fn integrate(
         state.allowed = allowed_step(rate, params);
     }
     adapt_step(state, params);
+}
+
+/// The densities a step of an exact run is composited with: its ends', scaled so that their
+/// mean's optical depth is the trapezoid rule's less its `bias` ([`trapezoid_bias`], where
+/// both sides give a curvature; never below zero). The trapezoid rule's error, `δ³·σ''/12`,
+/// has the sign of the curvature: over a convex stretch of a trained surface it adds up,
+/// step after step, each within its own estimate (on the dense blob at 1080p, some 150
+/// Final steps' added up to 1.05e-3 in alpha at pixel (1357, 426); the bias predicted three
+/// quarters of it). Less the bias, what is left is the change of the curvature across the
+/// step, which changes sign along a bump. The bias is at most a twelfth of the step's
+/// weighted error estimate (`T·δ³·|σ''|`), so it moves a piece's weight by at most a
+/// twelfth of the target where the step meets it, and by nothing where it has no neighbour
+/// on a side.
+///
+/// Only where the step and its neighbours lie within the smooth length of every field the
+/// ray meets (`RayState::smooth`): over nodes further apart a trained field's cells have
+/// kinks the cubic does not model (on the fog at 480×270, with every step corrected,
+/// Draft's worst alpha went from 6.7e-4 to 1.9e-3, and with steps up to one smooth length
+/// the blob's Draft from 4.55e-2 to 4.66e-2). An analytic field declares no such length:
+/// its exact runs are smooth, but over steps as long as its features (a Gaussian's width at
+/// Draft) the cubic fits them no better than the trapezoid (corrected, the sheets' Draft
+/// PSNR at 480×270 fell from 64.3 to 62.6 dB, though Final's rose from 87.1 to 93.5 dB).
+fn unbiased_ends(a: &Node, b: &Node, bias: Option<f64>) -> [f64; 2] {
+    let ends = [a.sigma, b.sigma];
+    let mean = 0.5 * (a.sigma + b.sigma);
+    match bias {
+        Some(bias) if mean > 0.0 => {
+            let scale = (1.0 - bias / ((b.t - a.t) * mean)).max(0.0);
+            ends.map(|sigma| sigma * scale)
+        }
+        _ => ends,
+    }
 }
 
 /// The error rule's step in an exact run: the trapezoid rule's error over a step of length

@@ -53,6 +53,20 @@ pub(super) fn growth(plan: &InstancePlan, lr: &LocalRay, t: f64) -> f64 {
         .map_or(1.0, |u| f64::from(u.step_growth(lr.at(t))))
 }
 
+/// The shortest smooth length (world units) at world distance `t` of the instances ray `r`
+/// meets ([`Field::smooth_length`](crate::field::Field::smooth_length), grown as its steps
+/// grow where it is unbounded): 0 where one of them is not smooth below any length (an
+/// analytic field); infinite where it meets none.
+fn smooth_length_at(r: usize, t: f64, plans: &[InstancePlan], s: &Scratch) -> f64 {
+    met_by(s, r)
+        .iter()
+        .map(|met| {
+            let (plan, lr) = (&plans[met.inst as usize], &met.local);
+            plan.smooth * growth(plan, lr, t) / lr.units_per_world as f64
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
 /// The share of a run's inset (see [`RayState::inset`](super::RayState::inset)) a masked
 /// run's face is probed at first: a sixteenth, one unit of an `f32` field-space position's
 /// rounding across the face.
@@ -100,6 +114,7 @@ pub(super) fn lay_nodes(r: usize, plans: &[InstancePlan], params: &MarchParams, 
         if !floor_set {
             floor_set = true;
             s.rays[r].finest = base * 0.5f64.powi(params.refine_depth.min(MAX_BISECTIONS) as i32);
+            s.rays[r].smooth = smooth_length_at(r, t, plans, s);
         }
         let state = &mut s.rays[r];
         let step = if exact && run.kind != RunKind::Masked {

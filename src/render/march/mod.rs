@@ -10,9 +10,11 @@
 //! A run whose ends are a span's has no edge or peak inside, so only its quadrature is
 //! judged; a run of constant density is one node and one piece. Between two nodes the
 //! density is taken as their mean (the trapezoid rule, exact for piecewise-constant fields
-//! once an edge is bracketed). The pieces are composited in order; only then is colour asked
-//! for, and only at nodes whose weight matters. A ray leaves the batch when its transmittance
-//! falls below the threshold or its runs end.
+//! once an edge is bracketed), less the bias the curvature through their neighbours
+//! predicts where the density is smooth (a trained field's step whose neighbours lie
+//! within its smooth length). The pieces are composited in order; only then is
+//! colour asked for, and only at nodes whose weight matters. A ray leaves the batch when its
+//! transmittance falls below the threshold or its runs end.
 
 mod hidden;
 mod integration;
@@ -206,6 +208,11 @@ struct RayState {
     /// its own `refine_depth` halvings, never below this, but a step that can hold no edge,
     /// see `refinement::split_candidates`).
     finest: f64,
+    /// The shortest smooth length (world units) of the fields the ray meets, where the
+    /// round's nodes start (`laying::smooth_length_at`; 0 where one is analytic): an exact
+    /// run's step whose neighbours lie within it is composited less its curvature's bias
+    /// (`integration::unbiased_ends`).
+    smooth: f64,
     /// The densest node of the ray's rounds so far, for the shell rule of a trained field's
     /// long steps (`refinement::split_candidates`): a round's nodes may all lie past the
     /// density that the surface it is inside reaches.

@@ -59,6 +59,7 @@ pub(super) fn setup_rays(
         state.worst = 0.0;
         state.samples = 0;
         state.finest = 0.0;
+        state.smooth = f64::INFINITY;
         state.densest = 0.0;
         state.log.clear();
         state.runs.clear();

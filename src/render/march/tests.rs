@@ -190,8 +190,42 @@ fn a_bump_between_ends_of_equal_density_is_judged_by_its_curvature() {
         node(3.0, 4.0),
     ];
     assert_eq!(super::refinement::smooth_change(&slope, 1), 0.0);
-    // Without neighbours, the jump.
-    assert_eq!(super::refinement::smooth_change(&slope[1..3], 0), 1.0);
+    // Without neighbours, the denser end.
+    assert_eq!(super::refinement::smooth_change(&slope[1..3], 0), 3.0);
+}
+
+/// On a cubic density the trapezoid rule's bias is exact, steps of any lengths: the
+/// trapezoid's optical depth less it is the integral, to rounding. Without a node on either
+/// side in the run, or over nodes further apart than the smooth length, there is none.
+#[test]
+fn a_steps_trapezoid_bias_is_exact_for_a_cubic() {
+    use super::refinement::{trapezoid_bias, LastDifference};
+    let bias = |nodes: &[super::Node], i, smooth| {
+        trapezoid_bias(nodes, i, 0, &mut LastDifference::default(), smooth)
+    };
+    let cubic = |t: f64| 2.0 + t - 0.5 * t * t + 0.3 * t * t * t;
+    let integral = |t: f64| 2.0 * t + 0.5 * t * t - t * t * t / 6.0 + 0.075 * t.powi(4);
+    let nodes: Vec<_> = [0.0, 0.5, 1.5, 2.25]
+        .iter()
+        .map(|&t| node(t, cubic(t)))
+        .collect();
+    let (a, b) = (&nodes[1], &nodes[2]);
+    let trapezoid = 0.5 * (b.t - a.t) * (a.sigma + b.sigma);
+    let exact = integral(b.t) - integral(a.t);
+    assert!(
+        (trapezoid - exact).abs() > 1e-3,
+        "the cubic bends over the step"
+    );
+    let unbiased = trapezoid - bias(&nodes, 1, 2.25).unwrap();
+    assert!((unbiased - exact).abs() < 1e-12, "{unbiased} ≠ {exact}");
+    // Four nodes further apart than the field is smooth, or a run cut short: none.
+    assert_eq!(bias(&nodes, 1, 2.2), None);
+    assert_eq!((bias(&nodes, 0, 9.0), bias(&nodes, 2, 9.0)), (None, None));
+    for k in [1, 3] {
+        let mut cut = nodes.clone();
+        cut[k].starts_run = true;
+        assert_eq!(bias(&cut, 1, 9.0), None, "a run starts at node {k}");
+    }
 }
 
 /// A step's curvature is the same, bit for bit, whether its second differences are worked
@@ -250,9 +284,9 @@ fn a_trained_run_one_step_long_is_judged_by_its_denser_end() {
     a.starts_run = true;
     assert_eq!(exact_change(&a, &b, [None, None], true), 4.0);
     assert_eq!(exact_change(&a, &b, [None, None], false), 0.0);
-    // A step alone in a later round of its run keeps its jump.
+    // So is a step alone in a later round of its run.
     a.starts_run = false;
-    assert_eq!(exact_change(&a, &b, [None, None], true), 0.0);
+    assert_eq!(exact_change(&a, &b, [None, None], true), 4.0);
     // With a neighbour on one side, the larger of the jump and that side's curvature.
     let c = node(2.0, 5.0);
     assert_eq!(exact_change(&b, &c, [Some(0.5), None], true), 1.0);

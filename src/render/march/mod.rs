@@ -296,7 +296,7 @@ pub(super) struct Scratch {
     /// its ray's entry in `met`.
     by_inst: Vec<Vec<(u32, u32)>>,
     /// The instances some ray of the tile may meet, ascending
-    /// ([`cull_instances`](plan::cull_instances)): the only ones a tile's rays look at, or
+    /// ([`cull_instances`]): the only ones a tile's rays look at, or
     /// its rounds batch queries for.
     tile_insts: Vec<u32>,
     /// Floats of field features kept per slot (a node and an instance its ray meets): the

@@ -104,19 +104,12 @@ pub(super) fn integrate_tile(
     s.prim_at.clear();
     s.prim_at.push(0);
     for &i in &s.insts {
-        let spheres = plans[i as usize].primitive_spheres();
         let count = scene.instances[i as usize]
             .handle()
             .as_analytic()
             .map_or(0, |a| a.primitives.len());
-        s.prims.extend((0..count as u32).filter(|&k| {
-            // No sphere (a field of many primitives, or one not finite): kept.
-            let sphere = spheres.get(k as usize).copied().flatten();
-            match (&bundle, sphere) {
-                (Some(bundle), Some(sphere)) => bundle.may_meet(sphere),
-                _ => true,
-            }
-        }));
+        s.prims
+            .extend(plans[i as usize].primitives_met(count, bundle.as_ref()));
         s.prim_at.push(s.prims.len() as u32);
     }
     let mut stats = RenderStats {

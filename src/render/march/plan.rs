@@ -68,10 +68,22 @@ impl InstancePlan {
             .collect()
     }
 
-    /// For an analytic field that gives its spans, a world sphere around each primitive
-    /// (`None`: not finite); empty for other fields.
-    pub(in crate::render) fn primitive_spheres(&self) -> &[Option<(DVec3, f64)>] {
-        &self.primitive_spheres
+    /// The indices, ascending, of the first `count` primitives of the instance's analytic
+    /// field that some ray of `bundle` may meet: those whose world sphere it may meet, and
+    /// those without one (not finite, or a field that is not culled by primitive); without a
+    /// bundle, all of them.
+    pub(in crate::render) fn primitives_met<'a>(
+        &'a self,
+        count: usize,
+        bundle: Option<&'a Bundle>,
+    ) -> impl Iterator<Item = u32> + 'a {
+        (0..count as u32).filter(move |&k| {
+            let sphere = self.primitive_spheres.get(k as usize).copied().flatten();
+            match (bundle, sphere) {
+                (Some(bundle), Some(sphere)) => bundle.may_meet(sphere),
+                _ => true,
+            }
+        })
     }
 }
 
@@ -255,15 +267,10 @@ impl TileFields {
             let culled = &mut self.culled[i].primitives;
             culled.clear();
             culled.extend(
-                analytic
-                    .primitives
-                    .iter()
-                    .zip(&plan.primitive_spheres)
+                plan.primitives_met(analytic.primitives.len(), Some(bundle))
+                    .map(|k| analytic.primitives[k as usize])
                     // Primitives without density add nothing anywhere.
-                    .filter(|(p, sphere)| {
-                        p.density > 0.0 && sphere.is_none_or(|s| bundle.may_meet(s))
-                    })
-                    .map(|(p, _)| *p),
+                    .filter(|p| p.density > 0.0),
             );
             self.in_use[i] = culled.len() < analytic.primitives.len();
         }

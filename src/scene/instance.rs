@@ -131,6 +131,25 @@ impl LocalRay {
     }
 }
 
+/// A world ray seen from one instance, in `f64` ([`Instance::local_line`]): at world distance
+/// `t` it is at `start + t·velocity` in field space, inside the field's bounds and crop for
+/// `t ∈ [t_near, t_far]`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct LocalLine {
+    /// Field-space position of the world ray's origin.
+    pub start: DVec3,
+    /// Field units moved per world unit, unnormalised (`field_from_world · d`).
+    pub velocity: DVec3,
+    /// `velocity` as a unit direction.
+    pub dir: DVec3,
+    /// `|velocity|`.
+    pub units_per_world: f64,
+    /// World distance where the ray enters the field's bounds (and crop).
+    pub t_near: f64,
+    /// World distance where it leaves them.
+    pub t_far: f64,
+}
+
 /// Checks an instance's placement and crop box; returns the placement's inverse. Refuses
 /// matrices with NaN/inf, a projective row or no inverse.
 pub(super) fn check_placement(
@@ -246,22 +265,36 @@ impl Instance {
     /// The world ray within `[t_min, t_max]` carried into this instance's frame and clipped
     /// to its bounds and crop; `None` when it misses them.
     pub fn local_ray(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<LocalRay> {
-        let o = self.field_from_world.transform_point3(ray.origin);
-        let d = self.field_from_world.transform_vector3(ray.dir);
+        let line = self.local_line(ray, t_min, t_max)?;
+        Some(LocalRay {
+            origin: (line.start + line.dir * (line.t_near * line.units_per_world)).as_vec3(),
+            dir: line.dir.as_vec3(),
+            units_per_world: line.units_per_world as f32,
+            t_near: line.t_near,
+            t_far: line.t_far,
+        })
+    }
+
+    /// [`local_ray`](Self::local_ray) in `f64`, for those who integrate along the line rather
+    /// than sample it in `f32`.
+    pub(crate) fn local_line(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<LocalLine> {
+        let start = self.field_from_world.transform_point3(ray.origin);
+        let velocity = self.field_from_world.transform_vector3(ray.dir);
         // Reciprocals, not divisions, per ray: f64 divisions were most of this function's
         // cost (results move by an ulp).
-        let k = d.length();
+        let k = velocity.length();
         let inv_k = 1.0 / k;
-        let d = d * inv_k;
-        let (u0, u1) = self.clip_local(o, d)?;
+        let dir = velocity * inv_k;
+        let (u0, u1) = self.clip_local(start, dir)?;
         let (t_near, t_far) = ((u0 * inv_k).max(t_min), (u1 * inv_k).min(t_max));
         if t_near.is_nan() || t_far.is_nan() || t_near >= t_far {
             return None;
         }
-        Some(LocalRay {
-            origin: (o + d * (t_near * k)).as_vec3(),
-            dir: d.as_vec3(),
-            units_per_world: k as f32,
+        Some(LocalLine {
+            start,
+            velocity,
+            dir,
+            units_per_world: k,
             t_near,
             t_far,
         })

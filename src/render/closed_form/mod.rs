@@ -231,25 +231,21 @@ impl Context<'_> {
             if !may_meet(plan, ray) {
                 continue;
             }
-            let Some(local) = inst.local_ray(ray, ray.near, ray.far) else {
+            let Some(line) = inst.local_line(ray, ray.near, ray.far) else {
                 continue;
             };
-            // The line in f64 (the local ray keeps its origin and direction in f32, for
-            // samples): `velocity` is field units per world unit, unnormalised.
-            let field_from_world = inst.field_from_world();
-            let velocity = field_from_world.transform_vector3(ray.dir);
-            let origin = field_from_world.transform_point3(ray.origin) + local.t_near * velocity;
             let first = s.profiles.len();
             let prims = &self.prims[self.prim_at[j] as usize..self.prim_at[j + 1] as usize];
             analytic.profiles(
-                origin,
-                velocity,
-                [local.t_near, local.t_far],
+                line.start + line.t_near * line.velocity,
+                line.velocity,
+                [line.t_near, line.t_far],
                 prims.iter().copied(),
                 &mut s.profiles,
             );
+            let dir = line.dir.as_vec3();
             for p in &s.profiles[first..] {
-                let colour = analytic.primitives[p.index as usize].color.eval(local.dir);
+                let colour = analytic.primitives[p.index as usize].color.eval(dir);
                 s.colours.push(colour.as_dvec3());
             }
         }

@@ -192,9 +192,8 @@ impl Analytic {
             let density = match p.shape {
                 Shape::Sphere { .. } | Shape::Box { .. } => Density::Constant(k),
                 Shape::Gaussian { center, sigma, .. } => {
-                    let to_centre = center.as_dvec3() - line.o;
-                    let closest = to_centre.dot(line.d) * line.inv_len2;
-                    let miss2 = (to_centre - closest * line.d).length_squared();
+                    let closest = line.closest(center);
+                    let miss2 = (center.as_dvec3() - origin - closest * line.d).length_squared();
                     let s = f64::from(sigma);
                     Density::Gaussian {
                         peak: k * (-0.5 * miss2 / (s * s)).exp(),

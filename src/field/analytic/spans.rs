@@ -19,12 +19,12 @@ use crate::field::Span;
 /// interval needs worked out once per ray: a multiplication where each primitive would
 /// divide (results move by an ulp at most).
 pub(super) struct Line {
-    pub(super) o: DVec3,
+    o: DVec3,
     pub(super) d: DVec3,
     /// `1/d` per axis (infinite on an axis the line is parallel to, where it is not used).
     inv_d: DVec3,
     /// `1/|d|²`.
-    pub(super) inv_len2: f64,
+    inv_len2: f64,
 }
 
 impl Line {
@@ -35,6 +35,12 @@ impl Line {
             inv_d: d.recip(),
             inv_len2: 1.0 / d.length_squared(),
         }
+    }
+
+    /// Where along the line (its `t`) it passes closest to `c`: a Gaussian's peak along it.
+    #[inline]
+    pub(super) fn closest(&self, c: Vec3) -> f64 {
+        (c.as_dvec3() - self.o).dot(self.d) * self.inv_len2
     }
 }
 
@@ -114,7 +120,7 @@ pub(super) fn spans<'a>(
             continue;
         };
         if let Shape::Gaussian { center, .. } = p.shape {
-            let peak = (center.as_dvec3() - line.o).dot(line.d) * line.inv_len2;
+            let peak = line.closest(center);
             if enter < peak && peak < exit {
                 out.push(Span {
                     enter,

@@ -74,6 +74,18 @@ struct Asks {
     rough: bool,
 }
 
+impl Sums {
+    /// Every integral times `k`.
+    #[inline]
+    fn scaled(self, k: f64) -> Sums {
+        Sums {
+            rgb: k * self.rgb,
+            weight: k * self.weight,
+            transmittance: k * self.transmittance,
+        }
+    }
+}
+
 impl std::ops::Add for Sums {
     type Output = Sums;
 
@@ -271,17 +283,10 @@ impl<'a> Piece<'a> {
         let (mid, half) = (0.5 * (p + q), 0.5 * (q - p));
         let rule = |nodes: &[f64], weights: &[f64]| {
             let mut sum = Sums::default();
-            for (x, w) in nodes.iter().zip(weights) {
-                let n = self.node(mid + half * x, rough);
-                sum.rgb += w * n.rgb;
-                sum.weight += w * n.weight;
-                sum.transmittance += w * n.transmittance;
+            for (x, &w) in nodes.iter().zip(weights) {
+                sum = sum + self.node(mid + half * x, rough).scaled(w);
             }
-            Sums {
-                rgb: half * sum.rgb,
-                weight: half * sum.weight,
-                transmittance: half * sum.transmittance,
-            }
+            sum.scaled(half)
         };
         (rule(&GAUSS_3.0, &GAUSS_3.1), rule(&GAUSS_4.0, &GAUSS_4.1))
     }
@@ -346,11 +351,7 @@ impl<'a> Piece<'a> {
             } else {
                 let m = 0.5 * (p + q);
                 // A half that finds no budget left falls back on half the panel's sum.
-                let half = Sums {
-                    rgb: 0.5 * four.rgb,
-                    weight: 0.5 * four.weight,
-                    transmittance: 0.5 * four.transmittance,
-                };
+                let half = four.scaled(0.5);
                 panels.push((p, m, half));
                 panels.push((m, q, half));
             }

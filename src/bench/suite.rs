@@ -460,17 +460,17 @@ pub(super) fn marched_name(quality: Quality) -> String {
 /// preset again with the marcher, which holds the same targets on it (the marcher's cost
 /// on hard edges and thin sheets stays measured).
 fn configurations(truth: Truth) -> Vec<(String, MarchParams)> {
-    let presets = Quality::ALL.map(|q| (q.name().to_string(), q.params()));
-    let marched = Quality::ALL.map(|q| {
-        let params = MarchParams {
-            closed_form: false,
-            ..q.params()
-        };
-        (marched_name(q), params)
-    });
-    let mut all = presets.to_vec();
+    let mut all: Vec<_> = (Quality::ALL.iter())
+        .map(|q| (q.name().to_string(), q.params()))
+        .collect();
     if truth == Truth::Exact {
-        all.extend(marched);
+        all.extend(Quality::ALL.map(|q| {
+            let params = MarchParams {
+                closed_form: false,
+                ..q.params()
+            };
+            (marched_name(q), params)
+        }));
     }
     all
 }

@@ -85,8 +85,9 @@ fn line(name: &str, per_px: [f64; 3], ms: f64, cpu: Option<f64>, error: Option<&
     let cpu = cpu.map_or("?".into(), |c| format!("{c:.2}"));
     let error = error.map_or(String::new(), |(e, (x, y, got, want))| {
         format!(
-            ", PSNR {:.2} dB, max alpha error {:.2e} at ({x}, {y}): {got} for {want}",
-            e.psnr, e.max_alpha_error
+            ", PSNR {:.2} dB, max alpha error {:.2e} at ({x}, {y}): {got} for {want}, \
+             max depth error {:.2e} (rel.)",
+            e.psnr, e.max_alpha_error, e.max_depth_rel_error
         )
     });
     println!(

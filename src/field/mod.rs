@@ -24,7 +24,7 @@ mod srgb;
 
 pub use aabb::Aabb;
 pub use analytic::{Analytic, Primitive, ShColor, Shape};
-pub(crate) use analytic::{Anchor, Density, Profile};
+pub(crate) use analytic::{Anchor, Density, Line, Profile};
 pub use ingp::{IngpField, NgpRay, NgpSample, NgpScratch, NgpStats, NGP_MAX_STEPS};
 pub use nerfacto::{
     DataparserTransform, NerfactoField, Piece, SamplerRay, SamplerScratch, SamplerStats,

@@ -7,7 +7,7 @@ use glam::{DMat4, DVec3, DVec4, Vec3};
 use super::CropBox;
 use crate::camera::Ray;
 use crate::error::{Error, Result};
-use crate::field::{Analytic, Field, Occupancy};
+use crate::field::{Analytic, Field, Line, Occupancy};
 
 /// A loaded field, shared by every instance and frame that uses it, with its occupancy
 /// structures (built on first use, one per resolution a quality preset asks for).
@@ -132,15 +132,14 @@ impl LocalRay {
 }
 
 /// A world ray seen from one instance, in `f64` ([`Instance::local_line`]): at world distance
-/// `t` it is at `start + t·velocity` in field space, inside the field's bounds and crop for
-/// `t ∈ [t_near, t_far]`.
+/// `t` it is at `line.origin() + t·line.velocity()` in field space, inside the field's bounds
+/// and crop for `t ∈ [t_near, t_far]`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct LocalLine {
-    /// Field-space position of the world ray's origin.
-    pub start: DVec3,
-    /// Field units moved per world unit, unnormalised (`field_from_world · d`).
-    pub velocity: DVec3,
-    /// `velocity` as a unit direction.
+    /// From the field-space position of the world ray's origin, field units moved per world
+    /// unit (`field_from_world · d`, unnormalised), with the reciprocals that clipped it.
+    pub line: Line,
+    /// The velocity as a unit direction.
     pub dir: DVec3,
     /// `|velocity|`.
     pub units_per_world: f64,
@@ -230,34 +229,25 @@ impl Instance {
         self.crop.as_ref()
     }
 
-    /// The field-space interval `[u0, u1]` of the field-space ray `o + u·d` (`d` unit) inside
-    /// the field's bounds and the crop box, in f64; for an unbounded field, also between its
-    /// near and far distances from `o`.
-    fn clip_local(&self, o: DVec3, d: DVec3) -> Option<(f64, f64)> {
+    /// The interval `[t0, t1]` of the field-space line (`t` in world units, `inv_k` the
+    /// inverse of its speed) inside the field's bounds and the crop box; for an unbounded
+    /// field, also between its near and far distances (field units) from the line's origin.
+    /// Clipped in world units directly, with the line's reciprocals, which its primitives'
+    /// intervals take too: no division per axis here.
+    fn clip_local(&self, line: &Line, inv_k: f64) -> Option<(f64, f64)> {
         let Clip {
             min,
             max,
-            near: mut lo,
-            far: mut hi,
+            near,
+            far,
         } = self.clip;
-        for axis in 0..3 {
-            let (mn, mx) = (min[axis], max[axis]);
-            if d[axis] == 0.0 {
-                if o[axis] < mn || o[axis] > mx {
-                    return None;
-                }
-                continue;
-            }
-            let inv = 1.0 / d[axis];
-            let (a, c) = ((mn - o[axis]) * inv, (mx - o[axis]) * inv);
-            lo = lo.max(a.min(c));
-            hi = hi.min(a.max(c));
-        }
+        let [lo, hi] = line.box_interval(min, max)?;
+        let (lo, hi) = (lo.max(near * inv_k), hi.min(far * inv_k));
         if lo > hi {
             return None;
         }
         match &self.crop {
-            Some(c) => c.clip(o, d, lo, hi),
+            Some(c) => c.clip(line.origin(), line.velocity(), lo, hi),
             None => Some((lo, hi)),
         }
     }
@@ -267,7 +257,8 @@ impl Instance {
     pub fn local_ray(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<LocalRay> {
         let line = self.local_line(ray, t_min, t_max)?;
         Some(LocalRay {
-            origin: (line.start + line.dir * (line.t_near * line.units_per_world)).as_vec3(),
+            origin: (line.line.origin() + line.dir * (line.t_near * line.units_per_world))
+                .as_vec3(),
             dir: line.dir.as_vec3(),
             units_per_world: line.units_per_world as f32,
             t_near: line.t_near,
@@ -278,22 +269,24 @@ impl Instance {
     /// [`local_ray`](Self::local_ray) in `f64`, for those who integrate along the line rather
     /// than sample it in `f32`.
     pub(crate) fn local_line(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<LocalLine> {
-        let start = self.field_from_world.transform_point3(ray.origin);
-        let velocity = self.field_from_world.transform_vector3(ray.dir);
-        // Reciprocals, not divisions, per ray: f64 divisions were most of this function's
-        // cost (results move by an ulp).
-        let k = velocity.length();
+        let line = Line::new(
+            self.field_from_world.transform_point3(ray.origin),
+            self.field_from_world.transform_vector3(ray.dir),
+        );
+        let k = line.velocity().length();
+        // A ray without a direction (or one the placement sends to infinity) meets nothing.
+        if !(k > 0.0 && k.is_finite()) {
+            return None;
+        }
         let inv_k = 1.0 / k;
-        let dir = velocity * inv_k;
-        let (u0, u1) = self.clip_local(start, dir)?;
-        let (t_near, t_far) = ((u0 * inv_k).max(t_min), (u1 * inv_k).min(t_max));
+        let (t0, t1) = self.clip_local(&line, inv_k)?;
+        let (t_near, t_far) = (t0.max(t_min), t1.min(t_max));
         if t_near.is_nan() || t_far.is_nan() || t_near >= t_far {
             return None;
         }
         Some(LocalLine {
-            start,
-            velocity,
-            dir,
+            line,
+            dir: line.velocity() * inv_k,
             units_per_world: k,
             t_near,
             t_far,

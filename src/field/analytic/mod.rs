@@ -26,6 +26,7 @@ mod spans;
 
 pub(crate) use profile::{Anchor, Density, Profile};
 pub use sh::ShColor;
+pub(crate) use spans::Line;
 
 use super::{Aabb, Field, Span};
 use crate::error::{Error, Result};

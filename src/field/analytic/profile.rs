@@ -13,7 +13,6 @@
 use std::f64::consts::{FRAC_1_SQRT_2, PI};
 
 use errorfunctions::RealErrorFunctions;
-use glam::DVec3;
 
 use super::spans::{interval, Line};
 use super::{Analytic, Shape};
@@ -168,19 +167,20 @@ fn erf_pair(x: f64, bell: f64) -> [f64; 2] {
 
 impl Analytic {
     /// Appends to `out` the profiles of the primitives `indices` names (those of density > 0
-    /// whose support the ray meets for a length > 0) along the field-space line
-    /// `origin + (t − t_near)·velocity`, `t ∈ [t_near, t_far]` in world units (see the module
-    /// docs).
+    /// whose support the ray meets for a length > 0) along the field-space line `line`,
+    /// `t ∈ [t_near, t_far]` in world units, `units_per_world` its speed `|velocity|` (see
+    /// the module docs). The intervals are worked out from the line's point at `t_near`, so
+    /// that they keep their precision however far the line's origin is.
     pub(crate) fn profiles(
         &self,
-        origin: DVec3,
-        velocity: DVec3,
+        line: &Line,
+        units_per_world: f64,
         [t_near, t_far]: [f64; 2],
         indices: impl Iterator<Item = u32>,
         out: &mut Vec<Profile>,
     ) {
-        let line = Line::new(origin, velocity);
-        let units_per_world = velocity.length();
+        let line = line.moved(t_near);
+        let origin = line.origin();
         for index in indices {
             let Some(p) = (self.primitives.get(index as usize)).filter(|p| p.density > 0.0) else {
                 continue;
@@ -214,7 +214,7 @@ impl Analytic {
 
 #[cfg(test)]
 mod tests {
-    use glam::Vec3;
+    use glam::{DVec3, Vec3};
 
     use super::*;
     use crate::field::{Field, Primitive};
@@ -334,8 +334,9 @@ mod tests {
         let origin = DVec3::new(-2.0, 0.05, 0.02);
         let velocity = DVec3::new(1.0, 0.01, -0.02).normalize() * 2.5;
         let (t_near, t_far) = (10.0, 12.0);
+        let line = Line::new(origin - t_near * velocity, velocity);
         let mut out = Vec::new();
-        f.profiles(origin, velocity, [t_near, t_far], 0..3, &mut out);
+        f.profiles(&line, velocity.length(), [t_near, t_far], 0..3, &mut out);
         assert_eq!(out.len(), 3, "{out:?}");
         for i in 0..=400 {
             let t = t_near + (t_far - t_near) * f64::from(i) / 400.0;

@@ -15,10 +15,13 @@ use glam::{DVec3, Vec3};
 use super::{Primitive, Shape};
 use crate::field::Span;
 
-/// The line `o + t·d` (f64, from the f32 ray), with the reciprocals every primitive's
-/// interval needs worked out once per ray: a multiplication where each primitive would
-/// divide (results move by an ulp at most).
-pub(super) struct Line {
+/// The line `o + t·d` in f64, with the reciprocals every primitive's interval needs worked
+/// out once per ray: a multiplication where each primitive would divide (results move by an
+/// ulp at most). An instance clips a world ray to its field's bounds with the same
+/// reciprocals ([`Line::box_interval`]), and its primitives' profiles reuse them
+/// ([`Line::moved`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Line {
     o: DVec3,
     pub(super) d: DVec3,
     /// `1/d` per axis (infinite on an axis the line is parallel to, where it is not used).
@@ -28,13 +31,56 @@ pub(super) struct Line {
 }
 
 impl Line {
-    pub(super) fn new(o: DVec3, d: DVec3) -> Line {
+    pub(crate) fn new(o: DVec3, d: DVec3) -> Line {
         Line {
             o,
             d,
             inv_d: d.recip(),
             inv_len2: 1.0 / d.length_squared(),
         }
+    }
+
+    /// The point at `t = 0`.
+    #[inline]
+    pub(crate) fn origin(&self) -> DVec3 {
+        self.o
+    }
+
+    /// How far the line moves per unit of `t`.
+    #[inline]
+    pub(crate) fn velocity(&self) -> DVec3 {
+        self.d
+    }
+
+    /// The same line with its origin moved to `o + t·d`, its reciprocals kept.
+    #[inline]
+    pub(super) fn moved(&self, t: f64) -> Line {
+        Line {
+            o: self.o + t * self.d,
+            ..*self
+        }
+    }
+
+    /// Where the line lies in the box `[min, max]`, `[near, far]` in its `t`: between the
+    /// planes of every axis (slab by slab; an axis the line is parallel to either holds the
+    /// whole line or none of it).
+    #[inline]
+    pub(crate) fn box_interval(&self, min: DVec3, max: DVec3) -> Option<[f64; 2]> {
+        let (o, d) = (self.o, self.d);
+        let (mut near, mut far) = (f64::NEG_INFINITY, f64::INFINITY);
+        for a in 0..3 {
+            if d[a] != 0.0 {
+                let (ta, tb) = (
+                    (min[a] - o[a]) * self.inv_d[a],
+                    (max[a] - o[a]) * self.inv_d[a],
+                );
+                near = near.max(ta.min(tb));
+                far = far.min(ta.max(tb));
+            } else if !(o[a] >= min[a] && o[a] <= max[a]) {
+                return None;
+            }
+        }
+        (near <= far).then_some([near, far])
     }
 
     /// Where along the line (its `t`) it passes closest to `c`: a Gaussian's peak along it.
@@ -54,7 +100,7 @@ pub(super) fn interval(p: &Primitive, line: &Line, t0: f64, t1: f64) -> Option<[
             sigma,
             cutoff,
         } => ball(center, cutoff * sigma, line)?,
-        Shape::Box { min, max } => slabs(min.as_dvec3(), max.as_dvec3(), line)?,
+        Shape::Box { min, max } => line.box_interval(min.as_dvec3(), max.as_dvec3())?,
     };
     let (enter, exit) = (enter.max(t0), exit.min(t1));
     (enter < exit).then_some([enter, exit])
@@ -76,26 +122,6 @@ fn ball(center: Vec3, radius: f32, line: &Line) -> Option<[f64; 2]> {
     let x = q * line.inv_len2;
     let y = if q != 0.0 { c / q } else { x };
     Some([x.min(y), x.max(y)])
-}
-
-/// Where the line lies between `min` and `max` on every axis (slab by slab; an axis the ray
-/// is parallel to either holds the whole line or none of it).
-fn slabs(min: DVec3, max: DVec3, line: &Line) -> Option<[f64; 2]> {
-    let (o, d) = (line.o, line.d);
-    let (mut near, mut far) = (f64::NEG_INFINITY, f64::INFINITY);
-    for a in 0..3 {
-        if d[a] != 0.0 {
-            let (ta, tb) = (
-                (min[a] - o[a]) * line.inv_d[a],
-                (max[a] - o[a]) * line.inv_d[a],
-            );
-            near = near.max(ta.min(tb));
-            far = far.min(ta.max(tb));
-        } else if !(o[a] >= min[a] && o[a] <= max[a]) {
-            return None;
-        }
-    }
-    (near <= far).then_some([near, far])
 }
 
 /// Appends to `out` the spans of the primitives along `o + t·d`, `t ∈ [t0, t1]`: sorted,

@@ -237,8 +237,8 @@ impl Context<'_> {
             let first = s.profiles.len();
             let prims = &self.prims[self.prim_at[j] as usize..self.prim_at[j + 1] as usize];
             analytic.profiles(
-                line.start + line.t_near * line.velocity,
-                line.velocity,
+                &line.line,
+                line.units_per_world,
                 [line.t_near, line.t_far],
                 prims.iter().copied(),
                 &mut s.profiles,

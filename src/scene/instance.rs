@@ -268,6 +268,7 @@ impl Instance {
 
     /// [`local_ray`](Self::local_ray) in `f64`, for those who integrate along the line rather
     /// than sample it in `f32`.
+    #[inline(always)]
     pub(crate) fn local_line(&self, ray: &Ray, t_min: f64, t_max: f64) -> Option<LocalLine> {
         let line = Line::new(
             self.field_from_world.transform_point3(ray.origin),

@@ -92,6 +92,7 @@ impl Line {
 
 /// The closed interval of `t ∈ [t0, t1]` where the line lies in the primitive's support, if
 /// it is longer than 0.
+#[inline(always)]
 pub(super) fn interval(p: &Primitive, line: &Line, t0: f64, t1: f64) -> Option<[f64; 2]> {
     let [enter, exit] = match p.shape {
         Shape::Sphere { center, radius } => ball(center, radius, line)?,

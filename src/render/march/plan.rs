@@ -150,11 +150,12 @@ impl Bundle {
         }
         let axis = dir.try_normalize()?;
         let origin = origin / n;
-        // The farthest origin's distance is the root of the largest squared one (one root).
+        // The farthest origin's distance is the root of the largest squared one (one root);
+        // a ray's direction is a unit one, off by rounding that the angle's margin covers.
         let (mut rho2, mut cos_theta) = (0.0f64, 1.0f64);
         for ray in rays.iter().flatten() {
             rho2 = rho2.max((ray.origin - origin).length_squared());
-            cos_theta = cos_theta.min(ray.dir.dot(axis) / ray.dir.length());
+            cos_theta = cos_theta.min(ray.dir.dot(axis));
         }
         let rho = rho2.sqrt();
         // NaN directions fail this too.

@@ -109,6 +109,24 @@ impl Density {
         }
     }
 
+    /// The least and greatest density over `[a, b]`, given the anchor at `a` and the density
+    /// at `b` ([`sample_from`](Self::sample_from) gives it): a Gaussian's least is at one
+    /// end, its greatest at its centre where that lies inside, else at the other end.
+    pub fn range(&self, anchor: &Anchor, a: f64, b: f64, at_b: f64) -> [f64; 2] {
+        match *self {
+            Density::Constant(k) => [k, k],
+            Density::Gaussian { peak, centre, .. } => {
+                let at_a = peak * anchor.bell;
+                let highest = if centre > a && centre < b {
+                    peak
+                } else {
+                    at_a.max(at_b)
+                };
+                [at_a.min(at_b), highest]
+            }
+        }
+    }
+
     /// How far the optical depth a `rough` [`sample_from`](Self::sample_from) gives can be
     /// from the exact one: its `erfc` at `t` is off by at most [`ROUGH_ERFC_ERROR`], times
     /// `peak·width·√(π/2)`; 0 for a constant.
@@ -259,6 +277,34 @@ mod tests {
             "{far} {mirrored}"
         );
         assert_eq!(Density::Constant(3.0).optical_depth(1.0, 1.5), 1.5);
+    }
+
+    /// A Gaussian's least and greatest density over intervals on either side of its centre
+    /// and across it, against a fine scan of it.
+    #[test]
+    fn range_holds_the_density_over_the_interval() {
+        let g = Density::Gaussian {
+            peak: 2.0,
+            centre: 1.0,
+            width: 0.5,
+        };
+        for (a, b) in [(-1.0, 0.5), (0.2, 1.7), (1.5, 3.0), (0.9, 1.1)] {
+            let at_b = g.at(b);
+            let [least, greatest] = g.range(&g.anchor(a), a, b, at_b);
+            let scan: Vec<f64> = (0..=10_000)
+                .map(|i| g.at(a + (b - a) * f64::from(i) / 1e4))
+                .collect();
+            let lo = scan.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = scan.iter().copied().fold(0.0, f64::max);
+            assert!(
+                (least - lo).abs() < 1e-12 && (greatest - hi).abs() < 1e-6,
+                "{a} {b}"
+            );
+        }
+        assert_eq!(
+            Density::Constant(3.0).range(&Anchor::default(), 0.0, 1.0, 3.0),
+            [3.0, 3.0]
+        );
     }
 
     /// The rough `erfc` against the exact one, within its stated error, from 0 far into the

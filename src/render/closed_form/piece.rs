@@ -433,6 +433,11 @@ impl<'a> Piece<'a> {
             }
             let newton = t - f / sigma;
             let step_before = std::mem::replace(&mut step, (newton - t).abs());
+            // A step within the resolution is the answer, also where it rounds onto the end
+            // of the bracket (which bisecting the bracket down to it would not be faster).
+            if step <= resolution {
+                return newton.clamp(lo, hi);
+            }
             let next = if newton > lo && newton < hi && 2.0 * step <= step_before {
                 newton
             } else {

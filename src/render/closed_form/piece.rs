@@ -218,18 +218,27 @@ impl<'a> Piece<'a> {
         // `[ℓ − I, ℓ − I + τ·I/2]` (`I = ∫τ dt`, as `1 − x ≤ e^{−x} ≤ 1 − x + x·τ/2` for
         // `x ≤ τ`): the middle of where they meet is off by half its width. The first bounds
         // serve a piece whose density changes little (a faint blob inside a dense box), the
-        // last a thin one. Each is taken where it is within what it is held to.
+        // last a thin one; a Gaussian alone has a closer one ([`lone_transmittance`]). Each
+        // is taken where it is within what it is held to.
+        //
+        // [`lone_transmittance`]: Self::lone_transmittance
         let shares = (greatest / least - least / greatest).min(tau.exp_m1());
         let split = spread * (0.5 * shares).min(1.0) > COLOUR_SHARE * target;
         let length = b - self.a;
-        let lowest = (w / greatest)
+        let mut lowest = (w / greatest)
             .max(length * (1.0 - w))
             .max(length - integral);
-        let highest = (w / least)
+        let mut highest = (w / least)
             .min(length)
             .min(length - integral + 0.5 * tau * integral);
-        let closed_moment = highest - lowest <= 2.0 * DEPTH_SHARE * target * w * self.a;
-        let quadrature_moment = moment && !closed_moment;
+        let tolerance = 2.0 * DEPTH_SHARE * target * w * self.a;
+        if moment && highest - lowest > tolerance {
+            if let Some((estimate, off)) = self.lone_transmittance(b) {
+                lowest = lowest.max(estimate - off);
+                highest = highest.min(estimate + off);
+            }
+        }
+        let quadrature_moment = moment && highest - lowest > tolerance;
         // The colours weighed by the profiles' optical depths: any mean of them is within
         // their spread, and this one is the one the bounds above are about.
         let mix = rgb_tau / tau;
@@ -291,6 +300,53 @@ impl<'a> Piece<'a> {
             closed(DVec3::ZERO).2
         };
         (w, colour, moment)
+    }
+
+    /// `∫ₐᵇ T dt` of a piece that holds one Gaussian alone, and how far off it can be; `None`
+    /// for any other piece. On each side of the blob's centre the optical depth `τ` is
+    /// monotone, within `h` of the middle `m` of its values at the side's ends: there
+    /// `e^{−τ} = e^{−m}·(1 − δ + δ²/2)` (`δ = τ − m`) up to `e^{−m}·h³·e^h/6`, and the
+    /// integrals of `τ` and `τ²` are closed forms ([`Density::squared_depth_integral`]). Three
+    /// error functions, where panels over the same piece take fourteen nodes.
+    fn lone_transmittance(&self, b: f64) -> Option<(f64, f64)> {
+        let ([h], [anchor]) = (self.active, self.anchors) else {
+            return None;
+        };
+        let density = self.profiles[*h as usize].density;
+        let Density::Gaussian { centre, .. } = density else {
+            return None;
+        };
+        let sides = if centre > self.a && centre < b {
+            [centre, b]
+        } else {
+            [b, b]
+        };
+        // At the start of the side: where, the optical depth and its and its square's
+        // integrals from `a`.
+        let mut from = (self.a, 0.0, 0.0, 0.0);
+        let (mut sum, mut off) = (0.0, 0.0);
+        for t in sides {
+            if t <= from.0 {
+                continue;
+            }
+            let (_, tau, integral) = density.sample_from(anchor, self.a, t, false);
+            let to = (
+                t,
+                tau,
+                integral,
+                density.squared_depth_integral(anchor, self.a, t),
+            );
+            let (length, first, second) = (t - from.0, to.2 - from.2, to.3 - from.3);
+            let (m, h) = (0.5 * (to.1 + from.1), 0.5 * (to.1 - from.1));
+            let bell = (-m).exp();
+            // ∫δ = ∫τ − m·ℓ and ∫δ² = ∫τ² − 2m∫τ + m²ℓ.
+            let delta = first - m * length;
+            let delta_squared = second - 2.0 * m * first + m * m * length;
+            sum += bell * (length - delta + 0.5 * delta_squared);
+            off += bell * length * h.powi(3) * h.exp() / 6.0;
+            from = to;
+        }
+        Some((sum, off))
     }
 
     /// The largest difference between the piece's profiles' colours in any channel (0 for

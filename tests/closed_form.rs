@@ -1,7 +1,7 @@
 //! Scenes of analytic fields integrated in closed form (`MarchParams::closed_form`) against
 //! the exact reference (which shares no code with it) and against hand-worked integrals:
 //! the demo at every preset, seeded random scenes, a constant sphere, Gaussians alone, side
-//! by side and in a box, a density of 1e9, a box 1e-9 thick, a grazing ray, a scaled and
+//! by side and in a box, a faint Gaussian in a dense box, a density of 1e9, a box 1e-9 thick, a grazing ray, a scaled and
 //! cropped instance; and a scene with a field that is not analytic, which is still marched.
 
 // The shared harness serves the marcher's tests too; this one uses part of it.
@@ -167,15 +167,26 @@ fn a_constant_sphere_through_its_centre() {
     }
 }
 
-/// A Gaussian blob alone (peak ρ = 3, s = 0.4, cut at 8 s) through its centre: alpha
+/// A Gaussian blob alone (peak ρ = 3 and 0.5, s = 0.4, cut at 8 s) through its centre: alpha
 /// `1 − exp(−ρ s √(2π))` exactly, colour alpha times its colour, and by symmetry nothing
 /// but the transmittance decides the depths: the median where the optical depth reaches
-/// `ln(1/(1 − α/2))`, `ρ s √(π/2)(1 + erf(u/(√2 s)))` at `u` from the centre.
+/// `ln(1/(1 − α/2))`, `ρ s √(π/2)(1 + erf(u/(√2 s)))` at `u` from the centre, and the
+/// expected depth within an eighth of the target of a sum of `u·σ(u)·T(u)`.
 #[test]
 fn a_gaussian_alone() {
-    let scene = scene_of(vec![prim(gaussian([0.0; 3], 0.4), 3.0, [1.0, 0.5, 0.25])]);
+    for peak in [3.0, 0.5] {
+        a_gaussian_alone_of(peak);
+    }
+}
+
+fn a_gaussian_alone_of(peak: f64) {
+    let scene = scene_of(vec![prim(
+        gaussian([0.0; 3], 0.4),
+        peak as f32,
+        [1.0, 0.5, 0.25],
+    )]);
     let camera = one_pixel(DVec3::new(0.0, 0.0, 5.0), DVec3::ZERO);
-    let tau = 3.0 * 0.4 * (2.0 * PI).sqrt();
+    let tau = peak * 0.4 * (2.0 * PI).sqrt();
     let alpha = 1.0 - (-tau).exp();
     // Median: bisection on the closed form, independent of the renderer's Newton steps.
     let depth_at = |u: f64| 0.5 * tau * (1.0 + erf(u / (2f64.sqrt() * 0.4)));
@@ -189,12 +200,25 @@ fn a_gaussian_alone() {
             hi = m;
         }
     }
+    // Expected depth: a midpoint sum of `u·σ(u)·T(u)` over the blob's support.
+    let n = 20_000;
+    let du = 6.4 / f64::from(n);
+    let moment: f64 = (0..n)
+        .map(|i| {
+            let u = -3.2 + (f64::from(i) + 0.5) * du;
+            u * peak * (-0.5 * (u / 0.4).powi(2)).exp() * (-depth_at(u)).exp()
+        })
+        .sum::<f64>()
+        * du;
+    let expected = 5.0 + moment / alpha;
     for q in Quality::ALL {
-        let [r, g, b, a, _, med] = pixel(&scene, &camera, q);
+        let [r, g, b, a, depth, med] = pixel(&scene, &camera, q);
         close(a, alpha, 1e-6, "alpha");
         close(r, alpha, 1e-6, "r");
         close(g, 0.5 * alpha, 1e-6, "g");
         close(b, 0.25 * alpha, 1e-6, "b");
+        let target = f64::from(q.params().error_target);
+        close(depth, expected, target / 8.0 * expected, "depth");
         close(med, 5.0 + lo, 1e-5, "median");
     }
 }
@@ -249,6 +273,54 @@ fn overlapping_gaussians_and_a_gaussian_in_a_box() {
                 at(&want.depth_median),
                 1e-5,
                 &format!("median {q:?} {tau}"),
+            );
+        }
+    }
+}
+
+/// A faint Gaussian inside a dense box of another colour (as where the demo's haze meets its
+/// ground): the box sets the light and the blob tints it, and the piece's total density
+/// changes little, which bounds its colour split and depth in closed form. From a faint
+/// blob to one as dense as the box, at every preset, against the reference: alpha in
+/// closed form, the colour within a quarter of the target (what the closed form's bound is
+/// held to) and the depth within an eighth of it.
+#[test]
+fn a_faint_gaussian_inside_a_dense_box() {
+    let camera = one_pixel(DVec3::new(0.1, 0.05, 6.0), DVec3::new(0.1, 0.05, 0.0));
+    for peak in [0.01, 0.1, 1.0, 8.0] {
+        let scene = scene_of(vec![
+            prim(
+                Shape::Gaussian {
+                    center: Vec3::ZERO,
+                    sigma: 0.1,
+                    cutoff: 2.0,
+                },
+                peak,
+                [0.2, 0.4, 1.0],
+            ),
+            prim(
+                cube([-1.0, -1.0, -0.25], [1.0, 1.0, 0.25]),
+                8.0,
+                [0.9, 0.6, 0.3],
+            ),
+        ]);
+        let want = reference_full(&scene, &camera);
+        let at = |p: &Option<nerfx::image::Plane>| f64::from(p.as_ref().expect("plane").data[0]);
+        let rgb = want.rgb.as_ref().expect("rgb");
+        for q in Quality::ALL {
+            let target = f64::from(q.params().error_target);
+            let [r, g, b, a, depth, _] = pixel(&scene, &camera, q);
+            close(a, at(&want.alpha), 1e-6, "alpha");
+            for (c, plane) in [r, g, b].into_iter().zip(rgb) {
+                let what = format!("colour, peak {peak}, {q:?}");
+                close(c, f64::from(plane.data[0]), 0.25 * target, &what);
+            }
+            let z = at(&want.depth_ray);
+            close(
+                depth,
+                z,
+                target / 8.0 * z,
+                &format!("depth, peak {peak}, {q:?}"),
             );
         }
     }

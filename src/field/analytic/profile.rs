@@ -10,7 +10,7 @@
 //! has `|p(t) − c|² = k²(t − t*)² + b²`, so along the line it is `kρ·e^{−b²/2s²}` times a
 //! Gaussian in `t` of width `s/k` about `t*`.
 
-use std::f64::consts::{FRAC_1_SQRT_2, PI};
+use std::f64::consts::{FRAC_1_SQRT_2, PI, SQRT_2};
 
 use errorfunctions::RealErrorFunctions;
 
@@ -104,6 +104,50 @@ impl Density {
                 let depth = peak * width * (0.5 * PI).sqrt() * difference.max(0.0);
                 let integral = (t - centre) * depth - peak * width * width * (anchor.bell - e);
                 (peak * e, depth, integral.max(0.0))
+            }
+        }
+    }
+
+    /// The integral of the squared optical depth from the point `a` that `anchor` was taken
+    /// at, `∫ₐᵗ τ(s)² ds`. A constant's is `k²(t − a)³/3`. A Gaussian's optical depth is
+    /// `A·(erf z − erf z_a)`, `A = peak·width·√(π/2)`, so this is `A²·√2·width` times
+    /// `∫(erf z − erf z_a)² dz`, which `∫erf = z·erf + e^{−z²}/√π` and
+    /// `∫erf² = z·erf² + (2/√π)·e^{−z²}·erf − √(2/π)·erf(√2·z)` give as
+    /// `z_t·Δ² + (2/√π)·e^{−z_t²}·Δ − √(2/π)·(erf(√2·z_t) − erf(√2·z_a))`, `Δ = erf z_t − erf z_a`.
+    /// Its terms cancel where both ends lie far in one tail: it is good to about 1e-15 of
+    /// `A²·width·(|z_t| + 1)`, absolutely, not relatively.
+    pub fn squared_depth_integral(&self, anchor: &Anchor, a: f64, t: f64) -> f64 {
+        match *self {
+            Density::Constant(k) => k * k * (t - a).powi(3) / 3.0,
+            Density::Gaussian { peak, width, .. } => {
+                let (sigma, depth, _) = self.sample_from(anchor, a, t, false);
+                let scale = peak * width * (0.5 * PI).sqrt();
+                let zt = anchor.z + (t - a) * (FRAC_1_SQRT_2 / width);
+                let difference = depth / scale;
+                let bell = sigma / peak;
+                let h = RealErrorFunctions::erf(SQRT_2 * zt)
+                    - RealErrorFunctions::erf(SQRT_2 * anchor.z);
+                let z_integral = zt * difference * difference + 2.0 / PI.sqrt() * bell * difference
+                    - (2.0 / PI).sqrt() * h;
+                scale * scale * SQRT_2 * width * z_integral.max(0.0)
+            }
+        }
+    }
+
+    /// The least and greatest density over `[a, b]`, given the anchor at `a` and the density
+    /// at `b` ([`sample_from`](Self::sample_from) gives it): a Gaussian's least is at one
+    /// end, its greatest at its centre where that lies inside, else at the other end.
+    pub fn range(&self, anchor: &Anchor, a: f64, b: f64, at_b: f64) -> [f64; 2] {
+        match *self {
+            Density::Constant(k) => [k, k],
+            Density::Gaussian { peak, centre, .. } => {
+                let at_a = peak * anchor.bell;
+                let highest = if centre > a && centre < b {
+                    peak
+                } else {
+                    at_a.max(at_b)
+                };
+                [at_a.min(at_b), highest]
             }
         }
     }
@@ -261,6 +305,34 @@ mod tests {
         assert_eq!(Density::Constant(3.0).optical_depth(1.0, 1.5), 1.5);
     }
 
+    /// A Gaussian's least and greatest density over intervals on either side of its centre
+    /// and across it, against a fine scan of it.
+    #[test]
+    fn range_holds_the_density_over_the_interval() {
+        let g = Density::Gaussian {
+            peak: 2.0,
+            centre: 1.0,
+            width: 0.5,
+        };
+        for (a, b) in [(-1.0, 0.5), (0.2, 1.7), (1.5, 3.0), (0.9, 1.1)] {
+            let at_b = g.at(b);
+            let [least, greatest] = g.range(&g.anchor(a), a, b, at_b);
+            let scan: Vec<f64> = (0..=10_000)
+                .map(|i| g.at(a + (b - a) * f64::from(i) / 1e4))
+                .collect();
+            let lo = scan.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = scan.iter().copied().fold(0.0, f64::max);
+            assert!(
+                (least - lo).abs() < 1e-12 && (greatest - hi).abs() < 1e-6,
+                "{a} {b}"
+            );
+        }
+        assert_eq!(
+            Density::Constant(3.0).range(&Anchor::default(), 0.0, 1.0, 3.0),
+            [3.0, 3.0]
+        );
+    }
+
     /// The rough `erfc` against the exact one, within its stated error, from 0 far into the
     /// tail.
     #[test]
@@ -274,6 +346,36 @@ mod tests {
         }
         assert!(worst <= ROUGH_ERFC_ERROR, "{worst}");
         assert!(worst > 0.1 * ROUGH_ERFC_ERROR, "{worst}");
+    }
+
+    /// The integral of the squared optical depth against a midpoint sum of it (20 000
+    /// slices), across the centre, on either side and far in a tail.
+    #[test]
+    fn squared_depth_integral_matches_a_sum_of_it() {
+        let g = Density::Gaussian {
+            peak: 2.0,
+            centre: 1.0,
+            width: 0.5,
+        };
+        for density in [g, Density::Constant(3.0)] {
+            for (a, b) in [(-3.0, 5.0), (0.2, 0.9), (1.0, 1.7), (-1.0, 1.0), (3.0, 4.0)] {
+                let n = 20_000;
+                let h = (b - a) / f64::from(n);
+                let sum: f64 = (0..n)
+                    .map(|i| {
+                        density
+                            .optical_depth(a, a + (f64::from(i) + 0.5) * h)
+                            .powi(2)
+                    })
+                    .sum();
+                let want = sum * h;
+                let got = density.squared_depth_integral(&density.anchor(a), a, b);
+                assert!(
+                    (got - want).abs() < 1e-7 * want + 1e-14,
+                    "{density:?} {a} {b}: {got} vs {want}"
+                );
+            }
+        }
     }
 
     /// The integral of the optical depth against a midpoint sum of it (20 000 slices).

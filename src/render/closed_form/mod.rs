@@ -14,9 +14,11 @@
 //!   ([`Piece::integrate`]), the colour split `∫T Σσᵢcᵢ dt` between several primitives and
 //!   the depth moment (by parts, `∫ₐᵇ tσT dt = a·w + ∫ₐᵇ T dt − (b − a)·T_b`) come from
 //!   Gauss–Legendre panels ([`Piece::quadrature`]); the split is scaled so that its weight
-//!   is the exact one. A piece thin enough (small optical depth `τ`) has both in closed
-//!   form: the split as the profiles' optical depths' ratio, `∫T dt` from the integral of
-//!   the optical depth, each off by a bound in `τ` that is checked against the target. The
+//!   is the exact one. A piece thin enough (small optical depth `τ`), or whose total density
+//!   changes little over it, has both in closed form: the split as the profiles' optical
+//!   depths' ratio, `∫T dt` from the integral of the optical depth or the weight over the
+//!   densities, each off by a bound (in `τ`, in the densities' range) that is checked
+//!   against the target. The
 //!   panels' nodes take a rough `erfc` (a rational fit) where its error, bounded, is within
 //!   a hundredth of what they are held to.
 //! - Median depth: where `1 − T(t) = A/2`, `A` the ray's final alpha, found in the piece that

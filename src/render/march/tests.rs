@@ -664,3 +664,127 @@ fn the_step_rule_grows_only_where_a_curvature_allows_it() {
     let estimate = rate * step.powi(3);
     assert!((estimate / f64::from(params.error_target) - 0.5).abs() < 1e-12);
 }
+
+/// A primitive's world sphere holds its support, placed by a rotated, non-uniformly scaled
+/// (also with two equal scales) and moved transform, and is tighter than the sphere around
+/// the world box of the primitive's bounds: points of each support (a ball's or blob's
+/// surface, a box's corners and faces) all lie within it, and some reach nearly its radius.
+#[test]
+fn a_primitives_world_sphere_holds_its_support_and_no_more_than_needed() {
+    use crate::bench::rng::SplitMix64;
+    use crate::field::{Primitive, ShColor, Shape};
+    use glam::{DMat4, DQuat, DVec3};
+
+    let shapes = [
+        Shape::Sphere {
+            center: Vec3::new(0.5, -1.0, 0.25),
+            radius: 0.3,
+        },
+        Shape::Box {
+            min: Vec3::new(-1.0, 0.2, -0.4),
+            max: Vec3::new(-0.2, 0.5, 0.9),
+        },
+        Shape::Gaussian {
+            center: Vec3::new(1.2, 0.8, -0.6),
+            sigma: 0.1,
+            cutoff: 3.0,
+        },
+    ];
+    let primitives: Vec<_> = shapes
+        .iter()
+        .map(|&shape| Primitive {
+            shape,
+            density: 1.0,
+            color: ShColor::constant(Vec3::ONE),
+        })
+        .collect();
+    // Points of a support: a ball's surface (a spiral of directions), a box's corners and
+    // points of its faces.
+    let mut rng = SplitMix64::new(11);
+    let support = |shape: &Shape, rng: &mut SplitMix64| -> Vec<DVec3> {
+        let ball = |c: Vec3, r: f32| -> Vec<DVec3> {
+            let n = 4000;
+            (0..n)
+                .map(|k| {
+                    let z = 1.0 - (2 * k + 1) as f64 / n as f64;
+                    let phi = k as f64 * std::f64::consts::PI * (3.0 - 5f64.sqrt());
+                    let rho = (1.0 - z * z).sqrt();
+                    c.as_dvec3() + f64::from(r) * DVec3::new(rho * phi.cos(), rho * phi.sin(), z)
+                })
+                .collect()
+        };
+        match *shape {
+            Shape::Sphere { center, radius } => ball(center, radius),
+            Shape::Gaussian {
+                center,
+                sigma,
+                cutoff,
+            } => ball(center, cutoff * sigma),
+            Shape::Box { min, max } => {
+                let (lo, hi) = (min.as_dvec3(), max.as_dvec3());
+                let mut points: Vec<_> = (0..8)
+                    .map(|k| {
+                        DVec3::select(glam::BVec3::new(k & 1 == 0, k & 2 == 0, k & 4 == 0), lo, hi)
+                    })
+                    .collect();
+                for k in 0..600 {
+                    let u = rng.in_cube(0.0, 1.0).as_dvec3();
+                    let mut p = lo + u * (hi - lo);
+                    p[k % 3] = if k % 2 == 0 { lo[k % 3] } else { hi[k % 3] };
+                    points.push(p);
+                }
+                points
+            }
+        }
+    };
+    for scale in [DVec3::new(2.0, 0.5, 1.2), DVec3::new(1.5, 0.6, 1.5)] {
+        let world_from_field = DMat4::from_scale_rotation_translation(
+            scale,
+            DQuat::from_euler(glam::EulerRot::XYZ, 0.4, -0.9, 0.7),
+            DVec3::new(3.0, -1.0, 0.5),
+        );
+        let field = Analytic {
+            primitives: primitives.clone(),
+        };
+        let scene = Scene::new(vec![Instance::new(
+            "primitives",
+            FieldHandle::analytic(field),
+            world_from_field,
+            None,
+        )
+        .unwrap()]);
+        let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
+        for (shape, sphere) in shapes.iter().zip(&plans[0].primitive_spheres) {
+            let (centre, radius) = sphere.expect("a finite primitive has a sphere");
+            let farthest = support(shape, &mut rng)
+                .iter()
+                .map(|&p| world_from_field.transform_point3(p).distance(centre))
+                .fold(0.0, f64::max);
+            assert!(
+                farthest <= radius,
+                "{shape:?} at {scale}: {farthest} > {radius}"
+            );
+            assert!(
+                farthest >= 0.97 * radius,
+                "{shape:?} at {scale}: {farthest} of {radius}"
+            );
+            // The sphere around the world box of the bounds, as the culling had it.
+            let b = shape.bounds();
+            let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+            for k in 0..8 {
+                let corner = Vec3::select(
+                    glam::BVec3::new(k & 1 == 0, k & 2 == 0, k & 4 == 0),
+                    b.min,
+                    b.max,
+                );
+                let w = world_from_field.transform_point3(corner.as_dvec3());
+                (lo, hi) = (lo.min(w), hi.max(w));
+            }
+            let loose = 0.5 * (hi - lo).length();
+            assert!(
+                radius < 0.95 * loose,
+                "{shape:?} at {scale}: {radius} of {loose}"
+            );
+        }
+    }
+}

@@ -20,6 +20,7 @@
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
+mod erf;
 mod profile;
 mod sh;
 mod spans;

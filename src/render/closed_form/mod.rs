@@ -33,7 +33,7 @@ mod piece;
 
 use glam::DVec3;
 
-use self::piece::{Piece, Sums};
+use self::piece::{Integral, Piece, Sums};
 use super::composite::Pieces;
 use super::march::{cull_instances, may_meet, Bundle, InstancePlan, PixelResult};
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
@@ -82,8 +82,8 @@ struct RayScratch {
     /// The profiles present in the current piece, and their anchors at its start.
     active: Vec<u32>,
     anchors: Vec<Anchor>,
-    /// The pieces composited, `(a, b, T_a, T_b)`, for the median depth.
-    log: Vec<[f64; 4]>,
+    /// The pieces composited, `(a, b, T_a, T_b, τ)`, for the median depth.
+    log: Vec<[f64; 5]>,
     /// Panels waiting to be integrated: `(p, q, the sums taken for them if the ray's node
     /// budget runs out)`.
     panels: Vec<(f64, f64, Sums)>,
@@ -185,14 +185,20 @@ impl Context<'_> {
             }
             stats.density_samples += 1;
             let t_enter = pieces.transmittance();
-            match constant(&s.profiles, &s.colours, &s.active) {
+            let optical_depth = match constant(&s.profiles, &s.colours, &s.active) {
                 Some((k, colour)) => {
                     let w = pieces.add(a, b - a, k);
                     rgb += w * colour;
+                    k * (b - a)
                 }
                 None => {
                     let piece = Piece::new(a, &s.profiles, &s.colours, &s.active, &mut s.anchors);
-                    let (w, colour, moment) = piece.integrate(
+                    let Integral {
+                        depth: optical_depth,
+                        weight,
+                        colour,
+                        moment,
+                    } = piece.integrate(
                         b,
                         self.params.error_target,
                         depth,
@@ -200,11 +206,13 @@ impl Context<'_> {
                         &mut s.panels,
                     );
                     rgb += t_enter * colour;
-                    pieces.add_integrated(t_enter * w, t_enter * moment);
+                    pieces.add_integrated(t_enter * weight, t_enter * moment);
+                    optical_depth
                 }
-            }
+            };
             if self.outputs.depth_median {
-                s.log.push([a, b, t_enter, pieces.transmittance()]);
+                s.log
+                    .push([a, b, t_enter, pieces.transmittance(), optical_depth]);
             }
             if pieces.transmittance() <= stop {
                 break;
@@ -319,7 +327,7 @@ fn median_depth(s: &mut RayScratch, alpha: f64, budget: &mut Budget) -> f64 {
     if alpha.is_nan() || alpha <= 0.0 {
         return f64::INFINITY;
     }
-    let Some(&[a, b, t_a, _]) = s.log.iter().find(|piece| piece[3] <= t_star) else {
+    let Some(&[a, b, t_a, _, total]) = s.log.iter().find(|piece| piece[3] <= t_star) else {
         return f64::INFINITY;
     };
     if t_a <= t_star {
@@ -335,6 +343,7 @@ fn median_depth(s: &mut RayScratch, alpha: f64, budget: &mut Budget) -> f64 {
         None => Piece::new(a, profiles, &s.colours, &s.active, &mut s.anchors).depth_reaching(
             depth,
             b,
+            total,
             MEDIAN_RESOLUTION * b,
             budget,
         ),

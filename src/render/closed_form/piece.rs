@@ -71,6 +71,17 @@ pub(super) struct Sums {
     transmittance: f64,
 }
 
+/// A Gaussian piece integrated ([`Piece::integrate`]), relative to the transmittance it is
+/// entered with: its optical depth, weight `1 − e^{−τ}`, colour `∫T Σσᵢcᵢ dt` and depth
+/// moment `∫tσT dt`.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Integral {
+    pub depth: f64,
+    pub weight: f64,
+    pub colour: DVec3,
+    pub moment: f64,
+}
+
 /// A piece's optical depth and what bounds its integrals in closed form: over `[a, b]`, the
 /// optical depth `τ`, the colour sum `Στᵢcᵢ` of the profiles' own optical depths, the
 /// integral of the optical depth from `a`, `∫ₐᵇ τ(t) dt`, and the least and greatest total
@@ -176,8 +187,7 @@ impl<'a> Piece<'a> {
         whole
     }
 
-    /// The piece's weight `1 − e^{−τ}`, colour and depth moment (`∫tσT dt`), relative to
-    /// the transmittance it is entered with. The weight is exact, and so is the colour of a
+    /// The piece's [`Integral`]. The optical depth and weight are exact, and so is the colour of a
     /// profile alone. The rest is taken in closed form where bounds on it (below) are within
     /// what it is held to: the colour split within [`COLOUR_SHARE`] of the error target (any
     /// split is off by at most the spread of the profiles' colours), the moment (asked for
@@ -191,7 +201,7 @@ impl<'a> Piece<'a> {
         depth: bool,
         budget: &mut Budget,
         panels: &mut Vec<(f64, f64, Sums)>,
-    ) -> (f64, DVec3, f64) {
+    ) -> Integral {
         let Whole {
             tau,
             rgb_tau,
@@ -201,7 +211,10 @@ impl<'a> Piece<'a> {
         } = self.whole(b);
         let w = opacity(tau);
         if w.is_nan() || w <= 0.0 {
-            return (0.0, DVec3::ZERO, 0.0);
+            return Integral {
+                depth: tau,
+                ..Integral::default()
+            };
         }
         let target = f64::from(error_target);
         let middle = 0.5 * (self.a + b);
@@ -222,8 +235,10 @@ impl<'a> Piece<'a> {
         // is taken where it is within what it is held to.
         //
         // [`lone_transmittance`]: Self::lone_transmittance
-        let shares = (greatest / least - least / greatest).min(tau.exp_m1());
-        let split = spread * (0.5 * shares).min(1.0) > COLOUR_SHARE * target;
+        let split = spread > COLOUR_SHARE * target && {
+            let shares = (greatest / least - least / greatest).min(tau.exp_m1());
+            spread * (0.5 * shares).min(1.0) > COLOUR_SHARE * target
+        };
         let length = b - self.a;
         let mut lowest = (w / greatest)
             .max(length * (1.0 - w))
@@ -252,7 +267,12 @@ impl<'a> Piece<'a> {
             } else {
                 w * middle
             };
-            (w, w * colour, moment)
+            Integral {
+                depth: tau,
+                weight: w,
+                colour: w * colour,
+                moment,
+            }
         };
         if !split && !quadrature_moment {
             return closed(mix);
@@ -262,7 +282,7 @@ impl<'a> Piece<'a> {
         // from a sliver at its start, which panels over the whole piece could all miss.
         let cut = (1e3 / target).ln();
         let end = if tau > OPAQUE * cut {
-            self.depth_reaching(cut, b, 1e-2 * (b - self.a), budget)
+            self.depth_reaching(cut, b, tau, 1e-2 * (b - self.a), budget)
         } else {
             b
         };
@@ -297,9 +317,14 @@ impl<'a> Piece<'a> {
         let moment = if quadrature_moment {
             by_parts(sums.transmittance, end)
         } else {
-            closed(DVec3::ZERO).2
+            closed(DVec3::ZERO).moment
         };
-        (w, colour, moment)
+        Integral {
+            depth: tau,
+            weight: w,
+            colour,
+            moment,
+        }
     }
 
     /// `∫ₐᵇ T dt` of a piece that holds one Gaussian alone, and how far off it can be; `None`
@@ -453,22 +478,37 @@ impl<'a> Piece<'a> {
         total
     }
 
-    /// Where in `[a, b]` the optical depth from `a` reaches `depth` (`b` if it does not), to
-    /// within `resolution`: Newton steps on the closed-form optical depth, kept inside a
-    /// bracket that each step narrows, bisecting where a step would leave it or would not
-    /// halve the one before (a Newton step can bounce between the two sides of a density's
-    /// sharp rise).
+    /// Where in `[a, b]` the optical depth from `a` reaches `depth` (`b` if it does not;
+    /// `total` is the piece's), to within `resolution`: Newton steps on the closed-form
+    /// optical depth, kept inside a bracket that each step narrows, bisecting where a step
+    /// would leave it or would not halve the one before (a Newton step can bounce between the
+    /// two sides of a density's sharp rise).
+    ///
+    /// A step is the last one where its own size bounds what its end is off by within the
+    /// resolution: `f = τ − depth` has `f′ = σ ≥ m` (the constants' density) and
+    /// `|f″| = |σ′| ≤ M` (`peak/(width·√e)` per Gaussian), so a Newton step of size `s` ends
+    /// where `|f| ≤ M·s²/2`, within `M·s²/2m` of the root: in a piece a constant density
+    /// dominates, after one step from the linear guess.
     pub(super) fn depth_reaching(
         &self,
         depth: f64,
         b: f64,
+        total: f64,
         resolution: f64,
         budget: &mut Budget,
     ) -> f64 {
-        let total = self.sample(b, false).2;
         if total.is_nan() || total <= depth {
             return b;
         }
+        let (least, bend) = self
+            .each()
+            .fold((0.0, 0.0), |(m, big_m), (p, _)| match p.density {
+                Density::Constant(k) => (m + k, big_m),
+                Density::Gaussian { peak, width, .. } => {
+                    (m, big_m + peak / (width * std::f64::consts::E.sqrt()))
+                }
+            });
+        let settled = |step: f64| bend * step * step <= 2.0 * least * resolution;
         let (mut lo, mut hi) = (self.a, b);
         let mut t = self.a + (b - self.a) * (depth / total);
         let mut step = hi - lo;
@@ -491,7 +531,7 @@ impl<'a> Piece<'a> {
             let step_before = std::mem::replace(&mut step, (newton - t).abs());
             // A step within the resolution is the answer, also where it rounds onto the end
             // of the bracket (which bisecting the bracket down to it would not be faster).
-            if step <= resolution {
+            if step <= resolution || settled(step) {
                 return newton.clamp(lo, hi);
             }
             let next = if newton > lo && newton < hi && 2.0 * step <= step_before {

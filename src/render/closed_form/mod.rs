@@ -194,7 +194,7 @@ impl Context<'_> {
                 None => {
                     let piece = Piece::new(a, &s.profiles, &s.colours, &s.active, &mut s.anchors);
                     let Integral {
-                        depth: optical_depth,
+                        optical_depth,
                         weight,
                         colour,
                         moment,

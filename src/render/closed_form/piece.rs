@@ -76,7 +76,7 @@ pub(super) struct Sums {
 /// moment `∫tσT dt`.
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct Integral {
-    pub depth: f64,
+    pub optical_depth: f64,
     pub weight: f64,
     pub colour: DVec3,
     pub moment: f64,
@@ -187,13 +187,14 @@ impl<'a> Piece<'a> {
         whole
     }
 
-    /// The piece's [`Integral`]. The optical depth and weight are exact, and so is the colour of a
-    /// profile alone. The rest is taken in closed form where bounds on it (below) are within
-    /// what it is held to: the colour split within [`COLOUR_SHARE`] of the error target (any
-    /// split is off by at most the spread of the profiles' colours), the moment (asked for
-    /// with `depth`) within [`DEPTH_SHARE`] of the target times `a` (the mean depth inside
-    /// the piece lies between `a` and `b`, so its middle is off by at most half its length).
-    /// Elsewhere it comes from [`quadrature`](Self::quadrature), held to the target.
+    /// The piece's [`Integral`]. The optical depth and weight are exact, and so is the
+    /// colour of a profile alone. The rest is taken in closed form where bounds on it
+    /// (below) are within what it is held to: the colour split within [`COLOUR_SHARE`] of the
+    /// error target (any split is off by at most the spread of the profiles' colours), the
+    /// moment (asked for with `depth`) within [`DEPTH_SHARE`] of the target times `a` (the
+    /// mean depth inside the piece lies between `a` and `b`, so its middle is off by at most
+    /// half its length). Elsewhere it comes from [`quadrature`](Self::quadrature), held to
+    /// the target.
     pub(super) fn integrate(
         &self,
         b: f64,
@@ -212,7 +213,7 @@ impl<'a> Piece<'a> {
         let w = opacity(tau);
         if w.is_nan() || w <= 0.0 {
             return Integral {
-                depth: tau,
+                optical_depth: tau,
                 ..Integral::default()
             };
         }
@@ -268,7 +269,7 @@ impl<'a> Piece<'a> {
                 w * middle
             };
             Integral {
-                depth: tau,
+                optical_depth: tau,
                 weight: w,
                 colour: w * colour,
                 moment,
@@ -320,7 +321,7 @@ impl<'a> Piece<'a> {
             closed(DVec3::ZERO).moment
         };
         Integral {
-            depth: tau,
+            optical_depth: tau,
             weight: w,
             colour,
             moment,
@@ -331,8 +332,8 @@ impl<'a> Piece<'a> {
     /// for any other piece. On each side of the blob's centre the optical depth `τ` is
     /// monotone, within `h` of the middle `m` of its values at the side's ends: there
     /// `e^{−τ} = e^{−m}·(1 − δ + δ²/2)` (`δ = τ − m`) up to `e^{−m}·h³·e^h/6`, and the
-    /// integrals of `τ` and `τ²` are closed forms ([`Density::squared_depth_integral`]). Three
-    /// error functions, where panels over the same piece take fourteen nodes.
+    /// integrals of `τ` and `τ²` are closed forms ([`Density::squared_depth_integral`]): a
+    /// few error functions per side, where panels over the same piece take fourteen nodes.
     fn lone_transmittance(&self, b: f64) -> Option<(f64, f64)> {
         let ([h], [anchor]) = (self.active, self.anchors) else {
             return None;

@@ -114,12 +114,19 @@ impl Density {
     /// `∫erf² = z·erf² + (2/√π)·e^{−z²}·erf − √(2/π)·erf(√2·z)` give as
     /// `z_t·Δ² + (2/√π)·e^{−z_t²}·Δ − √(2/π)·(erf(√2·z_t) − erf(√2·z_a))`, `Δ = erf z_t − erf z_a`.
     /// Its terms cancel where both ends lie far in one tail: it is good to about 1e-15 of
-    /// `A²·width·(|z_t| + 1)`, absolutely, not relatively.
-    pub fn squared_depth_integral(&self, anchor: &Anchor, a: f64, t: f64) -> f64 {
+    /// `A²·width·(|z_t| + 1)`, absolutely, not relatively. `(sigma, depth)` are the density
+    /// and optical depth at `t` that [`sample_from`](Self::sample_from) gave, which it takes
+    /// rather than works out again.
+    pub fn squared_depth_integral(
+        &self,
+        anchor: &Anchor,
+        a: f64,
+        t: f64,
+        (sigma, depth): (f64, f64),
+    ) -> f64 {
         match *self {
             Density::Constant(k) => k * k * (t - a).powi(3) / 3.0,
             Density::Gaussian { peak, width, .. } => {
-                let (sigma, depth, _) = self.sample_from(anchor, a, t, false);
                 let scale = peak * width * (0.5 * PI).sqrt();
                 let zt = anchor.z + (t - a) * (FRAC_1_SQRT_2 / width);
                 let difference = depth / scale;
@@ -215,7 +222,8 @@ impl Analytic {
                 Shape::Sphere { .. } | Shape::Box { .. } => Density::Constant(k),
                 Shape::Gaussian { center, sigma, .. } => {
                     let closest = line.closest(center);
-                    let miss2 = (center.as_dvec3() - origin - closest * line.d).length_squared();
+                    let miss2 =
+                        (center.as_dvec3() - origin - closest * line.velocity()).length_squared();
                     let s = f64::from(sigma);
                     Density::Gaussian {
                         peak: k * (-0.5 * miss2 / (s * s)).exp(),
@@ -332,7 +340,9 @@ mod tests {
                     })
                     .sum();
                 let want = sum * h;
-                let got = density.squared_depth_integral(&density.anchor(a), a, b);
+                let anchor = density.anchor(a);
+                let (sigma, depth, _) = density.sample_from(&anchor, a, b, false);
+                let got = density.squared_depth_integral(&anchor, a, b, (sigma, depth));
                 assert!(
                     (got - want).abs() < 1e-7 * want + 1e-14,
                     "{density:?} {a} {b}: {got} vs {want}"

@@ -23,7 +23,7 @@ use crate::field::Span;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Line {
     o: DVec3,
-    pub(super) d: DVec3,
+    d: DVec3,
     /// `1/d` per axis (infinite on an axis the line is parallel to, where it is not used).
     inv_d: DVec3,
     /// `1/|d|²`.

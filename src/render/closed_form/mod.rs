@@ -18,9 +18,8 @@
 //!   changes little over it, has both in closed form: the split as the profiles' optical
 //!   depths' ratio, `∫T dt` from the integral of the optical depth or the weight over the
 //!   densities, each off by a bound (in `τ`, in the densities' range) that is checked
-//!   against the target. The
-//!   panels' nodes take a rough `erfc` (a rational fit) where its error, bounded, is within
-//!   a hundredth of what they are held to.
+//!   against the target. The panels' nodes take a rough `erfc` (a rational fit) where its
+//!   error, bounded, is within a hundredth of what they are held to.
 //! - Median depth: where `1 − T(t) = A/2`, `A` the ray's final alpha, found in the piece that
 //!   crosses it, exactly in a constant piece, by safeguarded Newton steps on the closed-form
 //!   optical depth in a Gaussian one.
@@ -176,10 +175,7 @@ impl Context<'_> {
             if b <= a {
                 continue;
             }
-            s.active.clear();
-            s.active.extend(
-                (0..s.profiles.len() as u32).filter(|&h| covers(&s.profiles[h as usize], a, b)),
-            );
+            present(&s.profiles, a, b, &mut s.active);
             if s.active.is_empty() {
                 continue;
             }
@@ -269,10 +265,14 @@ fn stop_transmittance(error_target: f32, brightest: f64) -> f64 {
     1e-3 * f64::from(error_target) / brightest
 }
 
-/// Whether profile `p` is present all over `[a, b]`.
+/// Lists in `active` the profiles present all over `[a, b]`.
 #[inline]
-fn covers(p: &Profile, a: f64, b: f64) -> bool {
-    p.enter <= a && p.exit >= b
+fn present(profiles: &[Profile], a: f64, b: f64, active: &mut Vec<u32>) {
+    active.clear();
+    active.extend((0..profiles.len() as u32).filter(|&h| {
+        let p = &profiles[h as usize];
+        p.enter <= a && p.exit >= b
+    }));
 }
 
 /// Sorts a handful of numbers in place (a ray meets a few primitives).
@@ -334,9 +334,7 @@ fn median_depth(s: &mut RayScratch, alpha: f64, budget: &mut Budget) -> f64 {
         return a;
     }
     let profiles = &s.profiles;
-    s.active.clear();
-    s.active
-        .extend((0..profiles.len() as u32).filter(|&h| covers(&profiles[h as usize], a, b)));
+    present(profiles, a, b, &mut s.active);
     let depth = (t_a / t_star).ln();
     match constant(profiles, &s.colours, &s.active) {
         Some((k, _)) => (a + depth / k).min(b),

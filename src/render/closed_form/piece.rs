@@ -355,12 +355,12 @@ impl<'a> Piece<'a> {
             if t <= from.0 {
                 continue;
             }
-            let (_, tau, integral) = density.sample_from(anchor, self.a, t, false);
+            let (sigma, tau, integral) = density.sample_from(anchor, self.a, t, false);
             let to = (
                 t,
                 tau,
                 integral,
-                density.squared_depth_integral(anchor, self.a, t),
+                density.squared_depth_integral(anchor, self.a, t, (sigma, tau)),
             );
             let (length, first, second) = (t - from.0, to.2 - from.2, to.3 - from.3);
             let (m, h) = (0.5 * (to.1 + from.1), 0.5 * (to.1 - from.1));

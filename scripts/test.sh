@@ -6,6 +6,7 @@
 #   blender        the reference for camera alignment (Debian's 3.4, run headless)
 #   numpy, msgpack the independent NumPy references of the trained fields and splats
 #   mpmath         the quadrature reference of the renderer's far share of a linear piece
+#   OpenEXR        OpenEXR's own library (PyPI's bindings), reading back the EXR output
 #   python3-numpy  Blender's own Python (Debian's build uses the system's) for the add-on's
 #                  splat import
 #
@@ -41,13 +42,16 @@ if ((${#need_apt[@]})); then
     apt_install "${need_apt[@]}"
 fi
 
-if ! python3 -c "import numpy, msgpack, mpmath" 2>/dev/null; then
-    echo "== installing numpy, msgpack and mpmath for $(command -v python3)"
+if ! python3 -c "import numpy, msgpack, mpmath, OpenEXR" 2>/dev/null; then
+    echo "== installing numpy, msgpack, mpmath and OpenEXR for $(command -v python3)"
     # A pip-managed Python (pyenv, a venv) takes them from PyPI; Debian's own python3 refuses
-    # pip (externally managed) and takes its packages.
-    python3 -m pip install --quiet numpy msgpack mpmath 2>/dev/null ||
-        apt_install python3-numpy python3-msgpack python3-mpmath
-    python3 -c "import numpy, msgpack, mpmath"
+    # pip (externally managed) and takes its packages, and OpenEXR, which Debian does not
+    # package for Python, from PyPI beside them.
+    python3 -m pip install --quiet numpy msgpack mpmath OpenEXR 2>/dev/null || {
+        apt_install python3-numpy python3-msgpack python3-mpmath python3-pip
+        python3 -m pip install --quiet --break-system-packages OpenEXR
+    }
+    python3 -c "import numpy, msgpack, mpmath, OpenEXR"
 fi
 
 if ! blender -b --factory-startup --python-exit-code 1 --python-expr "import numpy" \

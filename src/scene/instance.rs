@@ -4,7 +4,7 @@ use std::sync::{Arc, Mutex};
 
 use glam::{DMat4, DVec3, DVec4, Vec3};
 
-use super::CropBox;
+use super::{CropBox, CropClip};
 use crate::camera::Ray;
 use crate::error::{Error, Result};
 use crate::field::{Analytic, Field, Line, Occupancy};
@@ -73,6 +73,8 @@ pub struct Instance {
     world_from_field: DMat4,
     field_from_world: DMat4,
     crop: Option<CropBox>,
+    /// The crop box ready to clip rays.
+    crop_clip: Option<CropClip>,
     /// The field's bounds, in f64, and the interval its near and far distances allow
     /// (`[0, ∞)` for a bounded field): fixed for the field, so taken once here rather than
     /// asked of it on every ray.
@@ -200,6 +202,7 @@ impl Instance {
             field,
             world_from_field,
             field_from_world,
+            crop_clip: crop.as_ref().map(CropBox::clipper),
             crop,
         })
     }
@@ -229,6 +232,11 @@ impl Instance {
         self.crop.as_ref()
     }
 
+    /// The crop box ready to clip rays.
+    pub fn crop_clip(&self) -> Option<&CropClip> {
+        self.crop_clip.as_ref()
+    }
+
     /// The interval `[t0, t1]` of the field-space line (`t` in world units, `inv_k` the
     /// inverse of its speed) inside the field's bounds and the crop box; for an unbounded
     /// field, also between its near and far distances (field units) from the line's origin.
@@ -246,7 +254,7 @@ impl Instance {
         if lo > hi {
             return None;
         }
-        match &self.crop {
+        match &self.crop_clip {
             Some(c) => c.clip(line.origin(), line.velocity(), lo, hi),
             None => Some((lo, hi)),
         }

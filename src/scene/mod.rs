@@ -19,7 +19,7 @@ mod ngp;
 mod proposal;
 mod splats;
 
-pub use crop::CropBox;
+pub use crop::{CropBox, CropClip};
 pub use file::{FieldSource, InstanceDesc, LoadedScene, Sampler, SceneDesc};
 pub use instance::{FieldHandle, Instance, LocalRay};
 pub use ngp::NgpInstance;

@@ -77,7 +77,7 @@ impl ProposalInstance {
         }
         let dir = d / k;
         let far = f64::from(self.field.far_plane());
-        let (near, far) = match self.instance.crop() {
+        let (near, far) = match self.instance.crop_clip() {
             Some(c) => c.clip(origin, dir, 0.0, far)?,
             None => (0.0, far),
         };

@@ -231,17 +231,17 @@ impl Context<'_> {
         s.colours.clear();
         for (j, &i) in self.insts.iter().enumerate() {
             let (inst, plan) = (&self.scene.instances[i as usize], &self.plans[i as usize]);
+            let prims = &self.prims[self.prim_at[j] as usize..self.prim_at[j + 1] as usize];
             let Some(analytic) = inst.handle().as_analytic() else {
                 continue;
             };
-            if !may_meet(plan, ray) {
+            if prims.is_empty() || !may_meet(plan, ray) {
                 continue;
             }
             let Some(line) = inst.local_line(ray, ray.near, ray.far) else {
                 continue;
             };
             let first = s.profiles.len();
-            let prims = &self.prims[self.prim_at[j] as usize..self.prim_at[j + 1] as usize];
             analytic.profiles(
                 &line.line,
                 line.units_per_world,

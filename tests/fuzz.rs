@@ -11,7 +11,7 @@
 //!
 //! `cargo test --test fuzz` runs a few thousand cases; `NERFX_FUZZ_CASES=100000 cargo test
 //! --release --test fuzz -- --ignored --nocapture` runs that many per target, from other
-//! seeds.
+//! seeds (case numbers from 1 000 000, or from `NERFX_FUZZ_FIRST`).
 
 mod common_fields;
 mod common_fuzz;
@@ -729,8 +729,12 @@ fn long_fuzz_run() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(10_000);
     let only = std::env::var("NERFX_FUZZ_TARGETS").unwrap_or_default();
+    let first = std::env::var("NERFX_FUZZ_FIRST")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1_000_000);
     let chosen = |t: &Target| only.is_empty() || only.split(',').any(|w| t.name.contains(w));
-    run_all(1_000_000, |t| if chosen(t) { n } else { 0 });
+    run_all(first, |t| if chosen(t) { n } else { 0 });
 }
 
 /// Writes the input of one case to a file, to look at it: `NERFX_FUZZ_CASE="scene JSON:113"

@@ -76,31 +76,34 @@ fn draw(
 
     let mut pixels = vec![255u8; (WIDTH * HEIGHT * 3) as usize];
     let backend = BitMapBackend::with_buffer(&mut pixels, (WIDTH, HEIGHT));
+    let legend = legend_corner(&runs, &x, &y, log_x);
+    let text = Text {
+        title,
+        x_label,
+        y_label,
+        legend,
+    };
     let drawn = if log_x {
-        chart(
-            backend,
-            title,
-            x_label,
-            y_label,
-            &runs,
-            series,
-            x.log_scale(),
-            y,
-        )
+        chart(backend, text, &runs, series, x.log_scale(), y)
     } else {
-        chart(backend, title, x_label, y_label, &runs, series, x, y)
+        chart(backend, text, &runs, series, x, y)
     };
     drawn.map_err(|e| Error::invalid(format!("plot '{title}'"), e))?;
     Ok(pixels)
 }
 
+/// What a chart says besides its lines, and where its legend goes.
+struct Text<'a> {
+    title: &'a str,
+    x_label: &'a str,
+    y_label: &'a str,
+    legend: SeriesLabelPosition,
+}
+
 /// Draws the framed, gridded chart with its title, axis labels, series and legend.
-#[allow(clippy::too_many_arguments)]
 fn chart<X>(
     backend: BitMapBackend,
-    title: &str,
-    x_label: &str,
-    y_label: &str,
+    text: Text,
     runs: &[Vec<Vec<(f64, f64)>>],
     series: &[Series],
     x: X,
@@ -113,7 +116,7 @@ where
     let root = backend.into_drawing_area();
     root.fill(&WHITE).map_err(|e| e.to_string())?;
     let mut chart = ChartBuilder::on(&root)
-        .caption(title, (FONT, 26))
+        .caption(text.title, (FONT, 26))
         .margin(16)
         .x_label_area_size(56)
         .y_label_area_size(76)
@@ -121,8 +124,8 @@ where
         .map_err(|e| e.to_string())?;
     chart
         .configure_mesh()
-        .x_desc(x_label)
-        .y_desc(y_label)
+        .x_desc(text.x_label)
+        .y_desc(text.y_label)
         .label_style((FONT, 16))
         .axis_desc_style((FONT, 18))
         .light_line_style(RGBColor(240, 240, 240))
@@ -155,7 +158,7 @@ where
         .label_font((FONT, 16))
         .background_style(WHITE.mix(0.9))
         .border_style(BLACK)
-        .position(SeriesLabelPosition::LowerRight)
+        .position(text.legend)
         .draw()
         .map_err(|e| e.to_string())?;
     root.present().map_err(|e| e.to_string())
@@ -186,6 +189,63 @@ fn span(values: impl Iterator<Item = f64>, log: bool) -> Option<std::ops::Range<
     let pad = if hi > lo { 0.05 * (hi - lo) } else { 0.5 };
     Some(lo - pad..hi + pad)
 }
+
+/// The corner of the plotting area whose legend box would cover the fewest of the lines
+/// (their points and points sampled along each segment, as drawn: `x` on a log scale with
+/// `log_x`), lower right first among equals, then upper right, upper left, lower left: so
+/// that the legend does not hide a line where a corner is free.
+fn legend_corner(
+    runs: &[Vec<Vec<(f64, f64)>>],
+    x: &std::ops::Range<f64>,
+    y: &std::ops::Range<f64>,
+    log_x: bool,
+) -> SeriesLabelPosition {
+    let along_x = |v: f64| {
+        if log_x {
+            (v / x.start).log10() / (x.end / x.start).log10()
+        } else {
+            (v - x.start) / (x.end - x.start)
+        }
+    };
+    let unit = |(px, py): (f64, f64)| (along_x(px), (py - y.start) / (y.end - y.start));
+    // The legend's share of the plotting area (a 900×600 image's): its width, and a line a
+    // series with a margin.
+    let (w, h) = (0.32, 0.04 + 0.05 * runs.len() as f64);
+    let mut samples = Vec::new();
+    for run in runs.iter().flatten() {
+        let points: Vec<(f64, f64)> = run.iter().map(|&p| unit(p)).collect();
+        samples.extend(&points);
+        for pair in points.windows(2) {
+            let ((x0, y0), (x1, y1)) = (pair[0], pair[1]);
+            samples.extend((1..SEGMENT_SAMPLES).map(|k| {
+                let s = f64::from(k) / f64::from(SEGMENT_SAMPLES);
+                (x0 + s * (x1 - x0), y0 + s * (y1 - y0))
+            }));
+        }
+    }
+    let corners = [
+        (SeriesLabelPosition::LowerRight, (1.0 - w, 0.0)),
+        (SeriesLabelPosition::UpperRight, (1.0 - w, 1.0 - h)),
+        (SeriesLabelPosition::UpperLeft, (0.0, 1.0 - h)),
+        (SeriesLabelPosition::LowerLeft, (0.0, 0.0)),
+    ];
+    let covered = |(cx, cy): (f64, f64)| {
+        (samples.iter())
+            .filter(|&&(u, v)| u >= cx && u <= cx + w && v >= cy && v <= cy + h)
+            .count()
+    };
+    let mut best = (usize::MAX, SeriesLabelPosition::LowerRight);
+    for (corner, at) in corners {
+        let n = covered(at);
+        if n < best.0 {
+            best = (n, corner);
+        }
+    }
+    best.1
+}
+
+/// Points sampled along each segment of a line when placing the legend.
+const SEGMENT_SAMPLES: u32 = 32;
 
 /// The series split into runs of plottable points.
 fn runs(series: &Series, log_x: bool) -> Vec<Vec<(f64, f64)>> {
@@ -249,6 +309,33 @@ mod tests {
         }
         // Mostly white background.
         assert!(count([255, 255, 255, 255]) > 900 * 600 / 2);
+    }
+
+    #[test]
+    fn the_legend_goes_to_a_corner_no_line_crosses() {
+        let place = |pts: &[(f64, f64)], log_x: bool| {
+            let runs = vec![vec![pts.to_vec()]];
+            let all = || pts.iter();
+            let x = span(all().map(|p| p.0), log_x).unwrap();
+            let y = span(all().map(|p| p.1), false).unwrap();
+            legend_corner(&runs, &x, &y, log_x)
+        };
+        let is = |p: SeriesLabelPosition, want: SeriesLabelPosition| {
+            format!("{p:?}") == format!("{want:?}")
+        };
+        // A line rising from the lower left to the upper right leaves the lower right free.
+        let rising = [(1.0, 1.0), (10.0, 10.0), (100.0, 100.0)];
+        assert!(is(place(&rising, false), SeriesLabelPosition::LowerRight));
+        // Falling into it on a log axis, bent, it leaves the upper right and the lower left
+        // free, and takes the first of them.
+        let falling = [(1.0, 100.0), (10.0, 90.0), (100.0, 50.0), (1000.0, 1.0)];
+        assert!(is(place(&falling, true), SeriesLabelPosition::UpperRight));
+        // With the upper right taken too, the lower left.
+        let both = [(1.0, 100.0), (10.0, 90.0), (100.0, 50.0), (1000.0, 1.0), (1000.0, 100.0)];
+        assert!(is(place(&both, true), SeriesLabelPosition::LowerLeft));
+        // Points in the lower right only (the demo's naive marcher): any other corner.
+        let low_right = [(900.0, 1.0), (1000.0, 2.0), (10.0, 50.0)];
+        assert!(!is(place(&low_right, true), SeriesLabelPosition::LowerRight));
     }
 
     #[test]

@@ -331,11 +331,20 @@ mod tests {
         let falling = [(1.0, 100.0), (10.0, 90.0), (100.0, 50.0), (1000.0, 1.0)];
         assert!(is(place(&falling, true), SeriesLabelPosition::UpperRight));
         // With the upper right taken too, the lower left.
-        let both = [(1.0, 100.0), (10.0, 90.0), (100.0, 50.0), (1000.0, 1.0), (1000.0, 100.0)];
+        let both = [
+            (1.0, 100.0),
+            (10.0, 90.0),
+            (100.0, 50.0),
+            (1000.0, 1.0),
+            (1000.0, 100.0),
+        ];
         assert!(is(place(&both, true), SeriesLabelPosition::LowerLeft));
         // Points in the lower right only (the demo's naive marcher): any other corner.
         let low_right = [(900.0, 1.0), (1000.0, 2.0), (10.0, 50.0)];
-        assert!(!is(place(&low_right, true), SeriesLabelPosition::LowerRight));
+        assert!(!is(
+            place(&low_right, true),
+            SeriesLabelPosition::LowerRight
+        ));
     }
 
     #[test]

@@ -97,6 +97,72 @@ fn demo_then_render_a_frame_range_from_its_files() {
         );
     }
     assert!(!dir.join("frames/f.1002.exr").exists());
+    assert_eq!(
+        channels(&dir.join("frames/f.1001.exr")),
+        ["A", "B", "G", "R", "Z", "depth.median", "depth.ray"],
+        "every pass by default"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn render_passes_choose_the_channels_written() {
+    let dir = scratch_dir("passes");
+    let out = dir.to_string_lossy().into_owned();
+    let demo = nerfx(&["demo", "-o", &out, "--width", "32", "--height", "18"]);
+    assert!(
+        demo.status.success(),
+        "{}",
+        String::from_utf8_lossy(&demo.stderr)
+    );
+    let (scene, shot) = (dir.join("demo_scene.json"), dir.join("demo_shot.json"));
+    let render = |name: &str, extra: &[&str]| {
+        let file = dir.join(name);
+        let (scene, shot, path) = (
+            scene.to_string_lossy(),
+            shot.to_string_lossy(),
+            file.to_string_lossy(),
+        );
+        let mut args = vec![
+            "render",
+            &scene,
+            &shot,
+            "--frames",
+            "1001",
+            "--quality",
+            "draft",
+            "-o",
+            &path,
+        ];
+        args.extend(extra);
+        (nerfx(&args), file)
+    };
+    for (passes, want) in [
+        ("rgba,z", &["A", "B", "G", "R", "Z"][..]),
+        ("alpha,median", &["A", "depth.median"][..]),
+        ("ray", &["depth.ray"][..]),
+    ] {
+        let (run, file) = render(
+            &format!("{}.exr", passes.replace(',', "_")),
+            &["--passes", passes],
+        );
+        assert!(
+            run.status.success(),
+            "{passes}: {}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        assert_eq!(channels(&file), want, "--passes {passes}");
+    }
+    // A preview needs the colour; nothing is written when it is not asked for.
+    let (run, file) = render("depth_only.exr", &["--passes", "z", "--png"]);
+    assert!(!run.status.success());
+    assert!(String::from_utf8_lossy(&run.stderr).contains("--png"));
+    assert!(!file.exists());
+    // A graph's nodes choose their own outputs.
+    let comp = dir.join("demo_comp.json");
+    let run = nerfx(&["render", &comp.to_string_lossy(), "--passes", "rgba"]);
+    assert!(!run.status.success());
+    assert!(String::from_utf8_lossy(&run.stderr).contains("--passes"));
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -86,6 +86,11 @@ enum Command {
         /// Also write a PNG preview beside each EXR.
         #[arg(long)]
         png: bool,
+        /// Scenes: the passes to render and write, comma-separated (default: all). A pass not
+        /// asked for is neither computed nor written (graphs choose each NeRF Render node's
+        /// output instead).
+        #[arg(long, value_enum, value_delimiter = ',')]
+        passes: Option<Vec<Pass>>,
         /// Graphs: the OpenFX bundle (default: $NERFX_OFX_BUNDLE, then nerfx.ofx.bundle in
         /// each folder of $OFX_PLUGIN_PATH, beside this program, and in /usr/OFX/Plugins).
         #[arg(long)]
@@ -188,6 +193,35 @@ enum Command {
     },
 }
 
+/// A pass `nerfx render --passes` names, and the EXR channels it writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Pass {
+    /// Premultiplied colour and its alpha: `R`, `G`, `B`, `A`.
+    Rgba,
+    /// The accumulation alone, a matte: `A`.
+    Alpha,
+    /// Expected depth as camera Z: `Z`.
+    Z,
+    /// Expected depth as ray distance: `depth.ray`.
+    Ray,
+    /// Median depth (ray distance): `depth.median`.
+    Median,
+}
+
+impl Pass {
+    /// The planes `passes` ask for.
+    fn outputs(passes: &[Pass]) -> Outputs {
+        let has = |p: Pass| passes.contains(&p);
+        Outputs {
+            rgb: has(Pass::Rgba),
+            alpha: has(Pass::Rgba) || has(Pass::Alpha),
+            depth_z: has(Pass::Z),
+            depth_ray: has(Pass::Ray),
+            depth_median: has(Pass::Median),
+        }
+    }
+}
+
 fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
@@ -235,13 +269,27 @@ fn run(cli: Cli) -> Result<()> {
             colour,
             shutter_samples,
             png,
+            passes,
             bundle,
             scale,
         } => {
             let frames = frames.as_deref().map(parse_frames).transpose()?;
             let Some(shot) = shot else {
+                if passes.is_some() {
+                    return Err(Error::invalid(
+                        "--passes",
+                        "a graph's NeRF Render nodes choose their own outputs",
+                    ));
+                }
                 return graph::render(&scene, frames, &output, png, bundle, scale);
             };
+            let outputs = passes.as_deref().map_or_else(Outputs::all, Pass::outputs);
+            if png && !outputs.rgb {
+                return Err(Error::invalid(
+                    "--png",
+                    "the preview is of the colour: add rgba to --passes",
+                ));
+            }
             let scene = SceneDesc::for_path(&scene)?.load()?;
             for warning in scene.warnings() {
                 eprintln!("nerfx: warning: {warning}");
@@ -261,7 +309,7 @@ fn run(cli: Cli) -> Result<()> {
             let settings = RenderSettings {
                 color: colour,
                 shutter_samples,
-                ..RenderSettings::new(quality.params(), Outputs::all())
+                ..RenderSettings::new(quality.params(), outputs)
             };
             let bar = progress_bar(frames.len() as u64, "frames");
             for &frame in &frames {

@@ -23,7 +23,7 @@
 //!   space): the slab test on `Rᵀ(p(t) − centre)` against the half sides. It clips the
 //!   instance's interval of `t` (and `t ≥ 0`, the ray starts at the camera); it does not mask
 //!   density. This is computed here again rather than through
-//!   [`crate::scene::CropBox::clip`], so that the reference stays independent of the renderer.
+//!   [`crate::scene::CropClip::clip`], so that the reference stays independent of the renderer.
 
 use glam::{DMat3, DMat4, DVec3};
 

@@ -9,7 +9,7 @@ use crate::camera::{environment_camera, CameraPath, Shot, ShotFrame};
 use crate::composite::shutter_average;
 use crate::error::{Error, Result};
 use crate::image::Planes;
-use crate::render::{render_with_progress, RenderSettings, RenderStats};
+use crate::render::{render_with_progress, Outputs, RenderSettings, RenderStats};
 use crate::scene::LoadedScene;
 
 /// Most frames one `--frames` may name (a farm splits longer ranges over commands).
@@ -127,7 +127,9 @@ pub fn read_shot(path: &Path, nerf_object: &str) -> Result<Shot> {
 /// the [`shutter_average`] of renders at `settings.shutter_samples` stratified times over the
 /// shutter, camera and objects interpolated between the shot's frames ([`Shot::frame_at`]:
 /// the shot must hold the frames around the shutter interval); a closed shutter or one
-/// sample renders the frame itself.
+/// sample renders the frame itself. The average weighs each sample's depths by its alpha, so
+/// depths asked for without alpha are averaged with it all the same (and it is dropped
+/// after): a depth pass is the same number whichever passes come with it.
 pub fn render_frame(
     scene: &LoadedScene,
     shot: &Shot,
@@ -135,7 +137,7 @@ pub fn render_frame(
     settings: &RenderSettings,
     on_tile: &(dyn Fn(u64) + Sync),
 ) -> Result<(Planes, RenderStats)> {
-    let render_at = |at: &ShotFrame| {
+    let render_at = |at: &ShotFrame, settings: &RenderSettings| {
         let camera = at.camera(shot)?;
         let placed = scene.place(at.world_from_scene(shot)?, &|name| at.object_matrix(name))?;
         render_with_progress(&placed, &camera, camera.full_window(), settings, on_tile)
@@ -145,8 +147,17 @@ pub fn render_frame(
         |blur| blur.times(frame as f64, settings.shutter_samples),
     );
     if let [_] = times[..] {
-        return render_at(shot.frame(frame)?);
+        return render_at(shot.frame(frame)?, settings);
     }
+    let outputs = settings.outputs;
+    let depths = outputs.depth_z || outputs.depth_ray || outputs.depth_median;
+    let weighed = RenderSettings {
+        outputs: Outputs {
+            alpha: outputs.alpha || depths,
+            ..outputs
+        },
+        ..*settings
+    };
     let mut samples = Vec::with_capacity(times.len());
     let mut stats = RenderStats::default();
     for t in times {
@@ -156,11 +167,15 @@ pub fn render_frame(
                 format!("the shutter needs the shot at frame {t}: {e}"),
             )
         })?;
-        let (planes, s) = render_at(&at)?;
+        let (planes, s) = render_at(&at, &weighed)?;
         stats = stats + s;
         samples.push(planes);
     }
-    Ok((shutter_average(samples)?, stats))
+    let mut average = shutter_average(samples)?;
+    if !outputs.alpha {
+        average.alpha = None;
+    }
+    Ok((average, stats))
 }
 
 /// Where an environment map is rendered from.
@@ -264,6 +279,22 @@ mod tests {
             sharp,
             render_frame(&scene, &shot, frame, &one, &|_| {}).unwrap().0
         );
+        // A depth is the same with or without alpha asked for beside it.
+        let depth_only = RenderSettings {
+            outputs: Outputs {
+                rgb: false,
+                alpha: false,
+                ..Outputs::all()
+            },
+            ..settings
+        };
+        let depths = render_frame(&scene, &shot, frame, &depth_only, &|_| {})
+            .unwrap()
+            .0;
+        assert!(depths.alpha.is_none() && depths.rgb.is_none());
+        assert_eq!(depths.depth_z, blurred.depth_z);
+        assert_eq!(depths.depth_ray, blurred.depth_ray);
+        assert_eq!(depths.depth_median, blurred.depth_median);
         // The shutter must stay inside the shot.
         let first = crate::demo::FIRST_FRAME;
         let e = render_frame(&scene, &shot, first, &settings, &|_| {}).unwrap_err();

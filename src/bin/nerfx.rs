@@ -87,8 +87,8 @@ enum Command {
         #[arg(long)]
         png: bool,
         /// Scenes: the passes to render and write, comma-separated (default: all). A pass not
-        /// asked for is neither computed nor written (graphs choose each NeRF Render node's
-        /// output instead).
+        /// asked for is not written, and the work only it needs is skipped (graphs choose each
+        /// NeRF Render node's output instead).
         #[arg(long, value_enum, value_delimiter = ',')]
         passes: Option<Vec<Pass>>,
         /// Graphs: the OpenFX bundle (default: $NERFX_OFX_BUNDLE, then nerfx.ofx.bundle in

@@ -719,8 +719,9 @@ fn mutated_inputs_give_errors_or_finite_renders() {
     run_all(0, |t| t.cases);
 }
 
-/// The long run: `NERFX_FUZZ_CASES` cases per target (default 10000), from case 1000000;
-/// `NERFX_FUZZ_TARGETS` (words separated by commas) keeps the targets whose names hold one.
+/// The long run: `NERFX_FUZZ_CASES` cases per target (default 10000), from case 1000000 or
+/// `NERFX_FUZZ_FIRST`; `NERFX_FUZZ_TARGETS` (words separated by commas) keeps the targets
+/// whose names hold one.
 #[test]
 #[ignore = "long fuzz run"]
 fn long_fuzz_run() {
@@ -729,10 +730,14 @@ fn long_fuzz_run() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(10_000);
     let only = std::env::var("NERFX_FUZZ_TARGETS").unwrap_or_default();
-    let first = std::env::var("NERFX_FUZZ_FIRST")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(1_000_000);
+    let first: u64 = std::env::var("NERFX_FUZZ_FIRST").map_or(1_000_000, |v| {
+        v.parse()
+            .unwrap_or_else(|_| panic!("NERFX_FUZZ_FIRST: a case number, not '{v}'"))
+    });
+    assert!(
+        first.checked_add(n).is_some(),
+        "NERFX_FUZZ_FIRST + NERFX_FUZZ_CASES overflows"
+    );
     let chosen = |t: &Target| only.is_empty() || only.split(',').any(|w| t.name.contains(w));
     run_all(first, |t| if chosen(t) { n } else { 0 });
 }

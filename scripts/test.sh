@@ -49,7 +49,7 @@ if ! python3 -c "import numpy, msgpack, mpmath, OpenEXR" 2>/dev/null; then
     # package for Python, from PyPI beside them.
     python3 -m pip install --quiet numpy msgpack mpmath OpenEXR 2>/dev/null || {
         apt_install python3-numpy python3-msgpack python3-mpmath python3-pip
-        python3 -m pip install --quiet --break-system-packages OpenEXR
+        PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install --quiet OpenEXR
     }
     python3 -c "import numpy, msgpack, mpmath, OpenEXR"
 fi

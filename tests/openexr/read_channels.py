@@ -21,7 +21,7 @@ def main(path, out):
         header = f.header()
         (x0, y0), (x1, y1) = header["dataWindow"]
         facts = {
-            "compression": str(header["compression"]),
+            "compression": header["compression"].name,
             "width": int(x1 - x0 + 1),
             "height": int(y1 - y0 + 1),
             "pixel_aspect": float(header["pixelAspectRatio"]),

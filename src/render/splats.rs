@@ -11,7 +11,7 @@ use crate::field::{
     Fragment, RayLayer, SplatLayer, SplatPixel, SplatRayView, SplatView, SPLAT_NEAR_PLANE,
 };
 use crate::image::Window;
-use crate::scene::Scene;
+use crate::scene::{CropBox, Scene};
 
 /// Blender's camera (x right, y up, looking down −z) to gsplat's (x right, y down, z forward).
 const GSPLAT_FROM_BLENDER: DMat4 = DMat4::from_cols(
@@ -129,7 +129,7 @@ pub(crate) fn splat_layer(
                 eye: (inst.splats_from_world() * eye_world).truncate(),
                 antialiased: inst.antialiased(),
                 rgb: outputs.rgb,
-                crop: inst.crop().copied(),
+                crop: inst.crop().map(CropBox::clipper),
             };
             (inst.splats(), view)
         })
@@ -176,7 +176,7 @@ fn ray_layer(scene: &Scene, camera: &Camera, outputs: &Outputs) -> Result<RayLay
                 eye: inst.splats_from_world().transform_point3(centre),
                 depth_range: [clip_start.max(SPLAT_NEAR_PLANE), clip_end],
                 rgb: outputs.rgb,
-                crop: inst.crop().copied(),
+                crop: inst.crop().map(CropBox::clipper),
             };
             (inst.splats(), view)
         })

@@ -37,12 +37,9 @@ impl CropBox {
         DMat3::from_rotation_z(yaw) * DMat3::from_rotation_y(pitch) * DMat3::from_rotation_x(roll)
     }
 
-    /// Whether the field-space point `p` is inside the box (splats are cropped by their mean,
-    /// as nerfstudio's viewer crops them).
+    /// Whether the field-space point `p` is inside the box (see [`CropClip::contains`]).
     pub fn contains(&self, p: DVec3) -> bool {
-        let local = self.rotation_matrix().transpose() * (p - DVec3::from(self.center));
-        let half = DVec3::from(self.scale) * 0.5;
-        local.abs().cmple(half).all()
+        self.clipper().contains(p)
     }
 
     /// The box ready to clip rays ([`CropClip::clip`]): its rotation worked out once.
@@ -66,6 +63,13 @@ pub struct CropClip {
 }
 
 impl CropClip {
+    /// Whether the field-space point `p` is inside the box (splats are cropped by their mean,
+    /// as nerfstudio's viewer crops them).
+    pub fn contains(&self, p: DVec3) -> bool {
+        let local = self.crop_from_field * (p - self.center);
+        local.abs().cmple(self.half).all()
+    }
+
     /// The parameter interval `[u0, u1]` of the field-space ray `o + u·d` inside the box, if any.
     pub fn clip(&self, o: DVec3, d: DVec3, u0: f64, u1: f64) -> Option<(f64, f64)> {
         let o = self.crop_from_field * (o - self.center);

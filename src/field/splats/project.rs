@@ -12,7 +12,7 @@ use glam::{DMat3, DVec3, Vec3};
 
 use super::{SplatColor, Splats};
 use crate::field::sh_basis;
-use crate::scene::CropBox;
+use crate::scene::CropClip;
 
 /// Near cull of gsplat's rasteriser (camera z).
 pub(crate) const NEAR_PLANE: f64 = 0.01;
@@ -36,7 +36,7 @@ pub(crate) struct View {
     /// Colours wanted.
     pub rgb: bool,
     /// Splats whose mean is outside are dropped.
-    pub crop: Option<CropBox>,
+    pub crop: Option<CropClip>,
 }
 
 /// A splat on the image.

@@ -20,7 +20,7 @@ use rayon::prelude::*;
 use super::project::color;
 use super::raster::{Fragment, MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
 use super::Splats;
-use crate::scene::CropBox;
+use crate::scene::CropClip;
 
 /// Direction cells: longitude × latitude.
 const CELLS_X: usize = 128;
@@ -43,7 +43,7 @@ pub(crate) struct RayView {
     /// Distance range kept.
     pub depth_range: [f64; 2],
     pub rgb: bool,
-    pub crop: Option<CropBox>,
+    pub crop: Option<CropClip>,
 }
 
 /// A splat as the pixel loop reads it.

@@ -138,10 +138,10 @@ fn render_passes_choose_the_channels_written() {
         (nerfx(&args), file)
     };
     for (passes, want) in [
-        ("rgba,z", &["A", "B", "G", "R", "Z"][..]),
-        ("alpha,median", &["A", "depth.median"][..]),
-        ("ray", &["depth.ray"][..]),
-        ("rgba,alpha,rgba", &["A", "B", "G", "R"][..]),
+        ("rgba,depthZ", &["A", "B", "G", "R", "Z"][..]),
+        ("accumulation,depthMedian", &["A", "depth.median"][..]),
+        ("depthRay", &["depth.ray"][..]),
+        ("rgba,accumulation,rgba", &["A", "B", "G", "R"][..]),
     ] {
         let (run, file) = render(
             &format!("{}.exr", passes.replace(',', "_")),
@@ -155,7 +155,7 @@ fn render_passes_choose_the_channels_written() {
         assert_eq!(channels(&file), want, "--passes {passes}");
     }
     // A preview needs the colour; nothing is written when it is not asked for.
-    let (run, file) = render("depth_only.exr", &["--passes", "z", "--png"]);
+    let (run, file) = render("depth_only.exr", &["--passes", "depthZ", "--png"]);
     assert!(!run.status.success());
     assert!(String::from_utf8_lossy(&run.stderr).contains("--png"));
     assert!(!file.exists() && !file.with_extension("png").exists());

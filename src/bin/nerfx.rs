@@ -193,19 +193,23 @@ enum Command {
     },
 }
 
-/// A pass `nerfx render --passes` names, and the EXR channels it writes.
+/// A pass `nerfx render --passes` names (as the NeRF Render node's Output names them), and
+/// the EXR channels it writes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum Pass {
     /// Premultiplied colour and its alpha: `R`, `G`, `B`, `A`.
     Rgba,
     /// The accumulation alone, a matte: `A`.
-    Alpha,
+    Accumulation,
     /// Expected depth as camera Z: `Z`.
-    Z,
+    #[value(name = "depthZ")]
+    DepthZ,
     /// Expected depth as ray distance: `depth.ray`.
-    Ray,
+    #[value(name = "depthRay")]
+    DepthRay,
     /// Median depth (ray distance): `depth.median`.
-    Median,
+    #[value(name = "depthMedian")]
+    DepthMedian,
 }
 
 impl Pass {
@@ -214,10 +218,10 @@ impl Pass {
         let has = |p: Pass| passes.contains(&p);
         Outputs {
             rgb: has(Pass::Rgba),
-            alpha: has(Pass::Rgba) || has(Pass::Alpha),
-            depth_z: has(Pass::Z),
-            depth_ray: has(Pass::Ray),
-            depth_median: has(Pass::Median),
+            alpha: has(Pass::Rgba) || has(Pass::Accumulation),
+            depth_z: has(Pass::DepthZ),
+            depth_ray: has(Pass::DepthRay),
+            depth_median: has(Pass::DepthMedian),
         }
     }
 }

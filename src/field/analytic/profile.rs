@@ -263,19 +263,26 @@ mod tests {
         }
     }
 
+    /// The Gaussian the tests integrate: peak 2, centre 1, width ½.
+    const BLOB: Density = Density::Gaussian {
+        peak: 2.0,
+        centre: 1.0,
+        width: 0.5,
+    };
+
+    /// `∫ₐᵇ f` by the midpoint rule over `n` slices.
+    fn midpoint_sum(a: f64, b: f64, n: u32, f: impl Fn(f64) -> f64) -> f64 {
+        let h = (b - a) / f64::from(n);
+        let sum: f64 = (0..n).map(|i| f(a + (f64::from(i) + 0.5) * h)).sum();
+        sum * h
+    }
+
     /// Optical depths against a midpoint sum of the density (200 000 slices).
     #[test]
     fn optical_depth_matches_a_sum_of_the_density_and_keeps_the_tails() {
-        let g = Density::Gaussian {
-            peak: 2.0,
-            centre: 1.0,
-            width: 0.5,
-        };
+        let g = BLOB;
         for (a, b) in [(-3.0, 5.0), (0.2, 0.9), (1.0, 1.7), (0.5, 2.5), (2.0, 2.1)] {
-            let n = 200_000;
-            let h = (b - a) / f64::from(n);
-            let sum: f64 = (0..n).map(|i| g.at(a + (f64::from(i) + 0.5) * h)).sum();
-            let want = sum * h;
+            let want = midpoint_sum(a, b, 200_000, |t| g.at(t));
             let got = g.optical_depth(a, b);
             assert!((got - want).abs() < 1e-9 * want, "{a} {b}: {got} vs {want}");
         }
@@ -295,11 +302,7 @@ mod tests {
     /// and across it, against a fine scan of it.
     #[test]
     fn range_holds_the_density_over_the_interval() {
-        let g = Density::Gaussian {
-            peak: 2.0,
-            centre: 1.0,
-            width: 0.5,
-        };
+        let g = BLOB;
         for (a, b) in [(-1.0, 0.5), (0.2, 1.7), (1.5, 3.0), (0.9, 1.1)] {
             let at_b = g.at(b);
             let [least, greatest] = g.range(&g.anchor(a), a, b, at_b);
@@ -323,23 +326,9 @@ mod tests {
     /// slices), across the centre, on either side and far in a tail.
     #[test]
     fn squared_depth_integral_matches_a_sum_of_it() {
-        let g = Density::Gaussian {
-            peak: 2.0,
-            centre: 1.0,
-            width: 0.5,
-        };
-        for density in [g, Density::Constant(3.0)] {
+        for density in [BLOB, Density::Constant(3.0)] {
             for (a, b) in [(-3.0, 5.0), (0.2, 0.9), (1.0, 1.7), (-1.0, 1.0), (3.0, 4.0)] {
-                let n = 20_000;
-                let h = (b - a) / f64::from(n);
-                let sum: f64 = (0..n)
-                    .map(|i| {
-                        density
-                            .optical_depth(a, a + (f64::from(i) + 0.5) * h)
-                            .powi(2)
-                    })
-                    .sum();
-                let want = sum * h;
+                let want = midpoint_sum(a, b, 20_000, |t| density.optical_depth(a, t).powi(2));
                 let anchor = density.anchor(a);
                 let (sigma, depth, _) = density.sample_from(&anchor, a, b, false);
                 let got = density.squared_depth_integral(&anchor, a, b, (sigma, depth));
@@ -354,12 +343,7 @@ mod tests {
     /// The integral of the optical depth against a midpoint sum of it (20 000 slices).
     #[test]
     fn integral_of_the_optical_depth_matches_a_sum_of_it() {
-        let g = Density::Gaussian {
-            peak: 2.0,
-            centre: 1.0,
-            width: 0.5,
-        };
-        for density in [g, Density::Constant(3.0)] {
+        for density in [BLOB, Density::Constant(3.0)] {
             for (a, b) in [
                 (-3.0, 5.0),
                 (0.2, 0.9),
@@ -367,12 +351,7 @@ mod tests {
                 (2.0, 2.1),
                 (0.999, 1.001),
             ] {
-                let n = 20_000;
-                let h = (b - a) / f64::from(n);
-                let sum: f64 = (0..n)
-                    .map(|i| density.optical_depth(a, a + (f64::from(i) + 0.5) * h))
-                    .sum();
-                let want = sum * h;
+                let want = midpoint_sum(a, b, 20_000, |t| density.optical_depth(a, t));
                 let got = density.depth_integral(a, b);
                 assert!(
                     (got - want).abs() < 1e-7 * want,

@@ -37,11 +37,6 @@ impl CropBox {
         DMat3::from_rotation_z(yaw) * DMat3::from_rotation_y(pitch) * DMat3::from_rotation_x(roll)
     }
 
-    /// Whether the field-space point `p` is inside the box (see [`CropClip::contains`]).
-    pub fn contains(&self, p: DVec3) -> bool {
-        self.clipper().contains(p)
-    }
-
     /// The box ready to clip rays ([`CropClip::clip`]): its rotation worked out once.
     pub fn clipper(&self) -> CropClip {
         CropClip {

@@ -1,8 +1,9 @@
 //! Scenes of analytic fields integrated in closed form (`MarchParams::closed_form`) against
 //! the exact reference (which shares no code with it) and against hand-worked integrals:
 //! the demo at every preset, seeded random scenes, a constant sphere, Gaussians alone, side
-//! by side and in a box, a faint Gaussian in a dense box, a density of 1e9, a box 1e-9 thick, a grazing ray, a scaled and
-//! cropped instance; and a scene with a field that is not analytic, which is still marched.
+//! by side and in a box, a faint Gaussian in a dense box, a density of 1e9, a box 1e-9
+//! thick, a grazing ray, a scaled and cropped instance; and a scene with a field that is not
+//! analytic, which is still marched.
 
 // The shared harness serves the marcher's tests too; this one uses part of it.
 #[allow(dead_code)]

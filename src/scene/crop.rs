@@ -4,6 +4,7 @@ use glam::{DMat3, DVec3};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::field::Line;
 
 /// An oriented box in field space (nerfstudio's `crop`): it clips rays, it does not mask
 /// density (DESIGN §3).
@@ -48,7 +49,7 @@ impl CropBox {
 }
 
 /// A [`CropBox`] prepared for clipping rays, one after another: a ray costs two rotations and
-/// six divisions, where building the box's rotation from its angles (six sines and cosines,
+/// three reciprocals, where building the box's rotation from its angles (six sines and cosines,
 /// two matrix products) would cost more than that again per ray.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CropClip {
@@ -65,23 +66,16 @@ impl CropClip {
         local.abs().cmple(self.half).all()
     }
 
-    /// The parameter interval `[u0, u1]` of the field-space ray `o + u·d` inside the box, if any.
+    /// The parameter interval `[u0, u1]` of the field-space ray `o + u·d` inside the box, if any:
+    /// the ray carried into the box's frame, where the box is the axis-aligned `[−half, half]`
+    /// that a [`Line`] clips to slab by slab.
     pub fn clip(&self, o: DVec3, d: DVec3, u0: f64, u1: f64) -> Option<(f64, f64)> {
-        let o = self.crop_from_field * (o - self.center);
-        let d = self.crop_from_field * d;
-        let (mut lo, mut hi) = (u0, u1);
-        for axis in 0..3 {
-            let (oa, da, ha) = (o[axis], d[axis], self.half[axis]);
-            if da == 0.0 {
-                if oa.abs() > ha {
-                    return None;
-                }
-                continue;
-            }
-            let (a, b) = ((-ha - oa) / da, (ha - oa) / da);
-            lo = lo.max(a.min(b));
-            hi = hi.min(a.max(b));
-        }
+        let line = Line::new(
+            self.crop_from_field * (o - self.center),
+            self.crop_from_field * d,
+        );
+        let [lo, hi] = line.box_interval(-self.half, self.half)?;
+        let (lo, hi) = (lo.max(u0), hi.min(u1));
         (lo <= hi).then_some((lo, hi))
     }
 }

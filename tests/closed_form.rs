@@ -443,10 +443,7 @@ fn a_scene_with_a_field_that_is_not_analytic_is_marched() {
         50.0,
     );
     let on = Quality::Draft.params();
-    let off = MarchParams {
-        closed_form: false,
-        ..on
-    };
+    let off = marched(on);
     let mixed = Scene::new(vec![analytic.clone(), opaque]);
     let (a, sa) = render_stats(&mixed, &camera, on);
     let (b, sb) = render_stats(&mixed, &camera, off);

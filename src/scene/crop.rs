@@ -68,7 +68,7 @@ impl CropClip {
 
     /// The parameter interval `[u0, u1]` of the field-space ray `o + u·d` inside the box, if any:
     /// the ray carried into the box's frame, where the box is the axis-aligned `[−half, half]`
-    /// that a [`Line`] clips to slab by slab.
+    /// that a field-space line clips to slab by slab.
     pub fn clip(&self, o: DVec3, d: DVec3, u0: f64, u1: f64) -> Option<(f64, f64)> {
         let line = Line::new(
             self.crop_from_field * (o - self.center),

@@ -83,6 +83,7 @@ impl CropClip {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bench::rng::SplitMix64;
 
     #[test]
     fn axis_aligned_box_clips_to_its_faces() {
@@ -153,11 +154,10 @@ mod tests {
     /// clip says misses the box has no point in it at 2 000 steps along.
     #[test]
     fn the_clip_holds_the_points_the_box_contains() {
-        let mut rng = crate::bench::rng::SplitMix64::new(5);
+        let mut rng = SplitMix64::new(5);
         let mut met = 0;
         for _ in 0..300 {
-            let v =
-                |rng: &mut crate::bench::rng::SplitMix64, lo, hi| rng.in_cube(lo, hi).as_dvec3();
+            let v = |rng: &mut SplitMix64, lo, hi| rng.in_cube(lo, hi).as_dvec3();
             let c = CropBox {
                 center: v(&mut rng, -0.5, 0.5).into(),
                 scale: v(&mut rng, 0.2, 2.0).into(),

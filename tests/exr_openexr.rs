@@ -7,7 +7,7 @@
 //! Needs `python3` with `numpy` and `OpenEXR` (`scripts/test.sh` installs them); without them
 //! it fails with a message saying so.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use std::process::Command;
 
@@ -109,12 +109,8 @@ fn openexr_reads_every_channel_bit_for_bit() {
         .collect();
     let want = expected(&main, &layers);
     assert_eq!(
-        types.keys().collect::<Vec<_>>(),
-        want.iter()
-            .map(|(n, ..)| n)
-            .collect::<std::collections::BTreeSet<_>>()
-            .into_iter()
-            .collect::<Vec<_>>(),
+        types.keys().collect::<BTreeSet<_>>(),
+        want.iter().map(|(n, ..)| n).collect::<BTreeSet<_>>(),
         "channel names"
     );
     for (name, plane, is_depth) in want {

@@ -62,20 +62,30 @@ impl Line {
     }
 
     /// Where the line lies in the box `[min, max]`, `[near, far]` in its `t`: between the
-    /// planes of every axis (slab by slab; an axis the line is parallel to either holds the
-    /// whole line or none of it).
+    /// planes of every axis (slab by slab; an axis the line is parallel to, or so nearly
+    /// that its reciprocal overflows, either holds the whole line or none of it).
+    ///
+    /// The slabs are ordered and narrowed by comparisons, not `f64::min`/`max`: those keep
+    /// the number where the other is NaN, which costs four instructions each on baseline
+    /// x86-64 where a comparison costs one (the demo's Draft: 4 % of its CPU). An end that is
+    /// NaN (only an infinite bound met by an infinite origin makes one) narrows nothing.
     #[inline]
     pub(crate) fn box_interval(&self, min: DVec3, max: DVec3) -> Option<[f64; 2]> {
-        let (o, d) = (self.o, self.d);
+        let o = self.o;
         let (mut near, mut far) = (f64::NEG_INFINITY, f64::INFINITY);
         for a in 0..3 {
-            if d[a] != 0.0 {
+            if self.inv_d[a].is_finite() {
                 let (ta, tb) = (
                     (min[a] - o[a]) * self.inv_d[a],
                     (max[a] - o[a]) * self.inv_d[a],
                 );
-                near = near.max(ta.min(tb));
-                far = far.min(ta.max(tb));
+                let (lo, hi) = if ta < tb { (ta, tb) } else { (tb, ta) };
+                if lo > near {
+                    near = lo;
+                }
+                if hi < far {
+                    far = hi;
+                }
             } else if !(o[a] >= min[a] && o[a] <= max[a]) {
                 return None;
             }

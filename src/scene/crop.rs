@@ -49,8 +49,8 @@ impl CropBox {
 }
 
 /// A [`CropBox`] prepared for clipping rays, one after another: a ray costs two rotations and
-/// three reciprocals, where building the box's rotation from its angles (six sines and cosines,
-/// two matrix products) would cost more than that again per ray.
+/// four divisions (its line's reciprocals), where building the box's rotation from its angles
+/// (six sines and cosines, two matrix products) would cost more than that again per ray.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CropClip {
     crop_from_field: DMat3,

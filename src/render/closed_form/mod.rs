@@ -81,8 +81,11 @@ struct RayScratch {
     /// The profiles present in the current piece, and their anchors at its start.
     active: Vec<u32>,
     anchors: Vec<Anchor>,
-    /// The pieces composited, `(a, b, T_a, T_b, τ)`, for the median depth.
-    log: Vec<[f64; 5]>,
+    /// The pieces composited, for the median depth.
+    log: Vec<Logged>,
+    /// The logged Gaussian piece that `active` and `anchors` still describe, if any: the
+    /// median's solve takes them as they are when its piece is that one (a ray's last).
+    anchored: Option<usize>,
     /// Panels waiting to be integrated: `(p, q, the sums taken for them if the ray's node
     /// budget runs out)`.
     panels: Vec<(f64, f64, Sums)>,
@@ -170,22 +173,24 @@ impl Context<'_> {
             exhausted: false,
         };
         s.log.clear();
+        s.anchored = None;
         for e in 1..s.ends.len() {
             let (a, b) = (s.ends[e - 1], s.ends[e]);
             if b <= a {
                 continue;
             }
             present(&s.profiles, a, b, &mut s.active);
+            s.anchored = None;
             if s.active.is_empty() {
                 continue;
             }
             stats.density_samples += 1;
             let t_enter = pieces.transmittance();
-            let optical_depth = match constant(&s.profiles, &s.colours, &s.active) {
+            let (optical_depth, density) = match constant(&s.profiles, &s.colours, &s.active) {
                 Some((k, colour)) => {
                     let w = pieces.add(a, b - a, k);
                     rgb += w * colour;
-                    k * (b - a)
+                    (k * (b - a), Some(k))
                 }
                 None => {
                     let piece = Piece::new(a, &s.profiles, &s.colours, &s.active, &mut s.anchors);
@@ -203,12 +208,19 @@ impl Context<'_> {
                     );
                     rgb += t_enter * colour;
                     pieces.add_integrated(t_enter * weight, t_enter * moment);
-                    optical_depth
+                    s.anchored = Some(s.log.len());
+                    (optical_depth, None)
                 }
             };
             if self.outputs.depth_median {
-                s.log
-                    .push([a, b, t_enter, pieces.transmittance(), optical_depth]);
+                s.log.push(Logged {
+                    a,
+                    b,
+                    t_a: t_enter,
+                    t_b: pieces.transmittance(),
+                    optical_depth,
+                    density,
+                });
             }
             if pieces.transmittance() <= stop {
                 break;
@@ -319,6 +331,18 @@ impl Budget {
     }
 }
 
+/// A piece composited, as the median depth takes it: where it lies, the transmittance on
+/// either side, its optical depth, and its density where that is constant.
+#[derive(Clone, Copy, Debug)]
+struct Logged {
+    a: f64,
+    b: f64,
+    t_a: f64,
+    t_b: f64,
+    optical_depth: f64,
+    density: Option<f64>,
+}
+
 /// Where the accumulation reaches half the final alpha `alpha`: in the first logged piece
 /// that leaves the ray at `T ≤ 1 − A/2`, where its optical depth reaches `ln(T_a/(1 − A/2))`.
 /// `inf` when nothing was accumulated.
@@ -327,25 +351,31 @@ fn median_depth(s: &mut RayScratch, alpha: f64, budget: &mut Budget) -> f64 {
     if alpha.is_nan() || alpha <= 0.0 {
         return f64::INFINITY;
     }
-    let Some(&[a, b, t_a, _, total]) = s.log.iter().find(|piece| piece[3] <= t_star) else {
+    let Some(at) = s.log.iter().position(|piece| piece.t_b <= t_star) else {
         return f64::INFINITY;
     };
+    let Logged {
+        a,
+        b,
+        t_a,
+        optical_depth,
+        density,
+        ..
+    } = s.log[at];
     if t_a <= t_star {
         return a;
     }
-    let profiles = &s.profiles;
-    present(profiles, a, b, &mut s.active);
     let depth = (t_a / t_star).ln();
-    match constant(profiles, &s.colours, &s.active) {
-        Some((k, _)) => (a + depth / k).min(b),
-        None => Piece::new(a, profiles, &s.colours, &s.active, &mut s.anchors).depth_reaching(
-            depth,
-            b,
-            total,
-            MEDIAN_RESOLUTION * b,
-            budget,
-        ),
+    if let Some(k) = density {
+        return (a + depth / k).min(b);
     }
+    let piece = if s.anchored == Some(at) {
+        Piece::anchored(a, &s.profiles, &s.colours, &s.active, &s.anchors)
+    } else {
+        present(&s.profiles, a, b, &mut s.active);
+        Piece::new(a, &s.profiles, &s.colours, &s.active, &mut s.anchors)
+    };
+    piece.depth_reaching(depth, b, optical_depth, MEDIAN_RESOLUTION * b, budget)
 }
 
 /// The total density and density-weighted colour of the profiles `active` when every one

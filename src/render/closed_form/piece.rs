@@ -143,6 +143,17 @@ impl<'a> Piece<'a> {
                 .iter()
                 .map(|&h| profiles[h as usize].density.anchor(a)),
         );
+        Self::anchored(a, profiles, colours, active, anchors)
+    }
+
+    /// The piece from `a` of the profiles `active`, whose anchors at `a` are `anchors`.
+    pub(super) fn anchored(
+        a: f64,
+        profiles: &'a [Profile],
+        colours: &'a [DVec3],
+        active: &'a [u32],
+        anchors: &'a [Anchor],
+    ) -> Self {
         Piece {
             a,
             profiles,

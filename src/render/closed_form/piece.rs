@@ -33,7 +33,7 @@ const GAUSS_4: ([f64; 4], [f64; 4]) = (
 /// What share of the error target the expected depth is held to, relative: the target
 /// bounds alpha and colour, and the marcher's depths at Draft and Preview are off by about
 /// a fifth of it (relative), which the closed form does not do worse than.
-const DEPTH_SHARE: f64 = 0.125;
+pub(super) const DEPTH_SHARE: f64 = 0.125;
 
 /// What share of the error target a piece's colour is held to where it is taken in closed
 /// form ([`Piece::integrate`]): its bound is a worst case that, held to the whole target,

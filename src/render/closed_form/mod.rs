@@ -377,7 +377,7 @@ fn median_depth(s: &mut RayScratch, alpha: f64, resolution: f64, budget: &mut Bu
     if t_a <= t_star {
         return a;
     }
-    let depth = (t_a / t_star).ln();
+    let depth = half_logarithm(t_a / t_star);
     if let Some(k) = density {
         return (a + depth / k).min(b);
     }
@@ -388,6 +388,19 @@ fn median_depth(s: &mut RayScratch, alpha: f64, resolution: f64, budget: &mut Bu
         Piece::new(a, &s.profiles, &s.colours, &s.active, &mut s.anchors)
     };
     piece.depth_reaching(depth, b, optical_depth, resolution * b, budget)
+}
+
+/// `ln x`, without the logarithm where `x` is within 1e-8 of 2 (a ray that goes opaque in
+/// the piece it enters with `T = 1`, whose median is where `T` halves): there
+/// `ln 2 + (x/2 − 1)` is within `(x/2 − 1)²/2 ≤ 5e-17` of it, below rounding.
+#[inline]
+fn half_logarithm(x: f64) -> f64 {
+    let off = 0.5 * x - 1.0;
+    if off.abs() <= 1e-8 {
+        std::f64::consts::LN_2 + off
+    } else {
+        x.ln()
+    }
 }
 
 /// The total density and density-weighted colour of the profiles `active` when every one
@@ -402,4 +415,39 @@ fn constant(profiles: &[Profile], colours: &[DVec3], active: &[u32]) -> Option<(
         colour += density * colours[h as usize];
     }
     Some((k, colour / k))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Within an ulp of `ln` near 2, on either side of where it stops taking the logarithm,
+    /// and `ln` itself elsewhere.
+    #[test]
+    fn half_logarithm_is_the_logarithm() {
+        for k in -200..=200 {
+            let x = 2.0 + f64::from(k) * 1e-10;
+            let (got, want) = (half_logarithm(x), x.ln());
+            assert!(
+                (got - want).abs() <= f64::EPSILON * want,
+                "{x}: {got} vs {want}"
+            );
+        }
+        // Where `ln 2 + (x/2 − 1)` would be off by more than an ulp.
+        for x in [
+            1.0,
+            1.5,
+            2.0 - 1e-4,
+            2.0 - 1e-6,
+            2.0 + 1e-6,
+            2.0 + 1e-4,
+            3.0,
+            1e-300,
+            7.5e9,
+        ] {
+            assert_eq!(half_logarithm(x), x.ln());
+        }
+        assert_eq!(half_logarithm(2.0), std::f64::consts::LN_2);
+        assert!(half_logarithm(f64::NAN).is_nan());
+    }
 }

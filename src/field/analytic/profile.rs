@@ -115,11 +115,12 @@ impl Density {
     /// `z_t·Δ² + (2/√π)·e^{−z_t²}·Δ − √(2/π)·(erf(√2·z_t) − erf(√2·z_a))`, `Δ = erf z_t − erf z_a`.
     /// Its terms cancel where both ends lie far in one tail: it is good to about 1e-15 of
     /// `A²·width·(|z_t| + 1)`, absolutely, not relatively. `(sigma, depth)` are the density
-    /// and optical depth at `t` that [`sample_from`](Self::sample_from) gave, which it takes
-    /// rather than works out again.
+    /// and optical depth at `t` that [`sample_from`](Self::sample_from) gave, and `start`
+    /// what [`squared_depth_start`](Self::squared_depth_start) gave for `anchor`, which it
+    /// takes rather than works out again.
     pub fn squared_depth_integral(
         &self,
-        anchor: &Anchor,
+        (anchor, start): (&Anchor, f64),
         a: f64,
         t: f64,
         (sigma, depth): (f64, f64),
@@ -131,11 +132,21 @@ impl Density {
                 let zt = anchor.z + (t - a) * (FRAC_1_SQRT_2 / width);
                 let difference = depth / scale;
                 let bell = sigma / peak;
-                let h = erf(SQRT_2 * zt) - erf(SQRT_2 * anchor.z);
+                let h = erf(SQRT_2 * zt) - start;
                 let z_integral = zt * difference * difference + 2.0 / PI.sqrt() * bell * difference
                     - (2.0 / PI).sqrt() * h;
                 scale * scale * SQRT_2 * width * z_integral.max(0.0)
             }
+        }
+    }
+
+    /// The error function [`squared_depth_integral`](Self::squared_depth_integral) takes
+    /// at the point `anchor` was taken at, `erf(√2·z_a)` (0 for a constant), for any number
+    /// of ends.
+    pub fn squared_depth_start(&self, anchor: &Anchor) -> f64 {
+        match *self {
+            Density::Constant(_) => 0.0,
+            Density::Gaussian { .. } => erf(SQRT_2 * anchor.z),
         }
     }
 
@@ -331,7 +342,8 @@ mod tests {
                 let want = midpoint_sum(a, b, 20_000, |t| density.optical_depth(a, t).powi(2));
                 let anchor = density.anchor(a);
                 let (sigma, depth, _) = density.sample_from(&anchor, a, b, false);
-                let got = density.squared_depth_integral(&anchor, a, b, (sigma, depth));
+                let start = density.squared_depth_start(&anchor);
+                let got = density.squared_depth_integral((&anchor, start), a, b, (sigma, depth));
                 assert!(
                     (got - want).abs() < 1e-7 * want + 1e-14,
                     "{density:?} {a} {b}: {got} vs {want}"

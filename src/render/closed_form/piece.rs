@@ -53,6 +53,18 @@ const MAX_BISECTIONS: u32 = 48;
 /// as each step is either at most half the one before or a bisection of the bracket.
 const MAX_NEWTON_STEPS: u32 = 64;
 
+/// An upper bound on `e^h` for `h ≥ 0` without an exponential up to 1:
+/// `(e^h − 1 − h)/h²` grows with `h`, to `e − 2` at 1, so `1 + h + (e − 2)·h²` is above
+/// `e^h` there, and at most 2 % above it. `e^h` beyond.
+#[inline]
+fn exp_above(h: f64) -> f64 {
+    if h <= 1.0 {
+        1.0 + h + 0.718_281_9 * h * h
+    } else {
+        h.exp()
+    }
+}
+
 /// One piece `[a, b]` of a ray: the profiles present all over it, and their anchors at `a`.
 pub(super) struct Piece<'a> {
     a: f64,
@@ -84,10 +96,11 @@ pub(super) struct Integral {
 
 /// A piece's optical depth and what bounds its integrals in closed form: over `[a, b]`, the
 /// optical depth `τ`, the colour sum `Στᵢcᵢ` of the profiles' own optical depths, the
-/// integral of the optical depth from `a`, `∫ₐᵇ τ(t) dt`, and the least and greatest total
-/// density (sums of each profile's least and greatest).
+/// integral of the optical depth from `a`, `∫ₐᵇ τ(t) dt`, the least and greatest total
+/// density (sums of each profile's least and greatest), and the density at `b`.
 #[derive(Clone, Copy, Debug, Default)]
 struct Whole {
+    at_b: f64,
     tau: f64,
     rgb_tau: DVec3,
     integral: f64,
@@ -189,6 +202,7 @@ impl<'a> Piece<'a> {
         for ((p, c), anchor) in self.each().zip(self.anchors) {
             let (at_b, d, i) = p.density.sample_from(anchor, self.a, b, false);
             let [least, greatest] = p.density.range(anchor, self.a, b, at_b);
+            whole.at_b += at_b;
             whole.tau += d;
             whole.rgb_tau += d * c;
             whole.integral += i;
@@ -215,6 +229,7 @@ impl<'a> Piece<'a> {
         panels: &mut Vec<(f64, f64, Sums)>,
     ) -> Integral {
         let Whole {
+            at_b,
             tau,
             rgb_tau,
             integral,
@@ -260,7 +275,7 @@ impl<'a> Piece<'a> {
             .min(length - integral + 0.5 * tau * integral);
         let tolerance = 2.0 * DEPTH_SHARE * target * w * self.a;
         if moment && highest - lowest > tolerance {
-            if let Some((estimate, off)) = self.lone_transmittance(b) {
+            if let Some((estimate, off)) = self.lone_transmittance(b, (at_b, tau, integral)) {
                 lowest = lowest.max(estimate - off);
                 highest = highest.min(estimate + off);
             }
@@ -345,7 +360,9 @@ impl<'a> Piece<'a> {
     /// `e^{−τ} = e^{−m}·(1 − δ + δ²/2)` (`δ = τ − m`) up to `e^{−m}·h³·e^h/6`, and the
     /// integrals of `τ` and `τ²` are closed forms ([`Density::squared_depth_integral`]): a
     /// few error functions per side, where panels over the same piece take fourteen nodes.
-    fn lone_transmittance(&self, b: f64) -> Option<(f64, f64)> {
+    /// `end` is the density, optical depth and its integral at `b`, which
+    /// [`whole`](Self::whole) worked out.
+    fn lone_transmittance(&self, b: f64, end: (f64, f64, f64)) -> Option<(f64, f64)> {
         let ([h], [anchor]) = (self.active, self.anchors) else {
             return None;
         };
@@ -362,16 +379,21 @@ impl<'a> Piece<'a> {
         // integrals from `a`.
         let mut from = (self.a, 0.0, 0.0, 0.0);
         let (mut sum, mut off) = (0.0, 0.0);
+        let start = density.squared_depth_start(anchor);
         for t in sides {
             if t <= from.0 {
                 continue;
             }
-            let (sigma, tau, integral) = density.sample_from(anchor, self.a, t, false);
+            let (sigma, tau, integral) = if t == b {
+                end
+            } else {
+                density.sample_from(anchor, self.a, t, false)
+            };
             let to = (
                 t,
                 tau,
                 integral,
-                density.squared_depth_integral(anchor, self.a, t, (sigma, tau)),
+                density.squared_depth_integral((anchor, start), self.a, t, (sigma, tau)),
             );
             let (length, first, second) = (t - from.0, to.2 - from.2, to.3 - from.3);
             let (m, h) = (0.5 * (to.1 + from.1), 0.5 * (to.1 - from.1));
@@ -380,7 +402,7 @@ impl<'a> Piece<'a> {
             let delta = first - m * length;
             let delta_squared = second - 2.0 * m * first + m * m * length;
             sum += bell * (length - delta + 0.5 * delta_squared);
-            off += bell * length * h.powi(3) * h.exp() / 6.0;
+            off += bell * length * h.powi(3) * exp_above(h) / 6.0;
             from = to;
         }
         Some((sum, off))
@@ -558,5 +580,25 @@ impl<'a> Piece<'a> {
             t = next;
         }
         t
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Above `e^h` up to 1 (where it takes no exponential), within 2 % of it, and `e^h`
+    /// beyond; a coefficient below `e − 2` falls under it near 1.
+    #[test]
+    fn exp_above_bounds_the_exponential() {
+        for i in 0..=1000 {
+            let h = f64::from(i) * 1e-3;
+            let (bound, e) = (exp_above(h), h.exp());
+            assert!(bound >= e && bound <= 1.02 * e, "{h}: {bound} vs {e}");
+            // Still above it where rounding makes the optical depth fall a little.
+            assert!(exp_above(-h) >= (-h).exp(), "{}", -h);
+        }
+        assert_eq!(exp_above(1.5), 1.5f64.exp());
+        assert!(1.0 + 1.0 + 0.718_28 * 1.0 < 1f64.exp());
     }
 }

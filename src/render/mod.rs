@@ -327,19 +327,27 @@ impl Band<'_> {
                     };
                 }
             }
-            for (k, plane) in self.planes.iter_mut().enumerate().skip(3) {
-                let Some(plane) = plane else {
-                    continue;
-                };
-                for (v, px) in plane[span.clone()].iter_mut().zip(row) {
-                    *v = match k {
-                        3 => px.alpha,
-                        4 => px.depth_z,
-                        5 => px.depth_ray,
-                        _ => px.depth_median,
-                    };
-                }
-            }
+            let [.., alpha, depth_z, depth_ray, depth_median] = &mut self.planes;
+            put(alpha, &span, row, |px| px.alpha);
+            put(depth_z, &span, row, |px| px.depth_z);
+            put(depth_ray, &span, row, |px| px.depth_ray);
+            put(depth_median, &span, row, |px| px.depth_median);
+        }
+    }
+}
+
+/// Writes `value` of each pixel of `row` over `span` of `plane`, where it is present: one
+/// loop per plane and value, each a run of loads and stores.
+#[inline]
+fn put(
+    plane: &mut Option<&mut [f32]>,
+    span: &std::ops::Range<usize>,
+    row: &[PixelResult],
+    value: impl Fn(&PixelResult) -> f32,
+) {
+    if let Some(plane) = plane {
+        for (v, px) in plane[span.clone()].iter_mut().zip(row) {
+            *v = value(px);
         }
     }
 }

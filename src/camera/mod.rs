@@ -211,6 +211,13 @@ impl Camera {
         Some(self.world_ray(r, self.world_from_camera.transform_point3(r.origin)))
     }
 
+    /// Whether a window's rays ([`window_rays`](Self::window_rays)) share one origin and each
+    /// points inside the pyramid of the window's corner pixels' rays: a pinhole's do, their
+    /// directions being affine in the pixel position before they are normalised.
+    pub fn rectilinear(&self) -> bool {
+        matches!(self.projection, Projection::Perspective(_))
+    }
+
     /// Replaces `out` with the world rays through the pixel centres of `window`, row by row:
     /// the same rays as [`Self::ray`] gives, with what they share (a perspective camera's
     /// origin, its columns' and rows' slopes) worked out once.

@@ -112,7 +112,7 @@ pub(super) fn integrate_tile(
     out: &mut Vec<PixelResult>,
 ) -> RenderStats {
     camera.window_rays(tile, &mut s.rays);
-    let bundle = Bundle::of(&s.rays);
+    let bundle = Bundle::of(&s.rays, tile.width() as usize, camera.rectilinear());
     cull_instances(plans, bundle.as_ref(), &mut s.insts);
     s.prims.clear();
     s.prim_at.clear();

@@ -97,6 +97,10 @@ pub(super) struct InstancePlan {
     /// (`None`: not finite), to cull the primitives from a tile's rays
     /// ([`TileFields`]); empty for other fields.
     primitive_spheres: Vec<Option<(DVec3, f64)>>,
+    /// For an analytic field that gives its spans, each box primitive's placed corners and
+    /// the margin its sphere is widened by (`None` for other shapes), to cull it by a
+    /// pinhole tile's pyramid ([`Bundle::may_meet_box`](plan::Bundle::may_meet_box)).
+    primitive_boxes: Vec<Option<([DVec3; 8], f64)>>,
 }
 
 #[derive(Clone, Copy, Debug)]

@@ -63,13 +63,20 @@ impl InstancePlan {
                         }
                         _ => Vec::new(),
                     },
+                    primitive_boxes: match inst.handle().as_analytic() {
+                        Some(analytic) if spans => {
+                            primitive_boxes(analytic, inst.world_from_field())
+                        }
+                        _ => Vec::new(),
+                    },
                 }
             })
             .collect()
     }
 
     /// The indices, ascending, of the first `count` primitives of the instance's analytic
-    /// field that some ray of `bundle` may meet: those whose world sphere it may meet, and
+    /// field that some ray of `bundle` may meet: those whose world sphere it may meet (and,
+    /// for a box, whose placed corners are not all outside one side of its pyramid), and
     /// those without one (not finite, or a field that is not culled by primitive); without a
     /// bundle, all of them.
     pub(in crate::render) fn primitives_met<'a>(
@@ -80,7 +87,14 @@ impl InstancePlan {
         (0..count as u32).filter(move |&k| {
             let sphere = self.primitive_spheres.get(k as usize).copied().flatten();
             match (bundle, sphere) {
-                (Some(bundle), Some(sphere)) => bundle.may_meet(sphere),
+                (Some(bundle), Some(sphere)) => {
+                    bundle.may_meet(sphere)
+                        && self
+                            .primitive_boxes
+                            .get(k as usize)
+                            .and_then(Option::as_ref)
+                            .is_none_or(|(corners, margin)| bundle.may_meet_box(corners, *margin))
+                }
                 _ => true,
             }
         })
@@ -129,6 +143,30 @@ fn primitive_spheres(analytic: &Analytic, world_from_field: DMat4) -> Vec<Option
         .map(|p| {
             let (centre, radius) = support_sphere(&p.shape, world_from_field, stretch)?;
             Some((centre, radius + margin?))
+        })
+        .collect()
+}
+
+/// Per primitive of an analytic field, a box's eight corners placed in the world, and the
+/// margin [`primitive_spheres`] widens its sphere by; `None` for the other shapes, and where
+/// either is not finite.
+fn primitive_boxes(analytic: &Analytic, world_from_field: DMat4) -> Vec<Option<([DVec3; 8], f64)>> {
+    let b = analytic.bounds();
+    let reach = Aabb::new(b.min.min(Vec3::ZERO), b.max.max(Vec3::ZERO));
+    let margin = world_sphere(reach, world_from_field).map(|(_, r)| SAMPLE_ROUNDING * r);
+    analytic
+        .primitives
+        .iter()
+        .map(|p| {
+            let Shape::Box { min, max } = p.shape else {
+                return None;
+            };
+            let placed = corners(Aabb::new(min, max)).map(|c| world_from_field.transform_point3(c));
+            let margin = margin?;
+            placed
+                .iter()
+                .all(|c| c.is_finite())
+                .then_some((placed, margin))
         })
         .collect()
 }
@@ -186,19 +224,30 @@ fn largest_stretch(m: DMat3) -> f64 {
 }
 
 /// A tile's rays as a cone: they start within `rho` of their mean origin and point within
-/// `θ` of their mean direction `axis` (kept as `θ`'s sine and cosine).
+/// `θ` of their mean direction `axis` (kept as `θ`'s sine and cosine). A pinhole's tile is
+/// also a pyramid: its rays share their origin and point inside the four planes through it
+/// and each pair of neighbouring corner pixels' rays (`sides`, their unit normals, inward).
 pub(in crate::render) struct Bundle {
     origin: DVec3,
     axis: DVec3,
     rho: f64,
     sin_theta: f64,
     cos_theta: f64,
+    sides: Option<[DVec3; 4]>,
 }
 
 impl Bundle {
     /// The cone around `rays`; `None` where it culls nothing: no rays, directions that
-    /// cancel out, or a wide bundle (`θ` of 90° or more: panoramic tiles).
-    pub(in crate::render) fn of(rays: &[Option<Ray>]) -> Option<Bundle> {
+    /// cancel out, or a wide bundle (`θ` of 90° or more: panoramic tiles). `rays` are a
+    /// tile's, row by row, `width` to a row; `rectilinear`: they share their origin and
+    /// each points inside the pyramid of the tile's corner rays (as a pinhole camera's do,
+    /// [`Camera::rectilinear`](crate::camera::Camera::rectilinear)), which then bounds them
+    /// too.
+    pub(in crate::render) fn of(
+        rays: &[Option<Ray>],
+        width: usize,
+        rectilinear: bool,
+    ) -> Option<Bundle> {
         let (mut origin, mut dir, mut n) = (DVec3::ZERO, DVec3::ZERO, 0.0);
         for ray in rays.iter().flatten() {
             origin += ray.origin;
@@ -227,7 +276,19 @@ impl Bundle {
             rho,
             sin_theta,
             cos_theta,
+            sides: rectilinear.then(|| pyramid(rays, width, axis)).flatten(),
         })
+    }
+
+    /// Whether some ray of the bundle may meet the convex hull of `corners`: not where they
+    /// all lie more than `margin` outside one side of its pyramid (always, without one).
+    pub(in crate::render) fn may_meet_box(&self, corners: &[DVec3; 8], margin: f64) -> bool {
+        let Some(sides) = &self.sides else {
+            return true;
+        };
+        sides
+            .iter()
+            .all(|n| corners.iter().any(|&c| n.dot(c - self.origin) >= -margin))
     }
 
     /// Whether some ray of the bundle may meet the sphere `(b, R)`: a ray starting within
@@ -246,6 +307,34 @@ impl Bundle {
         let cos_beta = (1.0 - sin_beta * sin_beta).sqrt();
         v.dot(self.axis) / l >= self.cos_theta * cos_beta - self.sin_theta * sin_beta - 1e-9
     }
+}
+
+/// The inward unit normals of the planes through a rectilinear tile's origin and each pair of
+/// its neighbouring corner rays (`rays` row by row, `width` to a row, `axis` inside them);
+/// `None` for a tile less than two rays wide or high, a missing or off-origin corner, or
+/// corner rays too close to parallel for a plane.
+fn pyramid(rays: &[Option<Ray>], width: usize, axis: DVec3) -> Option<[DVec3; 4]> {
+    let height = rays.len().checked_div(width)?;
+    if width < 2 || height < 2 || width * height != rays.len() {
+        return None;
+    }
+    let corner = |i: usize| rays[i].as_ref();
+    let around = [
+        corner(0)?,
+        corner(width - 1)?,
+        corner(rays.len() - 1)?,
+        corner(rays.len() - width)?,
+    ];
+    if around.iter().any(|r| r.origin != around[0].origin) {
+        return None;
+    }
+    let mut sides = [DVec3::ZERO; 4];
+    for (k, side) in sides.iter_mut().enumerate() {
+        let n = around[k].dir.cross(around[(k + 1) % 4].dir);
+        let n = n.try_normalize()?;
+        *side = if n.dot(axis) >= 0.0 { n } else { -n };
+    }
+    Some(sides)
 }
 
 /// Lists in `keep`, ascending, the instances some ray of a tile (its [`Bundle`]) may meet;

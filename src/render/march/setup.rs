@@ -36,7 +36,7 @@ pub(super) fn setup_rays(
     s.met_at.push(0);
     s.active.clear();
     camera.window_rays(tile, &mut s.world_rays);
-    let bundle = Bundle::of(&s.world_rays);
+    let bundle = Bundle::of(&s.world_rays, tile.width() as usize, camera.rectilinear());
     cull_instances(plans, bundle.as_ref(), &mut s.tile_insts);
     s.feature_width = (s.tile_insts.iter())
         .map(|&i| plans[i as usize].features)

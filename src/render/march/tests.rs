@@ -409,7 +409,7 @@ fn tile_culling_keeps_every_instance_a_ray_of_the_tile_meets() {
         let rays: Vec<_> = (0..256)
             .map(|k| camera.ray((x0 + k % 16) as f64 + 0.5, (y0 + k / 16) as f64 + 0.5))
             .collect();
-        let bundle = super::plan::Bundle::of(&rays);
+        let bundle = super::plan::Bundle::of(&rays, 16, camera.rectilinear());
         super::plan::cull_instances(&plans, bundle.as_ref(), &mut keep);
         for (i, inst) in scene.instances.iter().enumerate() {
             let meets = rays
@@ -436,6 +436,75 @@ fn tile_culling_keeps_every_instance_a_ray_of_the_tile_meets() {
 /// sees it (its `f32` local ray), and leaves out most primitives no ray meets: a scattered
 /// field of small balls, boxes and Gaussians, rotated, scaled and moved into the world,
 /// seen by tiles of a perspective camera.
+/// A pinhole tile's pyramid culls a long thin box (a pillar, leaning, in a rotated and
+/// stretched instance) from the tiles beside it whose cone takes in its loose sphere, and
+/// keeps it for every tile one of whose rays meets it.
+#[test]
+fn a_tiles_pyramid_culls_a_thin_box_and_keeps_it_where_a_ray_meets_it() {
+    use crate::camera::{Camera, Perspective, Projection};
+    use crate::field::{Primitive, ShColor, Shape};
+    use glam::{DMat4, DQuat, DVec3};
+
+    let pillar = Primitive {
+        shape: Shape::Box {
+            min: Vec3::new(-0.1, -0.1, -2.0),
+            max: Vec3::new(0.1, 0.1, 2.0),
+        },
+        density: 5.0,
+        color: ShColor::constant(Vec3::ONE),
+    };
+    let field = Analytic {
+        primitives: vec![pillar],
+    };
+    let world_from_field = DMat4::from_scale_rotation_translation(
+        DVec3::new(1.3, 0.8, 1.0),
+        DQuat::from_euler(glam::EulerRot::XYZ, 0.2, 0.4, -0.3),
+        DVec3::new(0.3, 0.1, 0.0),
+    );
+    let scene = Scene::new(vec![Instance::new(
+        "pillar",
+        FieldHandle::analytic(field.clone()),
+        world_from_field,
+        None,
+    )
+    .unwrap()]);
+    let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
+    let p = Perspective::from_vertical_fov(160, 96, 60.0).unwrap();
+    let eye = crate::demo::look_at(DVec3::new(0.5, -4.0, 0.5), DVec3::ZERO);
+    let camera = Camera::new(eye, Projection::Perspective(p)).unwrap();
+    assert!(camera.rectilinear());
+    let (mut pyramid_culled, mut met) = (0, 0);
+    for (x0, y0) in (0..10).flat_map(|i| (0..6).map(move |j| (16 * i, 16 * j))) {
+        let rays: Vec<_> = (0..256)
+            .map(|k| camera.ray((x0 + k % 16) as f64 + 0.5, (y0 + k / 16) as f64 + 0.5))
+            .collect();
+        let bundle = super::plan::Bundle::of(&rays, 16, true).expect("a narrow tile");
+        let kept = plans[0].primitives_met(1, Some(&bundle)).count() == 1;
+        let cone = super::plan::Bundle::of(&rays, 16, false).expect("a narrow tile");
+        let cone_kept = plans[0].primitives_met(1, Some(&cone)).count() == 1;
+        let meets = rays.iter().flatten().any(|r| {
+            scene.instances[0]
+                .local_ray(r, r.near, r.far)
+                .is_some_and(|lr| {
+                    let length = (lr.t_far - lr.t_near) * f64::from(lr.units_per_world);
+                    let mut spans = Vec::new();
+                    field.spans(lr.origin, lr.dir, 0.0, length, &mut spans);
+                    !spans.is_empty()
+                })
+        });
+        assert!(kept || !meets, "tile ({x0}, {y0}) meets the pillar");
+        assert!(cone_kept || !kept, "tile ({x0}, {y0})");
+        met += usize::from(meets);
+        pyramid_culled += usize::from(cone_kept && !kept);
+    }
+    // 9 and 23 here.
+    assert!(met >= 6, "{met} tiles meet the pillar");
+    assert!(
+        pyramid_culled >= 12,
+        "{pyramid_culled} tiles culled by the pyramid alone"
+    );
+}
+
 #[test]
 fn a_tiles_culled_field_is_the_whole_field_along_its_rays() {
     use crate::bench::rng::SplitMix64;
@@ -494,7 +563,7 @@ fn a_tiles_culled_field_is_the_whole_field_along_its_rays() {
         let rays: Vec<_> = (0..256)
             .map(|k| camera.ray((x0 + k % 16) as f64 + 0.5, (y0 + k / 16) as f64 + 0.5))
             .collect();
-        let bundle = super::plan::Bundle::of(&rays);
+        let bundle = super::plan::Bundle::of(&rays, 16, camera.rectilinear());
         super::plan::cull_instances(&plans, bundle.as_ref(), &mut keep);
         tile_fields.cull(&scene, &plans, bundle.as_ref(), &keep);
         let tile_field = tile_fields.field(&scene, 0);

@@ -248,6 +248,11 @@ impl Bundle {
         width: usize,
         rectilinear: bool,
     ) -> Option<Bundle> {
+        if rectilinear {
+            if let Some(bundle) = Bundle::of_pyramid(rays, width) {
+                return Some(bundle);
+            }
+        }
         let (mut origin, mut dir, mut n) = (DVec3::ZERO, DVec3::ZERO, 0.0);
         for ray in rays.iter().flatten() {
             origin += ray.origin;
@@ -264,7 +269,30 @@ impl Bundle {
             cos_theta = cos_theta.min(ray.dir.dot(axis));
         }
         let rho = rho2.sqrt();
-        // NaN directions fail this too.
+        Bundle::around(origin, axis, rho, cos_theta, None)
+    }
+
+    /// The bundle of a rectilinear tile's rays (see [`of`](Self::of)) from its four corner
+    /// rays alone: they share the origin, and the angle from an axis inside the pyramid is
+    /// greatest at one of its edges' ends, the corners. `None` where the tile has no pyramid
+    /// ([`pyramid`]) or its corners spread 90° or more.
+    fn of_pyramid(rays: &[Option<Ray>], width: usize) -> Option<Bundle> {
+        let (origin, corners) = pyramid_corners(rays, width)?;
+        let axis = corners.iter().sum::<DVec3>().try_normalize()?;
+        let cos_theta = corners.iter().fold(1.0f64, |m, d| m.min(d.dot(axis)));
+        let sides = pyramid(corners, axis)?;
+        Bundle::around(origin, axis, 0.0, cos_theta, Some(sides))
+    }
+
+    /// The cone about `axis` from within `rho` of `origin` whose rays' directions have
+    /// `cos_theta` at least with it; `None` where that is not above 0 (90° or more, or NaN).
+    fn around(
+        origin: DVec3,
+        axis: DVec3,
+        rho: f64,
+        cos_theta: f64,
+        sides: Option<[DVec3; 4]>,
+    ) -> Option<Bundle> {
         if cos_theta.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) || !rho.is_finite() {
             return None;
         }
@@ -276,7 +304,7 @@ impl Bundle {
             rho,
             sin_theta,
             cos_theta,
-            sides: rectilinear.then(|| pyramid(rays, width, axis)).flatten(),
+            sides,
         })
     }
 
@@ -309,11 +337,10 @@ impl Bundle {
     }
 }
 
-/// The inward unit normals of the planes through a rectilinear tile's origin and each pair of
-/// its neighbouring corner rays (`rays` row by row, `width` to a row, `axis` inside them);
-/// `None` for a tile less than two rays wide or high, a missing or off-origin corner, or
-/// corner rays too close to parallel for a plane.
-fn pyramid(rays: &[Option<Ray>], width: usize, axis: DVec3) -> Option<[DVec3; 4]> {
+/// A rectilinear tile's shared origin and its corner rays' directions, going round (`rays`
+/// row by row, `width` to a row); `None` for a tile less than two rays wide or high, or a
+/// missing or off-origin corner.
+fn pyramid_corners(rays: &[Option<Ray>], width: usize) -> Option<(DVec3, [DVec3; 4])> {
     let height = rays.len().checked_div(width)?;
     if width < 2 || height < 2 || width * height != rays.len() {
         return None;
@@ -325,13 +352,20 @@ fn pyramid(rays: &[Option<Ray>], width: usize, axis: DVec3) -> Option<[DVec3; 4]
         corner(rays.len() - 1)?,
         corner(rays.len() - width)?,
     ];
-    if around.iter().any(|r| r.origin != around[0].origin) {
-        return None;
-    }
+    let origin = around[0].origin;
+    around
+        .iter()
+        .all(|r| r.origin == origin)
+        .then(|| (origin, around.map(|r| r.dir)))
+}
+
+/// The inward unit normals of the planes through a pyramid's apex and each pair of its
+/// neighbouring edges `corners` (directions, going round, `axis` inside them); `None` where
+/// two are too close to parallel for a plane.
+fn pyramid(corners: [DVec3; 4], axis: DVec3) -> Option<[DVec3; 4]> {
     let mut sides = [DVec3::ZERO; 4];
     for (k, side) in sides.iter_mut().enumerate() {
-        let n = around[k].dir.cross(around[(k + 1) % 4].dir);
-        let n = n.try_normalize()?;
+        let n = corners[k].cross(corners[(k + 1) % 4]).try_normalize()?;
         *side = if n.dot(axis) >= 0.0 { n } else { -n };
     }
     Some(sides)

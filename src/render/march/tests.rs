@@ -436,12 +436,35 @@ fn tile_culling_keeps_every_instance_a_ray_of_the_tile_meets() {
 /// sees it (its `f32` local ray), and leaves out most primitives no ray meets: a scattered
 /// field of small balls, boxes and Gaussians, rotated, scaled and moved into the world,
 /// seen by tiles of a perspective camera.
+/// A scene of `field` placed by `world_from_field`, its instance plans at Draft, and a
+/// `width`×`height` pinhole camera with a vertical field of view of `fov` degrees at `eye`,
+/// looking at the origin.
+fn placed_and_seen(
+    field: &Analytic,
+    world_from_field: glam::DMat4,
+    (width, height, fov): (u32, u32, f64),
+    eye: glam::DVec3,
+) -> (Scene, Vec<super::InstancePlan>, crate::camera::Camera) {
+    use crate::camera::{Camera, Perspective, Projection};
+    let scene = Scene::new(vec![Instance::new(
+        "placed",
+        FieldHandle::analytic(field.clone()),
+        world_from_field,
+        None,
+    )
+    .unwrap()]);
+    let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
+    let p = Perspective::from_vertical_fov(width, height, fov).unwrap();
+    let eye = crate::demo::look_at(eye, glam::DVec3::ZERO);
+    let camera = Camera::new(eye, Projection::Perspective(p)).unwrap();
+    (scene, plans, camera)
+}
+
 /// A pinhole tile's pyramid culls a long thin box (a pillar, leaning, in a rotated and
 /// stretched instance) from the tiles beside it whose cone takes in its loose sphere, and
 /// keeps it for every tile one of whose rays meets it.
 #[test]
 fn a_tiles_pyramid_culls_a_thin_box_and_keeps_it_where_a_ray_meets_it() {
-    use crate::camera::{Camera, Perspective, Projection};
     use crate::field::{Primitive, ShColor, Shape};
     use glam::{DMat4, DQuat, DVec3};
 
@@ -461,17 +484,12 @@ fn a_tiles_pyramid_culls_a_thin_box_and_keeps_it_where_a_ray_meets_it() {
         DQuat::from_euler(glam::EulerRot::XYZ, 0.2, 0.4, -0.3),
         DVec3::new(0.3, 0.1, 0.0),
     );
-    let scene = Scene::new(vec![Instance::new(
-        "pillar",
-        FieldHandle::analytic(field.clone()),
+    let (scene, plans, camera) = placed_and_seen(
+        &field,
         world_from_field,
-        None,
-    )
-    .unwrap()]);
-    let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
-    let p = Perspective::from_vertical_fov(160, 96, 60.0).unwrap();
-    let eye = crate::demo::look_at(DVec3::new(0.5, -4.0, 0.5), DVec3::ZERO);
-    let camera = Camera::new(eye, Projection::Perspective(p)).unwrap();
+        (160, 96, 60.0),
+        DVec3::new(0.5, -4.0, 0.5),
+    );
     assert!(camera.rectilinear());
     let (mut pyramid_culled, mut met) = (0, 0);
     for (x0, y0) in (0..10).flat_map(|i| (0..6).map(move |j| (16 * i, 16 * j))) {
@@ -508,7 +526,6 @@ fn a_tiles_pyramid_culls_a_thin_box_and_keeps_it_where_a_ray_meets_it() {
 #[test]
 fn a_tiles_culled_field_is_the_whole_field_along_its_rays() {
     use crate::bench::rng::SplitMix64;
-    use crate::camera::{Camera, Perspective, Projection};
     use crate::field::{Primitive, ShColor, Shape};
     use glam::{DMat4, DQuat, DVec3};
 
@@ -545,18 +562,12 @@ fn a_tiles_culled_field_is_the_whole_field_along_its_rays() {
         DQuat::from_euler(glam::EulerRot::XYZ, 0.3, -0.5, 1.1),
         DVec3::new(0.4, 0.2, -0.3),
     );
-    let handle = FieldHandle::analytic(field.clone());
-    let scene = Scene::new(vec![Instance::new(
-        "scattered",
-        handle,
+    let (scene, plans, camera) = placed_and_seen(
+        &field,
         world_from_field,
-        None,
-    )
-    .unwrap()]);
-    let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
-    let p = Perspective::from_vertical_fov(96, 64, 50.0).unwrap();
-    let eye = crate::demo::look_at(DVec3::new(1.0, -7.0, 2.0), DVec3::ZERO);
-    let camera = Camera::new(eye, Projection::Perspective(p)).unwrap();
+        (96, 64, 50.0),
+        DVec3::new(1.0, -7.0, 2.0),
+    );
     let (mut keep, mut tile_fields) = (Vec::new(), super::plan::TileFields::default());
     let (mut kept, mut seen, mut samples) = (0, 0, 0);
     for (x0, y0) in (0..6).flat_map(|i| (0..4).map(move |j| (16 * i, 16 * j))) {

@@ -49,8 +49,8 @@ const MEDIAN_RESOLUTION: f64 = 1e-9;
 /// How close to it a ray's median depth is found, relative, with `error_target`: within the
 /// share of it that the expected depth is held to ([`piece::DEPTH_SHARE`]), as a depth is
 /// judged by one measure whichever of the two it is; never finer than
-/// [`MEDIAN_RESOLUTION`]. Each Newton step a Gaussian piece's median takes costs an error
-/// function per profile; at Draft this takes the demo's from 2.1 to about 1.4 a solve.
+/// [`MEDIAN_RESOLUTION`]. Each Newton step of a Gaussian piece's median costs an error
+/// function per profile; at Draft the demo's Gaussian medians take 1.4 steps each, not 2.1.
 fn median_resolution(error_target: f32) -> f64 {
     (piece::DEPTH_SHARE * f64::from(error_target)).max(MEDIAN_RESOLUTION)
 }

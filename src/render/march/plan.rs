@@ -36,6 +36,13 @@ impl InstancePlan {
                 // Without bounds, gaps may hide between samples: a field with spans or
                 // mask segments has none unseen; one with an occupancy grid has its steps
                 // probed for them.
+                let (primitive_spheres, primitive_boxes) = match inst.handle().as_analytic() {
+                    Some(analytic) if spans => (
+                        primitive_spheres(analytic, inst.world_from_field()),
+                        primitive_boxes(analytic, inst.world_from_field()),
+                    ),
+                    _ => (Vec::new(), Vec::new()),
+                };
                 let cell = match &occupancy {
                     Some(o) if !bounded => {
                         o.bounds().size().min_element() as f64 / f64::from(o.resolution().max(1))
@@ -57,18 +64,8 @@ impl InstancePlan {
                         inst.field().occupied_bounds(),
                         inst.world_from_field(),
                     ),
-                    primitive_spheres: match inst.handle().as_analytic() {
-                        Some(analytic) if spans => {
-                            primitive_spheres(analytic, inst.world_from_field())
-                        }
-                        _ => Vec::new(),
-                    },
-                    primitive_boxes: match inst.handle().as_analytic() {
-                        Some(analytic) if spans => {
-                            primitive_boxes(analytic, inst.world_from_field())
-                        }
-                        _ => Vec::new(),
-                    },
+                    primitive_spheres,
+                    primitive_boxes,
                 }
             })
             .collect()
@@ -129,13 +126,19 @@ fn corners(b: Aabb) -> [DVec3; 8] {
     })
 }
 
+/// How far a primitive's culling volume is widened in the world ([`SAMPLE_ROUNDING`] of the
+/// world radius of the field's bounds and origin); `None` where that is not finite.
+fn sample_margin(analytic: &Analytic, world_from_field: DMat4) -> Option<f64> {
+    let b = analytic.bounds();
+    let reach = Aabb::new(b.min.min(Vec3::ZERO), b.max.max(Vec3::ZERO));
+    world_sphere(reach, world_from_field).map(|(_, r)| SAMPLE_ROUNDING * r)
+}
+
 /// Per primitive of an analytic field, a world sphere around its support ([`support_sphere`]),
 /// widened for the rounding of the marcher's samples ([`SAMPLE_ROUNDING`]); `None` where it
 /// is not finite.
 fn primitive_spheres(analytic: &Analytic, world_from_field: DMat4) -> Vec<Option<(DVec3, f64)>> {
-    let b = analytic.bounds();
-    let reach = Aabb::new(b.min.min(Vec3::ZERO), b.max.max(Vec3::ZERO));
-    let margin = world_sphere(reach, world_from_field).map(|(_, r)| SAMPLE_ROUNDING * r);
+    let margin = sample_margin(analytic, world_from_field);
     let stretch = largest_stretch(DMat3::from_mat4(world_from_field));
     analytic
         .primitives
@@ -148,12 +151,10 @@ fn primitive_spheres(analytic: &Analytic, world_from_field: DMat4) -> Vec<Option
 }
 
 /// Per primitive of an analytic field, a box's eight corners placed in the world, and the
-/// margin [`primitive_spheres`] widens its sphere by; `None` for the other shapes, and where
-/// either is not finite.
+/// margin its sphere is widened by ([`sample_margin`]); `None` for the other shapes, and
+/// where either is not finite.
 fn primitive_boxes(analytic: &Analytic, world_from_field: DMat4) -> Vec<Option<([DVec3; 8], f64)>> {
-    let b = analytic.bounds();
-    let reach = Aabb::new(b.min.min(Vec3::ZERO), b.max.max(Vec3::ZERO));
-    let margin = world_sphere(reach, world_from_field).map(|(_, r)| SAMPLE_ROUNDING * r);
+    let margin = sample_margin(analytic, world_from_field);
     analytic
         .primitives
         .iter()

@@ -214,7 +214,7 @@ impl Camera {
     /// Whether a window's rays ([`window_rays`](Self::window_rays)) share one origin and each
     /// points inside the pyramid of the window's corner pixels' rays: a pinhole's do, their
     /// directions being affine in the pixel position before they are normalised.
-    pub fn rectilinear(&self) -> bool {
+    pub(crate) fn rectilinear(&self) -> bool {
         matches!(self.projection, Projection::Perspective(_))
     }
 

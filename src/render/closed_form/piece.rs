@@ -53,13 +53,16 @@ const MAX_BISECTIONS: u32 = 48;
 /// as each step is either at most half the one before or a bisection of the bracket.
 const MAX_NEWTON_STEPS: u32 = 64;
 
+/// `e − 2`, rounded up: [`exp_above`]'s curvature.
+const E_MINUS_TWO_ABOVE: f64 = 0.718_281_9;
+
 /// An upper bound on `e^h` for `h ≥ 0` without an exponential up to 1:
 /// `(e^h − 1 − h)/h²` grows with `h`, to `e − 2` at 1, so `1 + h + (e − 2)·h²` is above
 /// `e^h` there, and at most 2.002 % above it (near 0.61). `e^h` beyond.
 #[inline]
 fn exp_above(h: f64) -> f64 {
     if h <= 1.0 {
-        1.0 + h + 0.718_281_9 * h * h
+        1.0 + h + E_MINUS_TWO_ABOVE * h * h
     } else {
         h.exp()
     }
@@ -588,7 +591,8 @@ mod tests {
     use super::*;
 
     /// Above `e^h` up to 1 (where it takes no exponential), within 2.002 % of it, and `e^h`
-    /// beyond; a coefficient below `e − 2` falls under it near 1.
+    /// beyond; its curvature is `e − 2` rounded up (below it, the bound falls under `e^h`
+    /// at 1).
     #[test]
     fn exp_above_bounds_the_exponential() {
         for i in 0..=1000 {
@@ -599,6 +603,7 @@ mod tests {
             assert!(exp_above(-h) >= (-h).exp(), "{}", -h);
         }
         assert_eq!(exp_above(1.5), 1.5f64.exp());
-        assert!(1.0 + 1.0 + 0.718_28 * 1.0 < 1f64.exp());
+        let e_minus_two = std::f64::consts::E - 2.0;
+        assert!(E_MINUS_TWO_ABOVE >= e_minus_two && E_MINUS_TWO_ABOVE - e_minus_two < 1e-7);
     }
 }

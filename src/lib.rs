@@ -27,6 +27,7 @@ pub mod host;
 pub mod image;
 mod input;
 mod json;
+mod output;
 pub mod reference;
 pub mod render;
 pub mod scene;

@@ -11,7 +11,7 @@ use std::path::Path;
 
 use glam::{DMat4, Vec3};
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::field::{Aabb, ColorSpace, Field, SplatColor, Splats};
 use crate::scene::Scene;
 
@@ -226,7 +226,7 @@ pub fn write_ply(path: &Path, points: &[Point]) -> Result<()> {
         }
         bytes.extend_from_slice(&p.rgb);
     }
-    write_replacing(path, &bytes)
+    crate::output::write_file(path, &bytes)
 }
 
 /// A triangle mesh with vertex colours, in the render frame.
@@ -342,12 +342,5 @@ pub fn write_mesh_ply(path: &Path, mesh: &Mesh) -> Result<()> {
             bytes.extend_from_slice(&i.to_le_bytes());
         }
     }
-    write_replacing(path, &bytes)
-}
-
-/// Writes `bytes` to `path` so that a failure leaves a file already there as it was.
-fn write_replacing(path: &Path, bytes: &[u8]) -> Result<()> {
-    crate::image::replace_file(path, |temp| {
-        std::fs::write(temp, bytes).map_err(|e| Error::io(path, e))
-    })
+    crate::output::write_file(path, &bytes)
 }

@@ -7,7 +7,7 @@ use std::path::Path;
 use super::plot::{plot_png, Series};
 use super::scaling;
 use super::suite::{marched_name, Report, Row, SceneReport, CHECK_ROW_STRIDE, ROW_STRIDE};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::render::Quality;
 
 /// Bytes as MiB with one decimal, or `n/a`.
@@ -46,7 +46,7 @@ impl Report {
     /// the growth series `cost_vs_content.png` into `dir`.
     pub fn write(&self, dir: &Path) -> Result<()> {
         let md = dir.join("report.md");
-        std::fs::write(&md, self.markdown()).map_err(|e| Error::io(&md, e))?;
+        crate::output::write_file(&md, self.markdown().as_bytes())?;
         for scene in &self.scenes {
             let series = |label: &str, keep: &dyn Fn(&str) -> bool| Series {
                 label: label.into(),

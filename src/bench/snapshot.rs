@@ -421,7 +421,7 @@ pub fn file_bytes(s: &SnapshotSpec) -> Result<Vec<u8>> {
 /// Writes the snapshot of `s` into `dir` as `name.ingp` (or `.msgpack`); returns its path.
 pub fn write_snapshot(dir: &Path, name: &str, s: &SnapshotSpec) -> Result<PathBuf> {
     let path = dir.join(format!("{name}.{}", s.extension()));
-    std::fs::write(&path, file_bytes(s)?).map_err(|e| Error::io(&path, e))?;
+    crate::output::write_file(&path, &file_bytes(s)?)?;
     Ok(path)
 }
 

@@ -349,7 +349,7 @@ impl CameraPath {
     pub fn write(&self, path: impl AsRef<Path>) -> Result<()> {
         let path = path.as_ref();
         let text = self.to_json_string(path)?;
-        std::fs::write(path, text).map_err(|e| Error::io(path, e))
+        crate::output::write_file(path, text.as_bytes())
     }
 
     fn to_json_string(&self, path: &Path) -> Result<String> {

@@ -265,7 +265,7 @@ impl Shot {
     pub fn write(&self, path: impl AsRef<Path>) -> Result<()> {
         let path = path.as_ref();
         let text = self.to_json_string(path)?;
-        std::fs::write(path, text).map_err(|e| Error::io(path, e))
+        crate::output::write_file(path, text.as_bytes())
     }
 
     /// The frame numbered `frame`; the error names the file and the frames it holds.

@@ -84,7 +84,7 @@ pub fn write_exr_layers(
     );
     let mut image = Image::from_layer(layer);
     image.attributes.pixel_aspect = pixel_aspect as f32;
-    super::replace::replace_file(path, |temp| {
+    crate::output::replace_file(path, |temp| {
         image.write().to_file(temp).map_err(|e| match e {
             exr::error::Error::Io(source) => Error::io(path, source),
             other => Error::invalid(format!("EXR {}", path.display()), other.to_string()),

@@ -3,8 +3,6 @@
 mod exr_io;
 mod plane;
 mod png;
-mod replace;
-pub(crate) use replace::replace_file;
 
 #[cfg(test)]
 pub(crate) use self::png::decode_rgba8;

@@ -50,7 +50,7 @@ pub(crate) fn write_png_rgba8(path: &Path, width: u32, height: u32, rgba: &[u8])
             ),
         ));
     }
-    super::replace::replace_file(path, |temp| {
+    crate::output::replace_file(path, |temp| {
         let file = std::fs::File::create(temp).map_err(|e| Error::io(path, e))?;
         let mut out = BufWriter::new(file);
         let mut encoder = png::Encoder::new(&mut out, width, height);

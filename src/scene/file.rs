@@ -290,7 +290,7 @@ impl SceneDesc {
     pub fn write(&self, path: &Path) -> Result<()> {
         let text = serde_json::to_string_pretty(self)
             .map_err(|e| Error::format(path, "", e.to_string()))?;
-        std::fs::write(path, text).map_err(|e| Error::io(path, e))
+        crate::output::write_file(path, text.as_bytes())
     }
 
     /// Loads every field once.

@@ -465,21 +465,15 @@ fn read_cache(path: &Path, key: &str, n: usize) -> Option<Vec<bool>> {
     decode(&std::fs::read(path).ok()?, key, n)
 }
 
-/// Writes the cache (creating its directory) through a temporary file and a rename;
-/// whether it was written. Failures leave no file behind.
+/// Writes the cache (creating its directory) as every output is written; whether it was
+/// written. Failures leave no file behind.
 fn write_cache(path: &Path, key: &str, n: usize, cells: &[bool]) -> bool {
     if let Some(dir) = path.parent() {
         if std::fs::create_dir_all(dir).is_err() {
             return false;
         }
     }
-    let tmp = path.with_extension(format!("tmp-{}", std::process::id()));
-    if std::fs::write(&tmp, encode(key, n, cells)).is_err() || std::fs::rename(&tmp, path).is_err()
-    {
-        let _ = std::fs::remove_file(&tmp);
-        return false;
-    }
-    true
+    crate::output::write_file(path, &encode(key, n, cells)).is_ok()
 }
 
 #[cfg(test)]

@@ -152,7 +152,7 @@ impl Splats {
                 put(v);
             }
         }
-        std::fs::write(path, out).map_err(|e| Error::io(path, e))
+        crate::output::write_file(path, &out)
     }
 
     /// Activates and appends one splat as stored (log scales, `w x y z` quaternion, opacity

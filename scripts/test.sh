@@ -9,6 +9,7 @@
 #   OpenEXR        OpenEXR's own library (PyPI's bindings), reading back the EXR output
 #   python3-numpy  Blender's own Python (Debian's build uses the system's) for the add-on's
 #                  splat import
+#   mdbook         builds the user's guide in docs/ (tests/docs.rs checks its links)
 #
 # Nothing is skipped when a tool is missing: the tests that need one fail. Extra arguments go
 # to `cargo test` (a test name, `-- --nocapture`).
@@ -60,5 +61,13 @@ if ! blender -b --factory-startup --python-exit-code 1 --python-expr "import num
     apt_install python3-numpy
 fi
 
+if ! command -v mdbook >/dev/null; then
+    echo "== installing mdbook"
+    cargo install --quiet --locked mdbook --no-default-features --features search
+fi
+
 echo "== cargo test --workspace"
 cargo test --workspace "$@"
+
+echo "== mdbook build docs"
+mdbook build docs

@@ -191,6 +191,23 @@ enum Command {
         #[arg(long, value_enum)]
         passes: Option<Quality>,
     },
+    /// Print a reference page of the user's guide, generated from the code: `nodes` (every
+    /// node and parameter, from the node registry) or `cli` (every command and option).
+    #[command(hide = true)]
+    Reference {
+        /// Which page.
+        #[arg(value_enum)]
+        page: ReferencePage,
+    },
+}
+
+/// The guide's generated reference pages.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum ReferencePage {
+    /// `docs/src/reference/nodes.md`.
+    Nodes,
+    /// `docs/src/reference/cli.md`.
+    Cli,
 }
 
 /// A pass `nerfx render --passes` names (as the NeRF Render node's Output names them), and
@@ -393,6 +410,16 @@ fn run(cli: Cli) -> Result<()> {
             }
             write_exr(&output, &planes)?;
             println!("envmap: frame {frame} → {}", output.display());
+            Ok(())
+        }
+        Command::Reference { page } => {
+            match page {
+                ReferencePage::Nodes => {
+                    let descs: Vec<_> = nerfx::graph::nodes().iter().map(|n| &n.desc).collect();
+                    print!("{}", nerfx::graph::nodes_markdown(&descs));
+                }
+                ReferencePage::Cli => print!("{}", cli_markdown()),
+            }
             Ok(())
         }
         Command::Info { field } => {
@@ -714,4 +741,90 @@ fn progress_bar(len: u64, what: &str) -> ProgressBar {
     }
     bar.set_message(what.to_string());
     bar
+}
+
+/// The command-line reference page, from the argument definitions.
+fn cli_markdown() -> String {
+    use clap::CommandFactory;
+    use std::fmt::Write;
+    let mut cli = Cli::command();
+    cli.build();
+    let mut md = String::from(
+        "# Command-line reference\n\n\
+         Generated from the argument definitions by `nerfx reference cli`; do not edit by \
+         hand. `nerfx help COMMAND` prints the same.\n",
+    );
+    for sub in cli.get_subcommands_mut().filter(|c| !c.is_hide_set()) {
+        let name = sub.get_name().to_string();
+        let about = sub
+            .get_long_about()
+            .or(sub.get_about())
+            .map(|a| a.to_string())
+            .unwrap_or_default();
+        let usage = sub.render_usage().to_string();
+        let usage = usage.trim_start_matches("Usage: ");
+        let _ = write!(
+            md,
+            "\n## `nerfx {name}`\n\n{about}\n\n```text\n{usage}\n```\n"
+        );
+        let args: Vec<_> = sub
+            .get_arguments()
+            .filter(|a| !a.is_hide_set() && a.get_id() != "help")
+            .collect();
+        if args.is_empty() {
+            continue;
+        }
+        md.push_str("\n| argument | default | what it is |\n|---|---|---|\n");
+        for arg in args {
+            let value = arg
+                .get_value_names()
+                .map(|v| {
+                    v.iter()
+                        .map(|s| s.to_string())
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                })
+                .unwrap_or_else(|| arg.get_id().to_string().to_uppercase());
+            let takes_value = arg.get_num_args().is_some_and(|n| n.takes_values());
+            let shown = match (arg.get_short(), arg.get_long()) {
+                (Some(s), Some(l)) if takes_value => format!("`-{s}`, `--{l} {value}`"),
+                (Some(s), Some(l)) => format!("`-{s}`, `--{l}`"),
+                (None, Some(l)) if takes_value => format!("`--{l} {value}`"),
+                (None, Some(l)) => format!("`--{l}`"),
+                (Some(s), None) => format!("`-{s}`"),
+                (None, None) => format!("`{value}`"),
+            };
+            let defaults: Vec<String> = arg
+                .get_default_values()
+                .iter()
+                .map(|d| d.to_string_lossy().into_owned())
+                .collect();
+            let mut help = arg
+                .get_long_help()
+                .or(arg.get_help())
+                .map(|h| h.to_string())
+                .unwrap_or_default();
+            let values: Vec<String> = arg
+                .get_possible_values()
+                .iter()
+                .filter(|v| !v.is_hide_set())
+                .map(|v| format!("`{}`", v.get_name()))
+                .collect();
+            if !values.is_empty() && takes_value {
+                let _ = write!(help, " One of {}.", values.join(", "));
+            }
+            let help = help
+                .split_whitespace()
+                .collect::<Vec<_>>()
+                .join(" ")
+                .replace('|', "\\|");
+            let default = if defaults.is_empty() {
+                String::new()
+            } else {
+                format!("`{}`", defaults.join(","))
+            };
+            let _ = writeln!(md, "| {shown} | {default} | {help} |");
+        }
+    }
+    md
 }

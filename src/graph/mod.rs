@@ -33,6 +33,7 @@ mod nerf_render;
 mod node;
 #[cfg(feature = "host")]
 mod ofx;
+mod reference;
 mod shared_renders;
 mod values;
 
@@ -49,6 +50,7 @@ pub use node::{
 };
 #[cfg(feature = "host")]
 pub use ofx::OfxGraph;
+pub use reference::nodes_markdown;
 pub use shared_renders::{shared_render_stats, SharedRenderStats};
 pub use values::{ParamValues, Value};
 

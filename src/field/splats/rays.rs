@@ -8,7 +8,7 @@
 //! isotropic 3D term `0.3·(ω·r)²` added to `Σ`, with `ω` the camera's pixel angle and `r` the
 //! splat's distance. Fragments are ordered by the distance of the means from the camera centre
 //! and sit at `t*`. The approximation, measured against the pinhole rasteriser on a perspective
-//! view in the tests, is stated in the README.
+//! view in the tests, is stated in the guide (`docs/src/splats.md`).
 //!
 //! Splats are binned by direction from the camera centre into a longitude × latitude grid of
 //! cells, each splat into the cells its cone of influence (where its opacity can reach 1/255,

@@ -10,7 +10,8 @@ use std::process::{Command, Output};
 use common_ofx::images::rgba_of;
 use common_ofx::load;
 use nerfx::demo;
-use nerfx::graph::{evaluate, render_direct, Graph, OfxGraph};
+use nerfx::graph::{evaluate, render_direct, Graph};
+use nerfx::host::OfxGraph;
 use nerfx::host::{Bundle, HostOptions};
 use nerfx::image::read_exr_channels;
 

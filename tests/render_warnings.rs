@@ -18,7 +18,8 @@ use common_ingp::{write_snapshot, Spec};
 use common_ofx::fixtures::{demo_dir, instance_with, text};
 use common_ofx::load;
 use nerfx::bench::snapshot::Weights;
-use nerfx::graph::{node, Context, Graph, OfxGraph, ParamValues, RenderRequest};
+use nerfx::graph::{node, Context, Graph, ParamValues, RenderRequest};
+use nerfx::host::OfxGraph;
 use nerfx::host::{HostOptions, MessageSuiteOffer};
 use nerfx::image::{Planes, Window};
 

@@ -577,8 +577,9 @@ fn run(cli: Cli) -> Result<()> {
 #[cfg(feature = "host")]
 mod graph {
     use super::*;
-    use nerfx::graph::{Graph, OfxGraph};
+    use nerfx::graph::Graph;
     use nerfx::host::Bundle;
+    use nerfx::host::OfxGraph;
 
     /// Where the bundle is looked for, in order.
     fn bundle_candidates(given: Option<PathBuf>) -> Vec<PathBuf> {

@@ -31,8 +31,6 @@ mod file;
 mod matrix_text;
 mod nerf_render;
 mod node;
-#[cfg(feature = "host")]
-mod ofx;
 mod reference;
 mod shared_renders;
 mod values;
@@ -48,8 +46,6 @@ pub use node::{
     check_render_scale, single_channel, Format, IdentityFn, Node, PixelAspectFn, RenderFn,
     RenderRequest, Rendered, RodFn, TimeDomainFn,
 };
-#[cfg(feature = "host")]
-pub use ofx::OfxGraph;
 pub use reference::nodes_markdown;
 pub use shared_renders::{shared_render_stats, SharedRenderStats};
 pub use values::{ParamValues, Value};

@@ -40,6 +40,7 @@
 mod bundle;
 mod effect;
 mod globals;
+mod graph;
 mod handles;
 mod instance;
 mod log;
@@ -56,6 +57,7 @@ mod status;
 mod threads;
 
 pub use bundle::{Bundle, ClipDescription, EffectDescription, ParamDescription};
+pub use graph::OfxGraph;
 pub use instance::Instance;
 pub use log::Message;
 pub use options::{AbsentClip, ChangeReason, Field, HostOptions, MessageSuiteOffer, PADDING};

@@ -6,14 +6,11 @@
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
-use super::desc::{Context, ParamKind};
-use super::evaluate::evaluate;
-use super::file::{Graph, GraphNode};
-use super::matrix_text::matrix_text;
-use super::node::RenderRequest;
-use super::values::Value;
+use super::{Bundle, ClipSource, Instance};
 use crate::error::{Error, Result};
-use crate::host::{Bundle, ClipSource, Instance};
+use crate::graph::{
+    evaluate, matrix_text, Context, Graph, GraphNode, ParamKind, RenderRequest, Value,
+};
 use crate::image::Planes;
 
 /// The context a graph node is instantiated in: Generator without inputs, Filter when its

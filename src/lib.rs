@@ -30,6 +30,7 @@ mod json;
 mod output;
 pub mod reference;
 pub mod render;
+pub mod rng;
 pub mod scene;
 pub mod standin;
 

@@ -17,7 +17,6 @@ pub mod memory;
 pub mod passes;
 pub mod plot;
 pub mod report;
-pub mod rng;
 pub mod scaling;
 pub mod scenes;
 pub mod snapshot;

@@ -20,8 +20,8 @@ use std::path::{Path, PathBuf};
 use half::f16;
 use rmpv::Value;
 
-use super::rng::SplitMix64;
 use crate::error::{Error, Result};
+use crate::rng::SplitMix64;
 
 /// Cells per side of each occupancy cascade.
 const GRID: usize = 128;

@@ -83,7 +83,7 @@ impl CropClip {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bench::rng::SplitMix64;
+    use crate::rng::SplitMix64;
 
     #[test]
     fn axis_aligned_box_clips_to_its_faces() {

@@ -412,7 +412,7 @@ mod tests {
                 }),
             ],
         };
-        let mut rng = crate::bench::rng::SplitMix64::new(7);
+        let mut rng = crate::rng::SplitMix64::new(7);
         let mut pts = Vec::new();
         let mut sigma = Vec::new();
         for _ in 0..200 {

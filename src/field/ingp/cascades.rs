@@ -667,7 +667,7 @@ mod tests {
         let (lo, hi) = c.occupied_extent().unwrap();
         assert_eq!(lo, Vec3::new(39.0, 49.0, 59.0) / 128.0);
         assert_eq!(hi, Vec3::new(72.0, 68.0, 66.0) / 64.0 - 0.5);
-        let mut rng = crate::bench::rng::SplitMix64::new(3);
+        let mut rng = crate::rng::SplitMix64::new(3);
         let mut found = 0;
         for _ in 0..200_000 {
             let q = rng.in_cube(lo.min_element() - 0.1, hi.max_element() + 0.1);
@@ -768,7 +768,7 @@ mod tests {
     /// Three cascades, a seeded fifth of their cells occupied.
     fn seeded_cascades() -> Cascades {
         let n3 = GRID * GRID * GRID;
-        let mut rng = crate::bench::rng::SplitMix64::new(11);
+        let mut rng = crate::rng::SplitMix64::new(11);
         let v: Vec<f32> = (0..3 * n3)
             .map(|_| if rng.unit() < 0.2 { 1.0 } else { 0.0 })
             .collect();
@@ -778,7 +778,7 @@ mod tests {
     #[test]
     fn mask_segments_agree_with_sampled_cells() {
         let c = seeded_cascades();
-        let mut rng = crate::bench::rng::SplitMix64::new(5);
+        let mut rng = crate::rng::SplitMix64::new(5);
         for _ in 0..40 {
             // From outside every cascade (half width 2) or from inside one, in any direction.
             let outside = rng.unit() < 0.5;
@@ -795,7 +795,7 @@ mod tests {
         // the box of occupied cells): rays aimed at a clump's cells, from anywhere, and
         // rays along the axes through them.
         let n3 = GRID * GRID * GRID;
-        let mut rng = crate::bench::rng::SplitMix64::new(23);
+        let mut rng = crate::rng::SplitMix64::new(23);
         let mut v = vec![0.0f32; 3 * n3];
         let mut centres = Vec::new();
         for cascade in 0..3 {
@@ -852,7 +852,7 @@ mod tests {
             v[cascade * n3 + morton(x, y, z)] = 1.0;
         }
         let c = Cascades::from_densities(&v).unwrap();
-        let mut rng = crate::bench::rng::SplitMix64::new(31);
+        let mut rng = crate::rng::SplitMix64::new(31);
         for (cascade, lone) in [(0, [63, 64, 64]), (1, [97, 64, 40])] {
             let at = |i: [f64; 3]| {
                 Vec3::from(i.map(|i| ((i / GRID as f64 - 0.5) * 2f64.powi(cascade) + 0.5) as f32))

@@ -181,7 +181,7 @@ mod tests {
         // unit intervals, in runs of every length modulo four (the last few through masked
         // loads): libm's `expm1` of the same exponents to within three units in the last
         // place.
-        let mut rng = crate::bench::rng::SplitMix64::new(11);
+        let mut rng = crate::rng::SplitMix64::new(11);
         let mut sigma: Vec<f32> = (0..1001)
             .map(|_| 10f64.powf(-20.0 + 21.78 * f64::from(rng.unit())) as f32)
             .collect();
@@ -226,7 +226,7 @@ mod tests {
         // 37 seeded samples (longer than a run, not a multiple of it), invalid densities
         // among them: the same weights as the chain sample by sample with libm's expm1,
         // to rounding.
-        let mut rng = crate::bench::rng::SplitMix64::new(5);
+        let mut rng = crate::rng::SplitMix64::new(5);
         let mut next = || f64::from(rng.unit());
         let mut sigma: Vec<f32> = (0..37).map(|_| (20.0 * next()) as f32).collect();
         sigma[3] = f32::NAN;

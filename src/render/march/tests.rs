@@ -235,7 +235,7 @@ fn a_steps_trapezoid_bias_is_exact_for_a_cubic() {
 #[test]
 fn a_kept_second_difference_gives_the_curvature_worked_out_afresh() {
     use super::refinement::{step_curvature, LastDifference};
-    use crate::bench::rng::SplitMix64;
+    use crate::rng::SplitMix64;
 
     let mut rng = SplitMix64::new(3);
     let mut ray = || {
@@ -525,8 +525,8 @@ fn a_tiles_pyramid_culls_a_thin_box_and_keeps_it_where_a_ray_meets_it() {
 
 #[test]
 fn a_tiles_culled_field_is_the_whole_field_along_its_rays() {
-    use crate::bench::rng::SplitMix64;
     use crate::field::{Primitive, ShColor, Shape};
+    use crate::rng::SplitMix64;
     use glam::{DMat4, DQuat, DVec3};
 
     let mut rng = SplitMix64::new(5);
@@ -669,8 +669,8 @@ fn a_ray_lists_exactly_the_instances_it_meets() {
 /// after a fragment's drop in transmittance), every share of the pixel's alpha.
 #[test]
 fn a_cut_median_log_gives_the_full_logs_depth() {
-    use crate::bench::rng::SplitMix64;
     use crate::render::crossing_depth;
+    use crate::rng::SplitMix64;
 
     let mut rng = SplitMix64::new(11);
     let mut cut_short = 0;
@@ -751,8 +751,8 @@ fn the_step_rule_grows_only_where_a_curvature_allows_it() {
 /// surface, a box's corners and faces) all lie within it, and some reach nearly its radius.
 #[test]
 fn a_primitives_world_sphere_holds_its_support_and_no_more_than_needed() {
-    use crate::bench::rng::SplitMix64;
     use crate::field::{Primitive, ShColor, Shape};
+    use crate::rng::SplitMix64;
     use glam::{DMat4, DQuat, DVec3};
 
     let shapes = [

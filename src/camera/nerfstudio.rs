@@ -40,8 +40,8 @@ use super::{
     ShotCameraKind, ShotFrame, ShotStereo, StereoMode, Vr180, DEFAULT_IPD,
 };
 use crate::error::{Error, Result};
+use crate::field::CropBox;
 use crate::json::{self, numbers, short, Describe, Obj, Style};
-use crate::scene::CropBox;
 
 /// The sensor height used when a vertical FOV becomes a Blender lens (any value works: only
 /// `lens / sensor` matters).

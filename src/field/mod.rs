@@ -15,6 +15,7 @@
 mod aabb;
 mod analytic;
 mod container;
+mod crop;
 mod ingp;
 mod nerfacto;
 mod network;
@@ -25,6 +26,7 @@ mod srgb;
 pub use aabb::Aabb;
 pub use analytic::{Analytic, Primitive, ShColor, Shape};
 pub(crate) use analytic::{Anchor, Density, Line, Profile};
+pub use crop::{CropBox, CropClip};
 pub use ingp::{IngpField, NgpRay, NgpSample, NgpScratch, NgpStats, NGP_MAX_STEPS};
 pub use nerfacto::{
     DataparserTransform, NerfactoField, Piece, SamplerRay, SamplerScratch, SamplerStats,

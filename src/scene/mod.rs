@@ -12,14 +12,13 @@
 //! DESIGN's `C_t = N⁻¹ C_o` with renormalised directions, and depth comes out in world units
 //! for free — also when `N` carries non-uniform scale.
 
-mod crop;
 mod file;
 mod instance;
 mod ngp;
 mod proposal;
 mod splats;
 
-pub use crop::{CropBox, CropClip};
+pub use crate::field::{CropBox, CropClip};
 pub use file::{FieldSource, InstanceDesc, LoadedScene, Sampler, SceneDesc};
 pub use instance::{FieldHandle, Instance, LocalRay};
 pub use ngp::NgpInstance;

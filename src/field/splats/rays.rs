@@ -20,7 +20,7 @@ use rayon::prelude::*;
 use super::project::color;
 use super::raster::{Fragment, MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
 use super::Splats;
-use crate::scene::CropClip;
+use crate::field::CropClip;
 
 /// Direction cells: longitude × latitude.
 const CELLS_X: usize = 128;

@@ -3,11 +3,11 @@
 use glam::{DMat3, DVec3};
 use serde::{Deserialize, Serialize};
 
+use super::Line;
 use crate::error::{Error, Result};
-use crate::field::Line;
 
 /// An oriented box in field space (nerfstudio's `crop`): it clips rays, it does not mask
-/// density (DESIGN §3).
+/// density.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CropBox {
     /// Centre (`crop_center`).

@@ -1,5 +1,5 @@
 //! Synthetic instant-ngp snapshots with seeded weights, written from the format's facts
-//! (DESIGN §4): the benchmark's trained-field scenes and the loader's test fixtures come from
+//! (docs/src/architecture.md): the benchmark's trained-field scenes and the loader's test fixtures come from
 //! this one generator.
 //!
 //! A [`SnapshotSpec`] names the architecture (levels × features, table size, fp16 or f32,

@@ -11,7 +11,7 @@
 //!           "crop_bg_color": {"r": 0, "g": 0, "b": 0}}}
 //! ```
 //!
-//! Facts (DESIGN §3): `camera_to_world` is **row-major** (nested rows load too; a 3×4 form gets
+//! Facts (docs/src/architecture.md): `camera_to_world` is **row-major** (nested rows load too; a 3×4 form gets
 //! the row `0 0 0 1`); `fov` is the **vertical** field of view in degrees,
 //! `f = (H/2)/tan(fov/2)`, `fx = fy = f`, principal point at the image centre, and `aspect` is
 //! ignored. `keyframes[].matrix` is a string holding a **column-major** matrix; keyframes are

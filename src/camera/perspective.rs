@@ -8,7 +8,7 @@
 //! X = (x − cx) / fx,    Y = −(y − cy) / fy,    Z = −1
 //! ```
 //!
-//! For Blender (DESIGN §3, what `world_to_camera_view` does): with the pixel aspects clamped to
+//! For Blender (docs/src/architecture.md, what `world_to_camera_view` does): with the pixel aspects clamped to
 //! ≥ 1, `sizex = w·pa_x`, `sizey = h·pa_y`; the fit is horizontal when set so or when AUTO and
 //! `sizex ≥ sizey`; the sensor length is `sensor_height` only for an explicit VERTICAL fit;
 //! `ycor = pa_y/pa_x`; `viewfac = w` (horizontal fit) or `ycor·h`; `s = sensor/(lens·viewfac)`.
@@ -293,7 +293,7 @@ impl Perspective {
 mod tests {
     use super::*;
 
-    /// The image's extent at camera depth 1, written out from DESIGN §3 in its own terms
+    /// The image's extent at camera depth 1, written out from docs/src/architecture.md in its own terms
     /// (`[xmin, xmax] × [ymin, ymax]`), independently of the fx/cx form used by the code.
     fn blender_bounds(b: &BlenderIntrinsics) -> (f64, f64, f64, f64, f64, f64) {
         let w = (b.resolution_x * b.resolution_percentage / 100) as f64;

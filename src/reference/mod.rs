@@ -6,7 +6,7 @@
 //! become intervals of world distance ([`ReferenceScene`]); a sweep over their sorted ends
 //! integrates each piece exactly — constant densities in closed form, Gaussian blobs with a
 //! closed-form (erf) optical depth and adaptive Gauss–Kronrod quadrature for colour and
-//! depth. The physics is DESIGN §5 taken to the limit of zero step size:
+//! depth. The physics is the rendering rules of docs/src/architecture.md taken to the limit of zero step size:
 //! `C = ∫ T(t) Σₖ σₖ(t) cₖ dt`, `T(t) = exp(−∫₀ᵗ σ)`, `A = 1 − T(∞)`, expected depth
 //! `∫ t σ T dt / A`, median depth where `1 − T(t) = A/2`.
 //!

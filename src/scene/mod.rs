@@ -9,7 +9,7 @@
 //! Why world units: with `field_from_world = N⁻¹`, a world ray `o + t·d` (|d| = 1) maps to
 //! `N⁻¹o + t·N⁻¹d`. With `k = |N⁻¹d|` the local unit direction is `N⁻¹d / k` and the local
 //! distance is `u = k·t`; a local density σ per field unit is `k·σ` per world unit. This is
-//! DESIGN's `C_t = N⁻¹ C_o` with renormalised directions, and depth comes out in world units
+//! the alignment `C_t = N⁻¹ C_o` with renormalised directions, and depth comes out in world units
 //! for free — also when `N` carries non-uniform scale.
 
 mod file;

@@ -1,5 +1,5 @@
 //! A writer of small nerfstudio nerfacto runs with seeded weights, written from the format
-//! facts (torch's zip layout, pickle protocol 2, nerfstudio's state-dict keys; DESIGN §4),
+//! facts (torch's zip layout, pickle protocol 2, nerfstudio's state-dict keys; docs/src/architecture.md),
 //! for the loader's tests and the NumPy cross-check: `config.yml`,
 //! `dataparser_transforms.json` and `nerfstudio_models/step-<n>.ckpt`.
 #![allow(dead_code)]

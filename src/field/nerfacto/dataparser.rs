@@ -5,7 +5,7 @@
 //! {"transform": [[r00, r01, r02, t0], [r10, r11, r12, t1], [r20, r21, r22, t2]], "scale": 0.25}
 //! ```
 //!
-//! `x_ns = s·(T·x + t)` (DESIGN §3): the 3×4 `[T | t]` is applied first, then the uniform
+//! `x_ns = s·(T·x + t)` (docs/src/architecture.md): the 3×4 `[T | t]` is applied first, then the uniform
 //! scale `s`. As one matrix, `ns_from_data = diag(s, s, s, 1)·[T t; 0 1]`. A camera from the
 //! data's frame (`data_from_camera`) lands in the field's frame as
 //! `ns_from_data · data_from_camera`; its rotation then carries the scale `s`, which

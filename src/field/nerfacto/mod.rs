@@ -2,7 +2,7 @@
 //! `dataparser_transforms.json` and `nerfstudio_models/step-*.ckpt` (the highest step).
 //!
 //! **Frame.** The field is queried in nerfstudio's normalised frame, the frame `ns-render`
-//! renders in and `ns-export` writes stand-ins in (DESIGN §3); the dataparser transform is
+//! renders in and `ns-export` writes stand-ins in (docs/src/architecture.md); the dataparser transform is
 //! read and kept ([`NerfactoField::dataparser`]) to map data-frame cameras into it.
 //!
 //! **Evaluation** (nerfacto's field at inference). A point `x` is contracted (L∞):

@@ -146,7 +146,8 @@ fn write_through(
 }
 
 /// Creates an empty temporary file in `dir` named after `target` (`.<name>.<pid>.<n>.partial`),
-/// unique across processes and threads. A folder that refuses it is named in the error.
+/// unique across processes and threads. A folder that is missing or refuses it is named in
+/// the I/O error, which keeps the cause's kind.
 fn create_temporary(dir: &Path, target: &Path, path: &Path) -> Result<PathBuf> {
     static NEXT: AtomicU64 = AtomicU64::new(0);
     let name = target
@@ -164,21 +165,17 @@ fn create_temporary(dir: &Path, target: &Path, path: &Path) -> Result<PathBuf> {
             Ok(_) => return Ok(temp),
             Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
             Err(e) if e.kind() == io::ErrorKind::NotFound => {
-                return Err(Error::invalid(
-                    format!("output {}", path.display()),
-                    format!("folder {} does not exist", dir.display()),
-                ))
+                let why = format!("folder {} does not exist", dir.display());
+                return Err(Error::io(path, io::Error::new(e.kind(), why)));
             }
             Err(e) if e.kind() == io::ErrorKind::PermissionDenied => {
-                return Err(Error::invalid(
-                    format!("output {}", path.display()),
-                    format!(
-                        "folder {} is not writable: nerfx writes a temporary file beside the \
-                         output and renames it into place, so the folder must allow new files \
-                         (the output file's own permissions are not enough)",
-                        dir.display()
-                    ),
-                ))
+                let why = format!(
+                    "folder {} is not writable: nerfx writes a temporary file beside the \
+                     output and renames it into place, so the folder must allow new files \
+                     (the output file's own permissions are not enough)",
+                    dir.display()
+                );
+                return Err(Error::io(path, io::Error::new(e.kind(), why)));
             }
             Err(e) => return Err(Error::io(dir, e)),
         }

@@ -763,3 +763,183 @@ fn write_case_input() {
 fn regression_scene_gaussian_cutoff_of_two_billion() {
     replay("scene JSON", 113);
 }
+
+// ---------------------------------------------------------------------------------------
+// Inflate bombs: small files claiming gigabytes.
+
+/// Runs `f` with no case running beside it; returns its result and the most it held at once
+/// beyond what was alive before.
+fn peak_of<R>(f: impl FnOnce() -> R) -> (R, usize) {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(PoisonError::into_inner);
+    let before = LIVE.load(Ordering::SeqCst);
+    PEAK.store(before, Ordering::SeqCst);
+    let r = f();
+    (r, PEAK.load(Ordering::SeqCst).saturating_sub(before))
+}
+
+/// A snapshot of `spec` with its top-level entries in `order` (the snapshot first or last)
+/// and its `params_binary` replaced by a header declaring `claimed` bytes followed by
+/// `written` zero bytes, gzip-framed as it is written (nothing of that size is held here).
+fn params_bomb(
+    spec: &common_ingp::Spec,
+    snapshot_first: bool,
+    claimed: u32,
+    written: usize,
+) -> Vec<u8> {
+    let bytes = common_ingp::snapshot_bytes(spec);
+    let rmpv::Value::Map(mut top) = rmpv::decode::read_value(&mut &bytes[..]).unwrap() else {
+        panic!("a snapshot is a map");
+    };
+    let marker = vec![0xA5u8; 13];
+    for (k, v) in &mut top {
+        if k.as_str() == Some("snapshot") {
+            let rmpv::Value::Map(snap) = v else {
+                panic!("snapshot is a map")
+            };
+            for (k, v) in snap {
+                if k.as_str() == Some("params_binary") {
+                    *v = rmpv::Value::Binary(marker.clone());
+                }
+            }
+        }
+    }
+    top.sort_by_key(|(k, _)| (k.as_str() == Some("snapshot")) != snapshot_first);
+    let mut encoded = Vec::new();
+    rmpv::encode::write_value(&mut encoded, &rmpv::Value::Map(top)).unwrap();
+    let mut needle = vec![0xc4, 13];
+    needle.extend(&marker);
+    let at = encoded
+        .windows(needle.len())
+        .position(|w| w == needle)
+        .unwrap();
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    gz.write_all(&encoded[..at]).unwrap();
+    gz.write_all(&[0xc6]).unwrap();
+    gz.write_all(&claimed.to_be_bytes()).unwrap();
+    let zeros = vec![0u8; 1 << 20];
+    let mut left = written;
+    while left > 0 {
+        let n = left.min(zeros.len());
+        gz.write_all(&zeros[..n]).unwrap();
+        left -= n;
+    }
+    gz.write_all(&encoded[at + needle.len()..]).unwrap();
+    gz.finish().unwrap()
+}
+
+fn small_snapshot() -> common_ingp::Spec {
+    common_ingp::Spec {
+        n_cascades: 1,
+        log2_table_size: 10,
+        gzip: false,
+        ..common_ingp::Spec::small_8x4()
+    }
+}
+
+/// A gzip snapshot whose parameters claim 3 GiB after the configuration that says they hold
+/// a few hundred kilobytes: refused at the header, holding next to nothing.
+#[test]
+fn ingp_params_claiming_gigabytes_are_refused_at_their_header() {
+    let bomb = params_bomb(&small_snapshot(), false, 3 << 30, 1 << 20);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bomb.ingp");
+    write(&path, &bomb);
+    let (r, peak) = peak_of(|| nerfx::field::IngpField::load(&path).map(|_| ()));
+    let e = r.unwrap_err().to_string();
+    assert!(
+        e.contains("bomb.ingp") && e.contains("snapshot.params_binary") && e.contains("3221225472"),
+        "{e}"
+    );
+    assert!(peak < 4 << 20, "held {peak} bytes to refuse it");
+}
+
+/// The same with the snapshot written before its configuration: its binaries are read past
+/// (never held), then refused against the configuration read after them.
+#[test]
+fn ingp_params_before_their_configuration_are_bounded_too() {
+    let bomb = params_bomb(&small_snapshot(), true, 48 << 20, 48 << 20);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bomb.ingp");
+    write(&path, &bomb);
+    let (r, peak) = peak_of(|| nerfx::field::IngpField::load(&path).map(|_| ()));
+    let e = r.unwrap_err().to_string();
+    assert!(
+        e.contains("snapshot.params_binary") && e.contains("more than the network"),
+        "{e}"
+    );
+    assert!(peak < 16 << 20, "held {peak} bytes to refuse it");
+}
+
+/// A valid snapshot with its binaries before its configuration loads as the same field.
+#[test]
+fn ingp_snapshot_before_its_configuration_loads_the_same() {
+    // Its allocations would count in the bombs' peaks.
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(PoisonError::into_inner);
+    let spec = common_ingp::Spec {
+        log2_table_size: 17,
+        ..small_snapshot()
+    };
+    let bytes = common_ingp::snapshot_bytes(&spec);
+    let rmpv::Value::Map(mut top) = rmpv::decode::read_value(&mut &bytes[..]).unwrap() else {
+        panic!("a snapshot is a map");
+    };
+    top.sort_by_key(|(k, _)| k.as_str() != Some("snapshot"));
+    let mut reordered = Vec::new();
+    rmpv::encode::write_value(&mut reordered, &rmpv::Value::Map(top)).unwrap();
+    assert_ne!(reordered, bytes);
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a.msgpack"), dir.path().join("b.msgpack"));
+    write(&a, &bytes);
+    write(&b, &reordered);
+    let (fa, fb) = (
+        nerfx::field::IngpField::load(&a).unwrap(),
+        nerfx::field::IngpField::load(&b).unwrap(),
+    );
+    let points: Vec<glam::Vec3> = (0..64)
+        .map(|i| glam::Vec3::new(i as f32 / 64.0 - 0.5, 0.1, -0.2))
+        .collect();
+    use nerfx::field::Field;
+    let (mut sa, mut sb) = (vec![0.0; 64], vec![0.0; 64]);
+    fa.density(&points, &mut sa);
+    fb.density(&points, &mut sb);
+    assert_eq!(sa, sb);
+    assert_eq!(fa.bounds(), fb.bounds());
+}
+
+/// A checkpoint's deflated storage declaring more than deflate can expand its bytes to, and
+/// one declaring more than its tensor's storage holds: both refused before inflating.
+#[test]
+fn checkpoint_entries_declaring_more_than_they_can_hold_are_refused() {
+    let f = fixtures();
+    let ckpt = &f.runs[0][2];
+    // The largest storage entry: its declared size (central directory and local header)
+    // raised by a factor of 4096.
+    let dir = tempfile::tempdir().unwrap();
+    let mut bytes = ckpt.clone();
+    let mut patched = 0;
+    let mut at = 0;
+    while let Some(p) = bytes[at..]
+        .windows(4)
+        .position(|w| w == [0x50, 0x4b, 0x01, 0x02])
+    {
+        let cd = at + p;
+        let name_len = u16::from_le_bytes([bytes[cd + 28], bytes[cd + 29]]) as usize;
+        let name = String::from_utf8_lossy(&bytes[cd + 46..cd + 46 + name_len]).to_string();
+        if name.contains("/data/") {
+            let size = u32::from_le_bytes(bytes[cd + 24..cd + 28].try_into().unwrap());
+            let big = (size.max(1) as u64 * 4096).min(u32::MAX as u64 - 1) as u32;
+            bytes[cd + 24..cd + 28].copy_from_slice(&big.to_le_bytes());
+            let local = u32::from_le_bytes(bytes[cd + 42..cd + 46].try_into().unwrap()) as usize;
+            bytes[local + 22..local + 26].copy_from_slice(&big.to_le_bytes());
+            patched += 1;
+        }
+        at = cd + 4;
+    }
+    assert!(patched > 0);
+    let (r, peak) = peak_of(|| run_with(f, 0, dir.path(), 2, &bytes));
+    let Ok(Refused(e)) = r else {
+        panic!("accepted: {r:?}")
+    };
+    assert!(e.contains("declares") && e.contains("more than"), "{e}");
+    assert!(peak < 64 << 20, "held {peak} bytes");
+}

@@ -174,11 +174,12 @@ impl Checkpoint {
             .get(name)
             .ok_or_else(|| Error::format(path, name, "tensor missing from the checkpoint"))?;
         let entry = format!("{}data/{}", self.prefix, t.storage);
-        let data = self.zip.read(&entry)?.ok_or_else(|| {
+        let es = t.dtype.size();
+        let needed = t.storage_numel as u64 * es as u64;
+        let data = self.zip.read_at_most(&entry, needed)?.ok_or_else(|| {
             Error::format(path, name, format!("storage entry '{entry}' is missing"))
         })?;
-        let es = t.dtype.size();
-        if (data.len() as u64) < t.storage_numel as u64 * es as u64 {
+        if (data.len() as u64) < needed {
             return Err(Error::format(
                 path,
                 name,
@@ -733,6 +734,15 @@ impl<'a> Machine<'a> {
                 )));
             }
         }
+        // Each element is read into memory: never more than the storage really holds.
+        let numel = shape.iter().try_fold(1usize, |a, &n| a.checked_mul(n));
+        if numel.is_none_or(|n| n > s.2) {
+            return Err(self.err(format!(
+                "tensor of shape {shape:?} has more elements than its storage of {} (a view \
+                 that repeats elements is not a saved parameter)",
+                s.2
+            )));
+        }
         Ok(Value::Tensor(TensorInfo {
             dtype: s.0,
             shape,
@@ -779,6 +789,24 @@ mod tests {
         s(&mut p, "ok");
         p.extend([0x88, b'u', b'.']);
         p
+    }
+
+    #[test]
+    fn a_view_holding_more_elements_than_its_storage_is_refused() {
+        // Shape 20 x 30 with strides 0 over a storage of 8: 600 elements read from 8.
+        let mut bytes = pickle();
+        let shape = [b'K', 2, b'K', 3, 0x86, b'K', 1, b'K', 2, 0x86];
+        let at = bytes.windows(shape.len()).position(|w| w == shape).unwrap();
+        bytes[at..at + shape.len()]
+            .copy_from_slice(&[b'K', 20, b'K', 30, 0x86, b'K', 0, b'K', 0, 0x86]);
+        let e = Machine::new(Path::new("t.ckpt"), &bytes)
+            .run()
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("t.ckpt") && e.contains("more elements than its storage of 8"),
+            "{e}"
+        );
     }
 
     #[test]

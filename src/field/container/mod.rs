@@ -8,5 +8,5 @@ mod ply;
 mod zip;
 
 pub(crate) use checkpoint::{Checkpoint, DType};
-pub(crate) use msgpack::{read_document, Doc};
+pub(crate) use msgpack::{read_document, Doc, Payload, PayloadKind, Verdict};
 pub(crate) use ply::{Ply, Property};

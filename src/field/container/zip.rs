@@ -64,20 +64,27 @@ impl Zip {
 
     /// The contents of entry `name`, CRC-checked; `None` when there is no such entry.
     pub(crate) fn read(&self, name: &str) -> Result<Option<Vec<u8>>> {
+        self.read_at_most(name, u64::MAX)
+    }
+
+    /// The contents of entry `name`, CRC-checked, refused before a byte is inflated when its
+    /// directory declares more than `most` bytes (what its reader can use) or more than its
+    /// compressed bytes can inflate to; `None` when there is no such entry.
+    pub(crate) fn read_at_most(&self, name: &str, most: u64) -> Result<Option<Vec<u8>>> {
         let Some(index) = self.archive.index_for_name(name) else {
             return Ok(None);
         };
         let what = format!("entry '{name}'");
         // A clone shares the bytes and the parsed directory; it only has its own position.
         let mut archive = self.archive.clone();
-        let (method, size, end) = {
+        let (method, size, end, packed) = {
             let raw = archive
                 .by_index_raw(index)
                 .map_err(|e| corrupt(&self.path, &what, e))?;
             let end = raw
                 .data_start()
                 .and_then(|start| start.checked_add(raw.compressed_size()));
-            (raw.compression(), raw.size(), end)
+            (raw.compression(), raw.size(), end, raw.compressed_size())
         };
         if !matches!(
             method,
@@ -94,6 +101,25 @@ impl Zip {
                 &self.path,
                 &what,
                 "zip archive truncated: the entry runs past the end of the file",
+            ));
+        }
+        if size > most {
+            return Err(Error::format(
+                &self.path,
+                &what,
+                format!("the directory declares {size} bytes, more than the {most} it can hold"),
+            ));
+        }
+        if method == CompressionMethod::Deflated
+            && size > packed.saturating_mul(MAX_DEFLATE_RATIO).saturating_add(64)
+        {
+            return Err(Error::format(
+                &self.path,
+                &what,
+                format!(
+                    "the directory declares {size} bytes, more than its {packed} deflated \
+                     bytes can inflate to (deflate expands at most {MAX_DEFLATE_RATIO}-fold)"
+                ),
             ));
         }
         let entry = archive
@@ -116,6 +142,9 @@ impl Zip {
         Ok(Some(data))
     }
 }
+
+/// The most deflate expands its input: a 258-byte match in as little as 2 bits, 1032-fold.
+const MAX_DEFLATE_RATIO: u64 = 1032;
 
 /// A compression method's name and number (APPNOTE 4.4.5), for messages.
 fn method_name(method: CompressionMethod) -> String {
@@ -251,6 +280,39 @@ mod tests {
         let bytes = archive_with(&[("a/data/0", 8, raw, &data)]);
         let z = Zip::from_bytes(Path::new("x.ckpt"), bytes).unwrap();
         assert_eq!(z.read("a/data/0").unwrap().unwrap(), data);
+    }
+
+    #[test]
+    fn entries_declaring_more_than_they_can_hold_are_refused_before_inflating() {
+        let data = vec![0u8; 5000];
+        let mut enc = flate2::write::DeflateEncoder::new(Vec::new(), flate2::Compression::best());
+        std::io::Write::write_all(&mut enc, &data).unwrap();
+        let raw = enc.finish().unwrap();
+        // More than the reader can use.
+        let bytes = archive_with(&[("a/data/0", 8, raw.clone(), &data)]);
+        let z = Zip::from_bytes(Path::new("x.ckpt"), bytes).unwrap();
+        let e = z.read_at_most("a/data/0", 4999).unwrap_err().to_string();
+        assert!(
+            e.contains("a/data/0") && e.contains("declares 5000 bytes"),
+            "{e}"
+        );
+        assert_eq!(z.read_at_most("a/data/0", 5000).unwrap().unwrap(), data);
+        // More than deflate expands its bytes to: the sizes claim a 4 GiB - 1 entry.
+        let mut bytes = archive_with(&[("a/data/0", 8, raw.clone(), &data)]);
+        for sig in [0x0403_4b50u32, 0x0201_4b50] {
+            let at = bytes
+                .windows(4)
+                .position(|w| w == sig.to_le_bytes())
+                .unwrap();
+            let size = if sig == 0x0403_4b50 { at + 22 } else { at + 24 };
+            bytes[size..size + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+        }
+        let z = Zip::from_bytes(Path::new("x.ckpt"), bytes).unwrap();
+        let e = z.read("a/data/0").unwrap_err().to_string();
+        assert!(
+            e.contains("more than its") && e.contains("1032-fold"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -29,7 +29,7 @@ use rmpv::Value;
 mod cascades;
 mod marcher;
 
-use super::container::{read_document, Doc};
+use super::container::{read_document, Doc, Payload, PayloadKind, Verdict};
 use super::network::{
     correctly_rounded, exp_density, non_finite, sh4, HashGrid, HashGridConfig, LastInputs, Mlp,
     MlpConfig, TableStorage,
@@ -147,8 +147,8 @@ impl IngpField {
 
     /// Loads a snapshot with its hash tables in `storage` (`None`: as saved).
     pub fn load_with(path: &Path, storage: Option<TableStorage>) -> Result<Self> {
-        let (top, gzip) = read_document(path)?;
         let doc = Doc { path };
+        let (top, gzip) = read_bounded(&doc)?;
         let snap = doc.get(&top, "", "snapshot")?;
         let version = match doc.find(snap, "version") {
             Some(v) => v.as_u64().unwrap_or(0),
@@ -383,6 +383,102 @@ impl IngpField {
             self.cascades.fill_ratio(),
         )
     }
+}
+
+/// The most bytes instant-ngp's density grid holds: 128³ fp16 values for each of at most 8
+/// cascades (`NERF_CASCADES`, reached at aabb_scale 128).
+const MAX_DENSITY_GRID_BYTES: u64 = (cascades::GRID as u64).pow(3) * 8 * 2;
+/// A binary this long is kept before the configuration that bounds it has been read.
+const SMALL_BINARY: u64 = 1 << 20;
+/// The longest text a snapshot holds (names, paths).
+const MAX_STRING: u64 = 64 << 10;
+
+/// The snapshot at `doc.path`, decoded with every binary bounded by what its field can hold
+/// before a byte of it is read: the density grid by 128³ × 8 cascades in fp16, any other
+/// binary (the parameters, an optimiser's moments) by the parameters of the network the
+/// configuration describes in single precision. instant-ngp writes the configuration before
+/// the snapshot; a file with its binaries first is decoded twice, the first time reading
+/// past them, so that nothing longer than its bound is ever held.
+fn read_bounded(doc: &Doc) -> Result<(Value, bool)> {
+    let first = read_document(doc.path, &mut |p| judge(doc, p, p.top))?;
+    if first.skipped.is_empty() {
+        return Ok((first.top, first.gzip));
+    }
+    let Some(top) = first.top.as_map() else {
+        return Err(doc.err("top level", "not a map of keys"));
+    };
+    for (at, len) in &first.skipped {
+        if let Verdict::Refuse(why) = judge_with_config(doc, *len, top)? {
+            return Err(doc.err(at, why));
+        }
+    }
+    let second = read_document(doc.path, &mut |p| judge(doc, p, top))?;
+    Ok((second.top, second.gzip))
+}
+
+/// What to do with a payload, given the top-level entries known (`top`).
+fn judge(doc: &Doc, p: &Payload, top: &[(Value, Value)]) -> Verdict {
+    match p.kind {
+        PayloadKind::String if p.len > MAX_STRING => Verdict::Refuse(format!(
+            "a string of {} bytes: no snapshot key holds text longer than {} KiB",
+            p.len,
+            MAX_STRING >> 10
+        )),
+        PayloadKind::String => Verdict::Keep,
+        _ if p.at == "snapshot.density_grid_binary" => {
+            if p.len > MAX_DENSITY_GRID_BYTES {
+                Verdict::Refuse(format!(
+                    "{} bytes, more than the density grid holds (128^3 cells x 8 cascades x 2                      bytes = {MAX_DENSITY_GRID_BYTES})",
+                    p.len
+                ))
+            } else {
+                Verdict::Keep
+            }
+        }
+        _ if p.len <= SMALL_BINARY => Verdict::Keep,
+        _ => {
+            let config = ["encoding", "network", "rgb_network"];
+            let known = config
+                .iter()
+                .all(|k| top.iter().any(|(key, _)| key.as_str() == Some(*k)));
+            if !known {
+                return Verdict::Skip;
+            }
+            // A configuration that does not load is reported as such after decoding.
+            judge_with_config(doc, p.len, top).unwrap_or(Verdict::Skip)
+        }
+    }
+}
+
+/// Whether a binary of `len` bytes fits the parameters of the network `top` configures.
+fn judge_with_config(doc: &Doc, len: u64, top: &[(Value, Value)]) -> Result<Verdict> {
+    let config: Vec<(Value, Value)> = top
+        .iter()
+        .filter(|(k, _)| {
+            matches!(
+                k.as_str(),
+                Some("encoding" | "network" | "rgb_network" | "dir_encoding")
+            )
+        })
+        .cloned()
+        .collect();
+    let layout = read_layout(doc, &Value::Map(config), 1.0)?;
+    let most = layout.density.n_params()
+        + MlpConfig {
+            output_alignment: 16,
+            ..layout.rgb
+        }
+        .n_params()
+        + layout.grid.n_params();
+    let bound = most as u64 * 4;
+    Ok(if len > bound {
+        Verdict::Refuse(format!(
+            "{len} bytes, more than the network the snapshot configures can hold ({most} \
+             parameters x 4 bytes = {bound})"
+        ))
+    } else {
+        Verdict::Keep
+    })
 }
 
 /// Whether the parameters are `__half` and whether the rgb MLP's output is padded to 8

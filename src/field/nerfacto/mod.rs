@@ -549,11 +549,22 @@ pub(crate) fn latest_checkpoint(dir: &Path) -> Result<(PathBuf, u64)> {
     for entry in entries {
         let path = entry.map_err(|e| Error::io(dir, e))?.path();
         let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
-        let step = name
+        let digits = name
             .strip_prefix("step-")
             .and_then(|n| n.strip_suffix(".ckpt"))
-            .and_then(|n| n.parse::<u64>().ok());
-        if let Some(step) = step {
+            .filter(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()));
+        if let Some(digits) = digits {
+            // Skipping a checkpoint whose step is too large would load an older one.
+            let step = digits.parse::<u64>().map_err(|_| {
+                Error::format(
+                    &path,
+                    "",
+                    format!(
+                        "the step {digits} does not fit 64 bits, so which checkpoint is the \
+                         latest cannot be told: rename it or move it out of nerfstudio_models"
+                    ),
+                )
+            })?;
             if best.as_ref().is_none_or(|(b, _)| step > *b) {
                 best = Some((step, path));
             }
@@ -1086,6 +1097,25 @@ impl Field for NerfactoField {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_checkpoint_step_past_64_bits_is_refused_not_skipped() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in ["step-000000100.ckpt", "step-99999999999999999999999.ckpt"] {
+            std::fs::write(dir.path().join(name), b"").unwrap();
+        }
+        let e = latest_checkpoint(dir.path()).unwrap_err().to_string();
+        assert!(
+            e.contains("step-99999999999999999999999.ckpt") && e.contains("does not fit 64 bits"),
+            "{e}"
+        );
+        std::fs::remove_file(dir.path().join("step-99999999999999999999999.ckpt")).unwrap();
+        let (path, step) = latest_checkpoint(dir.path()).unwrap();
+        assert_eq!(
+            (path.file_name().unwrap(), step),
+            ("step-000000100.ckpt".as_ref(), 100)
+        );
+    }
 
     #[test]
     fn contraction_follows_the_formula() {

@@ -160,7 +160,8 @@ impl Splats {
 
     /// Activates and appends one splat as stored (log scales, `w x y z` quaternion, opacity
     /// logit, coefficient-major colour); `false` (nothing appended) when a value is not finite
-    /// or the quaternion is zero.
+    /// or the quaternion is zero. An infinite logit is the opacity 0 or 1 it stands for (what
+    /// tools write for a quantised opacity of 0 or 255).
     pub(super) fn push(
         &mut self,
         mean: Vec3,
@@ -169,7 +170,7 @@ impl Splats {
         logit: f32,
         coefficients: &[f32],
     ) -> bool {
-        if !logit.is_finite() {
+        if logit.is_nan() {
             return false;
         }
         let opacity = 1.0 / (1.0 + (-logit).exp());
@@ -179,7 +180,7 @@ impl Splats {
     /// Appends one splat given with linear scales and an opacity in [0, 1] (the quaternion
     /// `w x y z`, normalised here); `false` (nothing appended) when a value is not finite, the
     /// opacity is outside [0, 1] or the quaternion is zero.
-    pub(super) fn push_activated(
+    pub fn push_activated(
         &mut self,
         mean: Vec3,
         scale: Vec3,

@@ -279,7 +279,7 @@ mod tests {
 
     #[test]
     fn packed_words_unpack_in_their_bit_order() {
-        let v = (2047 << 21) | (512 << 11) | 0;
+        let v = (2047 << 21) | (512 << 11);
         let t = unpack_11_10_11(v);
         assert_eq!(t.x, 1.0);
         assert!((t.y - 512.0 / 1023.0).abs() < 1e-7);

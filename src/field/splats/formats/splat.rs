@@ -40,7 +40,7 @@ fn from_reader(path: &Path, mut reader: impl Read, len: u64) -> Result<Splats> {
             "is empty: a .splat holds 32 bytes a splat",
         ));
     }
-    if len % RECORD as u64 != 0 {
+    if !len.is_multiple_of(RECORD as u64) {
         return Err(Error::format(
             path,
             format!("splat {}", len / RECORD as u64),

@@ -397,8 +397,8 @@ fn decode(h: Header, p: Packed) -> Result<Splats> {
             first_three([r[0], r[1], r[2]])
         };
         let opacity = f32::from(p.alphas[i]) / 255.0;
-        for c in 0..3 {
-            coeffs[c] = (f32::from(p.colors[3 * i + c]) / 255.0 - 0.5) / COLOR_SCALE;
+        for (k, c) in coeffs[..3].iter_mut().zip(&p.colors[3 * i..3 * i + 3]) {
+            *k = (f32::from(*c) / 255.0 - 0.5) / COLOR_SCALE;
         }
         let sh = &p.sh[3 * dim * i..3 * dim * (i + 1)];
         for k in 0..kept {

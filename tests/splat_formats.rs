@@ -94,6 +94,50 @@ fn psnr(a: &Planes, b: &Planes) -> f64 {
     }
 }
 
+/// `name` read by nerfx against splat-transform's decoding `name.decoded.ply` in `dir`:
+/// the largest differences and the render's PSNR.
+fn check_against_decoding(dir: &Path, name: &str, axes: Axes) -> ([f32; 5], f64) {
+    let file = dir.join(name);
+    let ours = Splats::load(&file).unwrap().into_ply_frame(axes);
+    let mut theirs = Splats::load(&dir.join(format!("{name}.decoded.ply"))).unwrap();
+    assert_eq!(ours.dropped, 0, "{name}");
+    if ours.source.format == SplatFormat::Splat {
+        // splat-transform centres rotation bytes at 127.5; antimatter15's viewer, and the
+        // viewers after it, at 128: `(q − 128)/128`. Take the rotations from the bytes so.
+        let bytes = std::fs::read(&file).unwrap();
+        for (i, r) in bytes.chunks_exact(32).enumerate() {
+            let q = [28, 29, 30, 31].map(|k| (f32::from(r[k]) - 128.0) / 128.0);
+            theirs.rotations[i] = Quat::from_xyzw(q[1], q[2], q[3], q[0]).normalize();
+        }
+    }
+    let d = differences(&ours, &theirs);
+    let db = psnr(
+        &render_splats(&ours, &theirs),
+        &render_splats(&theirs, &theirs),
+    );
+    println!(
+        "{name}: {} splats; means {:.1e}, scales {:.1e} (relative), rotations {:.1e}, \
+         opacities {:.1e}, coefficients {:.1e}; render {db:.1} dB",
+        ours.len(),
+        d[0],
+        d[1],
+        d[2],
+        d[3],
+        d[4]
+    );
+    (d, db)
+}
+
+fn assert_matches(name: &str, (d, db): ([f32; 5], f64)) {
+    // splat-transform computes in f64 and stores f32; the opacity crosses a logit.
+    assert!(d[0] <= 1e-5, "{name}: means differ by {}", d[0]);
+    assert!(d[1] <= 1e-4, "{name}: scales differ by {}", d[1]);
+    assert!(d[2] <= 1e-5, "{name}: rotations differ by {}", d[2]);
+    assert!(d[3] <= 1e-5, "{name}: opacities differ by {}", d[3]);
+    assert!(d[4] <= 1e-4, "{name}: coefficients differ by {}", d[4]);
+    assert!(db >= 60.0, "{name}: {db:.1} dB");
+}
+
 /// Each encoding read by nerfx against splat-transform's decoding of it.
 #[test]
 fn encodings_equal_splat_transforms_decoding_and_render_alike() {
@@ -126,37 +170,43 @@ fn encodings_equal_splat_transforms_decoding_and_render_alike() {
         ),
     ];
     for (name, format, version, degree, axes) in cases {
-        let ours = Splats::load(&data(name)).unwrap().into_ply_frame(axes);
-        let mut theirs = Splats::load(&data(&format!("{name}.decoded.ply"))).unwrap();
-        if format == SplatFormat::Splat {
-            // splat-transform centres rotation bytes at 127.5; antimatter15's viewer, and the
-            // viewers after it, at 128: `(q − 128)/128`. Take the rotations from the bytes so.
-            let bytes = std::fs::read(data(name)).unwrap();
-            for (i, r) in bytes.chunks_exact(32).enumerate() {
-                let q = [28, 29, 30, 31].map(|k| (f32::from(r[k]) - 128.0) / 128.0);
-                theirs.rotations[i] = Quat::from_xyzw(q[1], q[2], q[3], q[0]).normalize();
-            }
-        }
+        let ours = Splats::load(&data(name)).unwrap();
         assert_eq!(ours.source.format, format, "{name}");
         assert_eq!(ours.source.version, version, "{name}");
         assert_eq!(ours.color, SplatColor::Sh { degree }, "{name}");
         assert_eq!((ours.len(), ours.dropped), (512, 0), "{name}");
-        let d = differences(&ours, &theirs);
-        println!("{name}: means {:.1e}, scales {:.1e} (relative), rotations {:.1e}, opacities {:.1e}, coefficients {:.1e}", d[0], d[1], d[2], d[3], d[4]);
-        // splat-transform computes in f64 and stores f32; the opacity crosses a logit
-        // (clamped at 1e-6 from 0 and 1 for .splat).
-        assert!(d[0] <= 1e-5, "{name}: means differ by {}", d[0]);
-        assert!(d[1] <= 1e-4, "{name}: scales differ by {}", d[1]);
-        assert!(d[2] <= 1e-5, "{name}: rotations differ by {}", d[2]);
-        assert!(d[3] <= 1e-5, "{name}: opacities differ by {}", d[3]);
-        assert!(d[4] <= 1e-4, "{name}: coefficients differ by {}", d[4]);
-        let db = psnr(
-            &render_splats(&ours, &theirs),
-            &render_splats(&theirs, &theirs),
-        );
-        println!("{name}: render {db:.1} dB");
-        assert!(db >= 60.0, "{name}: {db:.1} dB");
+        assert_matches(name, check_against_decoding(&data(""), name, axes));
     }
+}
+
+/// Whole real captures, which are too large to keep here: every file `NAME` in the folder
+/// `NERFX_REAL_SPLATS` names that has a `NAME.decoded.ply` beside it (splat-transform's
+/// decoding). `NERFX_REAL_SPLATS=dir cargo test --test splat_formats -- --ignored`.
+#[test]
+#[ignore]
+fn real_captures_equal_splat_transforms_decoding() {
+    let Some(dir) = std::env::var_os("NERFX_REAL_SPLATS").map(PathBuf::from) else {
+        panic!("NERFX_REAL_SPLATS names no folder");
+    };
+    let mut checked = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let name = entry.unwrap().file_name().to_string_lossy().into_owned();
+        if name.ends_with(".decoded.ply") || !dir.join(format!("{name}.decoded.ply")).is_file() {
+            continue;
+        }
+        let axes = if name.ends_with(".spz") {
+            Axes::Rub
+        } else {
+            Axes::Stored
+        };
+        assert_matches(&name, check_against_decoding(&dir, &name, axes));
+        checked += 1;
+    }
+    assert!(
+        checked > 0,
+        "no NAME with a NAME.decoded.ply in {}",
+        dir.display()
+    );
 }
 
 /// splat-transform 2.7.1 writes SPZ in RUB, y and z flipped from the PLY it was given (and

@@ -482,3 +482,205 @@ fn every_format_is_described_by_name() {
     }
     let _ = Path::new(".");
 }
+
+// ---------------------------------------------------------------------------------------
+// Bad input: a clear error naming the file and the element or image, never a panic.
+
+/// The error loading `bytes` as the file `name` (in a fresh folder).
+fn error_of(name: &str, bytes: &[u8]) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join(name);
+    std::fs::write(&path, bytes).unwrap();
+    match Splats::load(&path) {
+        Ok(s) => panic!("{name} loaded {} splats", s.len()),
+        Err(e) => e.to_string(),
+    }
+}
+
+/// `sog` (a zip) with the entries named in `replace` replaced.
+fn sog_with(sog: &[u8], replace: &[(&str, Vec<u8>)]) -> Vec<u8> {
+    let mut archive = zip::ZipArchive::new(std::io::Cursor::new(sog)).unwrap();
+    let mut out = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    let options =
+        zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    for i in 0..archive.len() {
+        let mut entry = archive.by_index(i).unwrap();
+        let name = entry.name().to_string();
+        let mut data = Vec::new();
+        std::io::Read::read_to_end(&mut entry, &mut data).unwrap();
+        if let Some((_, new)) = replace.iter().find(|(n, _)| *n == name) {
+            data = new.clone();
+        }
+        out.start_file(name, options).unwrap();
+        out.write_all(&data).unwrap();
+    }
+    out.finish().unwrap().into_inner()
+}
+
+fn meta_of(sog: &[u8]) -> serde_json::Value {
+    let mut archive = zip::ZipArchive::new(std::io::Cursor::new(sog)).unwrap();
+    let mut text = String::new();
+    std::io::Read::read_to_string(&mut archive.by_name("meta.json").unwrap(), &mut text).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
+#[test]
+fn truncated_files_are_refused_naming_the_file_and_what_is_cut() {
+    let cut = |name: &str, keep: f64| {
+        let bytes = std::fs::read(data(name)).unwrap();
+        let n = (bytes.len() as f64 * keep) as usize;
+        let ext = name.rsplit('.').next().unwrap();
+        error_of(&format!("cut.{ext}"), &bytes[..n])
+    };
+    let e = cut("sjeongab_512.splat", 0.5001);
+    assert!(e.contains("cut.splat") && e.contains("32-byte"), "{e}");
+    let e = cut("guitar_512.compressed.ply", 0.9);
+    assert!(
+        e.contains("cut.ply") && e.contains("element 'vertex'") && e.contains("truncated"),
+        "{e}"
+    );
+    let e = cut("subset_sh3.v3.spz", 0.7);
+    assert!(
+        e.contains("cut.spz") && (e.contains("truncated") || e.contains("decompressed")),
+        "{e}"
+    );
+    let e = cut("subset_sh3.spz", 0.7);
+    assert!(e.contains("cut.spz") && e.contains("truncated"), "{e}");
+    let e = cut("subset_sh3.sog", 0.7);
+    assert!(e.contains("cut.sog"), "{e}");
+}
+
+#[test]
+fn counts_larger_than_the_file_can_hold_are_refused_before_any_allocation() {
+    // SPZ 4 claiming four billion splats in its 12 KB.
+    let mut spz = std::fs::read(data("subset_sh3.spz")).unwrap();
+    spz[8..12].copy_from_slice(&u32::MAX.to_le_bytes());
+    let e = error_of("huge.spz", &spz);
+    assert!(
+        e.contains("huge.spz") && e.contains("header") && e.contains("more than a file"),
+        "{e}"
+    );
+    // The same inside a gzip stream.
+    let (mut raw, _) = spz_file(&plain_splats(10), 3, 1, false);
+    let mut inner = Vec::new();
+    std::io::Read::read_to_end(&mut flate2::read::GzDecoder::new(&raw[..]), &mut inner).unwrap();
+    inner[8..12].copy_from_slice(&2_000_000_000u32.to_le_bytes());
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    gz.write_all(&inner).unwrap();
+    raw = gz.finish().unwrap();
+    let e = error_of("huge.spz", &raw);
+    assert!(e.contains("more than a file"), "{e}");
+    // A compressed PLY whose chunks do not cover its splats.
+    let ply = std::fs::read(data("guitar_512.compressed.ply")).unwrap();
+    let text =
+        String::from_utf8_lossy(&ply).replacen("element vertex 512", "element vertex 900", 1);
+    let e = error_of("more.ply", text.as_bytes());
+    assert!(
+        e.contains("more.ply") && e.contains("element 'vertex'"),
+        "{e}"
+    );
+}
+
+/// A gzip bomb: a small SPZ whose stream inflates to far more than its header's splats need.
+/// Only what the count needs is inflated; the rest is never read.
+#[test]
+fn an_spz_gzip_bomb_inflates_only_what_its_count_needs() {
+    let (file, want) = spz_file(&plain_splats(20), 3, 0, false);
+    let mut inner = Vec::new();
+    std::io::Read::read_to_end(&mut flate2::read::GzDecoder::new(&file[..]), &mut inner).unwrap();
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
+    gz.write_all(&inner).unwrap();
+    // 256 MiB of zeros after the splats.
+    let zeros = vec![0u8; 1 << 20];
+    for _ in 0..256 {
+        gz.write_all(&zeros).unwrap();
+    }
+    let bomb = gz.finish().unwrap();
+    assert!(bomb.len() < 1 << 20, "{} bytes", bomb.len());
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bomb.spz");
+    std::fs::write(&path, &bomb).unwrap();
+    let got = Splats::load(&path).unwrap();
+    assert_eq!(got.means, want.means);
+}
+
+#[test]
+fn sog_images_and_meta_that_disagree_are_refused_naming_the_image() {
+    let sog = std::fs::read(data("subset_sh3.sog")).unwrap();
+    let mut meta = meta_of(&sog);
+    meta["count"] = 100_000.into();
+    let e = error_of(
+        "more.sog",
+        &sog_with(&sog, &[("meta.json", meta.to_string().into_bytes())]),
+    );
+    assert!(
+        e.contains("more.sog") && e.contains("image 'means_l.webp'") && e.contains("fewer than"),
+        "{e}"
+    );
+
+    // An image whose header claims 16383 × 16383 pixels for 512 splats: refused before decoding.
+    let mut webp = b"RIFF\0\0\0\0WEBPVP8L\0\0\0\0\x2f".to_vec();
+    let bits: u32 = 16382 | (16382 << 14) | (1 << 28);
+    webp.extend_from_slice(&bits.to_le_bytes());
+    webp.extend_from_slice(&[0u8; 64]);
+    let chunk = (webp.len() - 20) as u32;
+    webp[16..20].copy_from_slice(&chunk.to_le_bytes());
+    let riff = (webp.len() - 8) as u32;
+    webp[4..8].copy_from_slice(&riff.to_le_bytes());
+    let e = error_of("big.sog", &sog_with(&sog, &[("quats.webp", webp)]));
+    assert!(
+        e.contains("big.sog") && e.contains("image 'quats.webp'") && e.contains("16383×16383"),
+        "{e}"
+    );
+
+    let e = error_of(
+        "junk.sog",
+        &sog_with(&sog, &[("scales.webp", b"not an image".to_vec())]),
+    );
+    assert!(
+        e.contains("image 'scales.webp'") && e.contains("WebP"),
+        "{e}"
+    );
+
+    let mut meta = meta_of(&sog);
+    meta["means"]["files"] = serde_json::json!(["means_l.webp"]);
+    let e = error_of(
+        "one.sog",
+        &sog_with(&sog, &[("meta.json", meta.to_string().into_bytes())]),
+    );
+    assert!(e.contains("means.files"), "{e}");
+}
+
+#[test]
+fn not_finite_or_absurd_quantisation_ranges_are_refused_naming_them() {
+    // The compressed PLY's first chunk property, min_x, made NaN.
+    let mut ply = std::fs::read(data("guitar_512.compressed.ply")).unwrap();
+    let body = ply.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
+    ply[body..body + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    let e = error_of("nan.ply", &ply);
+    assert!(
+        e.contains("nan.ply") && e.contains("chunk 0") && e.contains("'min_x'"),
+        "{e}"
+    );
+    // A log-scale range of 1e20.
+    ply[body..body + 4].copy_from_slice(&0.0f32.to_le_bytes());
+    ply[body + 24..body + 28].copy_from_slice(&1e20f32.to_le_bytes());
+    let e = error_of("scale.ply", &ply);
+    assert!(e.contains("'min_scale_x'"), "{e}");
+
+    let sog = std::fs::read(data("subset_sh3.sog")).unwrap();
+    let mut meta = meta_of(&sog);
+    meta["means"]["mins"][1] = serde_json::json!(1e39);
+    let e = error_of(
+        "nan.sog",
+        &sog_with(&sog, &[("meta.json", meta.to_string().into_bytes())]),
+    );
+    assert!(e.contains("nan.sog") && e.contains("means.mins"), "{e}");
+    let mut meta = meta_of(&sog);
+    meta["version"] = 7.into();
+    let e = error_of(
+        "v7.sog",
+        &sog_with(&sog, &[("meta.json", meta.to_string().into_bytes())]),
+    );
+    assert!(e.contains("SOG version 7"), "{e}");
+}

@@ -684,3 +684,79 @@ fn not_finite_or_absurd_quantisation_ranges_are_refused_naming_them() {
     );
     assert!(e.contains("SOG version 7"), "{e}");
 }
+
+// ---------------------------------------------------------------------------------------
+// Everywhere a splat file goes.
+
+/// The splat instances of the scene `path` names (a scene file or one splat file), placed.
+fn placed(path: &Path) -> Vec<SplatInstance> {
+    let scene = nerfx::scene::SceneDesc::for_path(path)
+        .and_then(|d| d.load())
+        .and_then(|l| l.place(DMat4::IDENTITY, &|_| Ok(DMat4::IDENTITY)))
+        .unwrap();
+    scene.splats
+}
+
+#[test]
+fn scenes_take_every_format_with_axes_and_the_antialiased_mode() {
+    let dir = tempfile::tempdir().unwrap();
+    // One file on its own, as the NeRF Render node's file parameter and the command line
+    // take it: every format, and a SOG folder by its meta.json or itself.
+    let sog_dir = dir.path().join("scan_sog");
+    std::fs::create_dir(&sog_dir).unwrap();
+    let sog = std::fs::read(data("subset_sh3.sog")).unwrap();
+    let mut archive = zip::ZipArchive::new(std::io::Cursor::new(&sog[..])).unwrap();
+    archive.extract(&sog_dir).unwrap();
+    for path in [
+        data("subset_sh3.compressed.ply"),
+        data("subset_sh3.sog"),
+        data("subset_sh3.spz"),
+        data("sjeongab_512.splat"),
+        sog_dir.join("meta.json"),
+        sog_dir.clone(),
+    ] {
+        let splats = placed(&path);
+        assert_eq!(splats.len(), 1, "{}", path.display());
+        assert_eq!(splats[0].splats().len(), 512, "{}", path.display());
+    }
+    let from_folder = placed(&sog_dir);
+    let from_zip = placed(&data("subset_sh3.sog"));
+    assert_eq!(from_folder[0].splats().means, from_zip[0].splats().means);
+
+    // A scene: "axes": "rub" brings splat-transform's SPZ back into its PLY's frame; the
+    // antialiased mode follows the file unless the scene says otherwise.
+    let source = Splats::load(&data("subset_sh3.ply")).unwrap();
+    let (antialiased_spz, _) = spz_file(&plain_splats(8), 3, 1, true);
+    std::fs::write(dir.path().join("aa.spz"), antialiased_spz).unwrap();
+    let mut mip_ply = std::fs::read(data("subset_sh3.ply")).unwrap();
+    let at = mip_ply.windows(7).position(|w| w == b"element").unwrap();
+    mip_ply.splice(at..at, b"comment SplatRenderMode: mip\n".iter().copied());
+    std::fs::write(dir.path().join("mip.ply"), mip_ply).unwrap();
+    let scene = serde_json::json!({ "instances": [
+        { "name": "rub", "field": { "splats": {
+            "path": data("subset_sh3.spz"), "axes": "rub" } } },
+        { "name": "aa", "field": { "splats": { "path": "aa.spz" } } },
+        { "name": "aa off", "field": { "splats": { "path": "aa.spz", "antialiased": false } } },
+        { "name": "mip", "field": { "splats": { "path": "mip.ply" } } },
+        { "name": "plain", "field": { "splats": { "path": data("subset_sh3.ply") } } },
+        { "name": "forced", "field": { "splats": {
+            "path": data("subset_sh3.ply"), "antialiased": true } } } ] });
+    let path = dir.path().join("scene.json");
+    std::fs::write(&path, scene.to_string()).unwrap();
+    let splats = placed(&path);
+    let worst = splats[0]
+        .splats()
+        .means
+        .iter()
+        .zip(&source.means)
+        .map(|(a, b)| (*a - *b).abs().max_element())
+        .fold(0.0f32, f32::max);
+    assert!(worst <= 1.0 / 4096.0, "{worst}");
+    let modes: Vec<bool> = splats.iter().map(|s| s.antialiased()).collect();
+    assert_eq!(modes, [false, true, false, true, false, true]);
+    let text = nerfx::field::describe(&dir.path().join("mip.ply")).unwrap();
+    assert!(
+        text.contains("antialiased (mip-splatting) mode: yes"),
+        "{text}"
+    );
+}

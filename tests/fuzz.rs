@@ -3,7 +3,7 @@
 //! instant-ngp msgpack (raw and gzip), torch checkpoints (the zip and the pickle inside),
 //! nerfstudio `config.yml` and `dataparser_transforms.json`, splat PLY, and the compact splat
 //! formats: `.splat`, SuperSplat's compressed PLY, SPZ (its gzip stream's contents, and
-//! version 4's zstd streams), SOG (the zip, and its `meta.json`).
+//! version 4's zstd streams), SOG (the zip, its `meta.json` and a WebP image).
 //!
 //! Each case must end in an error, or in something loaded that renders an 8×8 frame to
 //! finite planes; never a panic, never longer than [`CASE_TIME`], never more memory at once
@@ -125,7 +125,7 @@ fn say_refused(size: usize) {
 // Targets.
 
 /// The targets, in [`targets`] order.
-const TARGET_NAMES: [&str; 19] = [
+const TARGET_NAMES: [&str; 20] = [
     "shot JSON",
     "camera path",
     "scene JSON",
@@ -145,6 +145,7 @@ const TARGET_NAMES: [&str; 19] = [
     "SPZ version 4",
     "SOG zip",
     "SOG meta.json",
+    "SOG WebP image",
 ];
 
 /// How a case ended well.
@@ -409,6 +410,16 @@ fn build_targets() -> Vec<Target> {
             check: |_, dir, b| {
                 let sog = fixture_sog();
                 load_and_render(dir, "splats.sog", &with_zip_member(sog, "meta.json", b))
+            },
+        },
+        Target {
+            name: TARGET_NAMES[19],
+            kind: Kind::Bytes,
+            seeds: vec![zip_member(&sog, "quats.webp")],
+            cases: 300,
+            check: |_, dir, b| {
+                let sog = fixture_sog();
+                load_and_render(dir, "splats.sog", &with_zip_member(sog, "quats.webp", b))
             },
         },
     ];

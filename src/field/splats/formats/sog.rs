@@ -166,13 +166,16 @@ struct Image {
     rgba: Vec<u8>,
 }
 
-/// Decodes the WebP `name` after checking that its size suits `count` splats.
+/// Decodes the WebP `name` after checking from its header that its size suits `count`
+/// splats: at least `count` pixels (or exactly `width` wide, for a palette), at most
+/// `most` pixels.
 fn image(
     meta: &Path,
     store: &Store,
     name: &str,
     count: usize,
-    exact_width: Option<usize>,
+    width: Option<usize>,
+    most: usize,
 ) -> Result<Image> {
     let what = format!("image '{name}'");
     let bytes = store.load(meta, name)?;
@@ -180,23 +183,25 @@ fn image(
     let mut decoder = image_webp::WebPDecoder::new(Cursor::new(&bytes[..]))
         .map_err(|e| bad(format!("not a readable WebP image: {e}")))?;
     let (w, h) = decoder.dimensions();
-    let (width, height) = (w as usize, h as usize);
-    let pixels = width.saturating_mul(height);
-    match exact_width {
-        Some(want) if width != want => {
-            return Err(bad(format!("{width} pixels wide; {want} expected for its palette")))
-        }
-        Some(_) => {}
-        None if pixels < count => {
+    let (w, h) = (w as usize, h as usize);
+    let pixels = w.saturating_mul(h);
+    match width {
+        Some(want) if w != want => {
             return Err(bad(format!(
-                "{width}×{height} holds {pixels} pixels, fewer than the {count} splats meta.json declares"
+                "{w} pixels wide; {want} expected for its palette"
             )))
         }
-        None => {}
+        _ if pixels < count => {
+            return Err(bad(format!(
+                "{w}×{h} holds {pixels} pixels, fewer than the {count} splats meta.json \
+                 declares"
+            )))
+        }
+        _ => {}
     }
-    if pixels > pixel_bound(count) {
+    if pixels > most {
         return Err(bad(format!(
-            "{width}×{height} is far larger than {count} splats need"
+            "{w}×{h} is far larger than {count} splats need"
         )));
     }
     if decoder.is_lossy() {
@@ -221,8 +226,8 @@ fn image(
         rgba
     };
     Ok(Image {
-        width,
-        height,
+        width: w,
+        height: h,
         rgba,
     })
 }
@@ -332,8 +337,8 @@ fn means(
 ) -> Result<Vec<Vec3>> {
     check_values(meta, "means.mins", &mins, 30.0)?;
     check_values(meta, "means.maxs", &maxs, 30.0)?;
-    let lo = image(meta, store, &names[0], count, None)?;
-    let hi = image(meta, store, &names[1], count, None)?;
+    let lo = image(meta, store, &names[0], count, None, pixel_bound(count))?;
+    let hi = image(meta, store, &names[1], count, None, pixel_bound(count))?;
     let span = |k: usize| {
         let s = maxs[k] - mins[k];
         if s == 0.0 {
@@ -435,9 +440,9 @@ fn decode_v2(meta: &Path, m: MetaV2, store: &Store) -> Result<Splats> {
     let quats_name = &files(meta, "quats", &m.quats.files, 1)?[0];
     let scales_name = &files(meta, "scales", &m.scales.files, 1)?[0];
     let sh0_name = &files(meta, "sh0", &m.sh0.files, 1)?[0];
-    let quats = image(meta, store, quats_name, count, None)?;
-    let scales = image(meta, store, scales_name, count, None)?;
-    let sh0 = image(meta, store, sh0_name, count, None)?;
+    let quats = image(meta, store, quats_name, count, None, pixel_bound(count))?;
+    let scales = image(meta, store, scales_name, count, None, pixel_bound(count))?;
+    let sh0 = image(meta, store, sh0_name, count, None, pixel_bound(count))?;
     let palette = match &m.sh_n {
         Some(sh) if sh.bands > 0 => {
             let per_channel = match sh.bands {
@@ -461,14 +466,16 @@ fn decode_v2(meta: &Path, m: MetaV2, store: &Store) -> Result<Splats> {
                 ));
             }
             let names = files(meta, "shN", &sh.files, 2)?;
+            let need = sh.count.div_ceil(64) * 64 * per_channel;
             let centroids = image(
                 meta,
                 store,
                 &names[0],
-                sh.count.div_ceil(64) * 64 * per_channel,
+                need,
                 Some(64 * per_channel),
+                pixel_bound(need),
             )?;
-            let labels = image(meta, store, &names[1], count, None)?;
+            let labels = image(meta, store, &names[1], count, None, pixel_bound(count))?;
             Some(Palette {
                 labels,
                 centroids,
@@ -565,6 +572,7 @@ fn decode_v1(meta: &Path, m: MetaV1, store: &Store) -> Result<Splats> {
         &files(meta, "quats", &m.quats.files, 1)?[0],
         count,
         None,
+        pixel_bound(count),
     )?;
     let scales = image(
         meta,
@@ -572,6 +580,7 @@ fn decode_v1(meta: &Path, m: MetaV1, store: &Store) -> Result<Splats> {
         &files(meta, "scales", &m.scales.files, 1)?[0],
         count,
         None,
+        pixel_bound(count),
     )?;
     let sh0 = image(
         meta,
@@ -579,6 +588,7 @@ fn decode_v1(meta: &Path, m: MetaV1, store: &Store) -> Result<Splats> {
         &files(meta, "sh0", &m.sh0.files, 1)?[0],
         count,
         None,
+        pixel_bound(count),
     )?;
     let palette = match &m.sh_n {
         Some(sh) => {
@@ -586,7 +596,8 @@ fn decode_v1(meta: &Path, m: MetaV1, store: &Store) -> Result<Splats> {
             check_values(meta, "shN.maxs", &[sh.maxs], 1e3)?;
             let names = files(meta, "shN", &sh.files, 2)?;
             // Version 1 gives no band count: the centroids' width tells it.
-            let centroids = image(meta, store, &names[0], 0, None)?;
+            // At most 65536 entries (16-bit labels) of 15 pixels.
+            let centroids = image(meta, store, &names[0], 0, None, 1 << 20)?;
             let per_channel = match centroids.width {
                 192 => 3,
                 512 => 8,
@@ -599,7 +610,7 @@ fn decode_v1(meta: &Path, m: MetaV1, store: &Store) -> Result<Splats> {
                     ))
                 }
             };
-            let labels = image(meta, store, &names[1], count, None)?;
+            let labels = image(meta, store, &names[1], count, None, pixel_bound(count))?;
             let entries = centroids.width / per_channel * centroids.height;
             Some((
                 Palette {

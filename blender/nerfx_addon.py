@@ -17,14 +17,18 @@ called from a script, e.g.
     bpy.ops.nerfx.render_environment(scene_file="/shots/scene.json", at_object="Chair")
     bpy.ops.nerfx.load_environment(filepath="/tmp/envmap.exr")
     bpy.ops.nerfx.import_splats(filepath="/captures/scan.ply")
+    bpy.ops.nerfx.import_splats(filepath="/captures/scan.spz", executable="/opt/nerfx/nerfx")
 
 Environment maps: `nerfx envmap` renders the field as a 2:1 equirectangular image laid out as
 the World's Environment Texture reads it (image centre +X, top +Z), so loading it as the
 World's colour with no Mapping node lights the Blender scene as the field would.
 
-Splat stand-ins: a Gaussian-splat PLY (INRIA layout) imports as a point cloud, one vertex per
-splat mean with its DC colour (`0.5 + 0.2821·f_dc`, clamped), in the splats' own frame (the
-frame nerfx renders them in), so it can serve as the NeRF object the artist places.
+Splat stand-ins: a Gaussian-splat file imports as a point cloud, one vertex per splat mean
+with its DC colour (`0.5 + 0.2821·f_dc`, clamped), in the splats' own frame (the frame nerfx
+renders them in), so it can serve as the NeRF object the artist places. An INRIA-layout PLY is
+read here with NumPy; every other format nerfx reads (SuperSplat's compressed PLY, `.splat`,
+`.spz`, `.sog`, a SOG folder's `meta.json`) goes through `nerfx export-standin`, so the stand-in
+comes from the very reader that renders the splats (its colours in 8 bits).
 """
 
 bl_info = {
@@ -468,13 +472,72 @@ def read_splat_means(path):
     return means[finite], np.clip(0.5 + SH_C0 * dc[finite], 0.0, 1.0)
 
 
-def import_splats(context, path, name=None):
-    """Creates a point-cloud object of the splats at `path` (their means, DC colour in a
-    "Col" point attribute), in the splats' own frame, and returns it."""
+def is_inria_ply(path):
+    """Whether `path` is a PLY whose header has no `chunk` element (SuperSplat's compressed
+    layout has one): the layout read here with NumPy."""
+    with open(path, "rb") as f:
+        head = f.read(1 << 16)
+    if not head.startswith(b"ply"):
+        return False
+    end = head.find(b"end_header")
+    header = head[: end if end >= 0 else len(head)]
+    return b"\nelement chunk " not in header
+
+
+def read_standin_points(path):
+    """Means (N, 3) and colours (N, 3) of a stand-in PLY written by `nerfx export-standin`
+    (float x y z, uchar red green blue)."""
     import numpy as np
 
-    means, colours = read_splat_means(path)
-    name = name or os.path.splitext(os.path.basename(path))[0]
+    with open(path, "rb") as f:
+        data = f.read()
+    end = data.find(b"end_header\n")
+    if end < 0:
+        raise ValueError("nerfx wrote no stand-in PLY")
+    count = None
+    for line in data[:end].decode("ascii", "replace").splitlines():
+        words = line.split()
+        if words[:2] == ["element", "vertex"]:
+            count = int(words[2])
+    dtype = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("r", "u1"), ("g", "u1"), ("b", "u1")])
+    table = np.frombuffer(data, dtype=dtype, count=count or 0, offset=end + len(b"end_header\n"))
+    means = np.stack([table[a].astype(np.float64) for a in "xyz"], axis=1)
+    colours = np.stack([table[c].astype(np.float64) / 255.0 for c in "rgb"], axis=1)
+    return means, colours
+
+
+def nerfx_splat_means(path, executable):
+    """Means and DC colours of any splat file nerfx reads, through `nerfx export-standin`
+    (every splat kept: no opacity threshold, no point budget)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, "standin.ply")
+        command = [
+            executable, "export-standin", path, "-o", out,
+            "--threshold=-1", "--points", str(2**62),
+        ]
+        try:
+            done = subprocess.run(command, capture_output=True, text=True)
+        except OSError as e:
+            raise ValueError("cannot run %s (set the panel's nerfx program): %s" % (executable, e))
+        if done.returncode != 0:
+            raise ValueError(done.stderr.strip() or "nerfx export-standin failed")
+        return read_standin_points(out)
+
+
+def import_splats(context, path, name=None, executable="nerfx"):
+    """Creates a point-cloud object of the splats at `path` (their means, DC colour in a
+    "Col" point attribute), in the splats' own frame, and returns it. An INRIA PLY is read
+    here; any other splat file through the nerfx program `executable`."""
+    import numpy as np
+
+    if os.path.isfile(path) and is_inria_ply(path):
+        means, colours = read_splat_means(path)
+    else:
+        means, colours = nerfx_splat_means(path, executable)
+    stem = os.path.basename(os.path.normpath(path))
+    if stem.lower() == "meta.json":
+        stem = os.path.basename(os.path.dirname(os.path.abspath(path)))
+    name = name or stem.split(".")[0]
     mesh = bpy.data.meshes.new(name)
     mesh.vertices.add(len(means))
     mesh.vertices.foreach_set("co", means.astype(np.float32).ravel())
@@ -489,14 +552,16 @@ def import_splats(context, path, name=None):
 
 
 class NERFX_OT_import_splats(bpy.types.Operator):
-    """Import a Gaussian-splat PLY as a point cloud (one vertex per splat) to place it"""
+    """Import Gaussian splats (.ply, .splat, .spz, .sog, SOG meta.json) as a point cloud (one
+    vertex per splat) to place them"""
 
     bl_idname = "nerfx.import_splats"
-    bl_label = "Import Splats (.ply)"
+    bl_label = "Import Splats"
     bl_options = {"REGISTER", "UNDO"}
 
     filepath: StringProperty(name="File", subtype="FILE_PATH")
-    filter_glob: StringProperty(default="*.ply", options={"HIDDEN"})
+    filter_glob: StringProperty(default="*.ply;*.splat;*.spz;*.sog;*.json", options={"HIDDEN"})
+    executable: StringProperty(name="nerfx program", description="Default: the panel's")
 
     def invoke(self, context, event):
         context.window_manager.fileselect_add(self)
@@ -505,7 +570,8 @@ class NERFX_OT_import_splats(bpy.types.Operator):
     def execute(self, context):
         path = bpy.path.abspath(self.filepath)
         try:
-            obj = import_splats(context, path)
+            executable = bpy.path.abspath(self.executable or context.scene.nerfx_executable)
+            obj = import_splats(context, path, executable=executable)
         except (OSError, ValueError) as e:
             self.report({"ERROR"}, "nerfx: cannot import %s: %s" % (path, e))
             return {"CANCELLED"}
@@ -516,7 +582,7 @@ class NERFX_OT_import_splats(bpy.types.Operator):
 
 
 def _menu_import(self, context):
-    self.layout.operator(NERFX_OT_import_splats.bl_idname, text="Gaussian Splats (.ply) as nerfx stand-in")
+    self.layout.operator(NERFX_OT_import_splats.bl_idname, text="Gaussian Splats (.ply, .splat, .spz, .sog) as nerfx stand-in")
 
 
 def load_environment(scene, path):

@@ -7,8 +7,9 @@ use std::path::Path;
 
 use crate::error::{Error, Result};
 
-/// The bytes of the regular file at `path`.
-pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+/// The regular file at `path`, open for reading, and its length when opened (a folder, a
+/// device or a pipe is refused, naming the file).
+pub(crate) fn open_regular(path: &Path) -> Result<(std::fs::File, u64)> {
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let meta = file.metadata().map_err(|e| Error::io(path, e))?;
     if !meta.is_file() {
@@ -23,7 +24,12 @@ pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>> {
             format!("is {what}; expected a file"),
         ));
     }
-    let len = meta.len();
+    Ok((file, meta.len()))
+}
+
+/// The bytes of the regular file at `path`.
+pub(crate) fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+    let (file, len) = open_regular(path)?;
     let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0));
     file.take(len)
         .read_to_end(&mut bytes)

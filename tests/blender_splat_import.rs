@@ -1,36 +1,41 @@
 //! The Blender add-on's splat import: headless Blender imports `tests/data/splat_plane_sh3.ply`
 //! through the operator; every vertex must sit on its splat's mean as nerfx reads the file
 //! (the frame nerfx renders the splats in) and carry the splat's DC colour, and the object
-//! becomes the NeRF object.
+//! becomes the NeRF object. Every other splat format goes through `nerfx export-standin` (the
+//! add-on runs the program): the same holds, colours to 8 bits.
 //!
 //! Blender is found on `PATH`; without it the test fails, unless `NERFX_SKIP_BLENDER=1`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use nerfx::field::Splats;
 
-#[test]
-fn blender_imports_splats_as_points_at_their_means() {
+/// What Blender made of importing `file`: vertex count, NeRF object, points (x y z r g b).
+fn blender_import(file: &Path, executable: Option<&Path>) -> Option<(u64, String, Vec<Vec<f64>>)> {
     if std::env::var("NERFX_SKIP_BLENDER").as_deref() == Ok("1") {
         eprintln!("SKIPPED blender_splat_import: NERFX_SKIP_BLENDER=1");
-        return;
+        return None;
     }
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let ply = root.join("tests/data/splat_plane_sh3.ply");
     let out = tempfile::tempdir().unwrap();
     let json_path = out.path().join("import.json");
-    let run = Command::new("blender")
+    let mut command = Command::new("blender");
+    command
         .args(["-b", "--factory-startup", "--python"])
         .arg(root.join("tests/blender/splat_import_check.py"))
         .arg("--")
         .arg(root.join("blender"))
-        .arg(&ply)
-        .arg(&json_path)
-        .output()
-        .unwrap_or_else(|e| {
-            panic!("`blender` did not run ({e}): apt-get install -y blender; NERFX_SKIP_BLENDER=1 skips")
-        });
+        .arg(file)
+        .arg(&json_path);
+    if let Some(exe) = executable {
+        command.arg(exe);
+    }
+    let run = command.output().unwrap_or_else(|e| {
+        panic!(
+            "`blender` did not run ({e}): apt-get install -y blender; NERFX_SKIP_BLENDER=1 skips"
+        )
+    });
     let text = std::fs::read_to_string(&json_path).unwrap_or_else(|_| {
         panic!(
             "Blender wrote nothing:\n{}\n{}",
@@ -39,30 +44,83 @@ fn blender_imports_splats_as_points_at_their_means() {
         )
     });
     let got: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let splats = Splats::load(&ply).unwrap();
-    assert_eq!(got["vertices"].as_u64(), Some(splats.len() as u64));
-    assert_eq!(got["nerf_object"], "splat_plane_sh3");
-    let points = got["points"].as_array().unwrap();
+    let points = got["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            p.as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap())
+                .collect()
+        })
+        .collect();
+    Some((
+        got["vertices"].as_u64().unwrap(),
+        got["nerf_object"].as_str().unwrap().to_string(),
+        points,
+    ))
+}
+
+/// The largest position and colour errors of Blender's points against the splats.
+fn errors(splats: &Splats, points: &[Vec<f64>]) -> (f64, f64) {
+    let stride = splats.color.coefficients() * 3;
     let (mut max_pos, mut max_col) = (0.0f64, 0.0f64);
     for (i, p) in points.iter().enumerate() {
-        let p: Vec<f64> = p
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_f64().unwrap())
-            .collect();
         let mean = splats.means[i].as_dvec3();
         max_pos = max_pos.max((glam::DVec3::new(p[0], p[1], p[2]) - mean).length());
         for c in 0..3 {
-            let dc = f64::from(splats.coefficients[i * 48 + c]);
+            let dc = f64::from(splats.coefficients[i * stride + c]);
             let want = (0.5 + 0.282_094_791_773_878_14 * dc).clamp(0.0, 1.0);
             max_col = max_col.max((p[3 + c] - want).abs());
         }
     }
+    (max_pos, max_col)
+}
+
+#[test]
+fn blender_imports_splats_as_points_at_their_means() {
+    let ply = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/splat_plane_sh3.ply");
+    let Some((vertices, nerf_object, points)) = blender_import(&ply, None) else {
+        return;
+    };
+    let splats = Splats::load(&ply).unwrap();
+    assert_eq!(vertices, splats.len() as u64);
+    assert_eq!(nerf_object, "splat_plane_sh3");
+    let (max_pos, max_col) = errors(&splats, &points);
     println!(
         "{} points: max position error {max_pos:.2e}, max colour error {max_col:.2e}",
         points.len()
     );
     assert!(max_pos <= 1e-5, "position error {max_pos}");
     assert!(max_col <= 1e-6, "colour error {max_col}");
+}
+
+#[test]
+fn blender_imports_every_other_format_through_nerfx() {
+    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/splats");
+    let exe = Path::new(env!("CARGO_BIN_EXE_nerfx"));
+    for name in [
+        "subset_sh3.compressed.ply",
+        "subset_sh3.sog",
+        "subset_sh3.spz",
+        "sjeongab_512.splat",
+    ] {
+        let file = data.join(name);
+        let Some((vertices, nerf_object, points)) = blender_import(&file, Some(exe)) else {
+            return;
+        };
+        let splats = Splats::load(&file).unwrap();
+        assert_eq!(vertices, splats.len() as u64, "{name}");
+        assert_eq!(nerf_object, name.split('.').next().unwrap(), "{name}");
+        let (max_pos, max_col) = errors(&splats, &points);
+        println!("{name}: max position error {max_pos:.2e}, max colour error {max_col:.2e}");
+        assert!(max_pos <= 1e-5, "{name}: position error {max_pos}");
+        // The stand-in's colours are bytes.
+        assert!(
+            max_col <= 0.5 / 255.0 + 1e-6,
+            "{name}: colour error {max_col}"
+        );
+    }
 }

@@ -1,7 +1,9 @@
 //! Every parser against seeded mutations of valid inputs (the fixture writers' files and the
 //! real ones in `tests/data`): shot JSON, nerfstudio camera paths, scene and graph JSON,
 //! instant-ngp msgpack (raw and gzip), torch checkpoints (the zip and the pickle inside),
-//! nerfstudio `config.yml` and `dataparser_transforms.json`, splat PLY.
+//! nerfstudio `config.yml` and `dataparser_transforms.json`, splat PLY, and the compact splat
+//! formats: `.splat`, SuperSplat's compressed PLY, SPZ (its gzip stream's contents, and
+//! version 4's zstd streams), SOG (the zip, its `meta.json` and a WebP image).
 //!
 //! Each case must end in an error, or in something loaded that renders an 8×8 frame to
 //! finite planes; never a panic, never longer than [`CASE_TIME`], never more memory at once
@@ -123,7 +125,7 @@ fn say_refused(size: usize) {
 // Targets.
 
 /// The targets, in [`targets`] order.
-const TARGET_NAMES: [&str; 13] = [
+const TARGET_NAMES: [&str; 20] = [
     "shot JSON",
     "camera path",
     "scene JSON",
@@ -137,6 +139,13 @@ const TARGET_NAMES: [&str; 13] = [
     "config.yml",
     "dataparser_transforms.json",
     "splat PLY",
+    "antimatter15 .splat",
+    "compressed PLY",
+    "SPZ gzip contents",
+    "SPZ version 4",
+    "SOG zip",
+    "SOG meta.json",
+    "SOG WebP image",
 ];
 
 /// How a case ended well.
@@ -245,6 +254,8 @@ fn build_targets() -> Vec<Target> {
         })
     };
     let ply = file(&data.join("splat_plane_sh3.ply"));
+    let splats = |name: &str| file(&data.join("splats").join(name));
+    let sog = splats("subset_sh3.sog");
     let targets = vec![
         Target {
             name: TARGET_NAMES[0],
@@ -353,6 +364,64 @@ fn build_targets() -> Vec<Target> {
             cases: 1000,
             check: check_ply,
         },
+        Target {
+            name: TARGET_NAMES[13],
+            kind: Kind::Bytes,
+            seeds: vec![splats("sjeongab_512.splat")[..64 * 32].to_vec()],
+            cases: 300,
+            check: |_, dir, b| load_and_render(dir, "splats.splat", b),
+        },
+        Target {
+            name: TARGET_NAMES[14],
+            kind: Kind::Ply,
+            seeds: vec![
+                splats("guitar_512.compressed.ply"),
+                splats("subset_sh3.compressed.ply"),
+            ],
+            cases: 300,
+            check: |_, dir, b| load_and_render(dir, "splats.compressed.ply", b),
+        },
+        Target {
+            name: TARGET_NAMES[15],
+            kind: Kind::Bytes,
+            seeds: vec![gunzip(&splats("subset_sh3.v3.spz"))],
+            cases: 300,
+            check: |_, dir, b| load_and_render(dir, "splats.spz", &gzip_bytes(b)),
+        },
+        Target {
+            name: TARGET_NAMES[16],
+            kind: Kind::Bytes,
+            seeds: vec![splats("subset_sh3.spz")],
+            cases: 300,
+            check: |_, dir, b| load_and_render(dir, "splats.spz", b),
+        },
+        Target {
+            name: TARGET_NAMES[17],
+            kind: Kind::Zip,
+            seeds: vec![sog.clone()],
+            cases: 200,
+            check: |_, dir, b| load_and_render(dir, "splats.sog", b),
+        },
+        Target {
+            name: TARGET_NAMES[18],
+            kind: Kind::Text,
+            seeds: vec![zip_member(&sog, "meta.json")],
+            cases: 200,
+            check: |_, dir, b| {
+                let sog = fixture_sog();
+                load_and_render(dir, "splats.sog", &with_zip_member(sog, "meta.json", b))
+            },
+        },
+        Target {
+            name: TARGET_NAMES[19],
+            kind: Kind::Bytes,
+            seeds: vec![zip_member(&sog, "quats.webp")],
+            cases: 300,
+            check: |_, dir, b| {
+                let sog = fixture_sog();
+                load_and_render(dir, "splats.sog", &with_zip_member(sog, "quats.webp", b))
+            },
+        },
     ];
     assert!(targets.iter().zip(TARGET_NAMES).all(|(t, n)| t.name == n));
     targets
@@ -391,6 +460,33 @@ fn first_vertices(bytes: &[u8], n: usize) -> Vec<u8> {
     let mut out = header.into_bytes();
     out.extend_from_slice(&bytes[end..end + n * stride]);
     out
+}
+
+/// The committed SOG fixture, read once.
+fn fixture_sog() -> &'static [u8] {
+    static SOG: OnceLock<Vec<u8>> = OnceLock::new();
+    SOG.get_or_init(|| {
+        std::fs::read(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/splats/subset_sh3.sog"),
+        )
+        .unwrap()
+    })
+}
+
+/// The contents of a gzip stream.
+fn gunzip(bytes: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    flate2::read::GzDecoder::new(bytes)
+        .read_to_end(&mut out)
+        .unwrap();
+    out
+}
+
+/// `bytes` as a gzip stream.
+fn gzip_bytes(bytes: &[u8]) -> Vec<u8> {
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    gz.write_all(bytes).unwrap();
+    gz.finish().unwrap()
 }
 
 /// The member of a zip whose name ends with `suffix`.

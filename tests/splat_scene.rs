@@ -12,7 +12,7 @@ use std::sync::Arc;
 
 use glam::{DMat4, DVec3, Vec3};
 use nerfx::camera::{Camera, Perspective, Projection};
-use nerfx::field::{Analytic, Primitive, ShColor, Shape, SplatColor, Splats};
+use nerfx::field::{Analytic, Primitive, ShColor, Shape, SplatColor, SplatFormat, Splats};
 use nerfx::graph::{node, ParamValues, RenderRequest, Value};
 use nerfx::image::Window;
 use nerfx::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
@@ -26,15 +26,7 @@ fn dc(c: f32) -> f32 {
 /// A square grid of small round blue splats in the plane z = 0, opacity 0.35.
 fn splat_plane(half: f32, spacing: f32) -> Splats {
     let n = (2.0 * half / spacing) as i32;
-    let mut s = Splats {
-        means: Vec::new(),
-        scales: Vec::new(),
-        rotations: Vec::new(),
-        opacities: Vec::new(),
-        color: SplatColor::Sh { degree: 0 },
-        coefficients: Vec::new(),
-        dropped: 0,
-    };
+    let mut s = Splats::with_capacity(0, SplatColor::Sh { degree: 0 }, SplatFormat::Generated);
     for i in 0..=n {
         for j in 0..=n {
             s.means.push(Vec3::new(

@@ -10,7 +10,7 @@ use glam::{DVec3, Quat, Vec3};
 use crate::camera::{BlenderIntrinsics, Camera, Perspective, Projection};
 use crate::demo::look_at;
 use crate::error::{Error, Result};
-use crate::field::{SplatColor, Splats};
+use crate::field::{SplatColor, SplatFormat, Splats};
 use crate::render::{render_with_progress, splat_layer, Outputs, Quality, RenderSettings};
 use crate::scene::{Scene, SplatInstance};
 
@@ -40,15 +40,7 @@ pub fn generated_splats(n: usize) -> Splats {
         state ^= state << 17;
         (state >> 40) as f32 / (1u64 << 24) as f32
     };
-    let mut s = Splats {
-        means: Vec::with_capacity(n),
-        scales: Vec::with_capacity(n),
-        rotations: Vec::with_capacity(n),
-        opacities: Vec::with_capacity(n),
-        color: SplatColor::Sh { degree: 3 },
-        coefficients: Vec::with_capacity(n * 48),
-        dropped: 0,
-    };
+    let mut s = Splats::with_capacity(n, SplatColor::Sh { degree: 3 }, SplatFormat::Generated);
     for i in 0..n {
         let radius = [0.6, 0.8, 1.0][i % 3];
         let z = 2.0 * uniform() - 1.0;

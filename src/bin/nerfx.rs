@@ -57,8 +57,8 @@ enum Command {
     /// Render a scene file through a shot file, or a node graph (`comp.json`) through the
     /// OpenFX bundle, for a list of frames.
     Render {
-        /// Scene file (JSON) or one field or splat file (`.ingp`, `.ply`, a nerfstudio run
-        /// directory), or a node graph file when no shot is given.
+        /// Scene file (JSON) or one field or splat file (`.ingp`; `.ply`, `.splat`, `.spz`,
+        /// `.sog`; a nerfstudio run directory), or a node graph file when no shot is given.
         scene: PathBuf,
         /// Shot file (JSON, written by the Blender add-on), or a nerfstudio camera_path.json.
         shot: Option<PathBuf>,
@@ -103,7 +103,8 @@ enum Command {
     /// laid out as Blender's World Environment Texture reads it, to relight a Blender scene as
     /// the field would.
     Envmap {
-        /// Scene file (JSON) or one field or splat file (`.ingp`, `.ply`, a nerfstudio run).
+        /// Scene file (JSON) or one field or splat file (`.ingp`; `.ply`, `.splat`, `.spz`,
+        /// `.sog`; a nerfstudio run).
         scene: PathBuf,
         /// Shot file, or a nerfstudio camera_path.json: places object-bound instances.
         shot: PathBuf,
@@ -129,15 +130,19 @@ enum Command {
         #[arg(short, long, default_value = "out/envmap.exr")]
         output: PathBuf,
     },
-    /// Describe a field file: format, architecture, parameters, bounds, occupancy.
+    /// Describe a field file: format, architecture, parameters, bounds, occupancy; for splats
+    /// the format and version, count, SH degree, quantisation, bounds, opacity and scale
+    /// ranges and memory once loaded.
     Info {
-        /// The field file (instant-ngp `.ingp` or `.msgpack`).
+        /// The field file (instant-ngp `.ingp` or `.msgpack`, a nerfstudio run, or a splat
+        /// `.ply`, `.splat`, `.spz`, `.sog` or SOG `meta.json`).
         field: PathBuf,
     },
     /// Write a stand-in point cloud (binary PLY) of a field or splat file, in the frame nerfx
     /// renders it in, to place the NeRF object by in Blender.
     ExportStandin {
-        /// The field: an instant-ngp snapshot, a nerfacto run, a splat `.ply` or splatfacto run.
+        /// The field: an instant-ngp snapshot, a nerfacto run, a splat file (`.ply`, `.splat`,
+        /// `.spz`, `.sog`, a SOG `meta.json`) or a splatfacto run.
         field: PathBuf,
         /// Output PLY.
         #[arg(short, long, default_value = "standin.ply")]

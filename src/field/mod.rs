@@ -40,7 +40,7 @@ pub(crate) use splats::{
     View as SplatView, MIN_TRANSMITTANCE as SPLAT_MIN_TRANSMITTANCE,
     NEAR_PLANE as SPLAT_NEAR_PLANE,
 };
-pub use splats::{SplatColor, Splats};
+pub use splats::{Axes, SplatColor, SplatFormat, SplatSource, Splats};
 pub(crate) use srgb::{linear_to_srgb, srgb_to_linear};
 
 use std::path::Path;
@@ -268,21 +268,31 @@ pub trait Field: Send + Sync {
 
 /// A description of a field file for people (`nerfx info`): format, architecture, parameter
 /// count, bounds and occupancy fill ratio. Formats: instant-ngp snapshots (`.ingp`,
-/// `.msgpack`) and nerfstudio nerfacto run directories (holding `config.yml`). Unreadable or
-/// corrupt files give an error naming the file.
+/// `.msgpack`), nerfstudio nerfacto and splatfacto run directories (holding `config.yml`) and
+/// every splat file [`Splats::load`] reads. Unreadable or corrupt files give an error naming
+/// the file.
 pub fn describe(path: &Path) -> Result<String> {
-    if is_splatfacto_run(path) {
+    let sog_folder = path.is_dir() && path.join("meta.json").is_file();
+    if is_splatfacto_run(path) || sog_folder {
         return Ok(Splats::load(path)?.describe(path));
     }
     if path.is_dir() {
         return Ok(NerfactoField::load(path)?.describe());
     }
-    match path.extension().and_then(|e| e.to_str()) {
+    let extension = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let is_meta = path
+        .file_name()
+        .is_some_and(|n| n.eq_ignore_ascii_case("meta.json"));
+    match extension.as_deref() {
         Some("ingp" | "msgpack") => Ok(IngpField::load(path)?.describe()),
-        Some("ply") => Ok(Splats::load(path)?.describe(path)),
+        Some("ply" | "splat" | "spz" | "sog") => Ok(Splats::load(path)?.describe(path)),
+        _ if is_meta => Ok(Splats::load(path)?.describe(path)),
         _ => Err(Error::Unsupported(format!(
             "{}: unknown field format (expected an instant-ngp .ingp or .msgpack snapshot, a \
-             splat .ply or a nerfstudio run directory)",
+             splat .ply, .splat, .spz, .sog or SOG meta.json, or a nerfstudio run directory)",
             path.display()
         ))),
     }

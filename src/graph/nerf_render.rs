@@ -88,7 +88,8 @@ pub(crate) fn nerf_render_node() -> Node {
                     "file",
                     "Field File",
                     "Scene file (JSON): the fields and splats and where they sit; or one \
-                     instant-ngp snapshot, splat .ply or nerfstudio run, in its own frame.",
+                     instant-ngp snapshot, splat file (.ply, .splat, .spz, .sog) or nerfstudio \
+                     run, in its own frame.",
                     ParamKind::File,
                 )
                 .fixed(),

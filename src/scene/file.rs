@@ -9,7 +9,8 @@
 //!     { "name": "garden", "field": { "ingp": { "path": "garden.ingp", "sampler": "ngp" } } },
 //!     { "name": "poster", "field": { "nerfacto": { "path": "outputs/poster/nerfacto/run1",
 //!                                                "sampler": "proposal" } } },
-//!     { "name": "scan", "field": { "splats": { "path": "scan.ply", "antialiased": false } } } ] }
+//!     { "name": "scan", "field": { "splats": { "path": "scan.spz", "axes": "rub",
+//!                                              "antialiased": false } } } ] }
 //! ```
 //! An instance is placed by `world_from_field` (row-major 4×4, default identity) or, when
 //! `object` is given, by that object's `matrix_world` in the shot, read per frame.
@@ -30,7 +31,7 @@ use serde::{Deserialize, Serialize};
 use super::instance::FieldHandle;
 use super::{CropBox, Instance, NgpInstance, ProposalInstance, Scene, SplatInstance};
 use crate::error::{Error, Result};
-use crate::field::{Analytic, IngpField, NerfactoField, Splats};
+use crate::field::{Analytic, Axes, IngpField, NerfactoField, Splats};
 
 /// Where an instance's field comes from.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -59,15 +60,26 @@ pub enum FieldSource {
         #[serde(default)]
         sampler: Option<Sampler>,
     },
-    /// 3D Gaussian splats (an INRIA-layout `.ply`), in the frame of their file.
+    /// 3D Gaussian splats in the frame of their file: an INRIA or SuperSplat compressed
+    /// `.ply`, a `.splat`, an `.spz`, a `.sog` or a SOG folder's `meta.json`, or a splatfacto
+    /// run.
     Splats {
         /// The splat file (relative paths: from the scene file's folder).
         path: PathBuf,
         /// Mip-splatting's opacity compensation, for splats trained with it (gsplat's
-        /// `antialiased` mode).
-        #[serde(default)]
-        antialiased: bool,
+        /// `antialiased` mode). Absent: what the file says (SPZ's flag, SOG's model, a PLY's
+        /// `SplatRenderMode: mip` comment), else off.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        antialiased: Option<bool>,
+        /// The frame the file's values are stored in: `stored` (the default: as they are) or
+        /// `rub` (right, up, back, as Niantic's tools write SPZ), turned into the PLY frame.
+        #[serde(default, skip_serializing_if = "is_stored")]
+        axes: Axes,
     },
+}
+
+fn is_stored(axes: &Axes) -> bool {
+    *axes == Axes::Stored
 }
 
 /// How a trained field's instance is sampled along each ray: by its trainer's own
@@ -154,7 +166,8 @@ impl SceneDesc {
     }
 
     /// The scene a path names: a scene file, or one field or splat file on its own (an
-    /// instant-ngp `.ingp`/`.msgpack` snapshot, a splat `.ply`, a nerfstudio run directory),
+    /// instant-ngp `.ingp`/`.msgpack` snapshot, a splat `.ply`, `.splat`, `.spz`, `.sog` or SOG
+    /// folder, a nerfstudio run directory),
     /// rendered in its own frame (`world_from_field` the identity).
     pub fn for_path(path: &Path) -> Result<Self> {
         let ext = path
@@ -162,11 +175,20 @@ impl SceneDesc {
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase);
         let file = path.to_path_buf();
-        let field = if crate::field::is_splatfacto_run(path) {
-            FieldSource::Splats {
-                path: file,
-                antialiased: false,
-            }
+        let splats = |path: PathBuf| FieldSource::Splats {
+            path,
+            antialiased: None,
+            axes: Axes::Stored,
+        };
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
+        let field = if crate::field::is_splatfacto_run(path)
+            || (path.is_dir() && path.join("meta.json").is_file())
+            || name == "meta.json"
+        {
+            splats(file)
         } else if path.is_dir() {
             FieldSource::Nerfacto {
                 path: file,
@@ -178,10 +200,7 @@ impl SceneDesc {
                     path: file,
                     sampler: None,
                 },
-                Some("ply") => FieldSource::Splats {
-                    path: file,
-                    antialiased: false,
-                },
+                Some("ply" | "splat" | "spz" | "sog") => splats(file),
                 _ => return Self::read(path),
             }
         };
@@ -323,8 +342,8 @@ impl SceneDesc {
                             Sampler::Occupancy | Sampler::Ngp => field(run),
                         }
                     }
-                    FieldSource::Splats { path, .. } => {
-                        Contents::Splats(Arc::new(Splats::load(path)?))
+                    FieldSource::Splats { path, axes, .. } => {
+                        Contents::Splats(Arc::new(Splats::load(path)?.into_ply_frame(*axes)))
                     }
                 })
             })
@@ -399,13 +418,13 @@ impl LoadedScene {
                     inst.crop,
                 )?),
                 Contents::Splats(splats) => {
-                    let antialiased = matches!(
-                        inst.field,
+                    let antialiased = match inst.field {
                         FieldSource::Splats {
-                            antialiased: true,
+                            antialiased: Some(on),
                             ..
-                        }
-                    );
+                        } => on,
+                        _ => splats.source.antialiased,
+                    };
                     scene.splats.push(SplatInstance::new(
                         inst.name.clone(),
                         splats.clone(),

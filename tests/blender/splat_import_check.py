@@ -1,6 +1,7 @@
-"""Imports a Gaussian-splat PLY through the add-on's operator and says what Blender made of it.
+"""Imports a Gaussian-splat file through the add-on's operator and says what Blender made of it.
 
-Usage: blender -b --factory-startup --python splat_import_check.py -- ADDON_DIR PLY OUT_JSON.
+Usage: blender -b --factory-startup --python splat_import_check.py -- ADDON_DIR FILE OUT_JSON
+[NERFX] (NERFX: the nerfx program the add-on runs for formats other than the INRIA PLY).
 Writes {"vertices": N, "nerf_object": name, "points": [[x, y, z, r, g, b], ...]} for every
 vertex, world coordinates (the object's matrix_world applied), colours from the "Col" point
 attribute.
@@ -10,14 +11,16 @@ import sys
 
 import bpy
 
-ADDON_DIR, PLY, OUT = sys.argv[sys.argv.index("--") + 1 :][:3]
+ARGS = sys.argv[sys.argv.index("--") + 1 :]
+ADDON_DIR, PLY, OUT = ARGS[:3]
+EXECUTABLE = ARGS[3] if len(ARGS) > 3 else ""
 sys.path.insert(0, ADDON_DIR)
 import nerfx_addon  # noqa: E402
 
 nerfx_addon.register()
 for obj in list(bpy.data.objects):
     bpy.data.objects.remove(obj)
-result = bpy.ops.nerfx.import_splats(filepath=PLY)
+result = bpy.ops.nerfx.import_splats(filepath=PLY, executable=EXECUTABLE)
 assert result == {"FINISHED"}, result
 obj = bpy.context.scene.nerfx_nerf_object
 mesh = obj.data

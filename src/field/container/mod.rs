@@ -9,4 +9,5 @@ mod zip;
 
 pub(crate) use checkpoint::{Checkpoint, DType};
 pub(crate) use msgpack::{read_document, Doc, Payload, PayloadKind, Verdict};
-pub(crate) use ply::{Ply, Property};
+pub(crate) use ply::{Element, Ply, Property, Scalar};
+pub(crate) use zip::Zip;

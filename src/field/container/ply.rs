@@ -89,6 +89,9 @@ pub(crate) struct Ply<'a> {
     bytes: &'a [u8],
     big_endian: bool,
     pub elements: Vec<Element>,
+    /// The header's `comment` lines, without the keyword (SuperSplat announces its render mode
+    /// in one).
+    pub comments: Vec<String>,
     body: usize,
 }
 
@@ -132,6 +135,27 @@ impl Rows<'_> {
             Scalar::F64 => read!(f64, 8) as f32,
         }
     }
+
+    /// Property `p` of row `row` as its bits, for packed integer words (`u32`, `u8`…, read
+    /// exactly; floats give their bit pattern).
+    #[inline]
+    pub fn bits(&self, row: usize, p: &Property) -> u32 {
+        let at = row * self.row_bytes + p.offset;
+        let b = &self.data[at..at + p.kind.size()];
+        let mut a = [0u8; 4];
+        match p.kind.size() {
+            1 => return u32::from(b[0]),
+            2 => a[..2].copy_from_slice(b),
+            4 => a.copy_from_slice(b),
+            _ => return self.get(row, p).to_bits(),
+        }
+        match (self.big_endian, p.kind.size()) {
+            (true, 2) => u32::from(u16::from_be_bytes([a[0], a[1]])),
+            (false, 2) => u32::from(u16::from_le_bytes([a[0], a[1]])),
+            (true, _) => u32::from_be_bytes(a),
+            (false, _) => u32::from_le_bytes(a),
+        }
+    }
 }
 
 impl<'a> Ply<'a> {
@@ -158,11 +182,16 @@ impl<'a> Ply<'a> {
             .map_err(|_| bad("header".into(), "is not text".into()))?;
         let mut big_endian = None;
         let mut elements: Vec<Element> = Vec::new();
+        let mut comments = Vec::new();
         for (n, line) in header.lines().enumerate().skip(1) {
             let at = || format!("header line {}", n + 1);
             let words: Vec<&str> = line.split_whitespace().collect();
             match words.as_slice() {
-                [] | ["comment", ..] | ["obj_info", ..] | ["end_header"] => {}
+                ["comment", ..] => {
+                    let text = line.trim_start().strip_prefix("comment").unwrap_or("");
+                    comments.push(text.trim().to_string());
+                }
+                [] | ["obj_info", ..] | ["end_header"] => {}
                 ["format", kind, _version] => {
                     big_endian = Some(match *kind {
                         "binary_little_endian" => false,
@@ -231,6 +260,7 @@ impl<'a> Ply<'a> {
             bytes,
             big_endian,
             elements,
+            comments,
             body: end,
         })
     }

@@ -5,12 +5,16 @@
 //! the splats in their *activated* form (linear scales, unit quaternions, opacities in
 //! (0, 1)), as every reader delivers them, so the rasteriser never sees a logit or a log.
 
+mod axes;
+mod formats;
 mod ply;
 mod project;
 mod raster;
 mod rays;
 mod splatfacto;
 
+pub use axes::Axes;
+pub use formats::{SplatFormat, SplatSource};
 pub(crate) use project::{View, NEAR_PLANE};
 pub(crate) use raster::{Fragment, SplatLayer, SplatPixel, MIN_TRANSMITTANCE};
 pub(crate) use rays::{RayLayer, RayView};
@@ -21,7 +25,7 @@ use std::path::Path;
 use glam::{Quat, Vec3};
 
 use super::Aabb;
-use crate::error::{Error, Result};
+use crate::error::Result;
 
 /// How a splat's colour is computed from its coefficients.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -67,23 +71,34 @@ pub struct Splats {
     pub coefficients: Vec<f32>,
     /// Splats the reader dropped because a value was not finite or the rotation was zero.
     pub dropped: usize,
+    /// What the file was.
+    pub source: SplatSource,
 }
 
 impl Splats {
-    /// Reads splats from an INRIA-layout `.ply` file or a nerfstudio splatfacto run (its
-    /// directory or its `config.yml`).
+    /// No splats yet, room for `n`, coloured by `color`, from a file of `format`.
+    pub fn with_capacity(n: usize, color: SplatColor, format: SplatFormat) -> Splats {
+        Splats {
+            means: Vec::with_capacity(n),
+            scales: Vec::with_capacity(n),
+            rotations: Vec::with_capacity(n),
+            opacities: Vec::with_capacity(n),
+            color,
+            coefficients: Vec::with_capacity(n * color.coefficients() * 3),
+            dropped: 0,
+            source: SplatSource {
+                format,
+                ..SplatSource::default()
+            },
+        }
+    }
+
+    /// Reads splats from any file they come in: an INRIA or SuperSplat compressed `.ply`, an
+    /// antimatter15 `.splat`, a Niantic `.spz`, a PlayCanvas `.sog` (or a SOG folder or its
+    /// `meta.json`), or a nerfstudio splatfacto run (its directory or its `config.yml`). The
+    /// stored values are kept as they are (no change of axes).
     pub fn load(path: &Path) -> Result<Splats> {
-        if path.is_dir() {
-            return splatfacto::read(path);
-        }
-        match path.extension().and_then(|e| e.to_str()) {
-            Some(e) if e.eq_ignore_ascii_case("ply") => ply::read(path),
-            Some("yml") => splatfacto::read(path.parent().unwrap_or(Path::new("."))),
-            _ => Err(Error::Unsupported(format!(
-                "{}: not a splat file (expected a Gaussian-splat .ply or a splatfacto run)",
-                path.display()
-            ))),
-        }
+        formats::load(path)
     }
 
     /// Number of splats.
@@ -126,16 +141,32 @@ impl Splats {
             SplatColor::Sh { degree } => format!("spherical harmonics, degree {degree}"),
             SplatColor::Sigmoid => "sigmoid of one coefficient per channel".to_string(),
         };
+        let source = &self.source;
+        let version = source
+            .version
+            .map_or_else(String::new, |v| format!(", version {v}"));
         let mut text = format!(
             "file: {}\n\
-             format: 3D Gaussian splats, {} splats\n\
-             colour: {color}\n\
+             format: {}{version}: 3D Gaussian splats, {} splats\n\
+             colour: {color}\n",
+            path.display(),
+            source.format,
+            self.len(),
+        );
+        if !source.quantisation.is_empty() {
+            text.push_str(&format!("quantisation: {}\n", source.quantisation));
+        }
+        text.push_str(&format!(
+            "antialiased (mip-splatting) mode: {}\n\
              bounds of the means: [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]\n\
              opacity: {o_lo:.4} .. {o_hi:.4}\n\
              scale (standard deviation): {s_lo:.3e} .. {s_hi:.3e}\n\
              memory: {:.1} MiB",
-            path.display(),
-            self.len(),
+            if source.antialiased {
+                "yes, the file says so"
+            } else {
+                "no"
+            },
             b.min.x,
             b.min.y,
             b.min.z,
@@ -143,7 +174,10 @@ impl Splats {
             b.max.y,
             b.max.z,
             self.memory_bytes() as f64 / (1024.0 * 1024.0),
-        );
+        ));
+        for note in &source.notes {
+            text.push_str(&format!("\nnote: {note}"));
+        }
         if self.dropped > 0 {
             text.push_str(&format!(
                 "\nwarning: {} splats dropped (a value not finite or a zero rotation)",

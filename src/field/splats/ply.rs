@@ -2,11 +2,14 @@
 //! `ns-export gaussian-splat` write): `x y z`, `f_dc_0..2`, `f_rest_*` (each channel's
 //! higher coefficients in turn: red's, then green's, then blue's), `opacity` (logit),
 //! `scale_0..2` (log), `rot_0..3` (`w x y z`, unnormalised). Other properties are ignored.
+//! A PLY with a `chunk` element is SuperSplat's compressed layout, read by
+//! [`compressed_ply`](super::formats::compressed_ply).
 
 use std::path::Path;
 
 use glam::{Quat, Vec3};
 
+use super::formats::{antialiased_from_comments, compressed_ply, SplatFormat};
 use super::{SplatColor, Splats};
 use crate::error::{Error, Result};
 use crate::field::container::{Ply, Property};
@@ -20,6 +23,12 @@ pub(super) fn read(path: &Path) -> Result<Splats> {
 /// Splats from the bytes of a PLY file (`path` for messages).
 pub(super) fn parse(path: &Path, bytes: &[u8]) -> Result<Splats> {
     let ply = Ply::parse(path, bytes)?;
+    let antialiased = antialiased_from_comments(&ply.comments);
+    if ply.elements.iter().any(|e| e.name == "chunk") {
+        let mut splats = compressed_ply::parse(path, &ply)?;
+        splats.source.antialiased = antialiased;
+        return Ok(splats);
+    }
     let (vertex, rows) = ply.rows("vertex")?;
     let prop = |name: &str| {
         vertex.property(name).ok_or_else(|| {
@@ -62,15 +71,9 @@ pub(super) fn parse(path: &Path, bytes: &[u8]) -> Result<Splats> {
     let coefficients = color.coefficients();
 
     let n = rows.len();
-    let mut splats = Splats {
-        means: Vec::with_capacity(n),
-        scales: Vec::with_capacity(n),
-        rotations: Vec::with_capacity(n),
-        opacities: Vec::with_capacity(n),
-        color,
-        coefficients: Vec::with_capacity(n * coefficients * 3),
-        dropped: 0,
-    };
+    let mut splats = Splats::with_capacity(n, color, SplatFormat::InriaPly);
+    splats.source.antialiased = antialiased;
+    splats.source.quantisation = "none: 32-bit floats".into();
     let vec3 = |row: usize, p: &[&Property]| {
         Vec3::new(
             rows.get(row, p[0]),
@@ -157,7 +160,8 @@ impl Splats {
 
     /// Activates and appends one splat as stored (log scales, `w x y z` quaternion, opacity
     /// logit, coefficient-major colour); `false` (nothing appended) when a value is not finite
-    /// or the quaternion is zero.
+    /// or the quaternion is zero. An infinite logit is the opacity 0 or 1 it stands for (what
+    /// tools write for a quantised opacity of 0 or 255).
     pub(super) fn push(
         &mut self,
         mean: Vec3,
@@ -166,16 +170,32 @@ impl Splats {
         logit: f32,
         coefficients: &[f32],
     ) -> bool {
-        let scale = log_scale.exp();
+        if logit.is_nan() {
+            return false;
+        }
+        let opacity = 1.0 / (1.0 + (-logit).exp());
+        self.push_activated(mean, log_scale.exp(), wxyz, opacity, coefficients)
+    }
+
+    /// Appends one splat given with linear scales and an opacity in [0, 1] (the quaternion
+    /// `w x y z`, normalised here); `false` (nothing appended) when a value is not finite, the
+    /// opacity is outside [0, 1] or the quaternion is zero.
+    pub fn push_activated(
+        &mut self,
+        mean: Vec3,
+        scale: Vec3,
+        wxyz: [f32; 4],
+        opacity: f32,
+        coefficients: &[f32],
+    ) -> bool {
         let [w, x, y, z] = wxyz;
         let q = Quat::from_xyzw(x, y, z, w);
         let length = q.length();
-        let opacity = 1.0 / (1.0 + (-logit).exp());
         let finite = mean.is_finite()
             && scale.is_finite()
             && length.is_finite()
             && length > 0.0
-            && logit.is_finite()
+            && (0.0..=1.0).contains(&opacity)
             && coefficients.iter().all(|c| c.is_finite());
         if !finite {
             return false;

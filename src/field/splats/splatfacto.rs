@@ -10,7 +10,7 @@ use std::path::Path;
 
 use glam::Vec3;
 
-use super::{SplatColor, Splats};
+use super::{SplatColor, SplatFormat, Splats};
 use crate::error::{Error, Result};
 use crate::field::container::Checkpoint;
 use crate::field::nerfacto::{latest_checkpoint, scan};
@@ -94,15 +94,8 @@ pub(super) fn read(run: &Path) -> Result<Splats> {
     } else {
         SplatColor::Sh { degree: sh_degree }
     };
-    let mut splats = Splats {
-        means: Vec::with_capacity(n),
-        scales: Vec::with_capacity(n),
-        rotations: Vec::with_capacity(n),
-        opacities: Vec::with_capacity(n),
-        color,
-        coefficients: Vec::with_capacity(n * color.coefficients() * 3),
-        dropped: 0,
-    };
+    let mut splats = Splats::with_capacity(n, color, SplatFormat::Splatfacto);
+    splats.source.quantisation = "none: 32-bit floats".into();
     let v3 = |v: &[f32], i: usize| Vec3::new(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
     let mut coeffs = Vec::with_capacity(color.coefficients() * 3);
     for i in 0..n {

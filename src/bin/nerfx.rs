@@ -267,7 +267,9 @@ enum FarmEngine {
     Openjd {
         #[command(flatten)]
         job: FarmArgs,
-        /// Write the template here (default: standard output).
+        /// Write the template here (default: standard output), and beside it the values of
+        /// its path parameters for `openjd run -p file://…` (`job.yaml` →
+        /// `job.parameters.yaml`).
         #[arg(long)]
         template: Option<PathBuf>,
         /// Also write a Deadline Cloud job bundle in this folder: `template.yaml`,
@@ -908,6 +910,14 @@ fn farm(engine: FarmEngine) -> Result<()> {
                 Some(path) => {
                     write_job_file(&path, &text)?;
                     written(&path);
+                    let values = openjd::run_parameters_path(&path);
+                    write_job_file(&values, &openjd::run_parameters(&job))?;
+                    written(&values);
+                    println!(
+                        "run with: openjd run {} -p file://{}",
+                        nerfx::farm::shell_quote(&path.display().to_string()),
+                        nerfx::farm::shell_quote(&values.display().to_string())
+                    );
                 }
                 None if bundle.is_none() => print!("{text}"),
                 None => {}

@@ -35,6 +35,8 @@ pub fn template(job: &FarmJob) -> Result<String> {
         ));
     }
     let names = input_names(job.inputs.len());
+    // Paths have no defaults: Open Job Description reads a default path as relative to the
+    // template's folder. Their values are in the parameter files (see [`path_values`]).
     let mut parameters = vec![map([
         ("name", s("Nerfx")),
         ("type", s("PATH")),
@@ -44,15 +46,13 @@ pub fn template(job: &FarmJob) -> Result<String> {
             "description",
             s("The nerfx program, where every worker sees it."),
         ),
-        ("default", s(job.program.display().to_string())),
     ])];
-    for (name, input) in names.iter().zip(&job.inputs) {
+    for name in names {
         parameters.push(map([
             ("name", s(*name)),
             ("type", s("PATH")),
             ("objectType", s("FILE")),
             ("dataFlow", s("IN")),
-            ("default", s(input.display().to_string())),
         ]));
     }
     let pattern = job
@@ -66,7 +66,6 @@ pub fn template(job: &FarmJob) -> Result<String> {
             ("type", s("PATH")),
             ("objectType", s("DIRECTORY")),
             ("dataFlow", s("OUT")),
-            ("default", s(job.output_dir().display().to_string())),
         ]),
         map([
             ("name", s("OutputPattern")),
@@ -117,7 +116,7 @@ pub fn template(job: &FarmJob) -> Result<String> {
             "chunks",
             map([
                 ("defaultTaskCount", s("{{Param.ChunkSize}}")),
-                ("rangeConstraint", s("CONTIGUOUS")),
+                ("rangeConstraint", s("NONCONTIGUOUS")),
             ]),
         ),
     ]);
@@ -193,6 +192,40 @@ pub fn template(job: &FarmJob) -> Result<String> {
     ))
 }
 
+/// The values of the template's path parameters, by name: the program, the inputs, the
+/// output folder.
+pub fn path_values(job: &FarmJob) -> Vec<(&'static str, String)> {
+    let mut values = vec![("Nerfx", job.program.display().to_string())];
+    let names = input_names(job.inputs.len());
+    values.extend(
+        names
+            .iter()
+            .zip(&job.inputs)
+            .map(|(name, path)| (*name, path.display().to_string())),
+    );
+    values.push(("OutputDir", job.output_dir().display().to_string()));
+    values
+}
+
+/// The path parameters' values as `openjd run -p file://FILE` reads them: a mapping of
+/// names to values.
+pub fn run_parameters(job: &FarmJob) -> String {
+    let values = path_values(job);
+    to_yaml(&map(values
+        .iter()
+        .map(|(name, value)| (*name, s(value.as_str())))))
+}
+
+/// Where [`run_parameters`] go beside the template at `template` (`job.yaml` →
+/// `job.parameters.yaml`).
+pub fn run_parameters_path(template: &Path) -> std::path::PathBuf {
+    let stem = template
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    template.with_file_name(format!("{stem}.parameters.yaml"))
+}
+
 /// A step script running the nerfx program with `args`.
 fn run_script(args: &[String]) -> Node {
     map([(
@@ -204,16 +237,23 @@ fn run_script(args: &[String]) -> Node {
     )])
 }
 
-/// Deadline Cloud's `parameter_values.yaml`: the job's retry and failure limits.
+/// Deadline Cloud's `parameter_values.yaml`: the job's retry and failure limits, and the
+/// path parameters' values.
 pub fn parameter_values(job: &FarmJob) -> String {
-    let value = |name: &str, v: i64| map([("name", s(name)), ("value", Node::Int(v))]);
-    let doc = map([(
-        "parameterValues",
-        Node::List(vec![
-            value("deadline:maxRetriesPerTask", i64::from(job.retries)),
-            value("deadline:maxFailedTasksCount", 1),
-        ]),
-    )]);
+    let value = |name: &str, v: Node| map([("name", s(name)), ("value", v)]);
+    let mut values = vec![
+        value(
+            "deadline:maxRetriesPerTask",
+            Node::Int(i64::from(job.retries)),
+        ),
+        value("deadline:maxFailedTasksCount", Node::Int(1)),
+    ];
+    values.extend(
+        path_values(job)
+            .into_iter()
+            .map(|(name, path)| value(name, s(path))),
+    );
+    let doc = map([("parameterValues", Node::List(values))]);
     to_yaml(&doc)
 }
 
@@ -308,6 +348,12 @@ mod tests {
         };
         assert!(template(&bad).is_err());
         assert!(parameter_values(&job()).contains("deadline:maxRetriesPerTask"));
+        assert!(parameter_values(&job()).contains("value: \"/show/scene.json\""));
+        assert_eq!(
+            run_parameters(&job()),
+            "Nerfx: \"/opt/nerfx\"\nScene: \"/show/scene.json\"\nShot: \"/show/shot.json\"\n\
+             OutputDir: \"/show/out\"\n"
+        );
         assert!(asset_references(&job()).contains("- \"/show/out\""));
     }
 }

@@ -488,7 +488,7 @@ fn check_frames_and_stripe(_: &Fixtures, _: &Path, bytes: &[u8]) -> Result<Verdi
     }
     let stripe = attempt!(nerfx::farm::Stripe::parse(stripe));
     let window = attempt!(stripe.window(37, 1000, 16));
-    let inside = window.x1 == 37 && window.y1 <= 1000 && window.y0 % 16 == 0;
+    let inside = window.x1 == 37 && window.y1 <= 1000 && window.y0.is_multiple_of(16);
     if !inside || window.y1 <= window.y0 {
         return Err(format!("stripe {stripe:?} gave the window {window:?}"));
     }

@@ -346,6 +346,7 @@ impl FarmArgs {
         job.cpus = self.cpus;
         job.memory_mib = self.mem;
         job.retries = self.retries;
+        job.check()?;
         Ok(job)
     }
 }

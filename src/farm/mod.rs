@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
 use crate::frames::parse_frames;
+use crate::render::{Outputs, Quality, RenderSettings};
 
 pub use split::{assemble, Stripe};
 pub use task::{is_done, ExitStatus, Progress};
@@ -108,6 +109,29 @@ impl FarmJob {
             memory_mib: None,
             retries: 2,
         })
+    }
+
+    /// Checks what can be checked before the job is submitted, so that a bad job fails here
+    /// and not on every worker: a shot (the second input) must hold every frame, and a split
+    /// frame must have a row of tiles for each stripe. (A graph is checked when it renders.)
+    pub fn check(&self) -> Result<()> {
+        let Some(shot_path) = self.inputs.get(1) else {
+            return Ok(());
+        };
+        let shot = crate::frames::read_shot(shot_path, crate::demo::NERF_OBJECT)?;
+        let settings = RenderSettings::new(Quality::Draft.params(), Outputs::all());
+        for &frame in &self.frames {
+            let camera = shot.frame(frame)?.camera(&shot)?;
+            if self.split > 1 {
+                let full = camera.full_window();
+                Stripe::new(self.split, self.split)?.window(
+                    full.width(),
+                    full.height(),
+                    settings.tile_size,
+                )?;
+            }
+        }
+        Ok(())
     }
 
     /// The frames of each task, in order.
@@ -317,5 +341,21 @@ mod tests {
             0
         ))
         .contains("--split-frame"));
+    }
+
+    #[test]
+    fn a_job_is_checked_against_its_shot() {
+        let dir = tempfile::tempdir().unwrap();
+        let (scene, shot) = (dir.path().join("scene.json"), dir.path().join("shot.json"));
+        crate::demo::scene_desc().write(&scene).unwrap();
+        crate::demo::shot(32, 40).write(&shot).unwrap();
+        let inputs = [scene, shot];
+        let out = dir.path().join("f.####.exr");
+        let job = |frames: &str, split| FarmJob::new(&inputs, frames, 4, &out, split).unwrap();
+        job("1001-1024", 3).check().unwrap();
+        let e = job("1001-1025", 1).check().unwrap_err().to_string();
+        assert!(e.contains("1025"), "{e}");
+        let e = job("1001", 4).check().unwrap_err().to_string();
+        assert!(e.contains("--split-frame 4"), "{e}");
     }
 }

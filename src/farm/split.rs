@@ -187,7 +187,7 @@ mod tests {
                     .unwrap();
                 assert_eq!((w.x0, w.x1, w.y0), (0, 30, next), "{height} {count}");
                 assert!(w.y1 > w.y0);
-                assert!(w.y0 % 16 == 0);
+                assert!(w.y0.is_multiple_of(16));
                 next = w.y1;
             }
             assert_eq!(next, height);

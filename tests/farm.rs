@@ -253,7 +253,9 @@ fn submitted(out: &Output) -> String {
         .to_string()
 }
 
-/// One cluster for every Slurm check: starting it is most of the cost.
+/// One cluster for every Slurm check: starting it is most of the cost. Its jobs: 12 frames in
+/// chunks of 4; the same split in three stripes; a task failing transiently once; a task
+/// killed with SIGKILL mid-frame; a bad scene.
 #[test]
 fn slurm_runs_chunks_split_frames_retries_and_refuses_bad_scenes() {
     let work = tempfile::tempdir().unwrap();
@@ -277,6 +279,44 @@ fn slurm_runs_chunks_split_frames_retries_and_refuses_bad_scenes() {
         submitted(&run(&mut command))
     };
 
+    // A task whose nerfx is killed with SIGKILL mid-frame: larger frames, so that the kill
+    // lands inside the second; the program records its pid (and execs nerfx).
+    let big_shot = work.path().join("big_shot.json");
+    nerfx::demo::shot(960, 540).write(&big_shot).unwrap();
+    let recorder = work.path().join("record-pid.sh");
+    std::fs::write(
+        &recorder,
+        format!(
+            "#!/bin/sh
+echo $$ > {}/attempt-${{SLURM_RESTART_COUNT:-0}}.pid
+exec {} \"$@\"\n",
+            work.path().display(),
+            env!("CARGO_BIN_EXE_nerfx")
+        ),
+    )
+    .unwrap();
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&recorder, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let killed = work.path().join("killed/f.####.exr");
+    let killed_job = submitted(&run(cluster
+        .command(env!("CARGO_BIN_EXE_nerfx"))
+        .args(["farm", "slurm"])
+        .args([&scene, &big_shot])
+        .args([
+            "--frames",
+            "1001-1004",
+            "--chunk",
+            "4",
+            "--cpus",
+            "1",
+            "--submit",
+            "-o",
+        ])
+        .arg(&killed)
+        .arg("--program")
+        .arg(&recorder)
+        .args(["--", "--quality", "draft"])));
+
     // 12 frames in chunks of 4: three array tasks, each frame the local render's.
     let whole = work.path().join("slurm/f.####.exr");
     let job = submit(&whole, &[], None);
@@ -294,7 +334,6 @@ fn slurm_runs_chunks_split_frames_retries_and_refuses_bad_scenes() {
         ),
     )
     .unwrap();
-    use std::os::unix::fs::PermissionsExt;
     std::fs::set_permissions(&flaky, std::fs::Permissions::from_mode(0o755)).unwrap();
     let retried = work.path().join("retried/f.####.exr");
     let retry_job = submit(&retried, &[], Some(&flaky));
@@ -309,7 +348,24 @@ fn slurm_runs_chunks_split_frames_retries_and_refuses_bad_scenes() {
         .arg(work.path().join("bad/f.####.exr")));
     let bad_job = submitted(&bad_out);
 
-    cluster.wait(&[&job, &joined, &retry_job, &bad_job]);
+    // Killed once its first frame is written, while it renders the second.
+    let start = Instant::now();
+    while !frame(&killed, 1001).exists() {
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "the job to kill never began"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let pid_file = work.path().join("attempt-0.pid");
+    let pid = std::fs::read_to_string(&pid_file).unwrap();
+    let first_written = std::fs::metadata(frame(&killed, 1001))
+        .unwrap()
+        .modified()
+        .unwrap();
+    run(Command::new("kill").args(["-KILL", pid.trim()]));
+
+    cluster.wait(&[&job, &joined, &retry_job, &bad_job, &killed_job]);
     let log = cluster.log();
     assert_frames_match(&whole, &reference);
     assert_frames_match(&split, &reference);
@@ -327,6 +383,42 @@ fn slurm_runs_chunks_split_frames_retries_and_refuses_bad_scenes() {
     assert_eq!(stripes, 0, "the stripes are removed once joined");
     let retry = cluster.show(&format!("{retry_job}_1"));
     assert!(retry.contains("Restarts=1"), "{retry}\n{log}");
+    // Run again by Slurm: the finished frame kept, the rest rendered, nothing partial left.
+    let rerun = cluster.show(&format!("{killed_job}_0"));
+    assert!(
+        rerun.contains("Restarts=1") && rerun.contains("JobState=COMPLETED"),
+        "{rerun}"
+    );
+    let kept = std::fs::metadata(frame(&killed, 1001))
+        .unwrap()
+        .modified()
+        .unwrap();
+    assert_eq!(
+        kept, first_written,
+        "the frame finished before the kill is not redone"
+    );
+    let mut left: Vec<String> = std::fs::read_dir(killed.parent().unwrap())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    left.sort();
+    assert_eq!(
+        left,
+        [
+            "f.1001.exr",
+            "f.1002.exr",
+            "f.1003.exr",
+            "f.1004.exr",
+            "logs"
+        ]
+    );
+    for f in 1001..=1004 {
+        assert_eq!(
+            channels(&frame(&killed, f)).len(),
+            7,
+            "frame {f} reads back whole"
+        );
+    }
     let failed = cluster.show(&bad_job);
     assert!(
         failed.contains("JobState=FAILED") && failed.contains("ExitCode=2:0"),

@@ -2,9 +2,11 @@
 //! frames are split), and with split frames a second array, one task per chunk, that joins
 //! the stripes once the first has finished (`--dependency=afterok`).
 //!
-//! A task that fails transiently (exit 75) requeues itself with `scontrol requeue`, at most
-//! [`FarmJob::retries`] times (Slurm's `SLURM_RESTART_COUNT` counts them); any other failure
-//! ends the task for good. `--requeue` also lets Slurm requeue a task whose node died.
+//! A task that fails transiently (exit 75), or whose `nerfx` was killed by a signal (the
+//! kernel's out-of-memory killer, a `kill -9`: the shell reports 128 + the signal), requeues
+//! itself with `scontrol requeue`, at most [`FarmJob::retries`] times (Slurm's
+//! `SLURM_RESTART_COUNT` counts them); the attempt that runs next resumes where the killed
+//! one stopped. Any other failure, bad input above all, ends the task for good. `--requeue` also lets Slurm requeue a task whose node died.
 
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
@@ -72,7 +74,8 @@ pub fn script(job: &FarmJob, options: &SlurmOptions, array: Array) -> String {
     let _ = writeln!(
         s,
         "#\n# Written by `nerfx farm slurm`: {} frames in chunks of {}{}.\n\
-         # Exit status 0: done; 2: bad input (not retried); 75: transient (requeued, at most {} times).",
+         # Exit status 0: done; 2: bad input (not retried); 75 or killed by a signal: transient
+         # (requeued, at most {} times).",
         job.frames.len(),
         job.chunk,
         if stripes > 1 {
@@ -111,8 +114,9 @@ pub fn script(job: &FarmJob, options: &SlurmOptions, array: Array) -> String {
         s,
         "{command}\n\
          status=$?\n\
-         if [ \"$status\" -eq 75 ] && [ \"${{SLURM_RESTART_COUNT:-0}}\" -lt {retries} ]; then\n\
-         \x20   echo \"nerfx: transient failure (exit 75): requeueing task $SLURM_ARRAY_TASK_ID\"\n\
+         if {{ [ \"$status\" -eq 75 ] || [ \"$status\" -gt 128 ]; }} && \
+         [ \"${{SLURM_RESTART_COUNT:-0}}\" -lt {retries} ]; then\n\
+         \x20   echo \"nerfx: transient failure (exit $status): requeueing task $SLURM_ARRAY_TASK_ID\"\n\
          \x20   scontrol requeue \"${{SLURM_ARRAY_JOB_ID}}_${{SLURM_ARRAY_TASK_ID}}\"\n\
          fi\n\
          exit \"$status\"",
@@ -188,7 +192,8 @@ mod tests {
             "frames=${chunks[$SLURM_ARRAY_TASK_ID]}",
             "/opt/nerfx/bin/nerfx render /show/scene.json '/show/shot one.json' --frames \
              \"$frames\" -o '/show/out/comp.####.exr' --resume --progress plain --quality draft",
-            "if [ \"$status\" -eq 75 ] && [ \"${SLURM_RESTART_COUNT:-0}\" -lt 3 ]; then",
+            "if { [ \"$status\" -eq 75 ] || [ \"$status\" -gt 128 ]; } && \
+             [ \"${SLURM_RESTART_COUNT:-0}\" -lt 3 ]; then",
         ] {
             assert!(s.lines().any(|l| l == line), "{line} not in\n{s}");
         }

@@ -10,6 +10,10 @@
 #   python3-numpy  Blender's own Python (Debian's build uses the system's) for the add-on's
 #                  splat import
 #   mdbook         builds the user's guide in docs/ (tests/docs.rs checks its links)
+#   slurm-wlm, munge   tests/farm.rs runs a one-node Slurm cluster (slurmctld, slurmd, munged;
+#                  started and stopped by the test, as root)
+#   openjd-cli     `openjd check` and `openjd run` of the Open Job Description templates
+#   opencue-pyoutline  PyOutline loads and serialises the OpenCue scripts (no Cuebot)
 #
 # Nothing is skipped when a tool is missing: the tests that need one fail. Extra arguments go
 # to `cargo test` (a test name, `-- --nocapture`).
@@ -38,6 +42,8 @@ command -v cc >/dev/null || need_apt+=(build-essential)
 dpkg -s libclang-dev >/dev/null 2>&1 || need_apt+=(libclang-dev)
 command -v blender >/dev/null || need_apt+=(blender)
 command -v python3 >/dev/null || need_apt+=(python3)
+command -v slurmctld >/dev/null || need_apt+=(slurm-wlm)
+command -v munged >/dev/null || need_apt+=(munge)
 if ((${#need_apt[@]})); then
     echo "== installing ${need_apt[*]}"
     apt_install "${need_apt[@]}"
@@ -53,6 +59,13 @@ if ! python3 -c "import numpy, msgpack, mpmath, OpenEXR" 2>/dev/null; then
         PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install --quiet OpenEXR
     }
     python3 -c "import numpy, msgpack, mpmath, OpenEXR"
+fi
+
+if ! command -v openjd >/dev/null || ! python3 -c "import outline" 2>/dev/null; then
+    echo "== installing openjd-cli and opencue-pyoutline for $(command -v python3)"
+    python3 -m pip install --quiet openjd-cli opencue-pyoutline 2>/dev/null ||
+        PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install --quiet openjd-cli opencue-pyoutline
+    command -v openjd >/dev/null && python3 -c "import outline"
 fi
 
 if ! blender -b --factory-startup --python-exit-code 1 --python-expr "import numpy" \

@@ -8,30 +8,32 @@ use glam::DVec3;
 use crate::camera::{environment_camera, CameraPath, Shot, ShotFrame};
 use crate::composite::shutter_average;
 use crate::error::{Error, Result};
-use crate::image::Planes;
+use crate::image::{Planes, Window};
 use crate::render::{render_with_progress, Outputs, RenderSettings, RenderStats};
 use crate::scene::LoadedScene;
 
 /// Most frames one `--frames` may name (a farm splits longer ranges over commands).
 pub const MAX_FRAMES: usize = 1_000_000;
 
-/// Parses a frame list: `1001`, `1001-1010`, `1001-1100x5` (every 5th), or several of those
-/// separated by commas (`1,5,10-12`). Frames come out in the order given, without repeats.
+/// Parses a frame list: `1001`, `1001-1010`, `1001-1100x5` (every 5th; `1001-1100:5`, as Open
+/// Job Description writes a step, is the same), or several of those separated by commas
+/// (`1,5,10-12`). Frames come out in the order given, without repeats.
 ///
 /// ```
 /// assert_eq!(nerfx::frames::parse_frames("7,1-3,2").unwrap(), vec![7, 1, 2, 3]);
 /// assert_eq!(nerfx::frames::parse_frames("10-20x5").unwrap(), vec![10, 15, 20]);
+/// assert_eq!(nerfx::frames::parse_frames("10-20:5").unwrap(), vec![10, 15, 20]);
 /// ```
 pub fn parse_frames(spec: &str) -> Result<Vec<i64>> {
     let bad = |why: &str| Error::invalid(format!("frames '{spec}'"), why.to_string());
     let mut frames = Vec::new();
     let mut seen = std::collections::HashSet::new();
     for part in spec.split(',').map(str::trim) {
-        let (range, step) = match part.split_once('x') {
+        let (range, step) = match part.split_once(['x', ':']) {
             Some((r, s)) => (
                 r,
                 s.parse::<i64>()
-                    .map_err(|_| bad("the step after 'x' is not a whole number"))?,
+                    .map_err(|_| bad("the step after 'x' or ':' is not a whole number"))?,
             ),
             None => (part, 1),
         };
@@ -137,10 +139,25 @@ pub fn render_frame(
     settings: &RenderSettings,
     on_tile: &(dyn Fn(u64) + Sync),
 ) -> Result<(Planes, RenderStats)> {
+    let window = shot.frame(frame)?.camera(shot)?.full_window();
+    render_frame_window(scene, shot, frame, window, settings, on_tile)
+}
+
+/// Renders the pixels of `window` of `frame` as [`render_frame`] renders the whole frame: each
+/// pixel is the whole frame's, bit for bit, so windows rendered apart (on several machines)
+/// join into the whole frame.
+pub fn render_frame_window(
+    scene: &LoadedScene,
+    shot: &Shot,
+    frame: i64,
+    window: Window,
+    settings: &RenderSettings,
+    on_tile: &(dyn Fn(u64) + Sync),
+) -> Result<(Planes, RenderStats)> {
     let render_at = |at: &ShotFrame, settings: &RenderSettings| {
         let camera = at.camera(shot)?;
         let placed = scene.place(at.world_from_scene(shot)?, &|name| at.object_matrix(name))?;
-        render_with_progress(&placed, &camera, camera.full_window(), settings, on_tile)
+        render_with_progress(&placed, &camera, window, settings, on_tile)
     };
     let times = shot.motion_blur.map_or_else(
         || vec![frame as f64],
@@ -310,7 +327,16 @@ mod tests {
         );
         assert_eq!(parse_frames("-2-1").unwrap(), vec![-2, -1, 0, 1]);
         assert_eq!(parse_frames("1-10x4, 3").unwrap(), vec![1, 5, 9, 3]);
-        for bad in ["", "a-b", "5-1", "1-10x0", "1-2-3", "1-1000000000"] {
+        assert_eq!(parse_frames("1-10:4").unwrap(), vec![1, 5, 9]);
+        for bad in [
+            "",
+            "a-b",
+            "5-1",
+            "1-10x0",
+            "1-10:x2",
+            "1-2-3",
+            "1-1000000000",
+        ] {
             let e = parse_frames(bad).unwrap_err().to_string();
             assert!(e.contains(&format!("'{bad}'")), "{e}");
         }

@@ -19,6 +19,7 @@ pub mod camera;
 pub mod composite;
 pub mod demo;
 pub mod error;
+pub mod farm;
 pub mod field;
 pub mod frames;
 pub mod graph;

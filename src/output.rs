@@ -182,6 +182,47 @@ fn create_temporary(dir: &Path, target: &Path, path: &Path) -> Result<PathBuf> {
     }
 }
 
+/// Removes the temporary files an earlier writer of `path` left beside it when it was killed
+/// before renaming one into place (`.<name>.<pid>.<n>.partial`, whichever process made them),
+/// and returns how many. Only for a caller that alone writes `path` now: a farm task owns the
+/// frames of its chunk, so what another process left there is a dead attempt's.
+pub(crate) fn remove_stale_temporaries(path: &Path) -> Result<usize> {
+    let target = resolve_links(path)?;
+    let (Some(dir), Some(name)) = (target.parent(), target.file_name()) else {
+        return Ok(0);
+    };
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let prefix = format!(".{}.", name.to_string_lossy());
+    let entries = match fs::read_dir(dir) {
+        Ok(entries) => entries,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(0),
+        Err(e) => return Err(Error::io(dir, e)),
+    };
+    let mut removed = 0;
+    for entry in entries {
+        let entry = entry.map_err(|e| Error::io(dir, e))?;
+        let file = entry.file_name().to_string_lossy().into_owned();
+        let Some(middle) = file
+            .strip_prefix(&prefix)
+            .and_then(|rest| rest.strip_suffix(".partial"))
+        else {
+            continue;
+        };
+        // `<pid>.<n>`: two numbers, so an output merely named like a temporary is kept.
+        let numbered = middle
+            .split_once('.')
+            .is_some_and(|(pid, n)| [pid, n].iter().all(|s| s.parse::<u64>().is_ok()));
+        if numbered && fs::remove_file(entry.path()).is_ok() {
+            removed += 1;
+        }
+    }
+    Ok(removed)
+}
+
 /// Gives `temp` the permissions of the file it replaces, and its owner and group where the
 /// process may (root may; others may keep their group at most).
 fn keep_ownership(temp: &Path, meta: &fs::Metadata, path: &Path) -> Result<()> {
@@ -232,6 +273,32 @@ mod tests {
             .is_ok_and(|s| s.success());
         let _ = fs::remove_file(&probe);
         ok
+    }
+
+    #[test]
+    fn stale_temporaries_of_the_output_are_removed_and_nothing_else() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("frame.0001.exr");
+        for name in [
+            ".frame.0001.exr.4242.0.partial",
+            ".frame.0001.exr.7.12.partial",
+            ".frame.0002.exr.4242.0.partial",
+            ".frame.0001.exr.notes.partial",
+            "frame.0001.exr",
+        ] {
+            fs::write(dir.path().join(name), b"x").unwrap();
+        }
+        assert_eq!(remove_stale_temporaries(&path).unwrap(), 2);
+        assert_eq!(
+            names(dir.path()),
+            [
+                ".frame.0001.exr.notes.partial",
+                ".frame.0002.exr.4242.0.partial",
+                "frame.0001.exr"
+            ]
+        );
+        let missing = dir.path().join("no-such-folder/frame.exr");
+        assert_eq!(remove_stale_temporaries(&missing).unwrap(), 0);
     }
 
     #[test]

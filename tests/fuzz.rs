@@ -125,7 +125,7 @@ fn say_refused(size: usize) {
 // Targets.
 
 /// The targets, in [`targets`] order.
-const TARGET_NAMES: [&str; 20] = [
+const TARGET_NAMES: [&str; 21] = [
     "shot JSON",
     "camera path",
     "scene JSON",
@@ -146,6 +146,7 @@ const TARGET_NAMES: [&str; 20] = [
     "SOG zip",
     "SOG meta.json",
     "SOG WebP image",
+    "frame list and stripe",
 ];
 
 /// How a case ended well.
@@ -422,6 +423,16 @@ fn build_targets() -> Vec<Target> {
                 load_and_render(dir, "splats.sog", &with_zip_member(sog, "quats.webp", b))
             },
         },
+        Target {
+            name: TARGET_NAMES[20],
+            kind: Kind::Text,
+            seeds: vec![
+                b"1001-1100x5,7,10-12:2\n2/4".to_vec(),
+                b"-3--1,1001\n16/16".to_vec(),
+            ],
+            cases: 400,
+            check: check_frames_and_stripe,
+        },
     ];
     assert!(targets.iter().zip(TARGET_NAMES).all(|(t, n)| t.name == n));
     targets
@@ -555,6 +566,27 @@ fn check_graph(f: &Fixtures, _: &Path, bytes: &[u8]) -> Result<Verdict, String> 
     purge_caches();
     for (name, p) in &attempt!(images) {
         finite(p).map_err(|e| format!("node {name}: {e}"))?;
+    }
+    Ok(Rendered)
+}
+
+/// A farm task's `--frames` (first line) and `--stripe` (second line): a frame list must
+/// read back from its compact form, and a stripe must fall inside the frame on tile rows.
+fn check_frames_and_stripe(_: &Fixtures, _: &Path, bytes: &[u8]) -> Result<Verdict, String> {
+    let text = attempt!(std::str::from_utf8(bytes));
+    let (frames, stripe) = text.split_once('\n').unwrap_or((text, "1/1"));
+    let frames = attempt!(nerfx::frames::parse_frames(frames));
+    let spec = nerfx::farm::frame_spec(&frames);
+    if nerfx::frames::parse_frames(&spec).ok().as_ref() != Some(&frames) {
+        return Err(format!(
+            "frame spec {spec} does not read back as its frames"
+        ));
+    }
+    let stripe = attempt!(nerfx::farm::Stripe::parse(stripe));
+    let window = attempt!(stripe.window(37, 1000, 16));
+    let inside = window.x1 == 37 && window.y1 <= 1000 && window.y0.is_multiple_of(16);
+    if !inside || window.y1 <= window.y0 {
+        return Err(format!("stripe {stripe:?} gave the window {window:?}"));
     }
     Ok(Rendered)
 }

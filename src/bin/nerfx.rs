@@ -11,8 +11,9 @@ use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use glam::DVec3;
+use nerfx::farm::{is_done, ExitStatus, FarmJob, Progress, Stripe};
 use nerfx::frames::{
-    frame_path, parse_frames, read_shot, render_environment, render_frame, EnvironmentOrigin,
+    frame_path, parse_frames, read_shot, render_environment, render_frame_window, EnvironmentOrigin,
 };
 use nerfx::image::{write_exr, write_exr_layers, write_png_preview};
 use nerfx::render::{ColorOutput, Outputs, Quality, RenderSettings};
@@ -98,6 +99,40 @@ enum Command {
         /// Graphs: render scale in (0, 1] (0.5: half-resolution proxies).
         #[arg(long, default_value_t = 1.0)]
         scale: f64,
+        /// Skip a frame whose output reads back whole and was written after its inputs last
+        /// changed (a farm task run again renders only what it has not finished).
+        #[arg(long)]
+        resume: bool,
+        /// How progress is reported: a line per frame, or Open Job Description's
+        /// `openjd_progress:` and `openjd_status:` lines as well.
+        #[arg(long, value_enum, default_value_t = Progress::Plain)]
+        progress: Progress,
+        /// Scenes: render stripe K of N of each frame (`2/4`), to the frame's name with
+        /// `.stripe2of4` before the extension; `nerfx assemble` joins the stripes.
+        #[arg(long)]
+        stripe: Option<String>,
+    },
+    /// Join the stripes of frames rendered with `nerfx render --stripe K/N` into the frames,
+    /// bit for bit the whole-frame render, every pass and layer, and remove the stripes.
+    Assemble {
+        /// Frames: `1001-1010`, `1001-1100x5`, `1,5,9`.
+        #[arg(long)]
+        frames: String,
+        /// How many stripes each frame was rendered in.
+        #[arg(long)]
+        split_frame: u32,
+        /// Output EXR pattern, as given to `nerfx render`.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// How progress is reported.
+        #[arg(long, value_enum, default_value_t = Progress::Plain)]
+        progress: Progress,
+    },
+    /// Write a render job for a farm engine: a Slurm job array, an Open Job Description
+    /// template (and Deadline Cloud job bundle), or an OpenCue PyOutline script.
+    Farm {
+        #[command(subcommand)]
+        engine: FarmEngine,
     },
     /// Render an environment map (2:1 equirectangular EXR, linear HDR) of a scene from a point,
     /// laid out as Blender's World Environment Texture reads it, to relight a Blender scene as
@@ -206,6 +241,121 @@ enum Command {
     },
 }
 
+/// The engines `nerfx farm` writes jobs for.
+#[derive(Subcommand)]
+enum FarmEngine {
+    /// An `sbatch` job-array script: one array task per chunk (per chunk and stripe with
+    /// `--split-frame`, and a second array, dependent on the first, joining the stripes).
+    Slurm {
+        #[command(flatten)]
+        job: FarmArgs,
+        /// Write the script here (default: standard output; with `--split-frame` or
+        /// `--submit`, beside the logs). The joining array's script goes beside it
+        /// (`job.assemble.sh`).
+        #[arg(long)]
+        script: Option<PathBuf>,
+        /// Slurm partition.
+        #[arg(long)]
+        partition: Option<String>,
+        /// At most this many array tasks run at once.
+        #[arg(long)]
+        max_running: Option<u32>,
+        /// The tasks' logs (one per task; default: `logs` in the output folder).
+        #[arg(long)]
+        log_dir: Option<PathBuf>,
+        /// Submit with `sbatch`; the last line printed is `submitted job <id>`.
+        #[arg(long)]
+        submit: bool,
+    },
+    /// An Open Job Description job template (`jobtemplate-2023-09`) for `openjd run` and AWS
+    /// Deadline Cloud.
+    Openjd {
+        #[command(flatten)]
+        job: FarmArgs,
+        /// Write the template here (default: standard output), and beside it the values of
+        /// its path parameters for `openjd run -p file://…` (`job.yaml` →
+        /// `job.parameters.yaml`).
+        #[arg(long)]
+        template: Option<PathBuf>,
+        /// Also write a Deadline Cloud job bundle in this folder: `template.yaml`,
+        /// `parameter_values.yaml`, `asset_references.yaml` (submit it with
+        /// `deadline bundle submit DIR`).
+        #[arg(long)]
+        bundle: Option<PathBuf>,
+    },
+    /// An OpenCue PyOutline script (submit it with `pycuerun`).
+    Opencue {
+        #[command(flatten)]
+        job: FarmArgs,
+        /// Write the script here (default: standard output).
+        #[arg(long)]
+        script: Option<PathBuf>,
+    },
+}
+
+/// What every engine's job takes.
+#[derive(clap::Args)]
+struct FarmArgs {
+    /// What `nerfx render` takes: a scene file and a shot file, or a node graph file.
+    #[arg(required = true, num_args = 1..=2)]
+    inputs: Vec<PathBuf>,
+    /// Frames: `1001-1100`, `1001-1100x5`, `1,5,9`.
+    #[arg(long)]
+    frames: String,
+    /// Frames per task.
+    #[arg(long, default_value_t = 10)]
+    chunk: usize,
+    /// Output EXR pattern; `####` becomes the zero-padded frame number.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Render each frame as this many stripes, each a task of its own, and join them in a last
+    /// step (scenes only).
+    #[arg(long, default_value_t = 1)]
+    split_frame: u32,
+    /// CPUs a task asks for.
+    #[arg(long)]
+    cpus: Option<u32>,
+    /// Memory a task asks for, in MiB.
+    #[arg(long)]
+    mem: Option<u64>,
+    /// How often a task that failed transiently (exit 75) may run again.
+    #[arg(long, default_value_t = 2)]
+    retries: u32,
+    /// The nerfx program the workers run (default: this one).
+    #[arg(long)]
+    program: Option<PathBuf>,
+    /// Further `nerfx render` options, after `--` (`-- --quality draft --passes rgba`).
+    #[arg(last = true)]
+    render_args: Vec<String>,
+}
+
+impl FarmArgs {
+    fn job(&self) -> Result<FarmJob> {
+        let mut job = FarmJob::new(
+            &self.inputs,
+            &self.frames,
+            self.chunk,
+            &self.output,
+            self.split_frame,
+        )?;
+        if self.split_frame > 1 && self.inputs.len() < 2 {
+            return Err(Error::invalid(
+                "--split-frame",
+                "a node graph renders whole frames: split the frames of a scene and a shot",
+            ));
+        }
+        if let Some(program) = &self.program {
+            job.program = std::path::absolute(program).map_err(|e| Error::io(program, e))?;
+        }
+        job.render_args = self.render_args.clone();
+        job.cpus = self.cpus;
+        job.memory_mib = self.mem;
+        job.retries = self.retries;
+        job.check()?;
+        Ok(job)
+    }
+}
+
 /// The guide's generated reference pages.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum ReferencePage {
@@ -253,7 +403,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("nerfx: error: {e}");
-            ExitCode::FAILURE
+            ExitCode::from(ExitStatus::of(&e).code())
         }
     }
 }
@@ -298,8 +448,18 @@ fn run(cli: Cli) -> Result<()> {
             passes,
             bundle,
             scale,
+            resume,
+            progress,
+            stripe,
         } => {
             let frames = frames.as_deref().map(parse_frames).transpose()?;
+            let stripe = stripe.as_deref().map(Stripe::parse).transpose()?;
+            let inputs: Vec<PathBuf> = std::iter::once(scene.clone()).chain(shot.clone()).collect();
+            let task = Task {
+                resume,
+                progress,
+                inputs,
+            };
             let Some(shot) = shot else {
                 if passes.is_some() {
                     return Err(Error::invalid(
@@ -307,13 +467,26 @@ fn run(cli: Cli) -> Result<()> {
                         "a graph's NeRF Render nodes choose their own outputs",
                     ));
                 }
-                return graph::render(&scene, frames, &output, png, bundle, scale);
+                if stripe.is_some() {
+                    return Err(Error::invalid(
+                        "--stripe",
+                        "a node graph renders whole frames: split the frames of a scene and a \
+                         shot",
+                    ));
+                }
+                return graph::render(&scene, frames, &output, png, bundle, scale, &task);
             };
             let outputs = passes.as_deref().map_or_else(Outputs::all, Pass::outputs);
             if png && !outputs.rgb {
                 return Err(Error::invalid(
                     "--png",
                     "the preview is of the colour: add rgba to --passes",
+                ));
+            }
+            if png && stripe.is_some() {
+                return Err(Error::invalid(
+                    "--png",
+                    "a preview is of a whole frame: render it after `nerfx assemble`",
                 ));
             }
             let scene = SceneDesc::for_path(&scene)?.load()?;
@@ -338,26 +511,74 @@ fn run(cli: Cli) -> Result<()> {
                 ..RenderSettings::new(quality.params(), outputs)
             };
             let bar = progress_bar(frames.len() as u64, "frames");
-            for &frame in &frames {
-                let path = frame_path(&output, frame, frames.len() > 1);
+            for (done, &frame) in frames.iter().enumerate() {
+                let whole = frame_path(&output, frame, frames.len() > 1);
+                let path = stripe.map_or_else(|| whole.clone(), |s| s.path(&whole));
                 if let Some(dir) = path.parent() {
                     create_dir(dir)?;
                 }
-                let (planes, stats) = render_frame(&scene, &shot, frame, &settings, &|_| {})?;
+                // A stripe is done too when the frame it belongs to has been assembled.
+                if task.resume
+                    && (task.is_done(&path) || (stripe.is_some() && task.is_done(&whole)))
+                {
+                    bar.inc(1);
+                    let what = format!("frame {frame}: {} is already whole", path.display());
+                    bar.suspend(|| task.report(done + 1, frames.len(), &what));
+                    continue;
+                }
+                task.clear(&path)?;
+                let camera = shot.frame(frame)?.camera(&shot)?;
+                let window = match stripe {
+                    Some(s) => {
+                        let full = camera.full_window();
+                        s.window(full.width(), full.height(), settings.tile_size)?
+                    }
+                    None => camera.full_window(),
+                };
+                let (planes, stats) =
+                    render_frame_window(&scene, &shot, frame, window, &settings, &|_| {})?;
                 if let Some(warning) = stats.warning() {
                     bar.suspend(|| eprintln!("nerfx: warning: frame {frame}: {warning}"));
                 }
-                let pixel_aspect = shot.pixel_aspect_for(&shot.frame(frame)?.camera(&shot)?);
+                let pixel_aspect = shot.pixel_aspect_for(&camera);
                 write_exr_layers(&path, &planes, &[], pixel_aspect)?;
                 if png {
                     write_png_preview(&path.with_extension("png"), &planes)?;
                 }
                 bar.inc(1);
-                bar.suspend(|| println!("frame {frame} → {}", path.display()));
+                let what = format!("frame {frame} → {}", path.display());
+                bar.suspend(|| task.report(done + 1, frames.len(), &what));
             }
             bar.finish_and_clear();
             Ok(())
         }
+        Command::Assemble {
+            frames,
+            split_frame,
+            output,
+            progress,
+        } => {
+            let frames = parse_frames(&frames)?;
+            let task = Task {
+                resume: true,
+                progress,
+                inputs: Vec::new(),
+            };
+            for (done, &frame) in frames.iter().enumerate() {
+                let path = frame_path(&output, frame, frames.len() > 1);
+                let first = Stripe::new(1, split_frame)?.path(&path);
+                // Assembled already (the stripes are removed once the frame is written).
+                let what = if !first.exists() && task.is_done(&path) {
+                    format!("frame {frame}: {} is already assembled", path.display())
+                } else {
+                    nerfx::farm::assemble(&path, split_frame)?;
+                    format!("frame {frame} → {}", path.display())
+                };
+                task.report(done + 1, frames.len(), &what);
+            }
+            Ok(())
+        }
+        Command::Farm { engine } => farm(engine),
         Command::Envmap {
             scene,
             shot,
@@ -578,6 +799,179 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
+/// What `nerfx render` does as a farm task besides rendering: skip what an earlier attempt
+/// finished, report progress in the engine's convention, and clear what a killed attempt left.
+struct Task {
+    /// Skip frames already whole (`--resume`).
+    resume: bool,
+    /// How progress is reported.
+    progress: Progress,
+    /// The files the frames are rendered from: a frame older than one is rendered again.
+    inputs: Vec<PathBuf>,
+}
+
+impl Task {
+    fn is_done(&self, path: &Path) -> bool {
+        is_done(path, &self.inputs)
+    }
+
+    fn report(&self, done: usize, total: usize, what: &str) {
+        for line in self.progress.frame_lines(done, total, what) {
+            println!("{line}");
+        }
+    }
+
+    /// With `--resume` the task alone writes `path`: what an attempt killed while writing it
+    /// left beside it goes.
+    fn clear(&self, path: &Path) -> Result<()> {
+        if self.resume {
+            nerfx::farm::remove_stale_temporaries(path)?;
+        }
+        Ok(())
+    }
+}
+
+/// `nerfx farm`: writes (and for Slurm, may submit) a job.
+fn farm(engine: FarmEngine) -> Result<()> {
+    use nerfx::farm::slurm::{self, Array, SlurmOptions};
+    use nerfx::farm::{opencue, openjd, write_job_file};
+    let written = |path: &Path| println!("wrote {}", path.display());
+    match engine {
+        FarmEngine::Slurm {
+            job,
+            script,
+            partition,
+            max_running,
+            log_dir,
+            submit,
+        } => {
+            let job = job.job()?;
+            let log_dir = match log_dir {
+                Some(dir) => std::path::absolute(&dir).map_err(|e| Error::io(&dir, e))?,
+                None => job.output_dir().join("logs"),
+            };
+            // Slurm opens each task's log there before the task starts.
+            create_dir(&log_dir)?;
+            let options = SlurmOptions {
+                partition,
+                max_running,
+                log_dir: log_dir.clone(),
+            };
+            let render = slurm::script(&job, &options, Array::Render);
+            let split = job.split > 1;
+            let script = match script {
+                Some(path) => Some(path),
+                None if split || submit => Some(log_dir.join(format!("{}.sh", job.name))),
+                None => None,
+            };
+            let Some(path) = script else {
+                print!("{render}");
+                return Ok(());
+            };
+            write_job_file(&path, &render)?;
+            written(&path);
+            let assemble = split.then(|| slurm::assemble_script_path(&path));
+            if let Some(assemble) = &assemble {
+                write_job_file(assemble, &slurm::script(&job, &options, Array::Assemble))?;
+                written(assemble);
+            }
+            if !submit {
+                if let Some(assemble) = &assemble {
+                    println!(
+                        "submit with: jid=$(sbatch --parsable {}) && sbatch \
+                         --dependency=afterok:$jid --kill-on-invalid-dep=yes {}",
+                        nerfx::farm::shell_quote(&path.display().to_string()),
+                        nerfx::farm::shell_quote(&assemble.display().to_string())
+                    );
+                }
+                return Ok(());
+            }
+            let id = sbatch(&[path.display().to_string()])?;
+            match assemble {
+                None => println!("submitted job {id}"),
+                Some(assemble) => {
+                    println!("submitted job {id} (render)");
+                    let joined = sbatch(&[
+                        format!("--dependency=afterok:{id}"),
+                        "--kill-on-invalid-dep=yes".into(),
+                        assemble.display().to_string(),
+                    ])?;
+                    println!("submitted job {joined}");
+                }
+            }
+            Ok(())
+        }
+        FarmEngine::Openjd {
+            job,
+            template,
+            bundle,
+        } => {
+            let job = job.job()?;
+            let text = openjd::template(&job)?;
+            if let Some(dir) = &bundle {
+                openjd::write_bundle(&job, dir)?;
+                written(dir);
+            }
+            match template {
+                Some(path) => {
+                    write_job_file(&path, &text)?;
+                    written(&path);
+                    let values = openjd::run_parameters_path(&path);
+                    write_job_file(&values, &openjd::run_parameters(&job))?;
+                    written(&values);
+                    println!(
+                        "run with: openjd run {} -p file://{}",
+                        nerfx::farm::shell_quote(&path.display().to_string()),
+                        nerfx::farm::shell_quote(&values.display().to_string())
+                    );
+                }
+                None if bundle.is_none() => print!("{text}"),
+                None => {}
+            }
+            Ok(())
+        }
+        FarmEngine::Opencue { job, script } => {
+            let text = opencue::script(&job.job()?)?;
+            match script {
+                Some(path) => {
+                    write_job_file(&path, &text)?;
+                    written(&path);
+                }
+                None => print!("{text}"),
+            }
+            Ok(())
+        }
+    }
+}
+
+/// Runs `sbatch --parsable ARGS` and returns the job id it prints.
+fn sbatch(args: &[String]) -> Result<String> {
+    let out = std::process::Command::new("sbatch")
+        .arg("--parsable")
+        .args(args)
+        .output()
+        .map_err(|e| Error::io("sbatch", e))?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    // `--parsable` prints `<id>` or `<id>;<cluster>`.
+    let id = text
+        .trim()
+        .split(';')
+        .next()
+        .unwrap_or_default()
+        .to_string();
+    if !out.status.success() || id.is_empty() {
+        return Err(Error::invalid(
+            "sbatch",
+            format!(
+                "failed ({}): {}",
+                out.status,
+                String::from_utf8_lossy(&out.stderr).trim()
+            ),
+        ));
+    }
+    Ok(id)
+}
+
 /// Graph rendering through the OpenFX host and bundle (`host` feature).
 #[cfg(feature = "host")]
 mod graph {
@@ -637,6 +1031,7 @@ mod graph {
         png: bool,
         bundle: Option<PathBuf>,
         scale: f64,
+        task: &Task,
     ) -> Result<()> {
         let graph = Graph::read(path)?;
         let nodes = graph.needed().iter().filter(|&&n| n).count();
@@ -662,8 +1057,18 @@ mod graph {
         let bar = progress_bar((frames.len() * nodes) as u64, "nodes");
         // The sequence is ended on every path, a failed frame included.
         let target = |frame| frame_path(output, frame, frames.len() > 1);
-        let rendered = frames.iter().try_for_each(|&frame| {
-            render_frame(&mut graph, frame, &target(frame), png, scale, &bar)
+        let rendered = frames.iter().enumerate().try_for_each(|(done, &frame)| {
+            let path = target(frame);
+            let what = if task.resume && task.is_done(&path) {
+                bar.inc(nodes as u64);
+                format!("frame {frame}: {} is already whole", path.display())
+            } else {
+                task.clear(&path)?;
+                render_frame(&mut graph, frame, &path, png, scale, &bar)?;
+                format!("frame {frame} → {}", path.display())
+            };
+            bar.suspend(|| task.report(done + 1, frames.len(), &what));
+            Ok(())
         });
         bar.finish_and_clear();
         let ended = graph.end_sequence(first, last, scale);
@@ -707,7 +1112,6 @@ mod graph {
         if png {
             write_png_preview(&target.with_extension("png"), main)?;
         }
-        bar.suspend(|| println!("frame {frame} → {}", target.display()));
         Ok(())
     }
 }
@@ -724,6 +1128,7 @@ mod graph {
         _: bool,
         _: Option<PathBuf>,
         _: f64,
+        _: &Task,
     ) -> Result<()> {
         Err(Error::Unsupported(format!(
             "{}: rendering a node graph needs the OpenFX host; this nerfx was built without it \

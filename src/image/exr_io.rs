@@ -73,8 +73,72 @@ pub fn write_exr_layers(
         }
         channels.extend(channels_of(planes, &format!("{name}."))?);
     }
+    write_channels(path, (main.width, main.height), channels, pixel_aspect)
+}
+
+/// Writes named f32 channels of one size to `path` as [`write_exr_layers`] writes its planes
+/// (same header, compression and channel order), so that channels read back from nerfx's own
+/// files (see [`read_exr_image`]) and joined are written as the whole image would have been.
+///
+/// Errors: [`Error::Invalid`] when there is no channel, a channel's size differs from
+/// `width`×`height`, or a sample is NaN; [`Error::Io`] naming `path`.
+pub fn write_exr_channels(
+    path: &Path,
+    (width, height): (u32, u32),
+    channels: &[(String, Plane)],
+    pixel_aspect: f64,
+) -> Result<()> {
+    if channels.is_empty() || width == 0 || height == 0 {
+        return Err(Error::invalid(
+            format!("EXR {}", path.display()),
+            "no channel or an empty image to write",
+        ));
+    }
+    if !(pixel_aspect.is_finite() && pixel_aspect > 0.0) {
+        return Err(Error::invalid(
+            format!("EXR {}: pixel aspect", path.display()),
+            format!("expected a positive number, got {pixel_aspect}"),
+        ));
+    }
+    let expected = width as usize * height as usize;
+    let mut any = SmallVec::new();
+    for (name, plane) in channels {
+        if (plane.width, plane.height) != (width, height) || plane.data.len() != expected {
+            return Err(Error::invalid(
+                format!("EXR {}: channel {name}", path.display()),
+                format!(
+                    "is {}×{}, the image {width}×{height}",
+                    plane.width, plane.height
+                ),
+            ));
+        }
+        if let Some(i) = plane.data.iter().position(|v| v.is_nan()) {
+            return Err(Error::invalid(
+                format!("EXR {}: channel {name}", path.display()),
+                format!(
+                    "pixel ({}, {}) is NaN: not written",
+                    i % width as usize,
+                    i / width as usize
+                ),
+            ));
+        }
+        any.push(AnyChannel::new(
+            name.as_str(),
+            FlatSamples::F32(plane.data.clone()),
+        ));
+    }
+    write_channels(path, (width, height), any, pixel_aspect)
+}
+
+/// The one place an image's header and encoding are decided.
+fn write_channels(
+    path: &Path,
+    (width, height): (u32, u32),
+    channels: SmallVec<[AnyChannel<FlatSamples>; 4]>,
+    pixel_aspect: f64,
+) -> Result<()> {
     let layer = Layer::new(
-        (main.width as usize, main.height as usize),
+        (width as usize, height as usize),
         LayerAttributes {
             software_name: Some("nerfx".into()),
             ..LayerAttributes::default()
@@ -99,10 +163,16 @@ pub fn write_exr_layers(
 /// Errors: [`Error::Io`] when the file cannot be read, [`Error::Format`] when it is not a flat
 /// (non-deep) EXR this reader understands.
 pub fn read_exr_channels(path: &Path) -> Result<Vec<(String, Plane)>> {
+    read_exr_image(path).map(|(channels, _)| channels)
+}
+
+/// [`read_exr_channels`], and the image's pixel aspect (width over height of a pixel).
+pub fn read_exr_image(path: &Path) -> Result<(Vec<(String, Plane)>, f64)> {
     let image = exr::prelude::read_all_flat_layers_from_file(path).map_err(|e| match e {
         exr::error::Error::Io(source) => Error::io(path, source),
         other => Error::format(path, "", other.to_string()),
     })?;
+    let pixel_aspect = f64::from(image.attributes.pixel_aspect);
     let mut out = Vec::new();
     for layer in image.layer_data {
         let prefix = match &layer.attributes.layer_name {
@@ -123,7 +193,7 @@ pub fn read_exr_channels(path: &Path) -> Result<Vec<(String, Plane)>> {
             out.push((format!("{prefix}{}", channel.name), plane));
         }
     }
-    Ok(out)
+    Ok((out, pixel_aspect))
 }
 
 /// The EXR channels for the present planes, names prefixed by `prefix`, checked against the

@@ -8,5 +8,8 @@ mod png;
 pub(crate) use self::png::decode_rgba8;
 pub use self::png::write_png_preview;
 pub(crate) use self::png::write_png_rgba8;
-pub use exr_io::{read_exr_channels, write_exr, write_exr_layers, BACKGROUND_DEPTH};
+pub use exr_io::{
+    read_exr_channels, read_exr_image, write_exr, write_exr_channels, write_exr_layers,
+    BACKGROUND_DEPTH,
+};
 pub use plane::{scaled_size, Plane, Planes, Window};

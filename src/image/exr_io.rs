@@ -23,37 +23,41 @@
 
 use std::path::Path;
 
+use exr::meta::attribute::{AttributeValue, Chromaticities, Text};
 use exr::prelude::{
-    AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, SmallVec,
+    AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, SmallVec, Vec2,
     WritableImage,
 };
 
 use crate::error::{Error, Result};
-use crate::image::{Plane, Planes};
+use crate::image::{ExrHeader, OutputColorSpace, Plane, Planes};
 
 /// Depth written where nothing was hit (the plane holds `inf` there): Blender's background
 /// value in its Z pass.
 pub const BACKGROUND_DEPTH: f32 = 1.0e10;
 
 /// Writes the present `planes` to `path` as a scanline f32 EXR (channel names in the module
-/// docs).
+/// docs), linear Rec.709 with square pixels.
 ///
 /// Errors: [`Error::Invalid`] when no plane is present, the image is empty, or a plane's size
 /// disagrees with `planes`; [`Error::Io`] naming `path` when the file cannot be written.
 pub fn write_exr(path: &Path, planes: &Planes) -> Result<()> {
-    write_exr_layers(path, planes, &[], 1.0)
+    write_exr_layers(path, planes, &[], &ExrHeader::default())
 }
 
 /// Writes `main` as [`write_exr`] does plus each of `layers` under its name, as channels
 /// `name.R`, `name.G`, `name.B`, `name.A` (`name.Z`, … for depths): one file a compositor
-/// splits into layers. Every layer must have `main`'s size. `pixel_aspect` (width over height
-/// of a pixel, e.g. 2 for an anamorphic shot) goes into the header, where compositors read it.
+/// splits into layers. Every layer must have `main`'s size. `header` says what else the file
+/// tells a compositor ([`ExrHeader`]): the pixel aspect (width over height of a pixel, e.g. 2
+/// for an anamorphic shot), the `chromaticities` of its colour space (always written), the
+/// camera's `worldToCamera` and `worldToNDC`, `framesPerSecond` and text entries.
 pub fn write_exr_layers(
     path: &Path,
     main: &Planes,
     layers: &[(&str, &Planes)],
-    pixel_aspect: f64,
+    header: &ExrHeader,
 ) -> Result<()> {
+    let pixel_aspect = header.pixel_aspect;
     if !(pixel_aspect.is_finite() && pixel_aspect > 0.0) {
         return Err(Error::invalid(
             format!("EXR {}: pixel aspect", path.display()),
@@ -75,21 +79,53 @@ pub fn write_exr_layers(
     }
     let layer = Layer::new(
         (main.width as usize, main.height as usize),
-        LayerAttributes {
-            software_name: Some("nerfx".into()),
-            ..LayerAttributes::default()
-        },
+        layer_attributes(header),
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(channels),
     );
     let mut image = Image::from_layer(layer);
     image.attributes.pixel_aspect = pixel_aspect as f32;
+    image.attributes.chromaticities = Some(chromaticities(header.color_space));
     crate::output::replace_file(path, |temp| {
         image.write().to_file(temp).map_err(|e| match e {
             exr::error::Error::Io(source) => Error::io(path, source),
             other => Error::invalid(format!("EXR {}", path.display()), other.to_string()),
         })
     })
+}
+
+/// The header's layer attributes: software, camera, frame rate and text entries.
+fn layer_attributes(header: &ExrHeader) -> LayerAttributes {
+    let mut attributes = LayerAttributes {
+        software_name: Some("nerfx".into()),
+        frames_per_second: header.frames_per_second,
+        ..LayerAttributes::default()
+    };
+    if let Some(camera) = &header.camera {
+        attributes.world_to_camera = Some(camera.world_to_camera);
+        attributes.world_to_normalized_device = camera.world_to_ndc;
+    }
+    // Stored as their UTF-8 bytes, as OpenEXR's own library stores a string (a path may
+    // hold any character).
+    let text = |s: &str| Text::from_slice_unchecked(s.as_bytes());
+    for (key, value) in &header.entries {
+        attributes
+            .other
+            .insert(text(key), AttributeValue::Text(text(value)));
+    }
+    attributes
+}
+
+/// The `chromaticities` attribute of `space`.
+fn chromaticities(space: OutputColorSpace) -> Chromaticities {
+    let c = space.chromaticities();
+    let xy = |[x, y]: [f64; 2]| Vec2(x as f32, y as f32);
+    Chromaticities {
+        red: xy(c.red),
+        green: xy(c.green),
+        blue: xy(c.blue),
+        white: xy(c.white),
+    }
 }
 
 /// Reads every channel of every layer of the EXR at `path` as f32 planes (f16 and u32 samples
@@ -328,7 +364,11 @@ mod tests {
         };
         let (main, env) = (rgba(0.1), rgba(0.5));
         let file = TempFile::new("layers");
-        write_exr_layers(&file.0, &main, &[("env", &env)], 2.0).unwrap();
+        let header = ExrHeader {
+            pixel_aspect: 2.0,
+            ..ExrHeader::default()
+        };
+        write_exr_layers(&file.0, &main, &[("env", &env)], &header).unwrap();
         let meta = exr::meta::MetaData::read_from_file(&file.0, false).unwrap();
         assert_eq!(meta.headers[0].shared_attributes.pixel_aspect, 2.0);
         let channels = read_exr_channels(&file.0).unwrap();
@@ -345,7 +385,8 @@ mod tests {
         assert_eq!(find(&channels, "A").data, main.alpha.as_ref().unwrap().data);
         let small = rgba(0.2);
         let small = Planes { width: 4, ..small };
-        let e = write_exr_layers(&file.0, &main, &[("x", &small)], 1.0).unwrap_err();
+        let e =
+            write_exr_layers(&file.0, &main, &[("x", &small)], &ExrHeader::default()).unwrap_err();
         assert!(e.to_string().contains("layer x"), "{e}");
     }
 

@@ -371,7 +371,7 @@ fn run(cli: Cli) -> Result<()> {
                     color_space: space,
                     camera: Some(CameraMatrices::of(&camera)),
                     frames_per_second: frames_per_second(shot.fps, shot.fps_base),
-                    entries: render_entries(&scene, quality, &settings, space),
+                    entries: render_entries(&scene, &shot, quality, &settings, space),
                 };
                 write_exr_layers(&path, &planes, &[], &header)?;
                 if png {
@@ -816,6 +816,7 @@ mod graph {
 /// The `nerfx/...` header entries of a scene's render: what made it.
 fn render_entries(
     scene: &nerfx::scene::LoadedScene,
+    shot: &nerfx::camera::Shot,
     quality: Quality,
     settings: &RenderSettings,
     space: OutputColorSpace,
@@ -835,7 +836,15 @@ fn render_entries(
         ("nerfx/version", env!("CARGO_PKG_VERSION").to_string()),
         ("nerfx/fieldFiles", fields.join(";")),
         ("nerfx/quality", quality.name().to_string()),
-        ("nerfx/shutterSamples", settings.shutter_samples.to_string()),
+        // Renders averaged per frame: the shutter's only where the shot has motion blur.
+        (
+            "nerfx/shutterSamples",
+            match shot.motion_blur {
+                Some(_) => settings.shutter_samples,
+                None => 1,
+            }
+            .to_string(),
+        ),
         ("nerfx/apertureSamples", "1".to_string()),
         ("nerfx/colorspace", space.ocio_name().to_string()),
     ]

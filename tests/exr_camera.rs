@@ -29,7 +29,6 @@ fn header_matrices_project_world_points_onto_their_pixels() {
     shot.frames.truncate(1);
     shot.frames[0].camera.shift_x = 0.08;
     shot.frames[0].camera.shift_y = -0.05;
-    let frame = shot.frames[0].frame;
     let camera = shot.frames[0].camera(&shot).unwrap();
     // Balls at known raster positions and depths, through the camera's own rays.
     let radius = 0.2;

@@ -564,6 +564,57 @@ fn a_nerf_render_passing_its_source_through_says_it_has_no_field_file() {
     }
 }
 
+/// With a host offering OpenFX 1.5's colour management, a NeRF Render says its output's
+/// colourspace by its native identifier (Raw for depth), and a compositing node leaves the
+/// host its default (its input's).
+#[test]
+fn the_output_colourspace_is_declared_to_a_colour_managed_host() {
+    let _turn = turn();
+    let b = load(HostOptions::default());
+    let env = demo_dir().join("demo_environment.json");
+    let (mut i, _) = nerf(&b, &env);
+    let preferred = ["ACEScg", "lin_rec709_srgb"];
+    assert_eq!(
+        i.output_colourspace(&preferred).unwrap().as_deref(),
+        Some("lin_rec709_srgb"),
+        "the scene file names no space: linear Rec.709"
+    );
+    for (space, native) in [
+        ("acescg", "ACEScg"),
+        ("aces2065-1", "ACES2065-1"),
+        ("srgb", "srgb_tx"),
+    ] {
+        let index = [
+            "scene",
+            "lin_rec709",
+            "acescg",
+            "aces2065-1",
+            "lin_rec2020",
+            "lin_p3d65",
+            "srgb",
+        ]
+        .iter()
+        .position(|s| *s == space)
+        .unwrap();
+        i.set_param("outputColourSpace", &Value::Choice(index))
+            .unwrap();
+        assert_eq!(
+            i.output_colourspace(&preferred).unwrap().as_deref(),
+            Some(native)
+        );
+    }
+    i.set_param("output", &Value::Choice(2)).unwrap();
+    assert_eq!(
+        i.output_colourspace(&preferred).unwrap().as_deref(),
+        Some("Raw")
+    );
+    let matte = b
+        .instance("org.nerfx.AccumulationMatte", Context::General)
+        .unwrap();
+    assert_eq!(matte.output_colourspace(&preferred).unwrap(), None);
+    no_violations(&b);
+}
+
 /// A mandatory input that is connected but for which the host hands out no image is not
 /// taken as black without a word: the frame's warning names the clip, once per frame.
 #[test]

@@ -42,12 +42,14 @@
 //!   instance's persistent error (the next action re-checks); a change because the time
 //!   moved changes nothing.
 //! - purgeCaches: drops the core's cached files.
+//! - GetOutputColourspace (OpenFX 1.5): the node's output space by its native identifier
+//!   ([`crate::colour`]).
 //!
 //! Anything else is replied the host's default.
 
 use std::ffi::{c_void, CStr};
 
-use nerfx::graph::{ClipKind, Node};
+use nerfx::graph::{ClipKind, Node, OutputSpace};
 use openfx_sys::*;
 
 use crate::images::{connected, pixel_aspect};
@@ -144,6 +146,11 @@ pub fn run(
     }
     if is(kOfxImageEffectActionBeginSequenceRender) || is(kOfxImageEffectActionEndSequenceRender) {
         return Ok(OK);
+    }
+    if action == crate::colour::GET_OUTPUT_COLOURSPACE {
+        // SAFETY: an instance action, between create and destroy.
+        let inst = unsafe { instance::get(effect) }?;
+        return output_colourspace(inst, props(out_args, "outArgs")?);
     }
     let known = [
         kOfxImageEffectActionGetRegionOfDefinition.as_slice(),
@@ -268,6 +275,23 @@ fn region_of_definition(
         }
         None => Ok(REPLY_DEFAULT),
     }
+}
+
+/// GetOutputColourspace: a node that says its output's space answers it (at the start of
+/// its time domain: the action has no time, and what decides the space does not animate in
+/// practice); others, and a node not ready, leave the host its default.
+fn output_colourspace(inst: &Instance, out: Props) -> Result<OfxStatus> {
+    let values = values_at(inst, 0.0)?;
+    if unset_file(inst.node, &values).is_some() {
+        return Ok(REPLY_DEFAULT);
+    }
+    let space = match inst.node.output_space(&values)? {
+        Some(OutputSpace::Colour(space)) => space.ofx_name(),
+        Some(OutputSpace::Data) => crate::colour::RAW,
+        None => return Ok(REPLY_DEFAULT),
+    };
+    out.set_string(crate::colour::CLIP_COLOURSPACE, space)?;
+    Ok(OK)
 }
 
 fn time_domain(inst: &Instance, out: Props) -> Result<OfxStatus> {

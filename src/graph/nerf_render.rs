@@ -20,7 +20,7 @@ use glam::DMat4;
 
 use super::cache::{cached_scene, cached_shot};
 use super::desc::{ClipDesc, ClipKind, Context, NodeDesc, ParamDesc, ParamKind, Range};
-use super::node::{Format, Node, RenderRequest, Rendered};
+use super::node::{Format, Node, OutputSpace, RenderRequest, Rendered};
 use super::shared_renders::{shared_render, RenderKey};
 use super::values::ParamValues;
 use crate::camera::{
@@ -265,6 +265,12 @@ pub(crate) fn nerf_render_node() -> Node {
             pixel_aspect: Some(pixel_aspect),
         }),
         identity: None,
+        output_space: Some(|values| {
+            Ok(match values.choice("output")? {
+                "rgba" => OutputSpace::Colour(output_color_space(values)?),
+                _ => OutputSpace::Data,
+            })
+        }),
     }
 }
 

@@ -158,6 +158,7 @@ pub fn scene_desc() -> SceneDesc {
                 crop: None,
             },
         ],
+        colorspace: None,
     }
 }
 
@@ -188,6 +189,7 @@ fn shadow_desc() -> SceneDesc {
             object: None,
             crop: None,
         }],
+        colorspace: None,
     }
 }
 
@@ -200,6 +202,7 @@ fn shadow_desc() -> SceneDesc {
 pub fn write_graph(dir: &Path, width: u32, height: u32) -> Result<PathBuf> {
     let [environment, object] = [0, 1].map(|i| SceneDesc {
         instances: vec![scene_desc().instances[i].clone()],
+        colorspace: None,
     });
     environment.write(&dir.join("demo_environment.json"))?;
     object.write(&dir.join("demo_object.json"))?;

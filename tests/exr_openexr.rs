@@ -11,7 +11,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use std::process::Command;
 
-use nerfx::image::{write_exr_layers, Plane, Planes, BACKGROUND_DEPTH};
+use nerfx::image::{write_exr_layers, ExrHeader, Plane, Planes, BACKGROUND_DEPTH};
 use nerfx::render::{render, Outputs, Quality, RenderSettings};
 
 /// The channels a file of `main` with `layers` holds, each with the plane it was written from
@@ -72,7 +72,11 @@ fn openexr_reads_every_channel_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("frame.exr");
     let layers = [("object", &layer)];
-    write_exr_layers(&file, &main, &layers, 2.0).unwrap();
+    let header = ExrHeader {
+        pixel_aspect: 2.0,
+        ..ExrHeader::default()
+    };
+    write_exr_layers(&file, &main, &layers, &header).unwrap();
     let read = dir.path().join("read");
     std::fs::create_dir(&read).unwrap();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/openexr/read_channels.py");

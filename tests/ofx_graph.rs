@@ -155,6 +155,22 @@ fn an_anamorphic_shot_keeps_its_pixel_aspect_to_the_exr() {
     assert_succeeded(&run);
     let meta = exr::meta::MetaData::read_from_file(&out, false).unwrap();
     assert_eq!(meta.headers[0].shared_attributes.pixel_aspect, 2.0);
+    // The camera of the renders the output comes from, and the graph's colour space.
+    let shot = nerfx::camera::Shot::read(&shot).unwrap();
+    let camera = shot.frame(1004).unwrap().camera(&shot).unwrap();
+    let want = nerfx::image::CameraMatrices::of(&camera);
+    let own = &meta.headers[0].own_attributes;
+    let close = |got: Option<[f32; 16]>, want: [f32; 16]| {
+        got.is_some_and(|g| g.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-5))
+    };
+    assert!(close(own.world_to_camera, want.world_to_camera));
+    assert!(close(
+        own.world_to_normalized_device,
+        want.world_to_ndc.unwrap()
+    ));
+    assert_eq!(own.frames_per_second, Some((24, 1)));
+    let chroma = meta.headers[0].shared_attributes.chromaticities.unwrap();
+    assert_eq!((chroma.red.0, chroma.white.1), (0.64, 0.329));
     assert_eq!(bundle.violations(), Vec::<String>::new());
 }
 

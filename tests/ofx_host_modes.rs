@@ -505,12 +505,15 @@ fn a_nerf_render_without_a_field_file_says_so_without_a_dialog() {
             Context::Generator,
             &[("shot", shot)],
         );
-        // The render succeeds (transparent), and the node says why.
-        i.render(FRAME, Window::new(0, 0, 8, 8), 1.0, false)
-            .unwrap();
+        // The render succeeds (transparent), and the node says why, once for all its tiles.
+        for x in [0, 8, 16] {
+            i.render(FRAME, Window::new(x, 0, x + 8, 8), 1.0, false)
+                .unwrap();
+        }
         let posted = said(&b, "no Field File chosen");
         match offer {
             MessageSuiteOffer::V2 => {
+                assert_eq!(posted.len(), 1, "posted once, not per tile: {posted:?}");
                 let m = i.persistent_message().expect("a persistent warning");
                 assert_eq!(m.kind, "OfxMessageWarning");
                 assert!(
@@ -530,6 +533,117 @@ fn a_nerf_render_without_a_field_file_says_so_without_a_dialog() {
         }
         no_violations(&b);
     }
+}
+
+/// In the Filter and General contexts a NeRF Render without a Field File passes its Source
+/// through (isIdentity): a host that honours that never renders it, so the node says what is
+/// missing when it is asked, once however often it is asked.
+#[test]
+fn a_nerf_render_passing_its_source_through_says_it_has_no_field_file() {
+    let _turn = turn();
+    for context in [Context::Filter, Context::General] {
+        let b = load(HostOptions::default());
+        let shot = text(demo_dir().join("demo_shot.json"));
+        let (mut i, _) = instance_with(&b, "org.nerfx.NeRFRender", context, &[("shot", shot)]);
+        i.connect(
+            "Source",
+            ClipSource::image(pattern(3, Window::new(0, 0, W, H), 1.0)),
+        )
+        .unwrap();
+        for _ in 0..3 {
+            let through = i.is_identity(FRAME, Window::new(0, 0, 8, 8), 1.0).unwrap();
+            assert_eq!(through.as_deref(), Some("Source"), "{context:?}");
+        }
+        let m = i.persistent_message().expect("a persistent warning");
+        assert!(
+            m.kind == "OfxMessageWarning" && m.text.contains("NeRF Render: no Field File chosen"),
+            "{context:?}: {m:?}"
+        );
+        assert_eq!(said(&b, "no Field File chosen").len(), 1, "{context:?}");
+        no_violations(&b);
+    }
+}
+
+/// With a host offering OpenFX 1.5's colour management, a NeRF Render says its output's
+/// colourspace by its native identifier (Raw for depth), and a compositing node leaves the
+/// host its default (its input's).
+#[test]
+fn the_output_colourspace_is_declared_to_a_colour_managed_host() {
+    let _turn = turn();
+    let b = load(HostOptions::default());
+    let env = demo_dir().join("demo_environment.json");
+    let (mut i, _) = nerf(&b, &env);
+    let preferred = ["ACEScg", "lin_rec709_srgb"];
+    assert_eq!(
+        i.output_colourspace(&preferred).unwrap().as_deref(),
+        Some("lin_rec709_srgb"),
+        "the scene file names no space: linear Rec.709"
+    );
+    for (space, native) in [
+        ("acescg", "ACEScg"),
+        ("aces2065-1", "ACES2065-1"),
+        ("srgb", "srgb_tx"),
+    ] {
+        let index = [
+            "scene",
+            "lin_rec709",
+            "acescg",
+            "aces2065-1",
+            "lin_rec2020",
+            "lin_p3d65",
+            "srgb",
+        ]
+        .iter()
+        .position(|s| *s == space)
+        .unwrap();
+        i.set_param("outputColourSpace", &Value::Choice(index))
+            .unwrap();
+        assert_eq!(
+            i.output_colourspace(&preferred).unwrap().as_deref(),
+            Some(native)
+        );
+    }
+    i.set_param("output", &Value::Choice(2)).unwrap();
+    assert_eq!(
+        i.output_colourspace(&preferred).unwrap().as_deref(),
+        Some("Raw")
+    );
+    let matte = b
+        .instance("org.nerfx.AccumulationMatte", Context::General)
+        .unwrap();
+    assert_eq!(matte.output_colourspace(&preferred).unwrap(), None);
+    no_violations(&b);
+}
+
+/// A mandatory input that is connected but for which the host hands out no image is not
+/// taken as black without a word: the frame's warning names the clip, once per frame.
+#[test]
+fn a_connected_input_without_an_image_is_named() {
+    let _turn = turn();
+    let b = load(HostOptions::default());
+    let mut i = b
+        .instance("org.nerfx.AccumulationMatte", Context::General)
+        .unwrap();
+    let failing = ClipSource::new((12, 9), |_, _, _| {
+        Err(nerfx::Error::invalid(
+            "test source",
+            "no image at this time",
+        ))
+    });
+    i.connect("Source", failing).unwrap();
+    for x in [0, 6] {
+        i.render(FRAME, Window::new(x, 0, x + 6, 9), 1.0, false)
+            .unwrap();
+    }
+    let m = i.persistent_message().expect("a persistent warning");
+    assert!(
+        m.kind == "OfxMessageWarning"
+            && m.text
+                .contains("the Source clip is connected but the host gave no image")
+            && m.text.contains("transparent black"),
+        "{m:?}"
+    );
+    assert_eq!(said(&b, "the Source clip is connected").len(), 1);
 }
 
 #[test]

@@ -10,9 +10,14 @@
 //!   its files) is *not ready*: where its region of definition needs the file it replies
 //!   default, it renders transparent black or passes its first connected RGBA input through,
 //!   and it never posts an error — hosts ask for the region at once, and a dialog before the
-//!   artist could pick a file is noise. Its render marks the node with a persistent warning
-//!   naming the missing file ([`message::warn`]), so a node left empty does not
+//!   artist could pick a file is noise. Wherever it learns the file is missing (region of
+//!   definition, isIdentity — a host that honours it never renders the node —, an edit, a
+//!   render) it marks the node with a persistent warning naming the missing file
+//!   ([`message::warn`], posted once, not per tile or query), so a node left empty does not
 //!   render black without a word. A file that is set but unreadable is an error.
+//! - A connected input clip the host gives no image for is said in the frame's warning,
+//!   naming the clip: an optional one is taken as not connected, a mandatory one as
+//!   transparent black.
 //! - getRegionsOfInterest: each connected input needs exactly the region asked for (every
 //!   node works pixel by pixel).
 //! - getClipPreferences: float everywhere, RGBA output premultiplied, Alpha or RGBA inputs
@@ -37,12 +42,14 @@
 //!   instance's persistent error (the next action re-checks); a change because the time
 //!   moved changes nothing.
 //! - purgeCaches: drops the core's cached files.
+//! - GetOutputColourspace (OpenFX 1.5): the node's output space by its native identifier
+//!   ([`crate::colour`]).
 //!
 //! Anything else is replied the host's default.
 
 use std::ffi::{c_void, CStr};
 
-use nerfx::graph::{ClipKind, Node};
+use nerfx::graph::{ClipKind, Node, OutputSpace};
 use openfx_sys::*;
 
 use crate::images::{connected, pixel_aspect};
@@ -129,11 +136,21 @@ pub fn run(
             let inst = unsafe { instance::get(effect) }?;
             message::reset(effect.cast(), &inst.shown);
             inst.frame_stats.reset();
+            // An edit that leaves a file empty (or empties one) says so at once.
+            let time = props(in_args, "inArgs")
+                .and_then(|p| p.double(name(kOfxPropTime)))
+                .unwrap_or(0.0);
+            warn_if_not_ready(inst, effect, time);
         }
         return Ok(OK);
     }
     if is(kOfxImageEffectActionBeginSequenceRender) || is(kOfxImageEffectActionEndSequenceRender) {
         return Ok(OK);
+    }
+    if action == crate::colour::GET_OUTPUT_COLOURSPACE {
+        // SAFETY: an instance action, between create and destroy.
+        let inst = unsafe { instance::get(effect) }?;
+        return output_colourspace(inst, props(out_args, "outArgs")?);
     }
     let known = [
         kOfxImageEffectActionGetRegionOfDefinition.as_slice(),
@@ -149,13 +166,23 @@ pub fn run(
     // SAFETY: these actions are instance actions, called between create and destroy.
     let inst = unsafe { instance::get(effect) }?;
     if is(kOfxImageEffectActionGetRegionOfDefinition) {
-        region_of_definition(inst, props(in_args, "inArgs")?, props(out_args, "outArgs")?)
+        region_of_definition(
+            inst,
+            effect,
+            props(in_args, "inArgs")?,
+            props(out_args, "outArgs")?,
+        )
     } else if is(kOfxImageEffectActionGetRegionsOfInterest) {
         regions_of_interest(inst, props(in_args, "inArgs")?, props(out_args, "outArgs")?)
     } else if is(kOfxImageEffectActionGetClipPreferences) {
         clip_preferences(inst, props(out_args, "outArgs")?)
     } else if is(kOfxImageEffectActionIsIdentity) {
-        is_identity(inst, props(in_args, "inArgs")?, props(out_args, "outArgs")?)
+        is_identity(
+            inst,
+            effect,
+            props(in_args, "inArgs")?,
+            props(out_args, "outArgs")?,
+        )
     } else if is(kOfxImageEffectActionGetTimeDomain) {
         time_domain(inst, props(out_args, "outArgs")?)
     } else {
@@ -166,36 +193,77 @@ pub fn run(
                 frame,
                 window,
                 stats,
+                missing,
             } => {
                 // Under the record's lock: tiles rendered at once post in the order they count.
                 inst.frame_stats
-                    .record(frame, window, stats, |frame_stats| {
-                        match frame_stats.warning() {
-                            Some(warning) => {
-                                let text = format!("{node}, frame {time}: {warning}");
-                                message::warn(effect.cast(), &inst.shown, &text);
-                            }
-                            None => message::succeeded(effect.cast(), &inst.shown),
+                    .record(frame, window, stats, &missing, |frame_stats, missing| {
+                        let parts: Vec<String> = missing
+                            .iter()
+                            .map(|clip| missing_input(inst.node, clip))
+                            .chain(frame_stats.warning())
+                            .collect();
+                        if parts.is_empty() {
+                            message::succeeded(effect.cast(), &inst.shown);
+                        } else {
+                            let text = format!("{node}, frame {time}: {}", parts.join("; "));
+                            message::warn(effect.cast(), &inst.shown, &text);
                         }
                     });
             }
             render::Outcome::NotReady(param) => {
-                let label = inst.node.desc.param(param).map_or(param, |p| p.label);
-                let text = format!(
-                    "{node}: no {label} chosen; it renders nothing of its own until one is"
-                );
-                message::warn(effect.cast(), &inst.shown, &text);
+                message::warn(effect.cast(), &inst.shown, &not_ready(inst.node, param));
             }
         }
         Ok(OK)
     }
 }
 
-fn region_of_definition(inst: &Instance, in_args: Props, out: Props) -> Result<OfxStatus> {
+/// The warning of a node whose file parameter `param` is empty.
+fn not_ready(node: &Node, param: &str) -> String {
+    let label = node.desc.param(param).map_or(param, |p| p.label);
+    format!(
+        "{}: no {label} chosen; it renders nothing of its own until one is",
+        node.desc.label
+    )
+}
+
+/// What a render says of a connected input clip `clip` the host gave no image for.
+fn missing_input(node: &Node, clip: &str) -> String {
+    let optional = node.desc.clip(clip).is_some_and(|c| c.optional);
+    let taken = if optional {
+        "taken as not connected"
+    } else {
+        "taken as transparent black"
+    };
+    format!("the {clip} clip is connected but the host gave no image for it; it was {taken}")
+}
+
+/// Marks the node with its not-ready warning when a file parameter is empty at `time`: a
+/// host may learn it from any action (a host that honours isIdentity never renders a node
+/// that passes its Source through), so each says it, once.
+fn warn_if_not_ready(inst: &Instance, effect: OfxImageEffectHandle, time: f64) {
+    if let Ok(values) = values_at(inst, time) {
+        if let Some(param) = unset_file(inst.node, &values) {
+            message::warn(effect.cast(), &inst.shown, &not_ready(inst.node, param));
+        }
+    }
+}
+
+fn region_of_definition(
+    inst: &Instance,
+    effect: OfxImageEffectHandle,
+    in_args: Props,
+    out: Props,
+) -> Result<OfxStatus> {
     let time = in_args.double(name(kOfxPropTime))?;
     let values = values_at(inst, time)?;
+    let unset = unset_file(inst.node, &values);
+    if unset.is_some() {
+        warn_if_not_ready(inst, effect, time);
+    }
     let rod = match inst.node.region_of_definition(&values, time) {
-        Err(_) if unset_file(inst.node, &values).is_some() => return Ok(REPLY_DEFAULT),
+        Err(_) if unset.is_some() => return Ok(REPLY_DEFAULT),
         rod => rod?,
     };
     match rod {
@@ -207,6 +275,23 @@ fn region_of_definition(inst: &Instance, in_args: Props, out: Props) -> Result<O
         }
         None => Ok(REPLY_DEFAULT),
     }
+}
+
+/// GetOutputColourspace: a node that says its output's space answers it (at the start of
+/// its time domain: the action has no time, and what decides the space does not animate in
+/// practice); others, and a node not ready, leave the host its default.
+fn output_colourspace(inst: &Instance, out: Props) -> Result<OfxStatus> {
+    let values = values_at(inst, 0.0)?;
+    if unset_file(inst.node, &values).is_some() {
+        return Ok(REPLY_DEFAULT);
+    }
+    let space = match inst.node.output_space(&values)? {
+        Some(OutputSpace::Colour(space)) => space.ofx_name(),
+        Some(OutputSpace::Data) => crate::colour::RAW,
+        None => return Ok(REPLY_DEFAULT),
+    };
+    out.set_string(crate::colour::CLIP_COLOURSPACE, space)?;
+    Ok(OK)
 }
 
 fn time_domain(inst: &Instance, out: Props) -> Result<OfxStatus> {
@@ -299,10 +384,16 @@ fn node_pixel_aspect(inst: &Instance) -> Option<f64> {
     inst.node.pixel_aspect(&values, time).ok()?
 }
 
-fn is_identity(inst: &Instance, in_args: Props, out: Props) -> Result<OfxStatus> {
+fn is_identity(
+    inst: &Instance,
+    effect: OfxImageEffectHandle,
+    in_args: Props,
+    out: Props,
+) -> Result<OfxStatus> {
     let time = in_args.double(name(kOfxPropTime))?;
     let values = values_at(inst, time)?;
     let clip = if unset_file(inst.node, &values).is_some() {
+        warn_if_not_ready(inst, effect, time);
         inst.inputs
             .iter()
             .find(|(c, _)| c.kind == ClipKind::Rgba)

@@ -55,6 +55,9 @@ pub fn describe(node: &Node, effect: OfxImageEffectHandle) -> Result<()> {
     ));
     optional(p.set_int(name(kOfxImageEffectPropTemporalClipAccess), 0));
     optional(p.set_int(name(kOfxImageEffectPluginPropFieldRenderTwiceAlways), 0));
+    if node.has_output_space() && crate::colour::host_offers() {
+        optional(p.set_string(crate::colour::STYLE, crate::colour::STYLE_CORE));
+    }
     Ok(())
 }
 

@@ -40,6 +40,8 @@ impl FrameKey {
 struct Frame {
     key: Option<FrameKey>,
     windows: Vec<(Window, RenderStats)>,
+    /// Connected input clips the host gave no image for, in any window of the frame.
+    missing: Vec<&'static str>,
 }
 
 /// One instance's record of the frame on show (shared by its render threads).
@@ -47,21 +49,28 @@ struct Frame {
 pub struct FrameStats(Mutex<Frame>);
 
 impl FrameStats {
-    /// Records what rendering `window` of `frame` counted, then hands the frame's counts so
-    /// far to `report` (still holding the record).
+    /// Records what rendering `window` of `frame` counted and which connected inputs had no
+    /// image (`missing`), then hands the frame's counts and missing inputs so far to `report`
+    /// (still holding the record).
     pub fn record(
         &self,
         frame: FrameKey,
         window: Window,
         stats: RenderStats,
-        report: impl FnOnce(&RenderStats),
+        missing: &[&'static str],
+        report: impl FnOnce(&RenderStats, &[&'static str]),
     ) {
         let mut f = self.0.lock().unwrap_or_else(PoisonError::into_inner);
         if f.key != Some(frame) {
             *f = Frame {
                 key: Some(frame),
-                windows: Vec::new(),
+                ..Frame::default()
             };
+        }
+        for clip in missing {
+            if !f.missing.contains(clip) {
+                f.missing.push(clip);
+            }
         }
         f.windows.retain(|(w, _)| *w != window);
         if f.windows.len() >= MAX_WINDOWS {
@@ -72,7 +81,7 @@ impl FrameStats {
             .windows
             .iter()
             .fold(RenderStats::default(), |sum, (_, s)| sum + *s);
-        report(&total);
+        report(&total, &f.missing);
     }
 
     /// Forgets the frame (an edit of the artist: its renders are stale).
@@ -88,7 +97,7 @@ mod tests {
     /// Records `stats` of `window` into `f`; what it reported for the frame.
     fn record(f: &FrameStats, at: FrameKey, window: Window, stats: RenderStats) -> RenderStats {
         let mut reported = None;
-        f.record(at, window, stats, |s| reported = Some(*s));
+        f.record(at, window, stats, &[], |s, _| reported = Some(*s));
         reported.expect("a report")
     }
 
@@ -121,6 +130,32 @@ mod tests {
         record(&f, at, a, stats(64, 3));
         f.reset();
         assert_eq!(record(&f, at, b, stats(64, 0)), stats(64, 0));
+    }
+
+    #[test]
+    fn an_input_missing_in_one_window_is_the_frames() {
+        let f = FrameStats::default();
+        let at = FrameKey::new(1.0, 1.0, false);
+        let mut said = Vec::new();
+        f.record(
+            at,
+            Window::new(0, 0, 1, 1),
+            stats(1, 0),
+            &["Source"],
+            |_, m| said = m.to_vec(),
+        );
+        f.record(at, Window::new(1, 0, 2, 1), stats(1, 0), &[], |_, m| {
+            said = m.to_vec()
+        });
+        assert_eq!(said, ["Source"]);
+        f.record(
+            FrameKey::new(2.0, 1.0, false),
+            Window::new(1, 0, 2, 1),
+            stats(1, 0),
+            &[],
+            |_, m| said = m.to_vec(),
+        );
+        assert!(said.is_empty());
     }
 
     #[test]

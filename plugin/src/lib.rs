@@ -12,10 +12,12 @@
 //! - `params`: parameter values at a time; `images` and `pixels`: clip images ⇄
 //!   [`nerfx::image::Planes`]; `coords`: OpenFX pixel rectangles ⇄ raster windows.
 //! - `props`, `suites`, `message`, `status`: the host's suites made safe, and errors;
-//!   `frame_stats`: a frame's render statistics over its tiles, for the node's warning.
+//!   `frame_stats`: a frame's render statistics over its tiles, for the node's warning;
+//!   `colour`: OpenFX 1.5's colour management names, for hosts that offer it.
 #![deny(missing_docs)]
 
 mod actions;
+mod colour;
 mod coords;
 mod describe;
 mod effect;

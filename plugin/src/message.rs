@@ -39,6 +39,9 @@ pub enum Target {
 pub struct Shown {
     /// A persistent message is set on the node.
     persistent: bool,
+    /// The text of the persistent warning set on the node, if that is what is set: the same
+    /// warning is not posted again (every tile of a frame, every query would).
+    warning: Option<String>,
     /// A transient message was shown since the last edit.
     transient: bool,
 }
@@ -61,6 +64,7 @@ fn delivery(v2: Option<bool>, target: Target, shown: Option<&mut Shown>) -> Deli
         Target::Instance(_) => match shown {
             Some(s) if v2 => {
                 s.persistent = true;
+                s.warning = None;
                 Delivery::Persistent
             }
             _ if v2 => Delivery::Persistent,
@@ -125,13 +129,18 @@ pub fn post_error(target: Target, shown: Option<&Mutex<Shown>>, text: &str) {
 /// *warning* (the host goes on; the node is flagged, without a dialog): a node without all
 /// its files says why it renders nothing, a render whose pixels may be off says why and what
 /// to do. Hosts without persistent messages get it once per edit on standard error. Cleared
-/// like an error: by the artist's next edit or a clean render.
+/// like an error: by the artist's next edit or a clean render. A warning already on the node
+/// is not posted again: every tile of a frame, and every query of a node not ready, would.
 pub fn warn(instance: *mut c_void, shown: &Mutex<Shown>, text: &str) {
     let mut shown = shown.lock().unwrap_or_else(PoisonError::into_inner);
     match suites().ok().and_then(|s| s.message) {
         Some(MessageSuite::V2(m)) => {
+            if shown.persistent && shown.warning.as_deref() == Some(text) {
+                return;
+            }
             if let Some(f) = m.setPersistentMessage {
                 shown.persistent = true;
+                shown.warning = Some(text.to_string());
                 let c_text = c_string(text);
                 // SAFETY: the host's function on the current action's instance; "%s" takes
                 // exactly one C string argument.
@@ -156,12 +165,11 @@ pub fn warn(instance: *mut c_void, shown: &Mutex<Shown>, text: &str) {
 
 /// After a clean render: clears the node's persistent message, if one is set.
 pub fn succeeded(instance: *mut c_void, shown: &Mutex<Shown>) {
-    let was = std::mem::take(
-        &mut shown
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .persistent,
-    );
+    let was = {
+        let mut shown = shown.lock().unwrap_or_else(PoisonError::into_inner);
+        shown.warning = None;
+        std::mem::take(&mut shown.persistent)
+    };
     if was {
         clear_persistent(instance);
     }

@@ -90,6 +90,9 @@ pub enum Outcome {
         window: Window,
         /// What rendering it counted (nothing for a node that only composites).
         stats: RenderStats,
+        /// Connected input clips the host gave no image for: an optional one was taken as
+        /// absent, a mandatory one as transparent black.
+        missing: Vec<&'static str>,
     },
     /// That file parameter is empty: the node rendered its first RGBA input or nothing.
     NotReady(&'static str),
@@ -126,6 +129,7 @@ pub fn render(instance: &Instance, in_args: Props) -> Result<Outcome> {
             Failure::failed(format!("{}: the host gave no output image", node.desc.id))
         })?;
     let rows = field_rows(&field, output.single_field);
+    let mut missing = Vec::new();
     let rendered = if window.area() == 0 {
         Rendered::from(clear(window))
     } else if !ready {
@@ -150,10 +154,17 @@ pub fn render(instance: &Instance, in_args: Props) -> Result<Outcome> {
             }
             let planes = match ClipImage::fetch(handle, clip.name, time, Some(region))? {
                 Some(image) => read_planes(&image.view, frame, window, image.straight),
-                // An optional input the host has no image for is absent (the node then does
-                // what it does without it: Accumulation Matte takes the Source's alpha).
-                None if clip.optional => continue,
-                None => clear(window),
+                // A connected input the host has no image for is said (the action warns);
+                // an optional one is absent (the node then does what it does without it:
+                // Accumulation Matte takes the Source's alpha), a mandatory one is
+                // transparent black.
+                None => {
+                    missing.push(clip.name);
+                    if clip.optional {
+                        continue;
+                    }
+                    clear(window)
+                }
             };
             request = request.with_input(clip.name, planes);
         }
@@ -175,6 +186,7 @@ pub fn render(instance: &Instance, in_args: Props) -> Result<Outcome> {
             frame: FrameKey::new(time, s, draft),
             window,
             stats: rendered.stats,
+            missing,
         },
     })
 }

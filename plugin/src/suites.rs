@@ -125,6 +125,18 @@ fn fetch_all() -> Result<Suites> {
     Ok(suites)
 }
 
+/// A string property of the host's descriptor (`OfxHost::host`), if the host sets it.
+pub fn host_string(prop: &std::ffi::CStr) -> Option<String> {
+    let host = HOST.load(Ordering::Acquire);
+    // SAFETY: the host pointer stays valid while the binary is loaded (ofxCore.h).
+    let host = unsafe { host.as_ref() }?;
+    let property = suites().ok()?.property;
+    // SAFETY: the host's descriptor property set, valid as long as the host.
+    unsafe { crate::props::Props::new(host.host, property) }
+        .string(prop)
+        .ok()
+}
+
 /// The suites: those loaded, or fetched now from the current host.
 pub fn suites() -> Result<Suites> {
     let loaded = *SUITES.read().unwrap_or_else(PoisonError::into_inner);

@@ -15,7 +15,10 @@ use nerfx::farm::{is_done, ExitStatus, FarmJob, Progress, Stripe};
 use nerfx::frames::{
     frame_path, parse_frames, read_shot, render_environment, render_frame_window, EnvironmentOrigin,
 };
-use nerfx::image::{write_exr, write_exr_layers, write_png_preview};
+use nerfx::image::{
+    frames_per_second, write_exr, write_exr_layers, write_png_preview, CameraMatrices, ExrHeader,
+    OutputColorSpace,
+};
 use nerfx::render::{ColorOutput, Outputs, Quality, RenderSettings};
 use nerfx::scene::SceneDesc;
 use nerfx::{bench, demo, Error, Result};
@@ -80,6 +83,11 @@ enum Command {
         /// referred; graphs set the NeRF Render node's Colour parameter instead).
         #[arg(long, value_enum, default_value_t = ColorOutput::Linear)]
         colour: ColorOutput,
+        /// Scenes: the colour space the EXR is written in (default: the scene file's
+        /// `colorspace`, else lin_rec709); its primaries go into the EXR's `chromaticities`
+        /// (graphs: the graph's `colorspace` and each NeRF Render node's Output Colour Space).
+        #[arg(long, value_enum)]
+        colorspace: Option<OutputColorSpace>,
         /// Scenes whose shot has motion blur: renders per frame over the shutter (default: the
         /// quality preset's, 4 / 8 / 16).
         #[arg(long)]
@@ -424,7 +432,12 @@ fn run(cli: Cli) -> Result<()> {
             }
             let layers: Vec<(&str, &_)> =
                 comp.layers.iter().map(|(n, p)| (n.as_str(), p)).collect();
-            write_exr_layers(&out.join("demo.exr"), &comp.image, &layers, 1.0)?;
+            write_exr_layers(
+                &out.join("demo.exr"),
+                &comp.image,
+                &layers,
+                &ExrHeader::default(),
+            )?;
             write_png_preview(&out.join("demo.png"), &comp.image)?;
             println!(
                 "demo: {width}×{height} {} in {:.2} s → {} (and demo.png; its graph: {})",
@@ -443,6 +456,7 @@ fn run(cli: Cli) -> Result<()> {
             output,
             quality,
             colour,
+            colorspace,
             shutter_samples,
             png,
             passes,
@@ -474,6 +488,13 @@ fn run(cli: Cli) -> Result<()> {
                          shot",
                     ));
                 }
+                if colorspace.is_some() {
+                    return Err(Error::invalid(
+                        "--colorspace",
+                        "a graph says its colour space itself: its `colorspace` key, or its \
+                         NeRF Render nodes' Output Colour Space",
+                    ));
+                }
                 return graph::render(&scene, frames, &output, png, bundle, scale, &task);
             };
             let outputs = passes.as_deref().map_or_else(Outputs::all, Pass::outputs);
@@ -493,6 +514,7 @@ fn run(cli: Cli) -> Result<()> {
             for warning in scene.warnings() {
                 eprintln!("nerfx: warning: {warning}");
             }
+            let space = colorspace.unwrap_or(scene.desc().colorspace.unwrap_or_default());
             let shot = read_shot(&shot, &nerf_object)?;
             let frames = frames.unwrap_or_else(|| shot.frames.iter().map(|f| f.frame).collect());
             let shutter_samples = match shutter_samples {
@@ -535,13 +557,20 @@ fn run(cli: Cli) -> Result<()> {
                     }
                     None => camera.full_window(),
                 };
-                let (planes, stats) =
+                let (mut planes, stats) =
                     render_frame_window(&scene, &shot, frame, window, &settings, &|_| {})?;
                 if let Some(warning) = stats.warning() {
                     bar.suspend(|| eprintln!("nerfx: warning: frame {frame}: {warning}"));
                 }
-                let pixel_aspect = shot.pixel_aspect_for(&camera);
-                write_exr_layers(&path, &planes, &[], pixel_aspect)?;
+                space.convert_planes(&mut planes);
+                let header = ExrHeader {
+                    pixel_aspect: shot.pixel_aspect_for(&camera),
+                    color_space: space,
+                    camera: Some(CameraMatrices::of(&camera)),
+                    frames_per_second: frames_per_second(shot.fps, shot.fps_base),
+                    entries: render_entries(&scene, &shot, quality, &settings, space),
+                };
+                write_exr_layers(&path, &planes, &[], &header)?;
                 if png {
                     write_png_preview(&path.with_extension("png"), &planes)?;
                 }
@@ -1107,12 +1136,67 @@ mod graph {
             .iter()
             .map(|(layer, node)| Ok((layer.as_str(), image(node)?)))
             .collect::<Result<Vec<_>>>()?;
-        let pixel_aspect = graph.pixel_aspect(&graph.graph().output);
-        write_exr_layers(target, main, &layers, pixel_aspect)?;
+        let header = graph_header(graph, frame as f64)?;
+        write_exr_layers(target, main, &layers, &header)?;
         if png {
             write_png_preview(&target.with_extension("png"), main)?;
         }
         Ok(())
+    }
+
+    /// The EXR header of a graph's frame: its colour space, the camera of the NeRF Render
+    /// node the output comes from, and the field files the output needs.
+    fn graph_header(graph: &OfxGraph, time: f64) -> Result<ExrHeader> {
+        let g = graph.graph();
+        let camera = g.output_camera(time)?;
+        let needed = g.needed();
+        let fields: Vec<&str> = g
+            .nodes
+            .iter()
+            .zip(needed)
+            .filter(|(n, needed)| *needed && n.node.desc.param("file").is_some())
+            .filter_map(|(n, _)| n.values.text("file").ok())
+            .collect();
+        let mut entries = vec![
+            (
+                "nerfx/version".to_string(),
+                env!("CARGO_PKG_VERSION").to_string(),
+            ),
+            ("nerfx/fieldFiles".to_string(), fields.join(";")),
+            (
+                "nerfx/colorspace".to_string(),
+                g.colorspace.ocio_name().to_string(),
+            ),
+        ];
+        if let Some(node) = g.output_render() {
+            for (key, param) in [
+                ("nerfx/quality", "quality"),
+                ("nerfx/shutterSamples", "shutterSamples"),
+            ] {
+                if let Some(value) = param_text(&node.values, param) {
+                    entries.push((key.to_string(), value));
+                }
+            }
+            entries.push(("nerfx/apertureSamples".to_string(), "1".to_string()));
+        }
+        Ok(ExrHeader {
+            pixel_aspect: graph.pixel_aspect(&g.output),
+            color_space: g.colorspace,
+            camera: camera.as_ref().map(|(c, _)| CameraMatrices::of(c)),
+            frames_per_second: camera
+                .as_ref()
+                .and_then(|(_, shot)| frames_per_second(shot.fps, shot.fps_base)),
+            entries,
+        })
+    }
+
+    /// A choice or whole-number parameter's value as text.
+    fn param_text(values: &nerfx::graph::ParamValues, name: &str) -> Option<String> {
+        values
+            .choice(name)
+            .map(str::to_string)
+            .or_else(|_| values.int(name).map(|v| v.to_string()))
+            .ok()
     }
 }
 
@@ -1136,6 +1220,46 @@ mod graph {
             path.display()
         )))
     }
+}
+
+/// The `nerfx/...` header entries of a scene's render: what made it.
+fn render_entries(
+    scene: &nerfx::scene::LoadedScene,
+    shot: &nerfx::camera::Shot,
+    quality: Quality,
+    settings: &RenderSettings,
+    space: OutputColorSpace,
+) -> Vec<(String, String)> {
+    let fields: Vec<String> = scene
+        .desc()
+        .instances
+        .iter()
+        .map(|i| match &i.field {
+            nerfx::scene::FieldSource::Analytic(_) => format!("{} (analytic)", i.name),
+            nerfx::scene::FieldSource::Ingp { path, .. }
+            | nerfx::scene::FieldSource::Nerfacto { path, .. }
+            | nerfx::scene::FieldSource::Splats { path, .. } => path.display().to_string(),
+        })
+        .collect();
+    [
+        ("nerfx/version", env!("CARGO_PKG_VERSION").to_string()),
+        ("nerfx/fieldFiles", fields.join(";")),
+        ("nerfx/quality", quality.name().to_string()),
+        // Renders averaged per frame: the shutter's only where the shot has motion blur.
+        (
+            "nerfx/shutterSamples",
+            match shot.motion_blur {
+                Some(_) => settings.shutter_samples,
+                None => 1,
+            }
+            .to_string(),
+        ),
+        ("nerfx/apertureSamples", "1".to_string()),
+        ("nerfx/colorspace", space.ocio_name().to_string()),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect()
 }
 
 fn create_dir(dir: &Path) -> Result<()> {

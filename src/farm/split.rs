@@ -115,11 +115,12 @@ pub fn assemble(frame: &Path, count: u32) -> Result<()> {
     let mut joined: Vec<(String, Plane)> = Vec::new();
     let mut width = 0;
     let mut height = 0u32;
-    let mut aspect = 1.0;
+    let mut header = None;
     let mut stripes = Vec::with_capacity(count as usize);
     for index in 1..=count {
         let path = Stripe { index, count }.path(frame);
-        let (mut channels, pixel_aspect) = read_exr_image(&path)?;
+        let (mut channels, stripe_header) = read_exr_image(&path)?;
+        let pixel_aspect = stripe_header.pixel_aspect;
         channels.sort_by(|a, b| a.0.cmp(&b.0));
         let disagree = |why: String| {
             Error::format(
@@ -137,17 +138,19 @@ pub fn assemble(frame: &Path, count: u32) -> Result<()> {
         }
         if index == 1 {
             width = w;
-            aspect = pixel_aspect;
+            header = Some(stripe_header);
             joined = channels
                 .iter()
                 .map(|(name, _)| (name.clone(), Plane::filled(w, 0, 0.0)))
                 .collect();
         } else if w != width {
             return Err(disagree(format!("{w} pixels wide, not {width}")));
-        } else if pixel_aspect != aspect {
-            return Err(disagree(format!(
-                "pixel aspect {pixel_aspect}, not {aspect}"
-            )));
+        } else if let Some(aspect) = header.as_ref().map(|h| h.pixel_aspect) {
+            if pixel_aspect != aspect {
+                return Err(disagree(format!(
+                    "pixel aspect {pixel_aspect}, not {aspect}"
+                )));
+            }
         }
         let names = |c: &[(String, Plane)]| c.iter().map(|(n, _)| n.clone()).collect::<Vec<_>>();
         if names(&channels) != names(&joined) {
@@ -164,7 +167,8 @@ pub fn assemble(frame: &Path, count: u32) -> Result<()> {
         height += h;
         stripes.push(path);
     }
-    write_exr_channels(frame, (width, height), &joined, aspect)?;
+    // The frame's header is the first stripe's: every stripe's is the whole frame's.
+    write_exr_channels(frame, (width, height), &joined, &header.unwrap_or_default())?;
     for path in stripes {
         std::fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
     }
@@ -174,7 +178,7 @@ pub fn assemble(frame: &Path, count: u32) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::image::{read_exr_channels, write_exr_layers, Planes};
+    use crate::image::{read_exr_channels, write_exr_layers, ExrHeader, OutputColorSpace, Planes};
 
     #[test]
     fn stripes_cover_the_frame_on_tile_rows() {
@@ -236,8 +240,14 @@ mod tests {
             depth_median: None,
             ..planes.clone()
         };
+        let header = ExrHeader {
+            pixel_aspect: 2.0,
+            color_space: OutputColorSpace::AcesCg,
+            entries: vec![("nerfx/colorspace".into(), "acescg".into())],
+            ..ExrHeader::default()
+        };
         let whole = dir.path().join("whole.exr");
-        write_exr_layers(&whole, &planes, &[("env", &layer)], 2.0).unwrap();
+        write_exr_layers(&whole, &planes, &[("env", &layer)], &header).unwrap();
         let frame = dir.path().join("frame.exr");
         for index in 1..=3 {
             let stripe = Stripe::new(index, 3).unwrap();
@@ -247,7 +257,7 @@ mod tests {
                 &stripe.path(&frame),
                 &cut(&planes),
                 &[("env", &cut(&layer))],
-                2.0,
+                &header,
             )
             .unwrap();
         }

@@ -138,6 +138,7 @@ pub(crate) fn accumulation_matte_node() -> Node {
         },
         rod: None,
         identity: Some(|v| Ok((v.double("mix")? == 0.0).then_some("Source"))),
+        output_space: None,
     }
 }
 
@@ -216,6 +217,7 @@ pub(crate) fn shadow_catcher_merge_node() -> Node {
         },
         rod: None,
         identity: Some(|v| Ok((v.double("mix")? == 0.0).then_some("B"))),
+        output_space: None,
     }
 }
 
@@ -284,5 +286,6 @@ pub(crate) fn depth_merge_node() -> Node {
         },
         rod: None,
         identity: Some(|v| Ok((v.double("mix")? == 0.0).then_some("B"))),
+        output_space: None,
     }
 }

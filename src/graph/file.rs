@@ -10,8 +10,13 @@
 //!    {"name": "comp", "node": "org.nerfx.ShadowCatcherMerge",
 //!     "inputs": {"A": "obj", "B": "env"}, "params": {"tint": [0.1, 0.1, 0.2]}}],
 //!  "output": "comp",
-//!  "layers": {"env": "env"}}
+//!  "layers": {"env": "env"},
+//!  "colorspace": "acescg"}
 //! ```
+//!
+//! `colorspace` (optional) is the colour space of the graph's images: every NeRF Render node
+//! outputs it (one that names another is refused), and the EXR says so. Without it the NeRF
+//! Render nodes the output needs must agree.
 //!
 //! Values are typed by the node's description: numbers, booleans, strings, arrays for
 //! colours and 3-vectors, 16 numbers (row-major) or 4 rows for a matrix, and a choice by its
@@ -24,13 +29,16 @@
 use std::cmp::Reverse;
 use std::collections::{BTreeMap, BinaryHeap, HashMap, HashSet};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use serde_json::Value as Json;
 
 use super::desc::ParamKind;
 use super::node::Node;
 use super::values::{ParamValues, Value};
+use crate::camera::{Camera, Shot};
 use crate::error::{Error, Result};
+use crate::image::OutputColorSpace;
 
 /// One node instance of a graph.
 #[derive(Clone, Debug)]
@@ -54,6 +62,8 @@ pub struct Graph {
     pub output: String,
     /// Extra output layers: EXR layer name → node name (written as `layer.R` … `layer.A`).
     pub layers: Vec<(String, String)>,
+    /// The colour space of the graph's images, written into the EXR's header.
+    pub colorspace: OutputColorSpace,
 }
 
 impl Graph {
@@ -75,9 +85,12 @@ impl Graph {
         if let Some(map) = json.as_object() {
             if let Some(key) = map
                 .keys()
-                .find(|k| !["nodes", "output", "layers"].contains(&k.as_str()))
+                .find(|k| !["nodes", "output", "layers", "colorspace"].contains(&k.as_str()))
             {
-                return Err(bad(key, "unknown key (keys: nodes, output, layers)".into()));
+                return Err(bad(
+                    key,
+                    "unknown key (keys: nodes, output, layers, colorspace)".into(),
+                ));
             }
         }
         let base = path.parent().unwrap_or(Path::new(""));
@@ -135,12 +148,88 @@ impl Graph {
                 layers.push((layer.clone(), named(&format!("layers.{layer}"), node)?));
             }
         }
+        let declared = match json.get("colorspace") {
+            None => None,
+            Some(v) => {
+                let name = v
+                    .as_str()
+                    .ok_or_else(|| bad("colorspace", "expected a colour space name".into()))?;
+                Some(
+                    OutputColorSpace::parse(name, "colorspace").map_err(|e| match e {
+                        Error::Invalid { message, .. } => bad("colorspace", message),
+                        other => other,
+                    })?,
+                )
+            }
+        };
         let nodes = upstream_first(nodes).map_err(|m| bad("nodes", m))?;
-        Ok(Graph {
+        let mut graph = Graph {
             nodes,
             output,
             layers,
-        })
+            colorspace: OutputColorSpace::default(),
+        };
+        graph.colorspace = graph
+            .settle_color_space(declared)
+            .map_err(|m| bad("colorspace", m))?;
+        Ok(graph)
+    }
+
+    /// The one colour space of the graph's images: `declared` (the file's `colorspace`),
+    /// which every NeRF Render node set to take its scene file's takes and none may
+    /// contradict; without it, the one every needed NeRF Render node outputs (linear Rec.709
+    /// when there is none; a scene file not readable yet counts for none). Compositing nodes
+    /// keep the space of their inputs.
+    fn settle_color_space(
+        &mut self,
+        declared: Option<OutputColorSpace>,
+    ) -> std::result::Result<OutputColorSpace, String> {
+        let need = self.needed();
+        let mut found: Option<(String, OutputColorSpace)> = None;
+        for (node, needed) in self.nodes.iter_mut().zip(need) {
+            if node.node.desc.id != super::nerf_render::NODE_ID {
+                continue;
+            }
+            let chosen = node
+                .values
+                .choice("outputColourSpace")
+                .map_err(|e| e.to_string())?;
+            if let Some(space) = declared {
+                if chosen == "scene" {
+                    node.values
+                        .set_choice("outputColourSpace", space.name())
+                        .map_err(|e| e.to_string())?;
+                } else if chosen != space.name() {
+                    return Err(format!(
+                        "the graph is {}, but node {:?} outputs {chosen}",
+                        space.name(),
+                        node.name
+                    ));
+                }
+                continue;
+            }
+            if !needed {
+                continue;
+            }
+            // A scene file that cannot be read now is the render's to report.
+            let Ok(space) = super::nerf_render::declared_color_space(&node.values) else {
+                continue;
+            };
+            match &found {
+                Some((other, s)) if *s != space => {
+                    return Err(format!(
+                        "node {:?} outputs {} and node {other:?} {}: say which space the \
+                         graph is in with its \"colorspace\"",
+                        node.name,
+                        space.name(),
+                        s.name()
+                    ))
+                }
+                Some(_) => {}
+                None => found = Some((node.name.clone(), space)),
+            }
+        }
+        Ok(declared.or(found.map(|(_, s)| s)).unwrap_or_default())
     }
 
     /// Which nodes (in [`Graph::nodes`] order) the outputs depend on: the output, the layers,
@@ -163,6 +252,33 @@ impl Graph {
             }
         }
         need
+    }
+
+    /// The NeRF Render node the output image comes from: the first met walking up from the
+    /// output node, inputs in clip order (`None` for a graph without one).
+    pub fn output_render(&self) -> Option<&GraphNode> {
+        let mut queue = std::collections::VecDeque::from([self.output.as_str()]);
+        let mut seen = HashSet::new();
+        while let Some(name) = queue.pop_front() {
+            let node = self.node(name)?;
+            if node.node.desc.id == super::nerf_render::NODE_ID {
+                return Some(node);
+            }
+            for up in node.inputs.values() {
+                if seen.insert(up.as_str()) {
+                    queue.push_back(up);
+                }
+            }
+        }
+        None
+    }
+
+    /// The camera the output image was seen through at host time `time`, and its shot: the
+    /// camera of [`Self::output_render`].
+    pub fn output_camera(&self, time: f64) -> Result<Option<(Camera, Arc<Shot>)>> {
+        self.output_render()
+            .map(|node| super::nerf_render::node_camera(&node.values, time))
+            .transpose()
     }
 
     /// The node named `name`.
@@ -412,6 +528,58 @@ mod tests {
         {"name": "objZ", "node": "org.nerfx.NeRFRender",
          "params": {"file": "obj.json", "shot": "s.json"}}],
       "output": "comp", "layers": {"env": "env"}}"#;
+
+    #[test]
+    fn the_graph_colour_space_reaches_every_render_and_is_not_contradicted() {
+        let with_b = |colorspace: &str, node_space: &str, b_space: &str| {
+            format!(
+                r#"{{"nodes": [
+                {{"name": "a", "node": "org.nerfx.NeRFRender",
+                  "params": {{"file": "a.json", "shot": "s.json"{node_space}}}}},
+                {{"name": "b", "node": "org.nerfx.NeRFRender",
+                  "params": {{"file": "b.json", "shot": "s.json"{b_space}}}}}],
+              "output": "a", "layers": {{"b": "b"}}{colorspace}}}"#
+            )
+        };
+        let with = |colorspace: &str, node_space: &str| with_b(colorspace, node_space, "");
+        let g = parse(&with(r#", "colorspace": "acescg""#, "")).unwrap();
+        assert_eq!(g.colorspace, OutputColorSpace::AcesCg);
+        for n in &g.nodes {
+            assert_eq!(n.values.choice("outputColourSpace").unwrap(), "acescg");
+        }
+        let same = r#", "outputColourSpace": "acescg""#;
+        assert!(parse(&with(r#", "colorspace": "acescg""#, same)).is_ok());
+        let e = parse(&with(
+            r#", "colorspace": "acescg""#,
+            r#", "outputColourSpace": "srgb""#,
+        ))
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("colorspace") && e.contains("\"a\" outputs srgb"),
+            "{e}"
+        );
+        let e = parse(&with(r#", "colorspace": "rec709""#, ""))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("unknown colour space 'rec709'"), "{e}");
+        // Without the key: the nodes' own, which must agree (b's scene file cannot be read
+        // here, so it counts only when it names its space itself).
+        let p3 = r#", "outputColourSpace": "lin_p3d65""#;
+        assert_eq!(
+            parse(&with("", p3)).unwrap().colorspace,
+            OutputColorSpace::LinP3D65
+        );
+        let e = parse(&with_b("", p3, r#", "outputColourSpace": "lin_rec709""#))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("lin_p3d65") && e.contains("say which space"),
+            "{e}"
+        );
+        let g = parse(&with("", "")).unwrap();
+        assert_eq!(g.colorspace, OutputColorSpace::LinRec709);
+    }
 
     #[test]
     fn a_graph_is_read_typed_and_ordered_upstream_first() {

@@ -43,8 +43,8 @@ pub use evaluate::{evaluate, render_direct, RenderNode};
 pub use file::{Graph, GraphNode};
 pub use matrix_text::{matrix_text, parse_matrix};
 pub use node::{
-    check_render_scale, single_channel, Format, IdentityFn, Node, PixelAspectFn, RenderFn,
-    RenderRequest, Rendered, RodFn, TimeDomainFn,
+    check_render_scale, single_channel, Format, IdentityFn, Node, OutputSpace, OutputSpaceFn,
+    PixelAspectFn, RenderFn, RenderRequest, Rendered, RodFn, TimeDomainFn,
 };
 pub use reference::nodes_markdown;
 pub use shared_renders::{shared_render_stats, SharedRenderStats};

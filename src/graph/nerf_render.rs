@@ -4,8 +4,8 @@
 //! and objects are interpolated ([`Shot::frame_at`]). Render scale `s`
 //! renders the shot at `ceil(s·width) × ceil(s·height)` pixels (the same camera, fewer
 //! pixels), so no parameter of this node is spatial. Outputs, as RGBA:
-//! - `rgba`: the render (premultiplied, times `2^exposure`) over the background colour, which
-//!   is over the optional Source clip;
+//! - `rgba`: the render (premultiplied, times `2^exposure`, in the Output Colour Space) over
+//!   the background colour, which is over the optional Source clip;
 //! - `accumulation`: the accumulation in all four channels;
 //! - `depthZ` / `depthRay`: depth in Blender units in RGB (10¹⁰ where nothing was hit, as in
 //!   Blender's Z pass), the accumulation in alpha; the depth plane itself rides along.
@@ -20,7 +20,7 @@ use glam::DMat4;
 
 use super::cache::{cached_scene, cached_shot};
 use super::desc::{ClipDesc, ClipKind, Context, NodeDesc, ParamDesc, ParamKind, Range};
-use super::node::{Format, Node, RenderRequest, Rendered};
+use super::node::{Format, Node, OutputSpace, RenderRequest, Rendered};
 use super::shared_renders::{shared_render, RenderKey};
 use super::values::ParamValues;
 use crate::camera::{
@@ -28,11 +28,23 @@ use crate::camera::{
 };
 use crate::composite::{over, rgba_pixels, rgba_planes, shutter_average};
 use crate::error::{Error, Result};
-use crate::image::{scaled_size, Plane, Planes, BACKGROUND_DEPTH};
+use crate::image::{scaled_size, OutputColorSpace, Plane, Planes, BACKGROUND_DEPTH};
 use crate::render::{
     render_with_progress, ColorOutput, Outputs, Quality, RenderSettings, RenderStats,
 };
 use crate::scene::{CropBox, Instance, Scene};
+
+/// The Output Colour Space parameter's options: the scene file's, then every
+/// [`OutputColorSpace`] by its name.
+const OUTPUT_COLOUR_SPACES: &[(&str, &str)] = &[
+    ("scene", "From Scene File"),
+    ("lin_rec709", "Linear Rec.709"),
+    ("acescg", "ACEScg"),
+    ("aces2065-1", "ACES2065-1"),
+    ("lin_rec2020", "Linear Rec.2020"),
+    ("lin_p3d65", "Linear P3-D65"),
+    ("srgb", "sRGB (display)"),
+];
 
 const CONTEXTS: &[Context] = &[Context::Generator, Context::Filter, Context::General];
 const WITH_SOURCE: &[Context] = &[Context::Filter, Context::General];
@@ -69,7 +81,7 @@ pub(crate) fn nerf_render_node() -> Node {
     let identity: [f64; 16] = DMat4::IDENTITY.transpose().to_cols_array();
     Node {
         desc: NodeDesc {
-            id: "org.nerfx.NeRFRender",
+            id: NODE_ID,
             label: "NeRF Render",
             group: "NeRF",
             hint: "Renders radiance fields from a Blender shot's camera: premultiplied RGBA, \
@@ -163,6 +175,15 @@ pub(crate) fn nerf_render_node() -> Node {
                      that composite unconverted, as the trainer's viewer shows it.",
                     &[("linear", "Linear"), ("asTrained", "As Trained (display)")],
                 ),
+                choice(
+                    "outputColourSpace",
+                    "Output Colour Space",
+                    "The colour space of the RGBA output: the scene file's (linear Rec.709 when \
+                     it names none), a linear space of an ACES pipeline or a wide gamut, or \
+                     display-encoded sRGB for previews. Background and Source are taken to be \
+                     in it already.",
+                    OUTPUT_COLOUR_SPACES,
+                ),
                 ParamDesc::new(
                     "crop",
                     "Crop",
@@ -245,6 +266,12 @@ pub(crate) fn nerf_render_node() -> Node {
             pixel_aspect: Some(pixel_aspect),
         }),
         identity: None,
+        output_space: Some(|values| {
+            Ok(match values.choice("output")? {
+                "rgba" => OutputSpace::Colour(output_color_space(values)?),
+                _ => OutputSpace::Data,
+            })
+        }),
     }
 }
 
@@ -402,7 +429,42 @@ fn placed_scene(values: &ParamValues, shot: &Shot, at: &ShotFrame) -> Result<Sce
 
 /// Parameters that only pick or grade the output: nodes differing only in these share one
 /// render.
-const LOOK: &[&str] = &["output", "background", "exposure"];
+const LOOK: &[&str] = &["output", "background", "exposure", "outputColourSpace"];
+
+/// The registry identifier of the NeRF Render node.
+pub(crate) const NODE_ID: &str = "org.nerfx.NeRFRender";
+
+/// The colour space a node with `values` outputs, read from its scene file's text without
+/// loading its fields (a graph settles its colour space when it is read).
+pub(crate) fn declared_color_space(values: &ParamValues) -> Result<OutputColorSpace> {
+    match values.choice("outputColourSpace")? {
+        "scene" => Ok(crate::scene::SceneDesc::for_path(file(values, "file")?)?
+            .colorspace
+            .unwrap_or_default()),
+        name => OutputColorSpace::parse(name, "parameter outputColourSpace"),
+    }
+}
+
+/// The camera a node with `values` renders through at host time `time` (full resolution),
+/// and its shot.
+pub(crate) fn node_camera(values: &ParamValues, time: f64) -> Result<(Camera, Arc<Shot>)> {
+    let shot = node_shot(values)?;
+    let time = within_shot(values, &shot, time)?;
+    let (_, camera) = camera(values, &shot, time, 1.0)?;
+    Ok((camera, shot))
+}
+
+/// The colour space the node's RGBA output is in: its Output Colour Space, or the scene
+/// file's (linear Rec.709 when it names none).
+pub(crate) fn output_color_space(values: &ParamValues) -> Result<OutputColorSpace> {
+    match values.choice("outputColourSpace")? {
+        "scene" => Ok(cached_scene(file(values, "file")?)?
+            .desc()
+            .colorspace
+            .unwrap_or_default()),
+        name => OutputColorSpace::parse(name, "parameter outputColourSpace"),
+    }
+}
 
 fn render_node(values: &ParamValues, request: &RenderRequest) -> Result<Rendered> {
     let shot = node_shot(values)?;
@@ -516,10 +578,17 @@ fn look(values: &ParamValues, request: &RenderRequest, planes: &Planes) -> Resul
             ..grey(&far(&planes.depth_ray), &alpha)?
         }),
         _ => {
+            // Exposed in linear light, then converted (an encoding applies to the exposed
+            // colour), then over a background and Source already in the output space.
             let gain = values.double("exposure")?.exp2() as f32;
+            let space = output_color_space(values)?;
             let lit: Vec<[f32; 4]> = rgba_pixels(planes)
                 .into_iter()
-                .map(|p| [p[0] * gain, p[1] * gain, p[2] * gain, p[3]])
+                .map(|p| {
+                    let [r, g, b] =
+                        space.convert_pixel([p[0] * gain, p[1] * gain, p[2] * gain], p[3]);
+                    [r, g, b, p[3]]
+                })
                 .collect();
             let bg = values.doubles("background")?;
             let bg = [bg[0] as f32, bg[1] as f32, bg[2] as f32, bg[3] as f32];

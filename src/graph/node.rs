@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use super::desc::{ClipKind, NodeDesc};
 use super::values::ParamValues;
 use crate::error::{Error, Result};
-use crate::image::{Plane, Planes, Window};
+use crate::image::{OutputColorSpace, Plane, Planes, Window};
 use crate::render::RenderStats;
 
 /// What one render call asks for.
@@ -139,6 +139,18 @@ pub struct Format {
 /// The input clip a node passes through unchanged with these values (e.g. `mix` = 0).
 pub type IdentityFn = fn(&ParamValues) -> Result<Option<&'static str>>;
 
+/// What a node's output image holds, for a host's colour management.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutputSpace {
+    /// Colour in this space.
+    Colour(OutputColorSpace),
+    /// Not colour (depth, a matte): not to be colour managed.
+    Data,
+}
+
+/// The space of a node's output with these values.
+pub type OutputSpaceFn = fn(&ParamValues) -> Result<OutputSpace>;
+
 /// A node of the registry: described once, rendered once.
 #[derive(Debug)]
 pub struct Node {
@@ -149,12 +161,29 @@ pub struct Node {
     /// frame range).
     pub(crate) rod: Option<Format>,
     pub(crate) identity: Option<IdentityFn>,
+    /// The space of its output; `None`: its inputs' (it composites them as they come).
+    pub(crate) output_space: Option<OutputSpaceFn>,
 }
 
 impl Node {
     /// Default values for every parameter.
     pub fn defaults(&'static self) -> ParamValues {
         ParamValues::defaults(&self.desc)
+    }
+
+    /// Whether the node says the space of its output itself ([`Node::output_space`]).
+    pub fn has_output_space(&self) -> bool {
+        self.output_space.is_some()
+    }
+
+    /// What the node's output holds with `values`; `None` for a node whose output is in its
+    /// inputs' space.
+    pub fn output_space(&self, values: &ParamValues) -> Result<Option<OutputSpace>> {
+        self.own(values)?;
+        self.output_space
+            .map(|f| f(values))
+            .transpose()
+            .map_err(|e| self.in_context(e))
     }
 
     fn own(&self, values: &ParamValues) -> Result<()> {

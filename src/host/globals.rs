@@ -102,6 +102,11 @@ fn new_entry(offer: MessageSuiteOffer, serial: usize, standard: bool) -> &'stati
     p.set_ints(ofx::kOfxParamHostPropPageRowColumnCount, &[0, 0]);
     // Clip preferences may set clips' pixel aspect ratios (a generator's shot).
     p.set_ints(ofx::kOfxImageEffectPropSupportsMultipleClipPARs, &[1]);
+    // OpenFX 1.5's core native colour management (the colourspaces of ofxColourspaceList.h).
+    strings(
+        super::spec::COLOUR_MANAGEMENT_STYLE,
+        &[super::spec::COLOUR_MANAGEMENT_CORE],
+    );
     let host = OfxHost {
         host: p.handle(),
         fetchSuite: Some(fetch_suite),

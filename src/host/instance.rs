@@ -536,6 +536,34 @@ impl Instance {
         Ok(Some(name))
     }
 
+    /// OpenFX 1.5's GetOutputColourspace, given the host's `preferred` colourspaces: the
+    /// colourspace the plugin says its output is in, or `None` when it replies default (the
+    /// output is in its first input's space).
+    pub fn output_colourspace(&self, preferred: &[&str]) -> Result<Option<String>> {
+        use super::spec::{CLIP_COLOURSPACE, GET_OUTPUT_COLOURSPACE, PREFERRED_COLOURSPACES};
+        let preferred = preferred.iter().map(|s| s.to_string()).collect();
+        let in_args = self.args(
+            false,
+            "GetOutputColourspace",
+            &[(PREFERRED_COLOURSPACES, PropValue::String(preferred))],
+        );
+        let out = self.args(
+            true,
+            "GetOutputColourspace",
+            &[(CLIP_COLOURSPACE, PropValue::String(vec![String::new()]))],
+        );
+        let s = self.run(
+            "GetOutputColourspace",
+            GET_OUTPUT_COLOURSPACE,
+            Some(&in_args),
+            Some(&out),
+        )?;
+        if s == status::REPLY_DEFAULT {
+            return Ok(None);
+        }
+        Ok(Some(out.string(CLIP_COLOURSPACE)))
+    }
+
     /// The regions of interest for a render (canonical), by input clip.
     fn regions_of_interest(
         &self,

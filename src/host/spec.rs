@@ -331,6 +331,19 @@ use Applies::All as A;
 use Dim::{Fixed as F, Variable as N};
 use PropType::{Double as DBL, Int as INT, Pointer as PTR, String as STR};
 
+/// `kOfxImageEffectPropColourManagementStyle` (OpenFX 1.5, `ofxColour.h`).
+pub(crate) const COLOUR_MANAGEMENT_STYLE: &[u8] = b"OfxImageEffectPropColourManagementStyle\0";
+/// `kOfxImageEffectPropColourManagementNone`.
+const COLOUR_MANAGEMENT_NONE: &str = "OfxImageEffectPropColourManagementNone";
+/// `kOfxImageEffectPropColourManagementCore`: the style this host offers.
+pub(crate) const COLOUR_MANAGEMENT_CORE: &[u8] = b"OfxImageEffectPropColourManagementCore\0";
+/// `kOfxImageEffectActionGetOutputColourspace`.
+pub(crate) const GET_OUTPUT_COLOURSPACE: &[u8] = b"OfxImageEffectActionGetOutputColourspace\0";
+/// `kOfxImageClipPropColourspace`.
+pub(crate) const CLIP_COLOURSPACE: &[u8] = b"OfxImageClipPropColourspace\0";
+/// `kOfxImageClipPropPreferredColourspaces`.
+pub(crate) const PREFERRED_COLOURSPACES: &[u8] = b"OfxImageClipPropPreferredColourspaces\0";
+
 const fn row(
     name: &'static [u8],
     ty: PropType,
@@ -418,6 +431,8 @@ static TABLE: &[PropSpec] = &[
     row(ofx::kOfxImageEffectPropRenderQualityDraft, INT, F(1), HOST, 0, I(1)),
     // Plugin descriptor (and host capabilities of the same name).
     row(ofx::kOfxImageEffectPropSupportedContexts, STR, N, HOST | EFFECT, ED, Z),
+    // OpenFX 1.5 colour management (ofxColour.h; not in the 1.4 headers openfx-sys binds).
+    row(COLOUR_MANAGEMENT_STYLE, STR, F(1), HOST | EFFECT, ED, S(COLOUR_MANAGEMENT_NONE)),
     row(ofx::kOfxImageEffectPluginPropGrouping, STR, F(1), EFFECT, ED, Z),
     row(ofx::kOfxImageEffectPluginPropSingleInstance, INT, F(1), EFFECT, ED, Z),
     row(ofx::kOfxImageEffectPluginRenderThreadSafety, STR, F(1), EFFECT, ED, S(cstr(ofx::kOfxImageEffectRenderInstanceSafe))),

@@ -23,37 +23,41 @@
 
 use std::path::Path;
 
+use exr::meta::attribute::{AttributeValue, Chromaticities, Text};
 use exr::prelude::{
-    AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, SmallVec,
+    AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, SmallVec, Vec2,
     WritableImage,
 };
 
 use crate::error::{Error, Result};
-use crate::image::{Plane, Planes};
+use crate::image::{CameraMatrices, ExrHeader, OutputColorSpace, Plane, Planes};
 
 /// Depth written where nothing was hit (the plane holds `inf` there): Blender's background
 /// value in its Z pass.
 pub const BACKGROUND_DEPTH: f32 = 1.0e10;
 
 /// Writes the present `planes` to `path` as a scanline f32 EXR (channel names in the module
-/// docs).
+/// docs), linear Rec.709 with square pixels.
 ///
 /// Errors: [`Error::Invalid`] when no plane is present, the image is empty, or a plane's size
 /// disagrees with `planes`; [`Error::Io`] naming `path` when the file cannot be written.
 pub fn write_exr(path: &Path, planes: &Planes) -> Result<()> {
-    write_exr_layers(path, planes, &[], 1.0)
+    write_exr_layers(path, planes, &[], &ExrHeader::default())
 }
 
 /// Writes `main` as [`write_exr`] does plus each of `layers` under its name, as channels
 /// `name.R`, `name.G`, `name.B`, `name.A` (`name.Z`, … for depths): one file a compositor
-/// splits into layers. Every layer must have `main`'s size. `pixel_aspect` (width over height
-/// of a pixel, e.g. 2 for an anamorphic shot) goes into the header, where compositors read it.
+/// splits into layers. Every layer must have `main`'s size. `header` says what else the file
+/// tells a compositor ([`ExrHeader`]): the pixel aspect (width over height of a pixel, e.g. 2
+/// for an anamorphic shot), the `chromaticities` of its colour space (always written), the
+/// camera's `worldToCamera` and `worldToNDC`, `framesPerSecond` and text entries.
 pub fn write_exr_layers(
     path: &Path,
     main: &Planes,
     layers: &[(&str, &Planes)],
-    pixel_aspect: f64,
+    header: &ExrHeader,
 ) -> Result<()> {
+    let pixel_aspect = header.pixel_aspect;
     if !(pixel_aspect.is_finite() && pixel_aspect > 0.0) {
         return Err(Error::invalid(
             format!("EXR {}: pixel aspect", path.display()),
@@ -73,7 +77,7 @@ pub fn write_exr_layers(
         }
         channels.extend(channels_of(planes, &format!("{name}."))?);
     }
-    write_channels(path, (main.width, main.height), channels, pixel_aspect)
+    write_channels(path, (main.width, main.height), channels, header)
 }
 
 /// Writes named f32 channels of one size to `path` as [`write_exr_layers`] writes its planes
@@ -86,8 +90,9 @@ pub fn write_exr_channels(
     path: &Path,
     (width, height): (u32, u32),
     channels: &[(String, Plane)],
-    pixel_aspect: f64,
+    header: &ExrHeader,
 ) -> Result<()> {
+    let pixel_aspect = header.pixel_aspect;
     if channels.is_empty() || width == 0 || height == 0 {
         return Err(Error::invalid(
             format!("EXR {}", path.display()),
@@ -127,7 +132,7 @@ pub fn write_exr_channels(
             FlatSamples::F32(plane.data.clone()),
         ));
     }
-    write_channels(path, (width, height), any, pixel_aspect)
+    write_channels(path, (width, height), any, header)
 }
 
 /// The one place an image's header and encoding are decided.
@@ -135,25 +140,57 @@ fn write_channels(
     path: &Path,
     (width, height): (u32, u32),
     channels: SmallVec<[AnyChannel<FlatSamples>; 4]>,
-    pixel_aspect: f64,
+    header: &ExrHeader,
 ) -> Result<()> {
     let layer = Layer::new(
         (width as usize, height as usize),
-        LayerAttributes {
-            software_name: Some("nerfx".into()),
-            ..LayerAttributes::default()
-        },
+        layer_attributes(header),
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(channels),
     );
     let mut image = Image::from_layer(layer);
-    image.attributes.pixel_aspect = pixel_aspect as f32;
+    image.attributes.pixel_aspect = header.pixel_aspect as f32;
+    image.attributes.chromaticities = Some(chromaticities(header.color_space));
     crate::output::replace_file(path, |temp| {
         image.write().to_file(temp).map_err(|e| match e {
             exr::error::Error::Io(source) => Error::io(path, source),
             other => Error::invalid(format!("EXR {}", path.display()), other.to_string()),
         })
     })
+}
+
+/// The header's layer attributes: software, camera, frame rate and text entries.
+fn layer_attributes(header: &ExrHeader) -> LayerAttributes {
+    let mut attributes = LayerAttributes {
+        software_name: Some("nerfx".into()),
+        frames_per_second: header.frames_per_second,
+        ..LayerAttributes::default()
+    };
+    if let Some(camera) = &header.camera {
+        attributes.world_to_camera = Some(camera.world_to_camera);
+        attributes.world_to_normalized_device = camera.world_to_ndc;
+    }
+    // Stored as their UTF-8 bytes, as OpenEXR's own library stores a string (a path may
+    // hold any character).
+    let text = |s: &str| Text::from_slice_unchecked(s.as_bytes());
+    for (key, value) in &header.entries {
+        attributes
+            .other
+            .insert(text(key), AttributeValue::Text(text(value)));
+    }
+    attributes
+}
+
+/// The `chromaticities` attribute of `space`.
+fn chromaticities(space: OutputColorSpace) -> Chromaticities {
+    let c = space.chromaticities();
+    let xy = |[x, y]: [f64; 2]| Vec2(x as f32, y as f32);
+    Chromaticities {
+        red: xy(c.red),
+        green: xy(c.green),
+        blue: xy(c.blue),
+        white: xy(c.white),
+    }
 }
 
 /// Reads every channel of every layer of the EXR at `path` as f32 planes (f16 and u32 samples
@@ -166,13 +203,16 @@ pub fn read_exr_channels(path: &Path) -> Result<Vec<(String, Plane)>> {
     read_exr_image(path).map(|(channels, _)| channels)
 }
 
-/// [`read_exr_channels`], and the image's pixel aspect (width over height of a pixel).
-pub fn read_exr_image(path: &Path) -> Result<(Vec<(String, Plane)>, f64)> {
+/// [`read_exr_channels`], and what the header says of the image ([`ExrHeader`]): pixel
+/// aspect, camera, frame rate, the text entries, and the colour space (from its
+/// `nerfx/colorspace` entry, else linear Rec.709), so that an image nerfx wrote can be
+/// written again as it was.
+pub fn read_exr_image(path: &Path) -> Result<(Vec<(String, Plane)>, ExrHeader)> {
     let image = exr::prelude::read_all_flat_layers_from_file(path).map_err(|e| match e {
         exr::error::Error::Io(source) => Error::io(path, source),
         other => Error::format(path, "", other.to_string()),
     })?;
-    let pixel_aspect = f64::from(image.attributes.pixel_aspect);
+    let header = header_of(&image);
     let mut out = Vec::new();
     for layer in image.layer_data {
         let prefix = match &layer.attributes.layer_name {
@@ -193,7 +233,39 @@ pub fn read_exr_image(path: &Path) -> Result<(Vec<(String, Plane)>, f64)> {
             out.push((format!("{prefix}{}", channel.name), plane));
         }
     }
-    Ok((out, pixel_aspect))
+    Ok((out, header))
+}
+
+/// The header entries of `image` that [`write_exr_layers`] writes.
+fn header_of(image: &exr::image::FlatImage) -> ExrHeader {
+    let mut header = ExrHeader {
+        pixel_aspect: f64::from(image.attributes.pixel_aspect),
+        ..ExrHeader::default()
+    };
+    let Some(first) = image.layer_data.first().map(|layer| &layer.attributes) else {
+        return header;
+    };
+    header.camera = first.world_to_camera.map(|world_to_camera| CameraMatrices {
+        world_to_camera,
+        world_to_ndc: first.world_to_normalized_device,
+    });
+    header.frames_per_second = first.frames_per_second;
+    let mut entries: Vec<(String, String)> = first
+        .other
+        .iter()
+        .filter_map(|(key, value)| match value {
+            AttributeValue::Text(text) => Some((key.to_string(), text.to_string())),
+            _ => None,
+        })
+        .collect();
+    entries.sort();
+    header.color_space = entries
+        .iter()
+        .find(|(key, _)| key == "nerfx/colorspace")
+        .and_then(|(_, name)| OutputColorSpace::parse(name, "nerfx/colorspace").ok())
+        .unwrap_or_default();
+    header.entries = entries;
+    header
 }
 
 /// The EXR channels for the present planes, names prefixed by `prefix`, checked against the
@@ -398,7 +470,11 @@ mod tests {
         };
         let (main, env) = (rgba(0.1), rgba(0.5));
         let file = TempFile::new("layers");
-        write_exr_layers(&file.0, &main, &[("env", &env)], 2.0).unwrap();
+        let header = ExrHeader {
+            pixel_aspect: 2.0,
+            ..ExrHeader::default()
+        };
+        write_exr_layers(&file.0, &main, &[("env", &env)], &header).unwrap();
         let meta = exr::meta::MetaData::read_from_file(&file.0, false).unwrap();
         assert_eq!(meta.headers[0].shared_attributes.pixel_aspect, 2.0);
         let channels = read_exr_channels(&file.0).unwrap();
@@ -415,7 +491,8 @@ mod tests {
         assert_eq!(find(&channels, "A").data, main.alpha.as_ref().unwrap().data);
         let small = rgba(0.2);
         let small = Planes { width: 4, ..small };
-        let e = write_exr_layers(&file.0, &main, &[("x", &small)], 1.0).unwrap_err();
+        let e =
+            write_exr_layers(&file.0, &main, &[("x", &small)], &ExrHeader::default()).unwrap_err();
         assert!(e.to_string().contains("layer x"), "{e}");
     }
 

@@ -1,5 +1,8 @@
-//! Images: planar f32 planes, render windows, EXR and PNG output.
+//! Images: planar f32 planes, render windows, EXR and PNG output, output colour spaces and
+//! what an EXR's header says.
 
+mod color_spaces;
+mod exr_header;
 mod exr_io;
 mod plane;
 mod png;
@@ -8,6 +11,8 @@ mod png;
 pub(crate) use self::png::decode_rgba8;
 pub use self::png::write_png_preview;
 pub(crate) use self::png::write_png_rgba8;
+pub use color_spaces::{Chromaticities, OutputColorSpace};
+pub use exr_header::{frames_per_second, CameraMatrices, ExrHeader};
 pub use exr_io::{
     read_exr_channels, read_exr_image, write_exr, write_exr_channels, write_exr_layers,
     BACKGROUND_DEPTH,

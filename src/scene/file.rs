@@ -12,6 +12,8 @@
 //!     { "name": "scan", "field": { "splats": { "path": "scan.spz", "axes": "rub",
 //!                                              "antialiased": false } } } ] }
 //! ```
+//! An optional `"colorspace"` (`"acescg"`, …; see [`OutputColorSpace`]) says which colour
+//! space the scene's images are written in.
 //! An instance is placed by `world_from_field` (row-major 4×4, default identity) or, when
 //! `object` is given, by that object's `matrix_world` in the shot, read per frame.
 //! A nerfacto instance is sampled by its own proposal networks (`"sampler": "proposal"`, the
@@ -32,6 +34,7 @@ use super::instance::FieldHandle;
 use super::{CropBox, Instance, NgpInstance, ProposalInstance, Scene, SplatInstance};
 use crate::error::{Error, Result};
 use crate::field::{Analytic, Axes, IngpField, NerfactoField, Splats};
+use crate::image::OutputColorSpace;
 
 /// Where an instance's field comes from.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -135,6 +138,10 @@ pub struct InstanceDesc {
 pub struct SceneDesc {
     /// The instances, rendered jointly.
     pub instances: Vec<InstanceDesc>,
+    /// The colour space images of the scene are written in (absent: linear Rec.709); the
+    /// command line's `--colorspace` and a NeRF Render node's Output Colour Space override it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub colorspace: Option<OutputColorSpace>,
 }
 
 /// A scene file with its fields loaded once, ready to be placed frame after frame.
@@ -215,6 +222,7 @@ impl SceneDesc {
                 object: None,
                 crop: None,
             }],
+            colorspace: None,
         })
     }
 

@@ -140,7 +140,16 @@ impl SplatLayer {
             );
         }
         let projecting = start.elapsed().as_secs_f64();
-        projected.par_sort_by(|a, b| a.z.total_cmp(&b.z));
+        // Depth order, ties in projection order (a stable sort by z): each splat's key is
+        // its z's bits (z > 0, so they order as the numbers do) above its index, and eight-byte
+        // keys sort far faster than the splats themselves.
+        let mut order: Vec<u64> = projected
+            .par_iter()
+            .enumerate()
+            .map(|(i, p)| u64::from(p.z.to_bits()) << 32 | i as u64)
+            .collect();
+        order.par_sort_unstable();
+        let in_order = |key: &u64| &projected[(*key & u64::from(u32::MAX)) as usize];
 
         let tiles = [
             window.x0 / TILE,
@@ -165,8 +174,8 @@ impl SplatLayer {
         };
         // Each splat is listed in the rows of tiles it touches (in depth order), then each
         // row is binned on its own (in parallel), so every tile's list comes out sorted.
-        let ranges: Vec<[u32; 4]> = projected.par_iter().map(range).collect();
-        let splat_entries: Vec<Entry> = projected.par_iter().map(Entry::new).collect();
+        let ranges: Vec<[u32; 4]> = order.par_iter().map(|k| range(in_order(k))).collect();
+        let splat_entries: Vec<Entry> = order.par_iter().map(|k| Entry::new(in_order(k))).collect();
         let rows_n = (tiles[3] - tiles[1]) as usize;
         let mut row_starts = vec![0usize; rows_n + 1];
         for r in &ranges {

@@ -71,20 +71,21 @@ impl Splatting {
 
     /// Composites each pixel of `window` (row-major) whose world ray is `rays[i]` from its
     /// fragments alone into `out[i]` (see [`SplatLayer::composite`]), when this layer can
-    /// (a perspective camera's): the number of fragments met, or `None` where [`Self::fill`]
-    /// must be used.
+    /// (a perspective camera's), with the depth moment where `depth` asks for it: the number
+    /// of fragments met, or `None` where [`Self::fill`] must be used.
     pub(super) fn composite(
         &self,
         window: Window,
         rays: &[Option<Ray>],
         z_per_t: &mut Vec<f64>,
+        depth: bool,
         out: &mut Vec<SplatPixel>,
     ) -> Option<u64> {
         let Splatting::Tiles(layer) = self else {
             return None;
         };
         out.resize(rays.len(), SplatPixel::default());
-        Some(layer.composite(window, z_per_t_of(rays, z_per_t), out))
+        Some(layer.composite(window, z_per_t_of(rays, z_per_t), depth, out))
     }
 }
 

@@ -27,7 +27,8 @@ pub(crate) const MIN_TRANSMITTANCE: f64 = 1e-4;
 /// it is exact) and `e^r` by its Taylor series to `r⁷` (`|r| ≤ ln 2 / 2`: truncation below
 /// 6e-9 relative). `n` is rounded by adding `1.5·2²³`, where floats are spaced by 1, so it
 /// lands in the low bits of the sum (no float-to-int conversion, whose saturation checks
-/// would not vectorise as well).
+/// would not vectorise as well). Fused multiply-adds: the pixel loop runs where the CPU has
+/// FMA (x86-64 with AVX2, and every AArch64).
 #[inline(always)]
 fn exp_neg(s: f32) -> f32 {
     const LN2_HI: f32 = 0.693_145_75;
@@ -36,7 +37,7 @@ fn exp_neg(s: f32) -> f32 {
     let x = -s;
     let shifted = x * std::f32::consts::LOG2_E + ROUND;
     let n = shifted - ROUND;
-    let r = (x - n * LN2_HI) - n * LN2_LO;
+    let r = (-n).mul_add(LN2_LO, (-n).mul_add(LN2_HI, x));
     let mut p: f32 = 1.0 / 5040.0;
     for c in [
         1.0 / 720.0,
@@ -47,7 +48,7 @@ fn exp_neg(s: f32) -> f32 {
         1.0,
         1.0,
     ] {
-        p = p * r + c;
+        p = p.mul_add(r, c);
     }
     // `n` (in [−116, 0]) as the low bits of `shifted`, moved into a float's exponent.
     let n_bits = shifted.to_bits().wrapping_sub(ROUND.to_bits());
@@ -112,13 +113,16 @@ impl Entry {
 
 /// The splats of a frame, projected, sorted and binned.
 pub(crate) struct SplatLayer {
-    /// Per row of tiles: where each tile's entries start (one more at the end), and the
-    /// entries.
-    rows: Vec<(Vec<u32>, Vec<Entry>)>,
+    /// Every projected splat's entry, in depth order.
+    entries: Vec<Entry>,
+    /// Per row of tiles: where each tile's list starts (one more at the end), and the lists:
+    /// indices into `entries`, in depth order (four bytes for each tile a splat covers, as
+    /// gsplat keeps them, rather than a copy of its entry).
+    rows: Vec<(Vec<u32>, Vec<u32>)>,
     /// Tile coordinates covered: `[x0, y0, x1, y1)`.
     tiles: [u32; 4],
-    /// The CPU has AVX2 and FMA: the pixel loop runs eight lanes wide.
-    avx2: bool,
+    /// How wide the pixel loop runs on this CPU.
+    lanes: Lanes,
     /// Seconds spent projecting, and sorting and binning (for benchmarks).
     pub timings: [f64; 2],
 }
@@ -136,7 +140,16 @@ impl SplatLayer {
             );
         }
         let projecting = start.elapsed().as_secs_f64();
-        projected.par_sort_by(|a, b| a.z.total_cmp(&b.z));
+        // Depth order, ties in projection order (a stable sort by z): each splat's key is
+        // its z's bits (z > 0, so they order as the numbers do) above its index, and eight-byte
+        // keys sort far faster than the splats themselves.
+        let mut order: Vec<u64> = projected
+            .par_iter()
+            .enumerate()
+            .map(|(i, p)| u64::from(p.z.to_bits()) << 32 | i as u64)
+            .collect();
+        order.par_sort_unstable();
+        let in_order = |key: &u64| &projected[(*key & u64::from(u32::MAX)) as usize];
 
         let tiles = [
             window.x0 / TILE,
@@ -161,8 +174,8 @@ impl SplatLayer {
         };
         // Each splat is listed in the rows of tiles it touches (in depth order), then each
         // row is binned on its own (in parallel), so every tile's list comes out sorted.
-        let ranges: Vec<[u32; 4]> = projected.par_iter().map(range).collect();
-        let splat_entries: Vec<Entry> = projected.par_iter().map(Entry::new).collect();
+        let ranges: Vec<[u32; 4]> = order.par_iter().map(|k| range(in_order(k))).collect();
+        let splat_entries: Vec<Entry> = order.par_iter().map(|k| Entry::new(in_order(k))).collect();
         let rows_n = (tiles[3] - tiles[1]) as usize;
         let mut row_starts = vec![0usize; rows_n + 1];
         for r in &ranges {
@@ -182,7 +195,7 @@ impl SplatLayer {
                 *slot += 1;
             }
         }
-        let rows: Vec<(Vec<u32>, Vec<Entry>)> = (0..rows_n)
+        let rows: Vec<(Vec<u32>, Vec<u32>)> = (0..rows_n)
             .into_par_iter()
             .map(|row| {
                 let splats = &in_rows[row_starts[row]..row_starts[row + 1]];
@@ -197,27 +210,23 @@ impl SplatLayer {
                     counts[i] += counts[i - 1];
                 }
                 let starts = counts.clone();
-                let mut entries = vec![Entry::default(); counts[tiles_x] as usize];
+                let mut list = vec![0u32; counts[tiles_x] as usize];
                 for &i in splats {
                     let r = &ranges[i as usize];
-                    let entry = splat_entries[i as usize];
                     for tx in r[0]..r[2] {
                         let slot = &mut counts[(tx - tiles[0]) as usize];
-                        entries[*slot as usize] = entry;
+                        list[*slot as usize] = i;
                         *slot += 1;
                     }
                 }
-                (starts, entries)
+                (starts, list)
             })
             .collect();
-        #[cfg(target_arch = "x86_64")]
-        let avx2 = is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma");
-        #[cfg(not(target_arch = "x86_64"))]
-        let avx2 = false;
         SplatLayer {
+            entries: splat_entries,
             rows,
             tiles,
-            avx2,
+            lanes: Lanes::detect(),
             timings: [projecting, start.elapsed().as_secs_f64() - projecting],
         }
     }
@@ -248,9 +257,16 @@ impl SplatLayer {
     /// would hand them to a sink that composites them in order (alpha over, stopping before
     /// the transmittance would fall to [`MIN_TRANSMITTANCE`]): `out[i]` for the `i`-th pixel
     /// (row-major), whose ray has camera z `z_per_t[i]` per unit distance (non-finite: no
-    /// ray, left transparent). Sixteen pixels of a row are composited at once. Returns the
-    /// number of fragments met.
-    pub fn composite(&self, window: Window, z_per_t: &[f64], out: &mut [SplatPixel]) -> u64 {
+    /// ray, left transparent). Sixteen pixels of a row are composited at once, in `f32` as
+    /// gsplat composites; the depth moment only where `depth` asks for it (else 0). Returns
+    /// the number of fragments met.
+    pub fn composite(
+        &self,
+        window: Window,
+        z_per_t: &[f64],
+        depth: bool,
+        out: &mut [SplatPixel],
+    ) -> u64 {
         for px in out.iter_mut() {
             *px = SplatPixel::default();
         }
@@ -261,6 +277,7 @@ impl SplatLayer {
             out,
             z_per_t,
             fragments: 0,
+            depth,
         };
         self.walk(window, &mut compositing);
         compositing.fragments
@@ -295,22 +312,26 @@ impl SplatLayer {
                     action.finish();
                     continue;
                 }
-                let (starts, entries) = &self.rows[(ty - self.tiles[1]) as usize];
+                let (starts, list) = &self.rows[(ty - self.tiles[1]) as usize];
                 let col = (tx - self.tiles[0]) as usize;
-                let tile = &entries[starts[col] as usize..starts[col + 1] as usize];
+                let tile = &list[starts[col] as usize..starts[col + 1] as usize];
                 self.walk_part(tile, part, action);
                 action.finish();
             }
         }
     }
 
-    fn walk_part<A: RowAction>(&self, tile: &[Entry], part: Window, action: &mut A) {
-        #[cfg(target_arch = "x86_64")]
-        if self.avx2 {
-            // SAFETY: `build` found AVX2 and FMA on this CPU.
-            return unsafe { walk_part_avx2(tile, part, action) };
+    fn walk_part<A: RowAction>(&self, tile: &[u32], part: Window, action: &mut A) {
+        let entries = &self.entries;
+        match self.lanes {
+            // SAFETY: `Lanes::detect` found these features on this CPU.
+            #[cfg(target_arch = "x86_64")]
+            Lanes::Avx512 => unsafe { walk_part_avx512(entries, tile, part, action) },
+            // SAFETY: as above.
+            #[cfg(target_arch = "x86_64")]
+            Lanes::Avx2 => unsafe { walk_part_avx2(entries, tile, part, action) },
+            Lanes::Plain => walk_part_lanes(entries, tile, part, action),
         }
-        walk_part_lanes(tile, part, action);
     }
 }
 
@@ -331,15 +352,49 @@ trait RowAction {
     fn finish(&mut self) {}
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn walk_part_avx2<A: RowAction>(tile: &[Entry], part: Window, action: &mut A) {
-    walk_part_lanes(tile, part, action);
+/// The widest vector instructions the pixel loop can use here: its sixteen lanes of `f32` are
+/// one AVX-512 register, two AVX2 ones.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Lanes {
+    #[cfg(target_arch = "x86_64")]
+    Avx512,
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+    Plain,
 }
 
-/// The pixels of `part` against the entries of its image tile, `tile`.
+impl Lanes {
+    fn detect() -> Lanes {
+        #[cfg(target_arch = "x86_64")]
+        {
+            let avx2 = is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma");
+            if avx2 && is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("avx512vl") {
+                return Lanes::Avx512;
+            }
+            if avx2 {
+                return Lanes::Avx2;
+            }
+        }
+        Lanes::Plain
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
+fn walk_part_avx512<A: RowAction>(entries: &[Entry], tile: &[u32], part: Window, action: &mut A) {
+    walk_part_lanes(entries, tile, part, action);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn walk_part_avx2<A: RowAction>(entries: &[Entry], tile: &[u32], part: Window, action: &mut A) {
+    walk_part_lanes(entries, tile, part, action);
+}
+
+/// The pixels of `part` against the entries of its image tile, `tile` (indices into
+/// `entries`, in depth order).
 #[inline(always)]
-fn walk_part_lanes<A: RowAction>(tile: &[Entry], part: Window, action: &mut A) {
+fn walk_part_lanes<A: RowAction>(entries: &[Entry], tile: &[u32], part: Window, action: &mut A) {
     // One chunk of lanes per pixel row of `part` (at most a tile's side), so a splat walks
     // only the rows its ellipse reaches. Lanes are kept as numbers (a live lane's factor is
     // 1, a pixel without a ray or done is 0) so that the row loops vectorise.
@@ -363,7 +418,10 @@ fn walk_part_lanes<A: RowAction>(tile: &[Entry], part: Window, action: &mut A) {
         return;
     }
     let (x_lo, x_hi) = (part.x0 as f32 + 0.5, (part.x1 - 1) as f32 + 0.5);
-    for e in tile {
+    for &i in tile {
+        let Some(e) = entries.get(i as usize) else {
+            continue;
+        };
         let [ex, ey] = e.extent;
         if e.xy[0] + ex < x_lo || e.xy[0] - ex > x_hi {
             continue;
@@ -476,13 +534,14 @@ impl Default for SplatPixel {
     }
 }
 
-/// One tile part's running sums, lane by lane (f64, as a pixel's pieces are composited).
+/// One tile part's running sums, lane by lane, in `f32` as gsplat composites them (sixteen
+/// lanes are one AVX-512 register).
 #[derive(Clone, Copy)]
 struct LaneSums {
-    transmittance: [[f64; LANES]; LANES],
-    rgb: [[[f64; LANES]; 3]; LANES],
-    /// `Σ w·z` with the camera z of the fragments' splats.
-    depth_moment: [[f64; LANES]; LANES],
+    transmittance: [[f32; LANES]; LANES],
+    rgb: [[[f32; LANES]; 3]; LANES],
+    /// `Σ w·z` with the camera z of the fragments' splats (kept only when depth is wanted).
+    depth_moment: [[f32; LANES]; LANES],
 }
 
 impl Default for LaneSums {
@@ -503,6 +562,8 @@ struct Compositing<'a> {
     out: &'a mut [SplatPixel],
     z_per_t: &'a [f64],
     fragments: u64,
+    /// Whether the depth moment is wanted.
+    depth: bool,
 }
 
 impl RowAction for Compositing<'_> {
@@ -523,24 +584,30 @@ impl RowAction for Compositing<'_> {
     fn row(&mut self, r: usize, alphas: &[f32; LANES], e: &Entry) -> u16 {
         let transmittance = &mut self.acc.transmittance[r];
         let rgb = &mut self.acc.rgb[r];
-        let depth = &mut self.acc.depth_moment[r];
-        let z = f64::from(e.z);
-        let colour = e.rgb.map(f64::from);
+        let colour = e.rgb;
+        let floor = MIN_TRANSMITTANCE as f32;
         let mut refused = [false; LANES];
+        let mut weights = [0f32; LANES];
         let mut met = 0;
         for l in 0..LANES {
-            let alpha = f64::from(alphas[l]);
-            met += u64::from(alpha > 0.0);
+            let alpha = alphas[l];
+            met += u32::from(alpha > 0.0);
             let t_enter = transmittance[l];
-            refused[l] = alpha > 0.0 && t_enter * (1.0 - alpha) <= MIN_TRANSMITTANCE;
+            refused[l] = alpha > 0.0 && t_enter * (1.0 - alpha) <= floor;
             let w = if refused[l] { 0.0 } else { t_enter * alpha };
+            weights[l] = w;
             transmittance[l] = (t_enter - w).max(0.0);
-            depth[l] += w * z;
             for c in 0..3 {
                 rgb[c][l] += w * colour[c];
             }
         }
-        self.fragments += met;
+        if self.depth {
+            let depth = &mut self.acc.depth_moment[r];
+            for l in 0..LANES {
+                depth[l] += weights[l] * e.z;
+            }
+        }
+        self.fragments += u64::from(met);
         if !refused.contains(&true) {
             return 0;
         }
@@ -558,9 +625,9 @@ impl RowAction for Compositing<'_> {
                     continue;
                 }
                 self.out[i] = SplatPixel {
-                    transmittance: self.acc.transmittance[r][l],
-                    rgb: [0, 1, 2].map(|c| self.acc.rgb[r][c][l]),
-                    depth_moment: self.acc.depth_moment[r][l] / self.z_per_t[i],
+                    transmittance: f64::from(self.acc.transmittance[r][l]),
+                    rgb: [0, 1, 2].map(|c| f64::from(self.acc.rgb[r][c][l])),
+                    depth_moment: f64::from(self.acc.depth_moment[r][l]) / self.z_per_t[i],
                 };
             }
         }

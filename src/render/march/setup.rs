@@ -121,8 +121,14 @@ pub(super) fn setup_rays(
     if let Some(layer) = splats {
         // A tile of splats alone is composited sixteen pixels at once.
         if s.active.is_empty() && !scene.has_sampled() && !outputs.depth_median {
-            let composited =
-                layer.composite(tile, &s.world_rays, &mut s.z_per_t, &mut s.splat_pixels);
+            let depth = outputs.depth_z || outputs.depth_ray;
+            let composited = layer.composite(
+                tile,
+                &s.world_rays,
+                &mut s.z_per_t,
+                depth,
+                &mut s.splat_pixels,
+            );
             if let Some(fragments) = composited {
                 s.stats.splat_fragments += fragments;
                 for (state, px) in s.rays[..n_rays].iter_mut().zip(&s.splat_pixels) {

@@ -12,7 +12,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use glam::DVec3;
 use nerfx::frames::{
-    frame_path, parse_frames, read_shot, render_environment, render_frame, EnvironmentOrigin,
+    frame_path, parse_frames, read_shot, render_coverage, render_environment, render_frame,
+    EnvironmentOrigin,
 };
 use nerfx::image::{
     frames_per_second, write_exr, write_exr_layers, write_png_preview, CameraMatrices, ExrHeader,
@@ -87,6 +88,13 @@ enum Command {
         /// (graphs: the graph's `colorspace` and each NeRF Render node's Output Colour Space).
         #[arg(long, value_enum)]
         colorspace: Option<OutputColorSpace>,
+        /// Scenes: also write Cryptomatte object mattes (layers CryptoObject00, … with an ID
+        /// per scene instance name, and the manifest in the header).
+        #[arg(long)]
+        cryptomatte: bool,
+        /// Scenes with --cryptomatte: ID–coverage pairs kept per pixel (two per layer).
+        #[arg(long, default_value_t = nerfx::image::cryptomatte::DEFAULT_RANKS)]
+        cryptomatte_ranks: usize,
         /// Scenes whose shot has motion blur: renders per frame over the shutter (default: the
         /// quality preset's, 4 / 8 / 16).
         #[arg(long)]
@@ -302,6 +310,8 @@ fn run(cli: Cli) -> Result<()> {
             quality,
             colour,
             colorspace,
+            cryptomatte,
+            cryptomatte_ranks,
             shutter_samples,
             png,
             passes,
@@ -314,6 +324,12 @@ fn run(cli: Cli) -> Result<()> {
                     return Err(Error::invalid(
                         "--passes",
                         "a graph's NeRF Render nodes choose their own outputs",
+                    ));
+                }
+                if cryptomatte {
+                    return Err(Error::invalid(
+                        "--cryptomatte",
+                        "graphs do not write Cryptomatte yet; render the scene with its shot",
                     ));
                 }
                 if colorspace.is_some() {
@@ -330,6 +346,17 @@ fn run(cli: Cli) -> Result<()> {
                 return Err(Error::invalid(
                     "--png",
                     "the preview is of the colour: add rgba to --passes",
+                ));
+            }
+            if cryptomatte
+                && !(1..=nerfx::image::cryptomatte::MAX_RANKS).contains(&cryptomatte_ranks)
+            {
+                return Err(Error::invalid(
+                    "--cryptomatte-ranks",
+                    format!(
+                        "{cryptomatte_ranks}; expected 1 to {}",
+                        nerfx::image::cryptomatte::MAX_RANKS
+                    ),
                 ));
             }
             let scene = SceneDesc::for_path(&scene)?.load()?;
@@ -366,14 +393,31 @@ fn run(cli: Cli) -> Result<()> {
                 }
                 space.convert_planes(&mut planes);
                 let camera = shot.frame(frame)?.camera(&shot)?;
-                let header = ExrHeader {
+                let mut header = ExrHeader {
                     pixel_aspect: shot.pixel_aspect_for(&camera),
                     color_space: space,
                     camera: Some(CameraMatrices::of(&camera)),
                     frames_per_second: frames_per_second(shot.fps, shot.fps_base),
                     entries: render_entries(&scene, &shot, quality, &settings, space),
                 };
-                write_exr_layers(&path, &planes, &[], &header)?;
+                let mattes = if cryptomatte {
+                    let coverage = render_coverage(&scene, &shot, frame, &settings)?;
+                    let names: Vec<&str> = scene
+                        .desc()
+                        .instances
+                        .iter()
+                        .map(|i| i.name.as_str())
+                        .collect();
+                    let layer = nerfx::image::cryptomatte::OBJECT_LAYER;
+                    header
+                        .entries
+                        .extend(nerfx::image::cryptomatte::header_entries(layer, &names));
+                    nerfx::image::cryptomatte::layers(layer, &names, &coverage, cryptomatte_ranks)?
+                } else {
+                    Vec::new()
+                };
+                let layers: Vec<(&str, &_)> = mattes.iter().map(|(n, p)| (n.as_str(), p)).collect();
+                write_exr_layers(&path, &planes, &layers, &header)?;
                 if png {
                     write_png_preview(&path.with_extension("png"), &planes)?;
                 }

@@ -350,6 +350,44 @@ impl LoadedScene {
         &self.desc
     }
 
+    /// The scene with instance `i` coloured `colours[i]` everywhere (each channel 0 or 1),
+    /// its densities untouched: a render of it composites in each channel the coverage of
+    /// the instances lit in that channel (see `scene::indicator`).
+    ///
+    /// Errors: [`Error::Unsupported`] for an instance sampled by its trainer's own sampler
+    /// (nerfacto's proposal networks, instant-ngp's marcher), whose colour cannot be
+    /// replaced yet; [`Error::Invalid`] when the colours are not one per instance.
+    pub fn with_indicator_colours(&self, colours: &[glam::Vec3]) -> Result<LoadedScene> {
+        if colours.len() != self.contents.len() {
+            return Err(Error::invalid(
+                "indicator colours",
+                format!("{} for {} instances", colours.len(), self.contents.len()),
+            ));
+        }
+        let contents = self
+            .contents
+            .iter()
+            .zip(colours)
+            .zip(&self.desc.instances)
+            .map(|((contents, &rgb), inst)| match contents {
+                Contents::Field(field) => Ok(Contents::Field(field.with_indicator_colour(rgb))),
+                Contents::Splats(splats) => Ok(Contents::Splats(Arc::new(
+                    super::indicator::indicator_splats(splats, rgb),
+                ))),
+                Contents::Proposal(_) | Contents::Ngp(_) => Err(Error::Unsupported(format!(
+                    "instance '{}': Cryptomatte coverage of an instance sampled by its \
+                     trainer's sampler (\"proposal\", \"ngp\") is not supported yet; give it \
+                     \"sampler\": \"occupancy\"",
+                    inst.name
+                ))),
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(LoadedScene {
+            desc: self.desc.clone(),
+            contents,
+        })
+    }
+
     /// What loading left out that the artist should hear of (splats dropped for non-finite
     /// values), one line each, naming the file.
     pub fn warnings(&self) -> Vec<String> {

@@ -8,6 +8,7 @@
 //! Needs `python3` with `numpy`, `OpenEXR` and `mmh3` (`scripts/test.sh` installs them).
 
 mod common_fields;
+#[allow(dead_code)] // the writers of bytes and folders this test does not use
 mod common_ingp;
 
 use std::path::Path;
@@ -162,8 +163,8 @@ fn coverage_of_a_trained_field_splats_and_a_ball_adds_up_to_alpha() {
     let alpha = &plain.alpha.unwrap().data;
     let [a, b, c] = coverage.rgb.as_ref().unwrap();
     let mut worst = 0.0f32;
-    for p in 0..alpha.len() {
-        worst = worst.max((a.data[p] + b.data[p] + c.data[p] - alpha[p]).abs());
+    for (p, &want) in alpha.iter().enumerate() {
+        worst = worst.max((a.data[p] + b.data[p] + c.data[p] - want).abs());
     }
     let seen = |p: &nerfx::image::Plane| p.data.iter().cloned().fold(0.0, f32::max);
     eprintln!(

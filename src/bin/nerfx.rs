@@ -285,12 +285,23 @@ fn run(cli: Cli) -> Result<()> {
             }
             let layers: Vec<(&str, &_)> =
                 comp.layers.iter().map(|(n, p)| (n.as_str(), p)).collect();
-            write_exr_layers(
-                &out.join("demo.exr"),
-                &comp.image,
-                &layers,
-                &ExrHeader::default(),
-            )?;
+            // The demo renders its shot's first frame.
+            let shot = demo::shot(width, height);
+            let camera = shot.frame(demo::FIRST_FRAME)?.camera(&shot)?;
+            let header = ExrHeader {
+                camera: Some(CameraMatrices::of(&camera)),
+                frames_per_second: frames_per_second(shot.fps, shot.fps_base),
+                entries: vec![
+                    ("nerfx/version".into(), env!("CARGO_PKG_VERSION").into()),
+                    ("nerfx/quality".into(), quality.name().into()),
+                    (
+                        "nerfx/colorspace".into(),
+                        OutputColorSpace::LinRec709.ocio_name().into(),
+                    ),
+                ],
+                ..ExrHeader::default()
+            };
+            write_exr_layers(&out.join("demo.exr"), &comp.image, &layers, &header)?;
             write_png_preview(&out.join("demo.png"), &comp.image)?;
             println!(
                 "demo: {width}×{height} {} in {:.2} s → {} (and demo.png; its graph: {})",

@@ -121,8 +121,9 @@ fn mattes_decode_per_the_specification_and_add_up_to_alpha() {
 }
 
 /// The marcher's path (a trained field, splats and an analytic ball marched jointly, in one
-/// render of indicator colours): each instance's coverage channel adds up to the alpha of the
-/// scene's own render, within the preset's error target, and each instance is seen.
+/// render of indicator colours), and instant-ngp's own marcher's fragments: each instance's
+/// coverage channel adds up to the alpha of the scene's own render, within the preset's
+/// error target, and each instance is seen.
 #[test]
 fn coverage_of_a_trained_field_splats_and_a_ball_adds_up_to_alpha() {
     use nerfx::bench::snapshot::Weights;
@@ -141,38 +142,48 @@ fn coverage_of_a_trained_field_splats_and_a_ball_adds_up_to_alpha() {
     let camera = nerfx::bench::splats::framing_camera(&splats, 64, 40).unwrap();
     let ply = dir.path().join("splats.ply");
     splats.write_ply(&ply).unwrap();
-    let scene = serde_json::json!({"instances": [
-        {"name": "fog", "field": {"ingp": {"path": fog}}},
+    // The snapshot marched by nerfx's marcher, then by instant-ngp's own (fragments).
+    for sampler in ["occupancy", "ngp"] {
+        let scene = serde_json::json!({"instances": [
+        {"name": "fog", "field": {"ingp": {"path": fog, "sampler": sampler}}},
         {"name": "splats", "field": {"splats": {"path": ply}}},
         {"name": "ball", "field": {"analytic": {"primitives": [{"shape": {"sphere":
             {"center": [0.3, 0.0, 0.2], "radius": 0.25}}, "density": 30.0,
             "color": {"rgb": [1, 1, 1]}}]}}}]});
-    let path = dir.path().join("scene.json");
-    std::fs::write(&path, scene.to_string()).unwrap();
-    let loaded = SceneDesc::read(&path).unwrap().load().unwrap();
-    let settings = RenderSettings {
-        color: ColorOutput::AsTrained,
-        ..RenderSettings::new(Quality::Preview.params(), Outputs::rgba())
-    };
-    let identity = glam::DMat4::IDENTITY;
-    let place = |s: &nerfx::scene::LoadedScene| s.place(identity, &|_| Ok(identity)).unwrap();
-    let window = camera.full_window();
-    let plain = render(&place(&loaded), &camera, window, &settings).unwrap();
-    let lit = loaded.with_indicator_colours(&glam::Vec3::AXES).unwrap();
-    let coverage = render(&place(&lit), &camera, window, &settings).unwrap();
-    let alpha = &plain.alpha.unwrap().data;
-    let [a, b, c] = coverage.rgb.as_ref().unwrap();
-    let mut worst = 0.0f32;
-    for (p, &want) in alpha.iter().enumerate() {
-        worst = worst.max((a.data[p] + b.data[p] + c.data[p] - want).abs());
+        let path = dir.path().join("scene.json");
+        std::fs::write(&path, scene.to_string()).unwrap();
+        let loaded = SceneDesc::read(&path).unwrap().load().unwrap();
+        let settings = RenderSettings {
+            color: ColorOutput::AsTrained,
+            ..RenderSettings::new(Quality::Preview.params(), Outputs::rgba())
+        };
+        let identity = glam::DMat4::IDENTITY;
+        let place = |s: &nerfx::scene::LoadedScene| s.place(identity, &|_| Ok(identity)).unwrap();
+        let window = camera.full_window();
+        let plain = render(&place(&loaded), &camera, window, &settings).unwrap();
+        let lit = loaded.with_indicator_colours(&glam::Vec3::AXES).unwrap();
+        let coverage = render(&place(&lit), &camera, window, &settings).unwrap();
+        let alpha = &plain.alpha.unwrap().data;
+        let [a, b, c] = coverage.rgb.as_ref().unwrap();
+        let mut worst = 0.0f32;
+        for (p, &want) in alpha.iter().enumerate() {
+            worst = worst.max((a.data[p] + b.data[p] + c.data[p] - want).abs());
+        }
+        let seen = |p: &nerfx::image::Plane| p.data.iter().cloned().fold(0.0, f32::max);
+        eprintln!(
+            "{sampler}: coverage sums to alpha within {worst:.2e}; most of fog {:.3}, splats \
+         {:.3}, ball {:.3}",
+            seen(a),
+            seen(b),
+            seen(c)
+        );
+        assert!(
+            worst <= Quality::Preview.params().error_target,
+            "{sampler}: {worst}"
+        );
+        assert!(
+            seen(a) > 0.05 && seen(b) > 0.05 && seen(c) > 0.05,
+            "{sampler}"
+        );
     }
-    let seen = |p: &nerfx::image::Plane| p.data.iter().cloned().fold(0.0, f32::max);
-    eprintln!(
-        "coverage sums to alpha within {worst:.2e}; most of fog {:.3}, splats {:.3}, ball {:.3}",
-        seen(a),
-        seen(b),
-        seen(c)
-    );
-    assert!(worst <= Quality::Preview.params().error_target, "{worst}");
-    assert!(seen(a) > 0.05 && seen(b) > 0.05 && seen(c) > 0.05);
 }

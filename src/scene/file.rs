@@ -144,8 +144,10 @@ pub struct LoadedScene {
 enum Contents {
     Field(FieldHandle),
     Splats(Arc<Splats>),
-    Proposal(Arc<NerfactoField>),
-    Ngp(Arc<IngpField>),
+    /// A run and the colour replacing its own, if any (indicator colours).
+    Proposal(Arc<NerfactoField>, Option<[f32; 3]>),
+    /// A snapshot and the colour replacing its own, if any (indicator colours).
+    Ngp(Arc<IngpField>, Option<[f32; 3]>),
 }
 
 /// A row-major nested 4×4 as a matrix.
@@ -313,7 +315,7 @@ impl SceneDesc {
                     FieldSource::Ingp { path, sampler } => {
                         let snapshot = Arc::new(IngpField::load(path)?);
                         match sampler.unwrap_or(Sampler::Occupancy) {
-                            Sampler::Ngp => Contents::Ngp(snapshot),
+                            Sampler::Ngp => Contents::Ngp(snapshot, None),
                             // `from_json_str` refuses the proposal sampler here.
                             Sampler::Occupancy | Sampler::Proposal => field(snapshot),
                         }
@@ -326,7 +328,7 @@ impl SceneDesc {
                             Sampler::Occupancy
                         };
                         match sampler.unwrap_or(by_default) {
-                            Sampler::Proposal => Contents::Proposal(run),
+                            Sampler::Proposal => Contents::Proposal(run, None),
                             // `from_json_str` refuses instant-ngp's marcher here.
                             Sampler::Occupancy | Sampler::Ngp => field(run),
                         }
@@ -354,9 +356,7 @@ impl LoadedScene {
     /// its densities untouched: a render of it composites in each channel the coverage of
     /// the instances lit in that channel (see `scene::indicator`).
     ///
-    /// Errors: [`Error::Unsupported`] for an instance sampled by its trainer's own sampler
-    /// (nerfacto's proposal networks, instant-ngp's marcher), whose colour cannot be
-    /// replaced yet; [`Error::Invalid`] when the colours are not one per instance.
+    /// Errors: [`Error::Invalid`] when the colours are not one per instance.
     pub fn with_indicator_colours(&self, colours: &[glam::Vec3]) -> Result<LoadedScene> {
         if colours.len() != self.contents.len() {
             return Err(Error::invalid(
@@ -368,20 +368,15 @@ impl LoadedScene {
             .contents
             .iter()
             .zip(colours)
-            .zip(&self.desc.instances)
-            .map(|((contents, &rgb), inst)| match contents {
-                Contents::Field(field) => Ok(Contents::Field(field.with_indicator_colour(rgb))),
-                Contents::Splats(splats) => Ok(Contents::Splats(Arc::new(
-                    super::indicator::indicator_splats(splats, rgb),
-                ))),
-                Contents::Proposal(_) | Contents::Ngp(_) => Err(Error::Unsupported(format!(
-                    "instance '{}': Cryptomatte coverage of an instance sampled by its \
-                     trainer's sampler (\"proposal\", \"ngp\") is not supported yet; give it \
-                     \"sampler\": \"occupancy\"",
-                    inst.name
-                ))),
+            .map(|(contents, &rgb)| match contents {
+                Contents::Field(field) => Contents::Field(field.with_indicator_colour(rgb)),
+                Contents::Splats(splats) => {
+                    Contents::Splats(Arc::new(super::indicator::indicator_splats(splats, rgb)))
+                }
+                Contents::Proposal(run, _) => Contents::Proposal(run.clone(), Some(rgb.to_array())),
+                Contents::Ngp(snapshot, _) => Contents::Ngp(snapshot.clone(), Some(rgb.to_array())),
             })
-            .collect::<Result<Vec<_>>>()?;
+            .collect();
         Ok(LoadedScene {
             desc: self.desc.clone(),
             contents,
@@ -432,18 +427,14 @@ impl LoadedScene {
                     m,
                     inst.crop,
                 )?),
-                Contents::Proposal(run) => scene.proposal.push(ProposalInstance::new(
-                    inst.name.clone(),
-                    run.clone(),
-                    m,
-                    inst.crop,
-                )?),
-                Contents::Ngp(snapshot) => scene.ngp.push(NgpInstance::new(
-                    inst.name.clone(),
-                    snapshot.clone(),
-                    m,
-                    inst.crop,
-                )?),
+                Contents::Proposal(run, indicator) => scene.proposal.push(
+                    ProposalInstance::new(inst.name.clone(), run.clone(), m, inst.crop)?
+                        .with_indicator(*indicator),
+                ),
+                Contents::Ngp(snapshot, indicator) => scene.ngp.push(
+                    NgpInstance::new(inst.name.clone(), snapshot.clone(), m, inst.crop)?
+                        .with_indicator(*indicator),
+                ),
                 Contents::Splats(splats) => {
                     let antialiased = matches!(
                         inst.field,

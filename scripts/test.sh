@@ -9,6 +9,7 @@
 #   OpenEXR        OpenEXR's own library (PyPI's bindings), reading back the EXR output
 #   opencolorio    OpenColorIO's own built-in configuration, the reference of the output
 #                  colour spaces
+#   mmh3           MurmurHash3 for the Cryptomatte decoder written from the specification
 #   python3-numpy  Blender's own Python (Debian's build uses the system's) for the add-on's
 #                  splat import
 #   mdbook         builds the user's guide in docs/ (tests/docs.rs checks its links)
@@ -51,16 +52,16 @@ if ((${#need_apt[@]})); then
     apt_install "${need_apt[@]}"
 fi
 
-if ! python3 -c "import numpy, msgpack, mpmath, OpenEXR, PyOpenColorIO" 2>/dev/null; then
-    echo "== installing numpy, msgpack, mpmath, OpenEXR and opencolorio for $(command -v python3)"
+if ! python3 -c "import numpy, msgpack, mpmath, OpenEXR, PyOpenColorIO, mmh3" 2>/dev/null; then
+    echo "== installing numpy, msgpack, mpmath, OpenEXR, opencolorio and mmh3 for $(command -v python3)"
     # A pip-managed Python (pyenv, a venv) takes them from PyPI; Debian's own python3 refuses
     # pip (externally managed) and takes its packages, and OpenEXR, which Debian does not
     # package for Python, from PyPI beside them.
-    python3 -m pip install --quiet numpy msgpack mpmath OpenEXR opencolorio 2>/dev/null || {
+    python3 -m pip install --quiet numpy msgpack mpmath OpenEXR opencolorio mmh3 2>/dev/null || {
         apt_install python3-numpy python3-msgpack python3-mpmath python3-pip
-        PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install --quiet OpenEXR opencolorio
+        PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install --quiet OpenEXR opencolorio mmh3
     }
-    python3 -c "import numpy, msgpack, mpmath, OpenEXR, PyOpenColorIO"
+    python3 -c "import numpy, msgpack, mpmath, OpenEXR, PyOpenColorIO, mmh3"
 fi
 
 if ! command -v openjd >/dev/null || ! python3 -c "import outline" 2>/dev/null; then

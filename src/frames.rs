@@ -12,6 +12,47 @@ use crate::image::{Planes, Window};
 use crate::render::{render_with_progress, Outputs, RenderSettings, RenderStats};
 use crate::scene::LoadedScene;
 
+/// Each instance's coverage of frame `frame` (one plane per instance of `scene`, in its
+/// order): the share of every pixel's opacity its samples and fragments hold, summing to the
+/// pixel's alpha, integrated over the shutter as the frame's colour is. Rendered with the
+/// instances in indicator colours, three at a time
+/// ([`LoadedScene::with_indicator_colours`]), at `settings`' quality.
+pub fn render_coverage(
+    scene: &LoadedScene,
+    shot: &Shot,
+    frame: i64,
+    settings: &RenderSettings,
+) -> Result<Vec<crate::image::Plane>> {
+    let count = scene.desc().instances.len();
+    let settings = RenderSettings {
+        outputs: Outputs {
+            rgb: true,
+            alpha: true,
+            depth_z: false,
+            depth_ray: false,
+            depth_median: false,
+        },
+        color: crate::render::ColorOutput::AsTrained,
+        ..*settings
+    };
+    let mut coverage = Vec::with_capacity(count);
+    for first in (0..count).step_by(3) {
+        let colours: Vec<glam::Vec3> = (0..count)
+            .map(|i| match i.checked_sub(first) {
+                Some(k @ 0..=2) => glam::Vec3::AXES[k],
+                _ => glam::Vec3::ZERO,
+            })
+            .collect();
+        let lit = scene.with_indicator_colours(&colours)?;
+        let (planes, _) = render_frame(&lit, shot, frame, &settings, &|_| {})?;
+        let Some(rgb) = planes.rgb else {
+            return Err(Error::invalid("coverage", "the render has no colour"));
+        };
+        coverage.extend(rgb.into_iter().take(count - first));
+    }
+    Ok(coverage)
+}
+
 /// Most frames one `--frames` may name (a farm splits longer ranges over commands).
 pub const MAX_FRAMES: usize = 1_000_000;
 

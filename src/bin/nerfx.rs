@@ -13,7 +13,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use glam::DVec3;
 use nerfx::farm::{is_done, ExitStatus, FarmJob, Progress, Stripe};
 use nerfx::frames::{
-    frame_path, parse_frames, read_shot, render_environment, render_frame_window, EnvironmentOrigin,
+    frame_path, parse_frames, read_shot, render_coverage, render_environment, render_frame_window,
+    EnvironmentOrigin,
 };
 use nerfx::image::{
     frames_per_second, write_exr, write_exr_layers, write_png_preview, CameraMatrices, ExrHeader,
@@ -88,6 +89,13 @@ enum Command {
         /// (graphs: the graph's `colorspace` and each NeRF Render node's Output Colour Space).
         #[arg(long, value_enum)]
         colorspace: Option<OutputColorSpace>,
+        /// Scenes: also write Cryptomatte object mattes (layers CryptoObject00, … with an ID
+        /// per scene instance name, and the manifest in the header).
+        #[arg(long)]
+        cryptomatte: bool,
+        /// Scenes with --cryptomatte: ID–coverage pairs kept per pixel (two per layer).
+        #[arg(long, default_value_t = nerfx::image::cryptomatte::DEFAULT_RANKS)]
+        cryptomatte_ranks: usize,
         /// Scenes whose shot has motion blur: renders per frame over the shutter (default: the
         /// quality preset's, 4 / 8 / 16).
         #[arg(long)]
@@ -432,12 +440,23 @@ fn run(cli: Cli) -> Result<()> {
             }
             let layers: Vec<(&str, &_)> =
                 comp.layers.iter().map(|(n, p)| (n.as_str(), p)).collect();
-            write_exr_layers(
-                &out.join("demo.exr"),
-                &comp.image,
-                &layers,
-                &ExrHeader::default(),
-            )?;
+            // The demo renders its shot's first frame.
+            let shot = demo::shot(width, height);
+            let camera = shot.frame(demo::FIRST_FRAME)?.camera(&shot)?;
+            let header = ExrHeader {
+                camera: Some(CameraMatrices::of(&camera)),
+                frames_per_second: frames_per_second(shot.fps, shot.fps_base),
+                entries: vec![
+                    ("nerfx/version".into(), env!("CARGO_PKG_VERSION").into()),
+                    ("nerfx/quality".into(), quality.name().into()),
+                    (
+                        "nerfx/colorspace".into(),
+                        OutputColorSpace::LinRec709.ocio_name().into(),
+                    ),
+                ],
+                ..ExrHeader::default()
+            };
+            write_exr_layers(&out.join("demo.exr"), &comp.image, &layers, &header)?;
             write_png_preview(&out.join("demo.png"), &comp.image)?;
             println!(
                 "demo: {width}×{height} {} in {:.2} s → {} (and demo.png; its graph: {})",
@@ -457,6 +476,8 @@ fn run(cli: Cli) -> Result<()> {
             quality,
             colour,
             colorspace,
+            cryptomatte,
+            cryptomatte_ranks,
             shutter_samples,
             png,
             passes,
@@ -488,6 +509,12 @@ fn run(cli: Cli) -> Result<()> {
                          shot",
                     ));
                 }
+                if cryptomatte {
+                    return Err(Error::invalid(
+                        "--cryptomatte",
+                        "graphs do not write Cryptomatte yet; render the scene with its shot",
+                    ));
+                }
                 if colorspace.is_some() {
                     return Err(Error::invalid(
                         "--colorspace",
@@ -508,6 +535,23 @@ fn run(cli: Cli) -> Result<()> {
                 return Err(Error::invalid(
                     "--png",
                     "a preview is of a whole frame: render it after `nerfx assemble`",
+                ));
+            }
+            if cryptomatte && stripe.is_some() {
+                return Err(Error::invalid(
+                    "--cryptomatte",
+                    "Cryptomatte is written with whole frames: render without --stripe",
+                ));
+            }
+            if cryptomatte
+                && !(1..=nerfx::image::cryptomatte::MAX_RANKS).contains(&cryptomatte_ranks)
+            {
+                return Err(Error::invalid(
+                    "--cryptomatte-ranks",
+                    format!(
+                        "{cryptomatte_ranks}; expected 1 to {}",
+                        nerfx::image::cryptomatte::MAX_RANKS
+                    ),
                 ));
             }
             let scene = SceneDesc::for_path(&scene)?.load()?;
@@ -563,14 +607,31 @@ fn run(cli: Cli) -> Result<()> {
                     bar.suspend(|| eprintln!("nerfx: warning: frame {frame}: {warning}"));
                 }
                 space.convert_planes(&mut planes);
-                let header = ExrHeader {
+                let mut header = ExrHeader {
                     pixel_aspect: shot.pixel_aspect_for(&camera),
                     color_space: space,
                     camera: Some(CameraMatrices::of(&camera)),
                     frames_per_second: frames_per_second(shot.fps, shot.fps_base),
                     entries: render_entries(&scene, &shot, quality, &settings, space),
                 };
-                write_exr_layers(&path, &planes, &[], &header)?;
+                let mattes = if cryptomatte {
+                    let coverage = render_coverage(&scene, &shot, frame, &settings)?;
+                    let names: Vec<&str> = scene
+                        .desc()
+                        .instances
+                        .iter()
+                        .map(|i| i.name.as_str())
+                        .collect();
+                    let layer = nerfx::image::cryptomatte::OBJECT_LAYER;
+                    header
+                        .entries
+                        .extend(nerfx::image::cryptomatte::header_entries(layer, &names));
+                    nerfx::image::cryptomatte::layers(layer, &names, &coverage, cryptomatte_ranks)?
+                } else {
+                    Vec::new()
+                };
+                let layers: Vec<(&str, &_)> = mattes.iter().map(|(n, p)| (n.as_str(), p)).collect();
+                write_exr_layers(&path, &planes, &layers, &header)?;
                 if png {
                     write_png_preview(&path.with_extension("png"), &planes)?;
                 }

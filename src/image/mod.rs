@@ -1,7 +1,8 @@
-//! Images: planar f32 planes, render windows, EXR and PNG output, output colour spaces and
-//! what an EXR's header says.
+//! Images: planar f32 planes, render windows, EXR and PNG output, output colour spaces,
+//! what an EXR's header says, and Cryptomatte layers ([`cryptomatte`]).
 
 mod color_spaces;
+pub mod cryptomatte;
 mod exr_header;
 mod exr_io;
 mod plane;

@@ -64,10 +64,10 @@ pub(super) fn fill(
             out[i as usize].extend(samples.iter().filter(|f| f.alpha > 0.0).map(|f| Fragment {
                 t: f.t / k,
                 alpha: f.alpha,
-                rgb: if encode {
-                    f.rgb.map(linear_to_srgb)
-                } else {
-                    f.rgb
+                rgb: match inst.indicator() {
+                    Some(rgb) => rgb,
+                    None if encode => f.rgb.map(linear_to_srgb),
+                    None => f.rgb,
                 },
             }));
         }

@@ -70,7 +70,7 @@ pub(super) fn fill(
                 (alpha > 0.0 && t >= ray.near && t <= ray.far).then_some(Fragment {
                     t,
                     alpha,
-                    rgb: p.rgb,
+                    rgb: inst.indicator().unwrap_or(p.rgb),
                 })
             }));
         }

@@ -156,8 +156,10 @@ pub struct LoadedScene {
 enum Contents {
     Field(FieldHandle),
     Splats(Arc<Splats>),
-    Proposal(Arc<NerfactoField>),
-    Ngp(Arc<IngpField>),
+    /// A run and the colour replacing its own, if any (indicator colours).
+    Proposal(Arc<NerfactoField>, Option<[f32; 3]>),
+    /// A snapshot and the colour replacing its own, if any (indicator colours).
+    Ngp(Arc<IngpField>, Option<[f32; 3]>),
 }
 
 /// A row-major nested 4×4 as a matrix.
@@ -332,7 +334,7 @@ impl SceneDesc {
                     FieldSource::Ingp { path, sampler } => {
                         let snapshot = Arc::new(IngpField::load(path)?);
                         match sampler.unwrap_or(Sampler::Occupancy) {
-                            Sampler::Ngp => Contents::Ngp(snapshot),
+                            Sampler::Ngp => Contents::Ngp(snapshot, None),
                             // `from_json_str` refuses the proposal sampler here.
                             Sampler::Occupancy | Sampler::Proposal => field(snapshot),
                         }
@@ -345,7 +347,7 @@ impl SceneDesc {
                             Sampler::Occupancy
                         };
                         match sampler.unwrap_or(by_default) {
-                            Sampler::Proposal => Contents::Proposal(run),
+                            Sampler::Proposal => Contents::Proposal(run, None),
                             // `from_json_str` refuses instant-ngp's marcher here.
                             Sampler::Occupancy | Sampler::Ngp => field(run),
                         }
@@ -367,6 +369,37 @@ impl LoadedScene {
     /// The description it was loaded from.
     pub fn desc(&self) -> &SceneDesc {
         &self.desc
+    }
+
+    /// The scene with instance `i` coloured `colours[i]` everywhere (each channel 0 or 1),
+    /// its densities untouched: a render of it composites in each channel the coverage of
+    /// the instances lit in that channel (see `scene::indicator`).
+    ///
+    /// Errors: [`Error::Invalid`] when the colours are not one per instance.
+    pub fn with_indicator_colours(&self, colours: &[glam::Vec3]) -> Result<LoadedScene> {
+        if colours.len() != self.contents.len() {
+            return Err(Error::invalid(
+                "indicator colours",
+                format!("{} for {} instances", colours.len(), self.contents.len()),
+            ));
+        }
+        let contents = self
+            .contents
+            .iter()
+            .zip(colours)
+            .map(|(contents, &rgb)| match contents {
+                Contents::Field(field) => Contents::Field(field.with_indicator_colour(rgb)),
+                Contents::Splats(splats) => {
+                    Contents::Splats(Arc::new(super::indicator::indicator_splats(splats, rgb)))
+                }
+                Contents::Proposal(run, _) => Contents::Proposal(run.clone(), Some(rgb.to_array())),
+                Contents::Ngp(snapshot, _) => Contents::Ngp(snapshot.clone(), Some(rgb.to_array())),
+            })
+            .collect();
+        Ok(LoadedScene {
+            desc: self.desc.clone(),
+            contents,
+        })
     }
 
     /// What loading left out that the artist should hear of (splats dropped for non-finite
@@ -413,18 +446,14 @@ impl LoadedScene {
                     m,
                     inst.crop,
                 )?),
-                Contents::Proposal(run) => scene.proposal.push(ProposalInstance::new(
-                    inst.name.clone(),
-                    run.clone(),
-                    m,
-                    inst.crop,
-                )?),
-                Contents::Ngp(snapshot) => scene.ngp.push(NgpInstance::new(
-                    inst.name.clone(),
-                    snapshot.clone(),
-                    m,
-                    inst.crop,
-                )?),
+                Contents::Proposal(run, indicator) => scene.proposal.push(
+                    ProposalInstance::new(inst.name.clone(), run.clone(), m, inst.crop)?
+                        .with_indicator(*indicator),
+                ),
+                Contents::Ngp(snapshot, indicator) => scene.ngp.push(
+                    NgpInstance::new(inst.name.clone(), snapshot.clone(), m, inst.crop)?
+                        .with_indicator(*indicator),
+                ),
                 Contents::Splats(splats) => {
                     let antialiased = match inst.field {
                         FieldSource::Splats {

@@ -40,6 +40,39 @@ impl FieldHandle {
         }))
     }
 
+    /// The same field coloured `rgb` everywhere ([`super::indicator`]), its occupancy
+    /// structures shared (they depend on density alone).
+    pub(crate) fn with_indicator_colour(&self, rgb: Vec3) -> FieldHandle {
+        let occupancy = self
+            .0
+            .occupancy
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone();
+        let (field, analytic): (Arc<dyn Field>, _) = match self.as_analytic() {
+            Some(a) => {
+                let mut a = a.clone();
+                for p in &mut a.primitives {
+                    p.color = crate::field::ShColor::constant(rgb);
+                }
+                let a = Arc::new(a);
+                (a.clone(), Some(a))
+            }
+            None => (
+                Arc::new(super::indicator::Indicator {
+                    field: self.0.field.clone(),
+                    rgb,
+                }),
+                None,
+            ),
+        };
+        FieldHandle(Arc::new(FieldInner {
+            field,
+            analytic,
+            occupancy: Mutex::new(occupancy),
+        }))
+    }
+
     /// The field.
     pub fn field(&self) -> &dyn Field {
         self.0.field.as_ref()

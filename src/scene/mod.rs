@@ -13,6 +13,7 @@
 //! for free — also when `N` carries non-uniform scale.
 
 mod file;
+mod indicator;
 mod instance;
 mod ngp;
 mod proposal;

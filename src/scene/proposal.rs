@@ -21,6 +21,8 @@ use crate::field::{NerfactoField, SamplerRay};
 pub struct ProposalInstance {
     instance: Instance,
     field: Arc<NerfactoField>,
+    /// A colour replacing the field's everywhere (indicator colours for coverage).
+    indicator: Option<[f32; 3]>,
 }
 
 impl ProposalInstance {
@@ -41,13 +43,34 @@ impl ProposalInstance {
         }
         let handle = FieldHandle::new(field.clone());
         let instance = Instance::new(name, handle, world_from_field, crop)?;
-        Ok(ProposalInstance { instance, field })
+        Ok(ProposalInstance {
+            instance,
+            field,
+            indicator: None,
+        })
     }
 
     /// The same placement with another crop box.
     pub fn with_crop(&self, crop: Option<CropBox>) -> Result<Self> {
         let m = self.instance.world_from_field();
-        Self::new(self.name(), self.field.clone(), m, crop)
+        Ok(Self {
+            indicator: self.indicator,
+            ..Self::new(self.name(), self.field.clone(), m, crop)?
+        })
+    }
+
+    /// The instance coloured `rgb` everywhere, its sampling untouched (indicator colours
+    /// for coverage, `scene::indicator`).
+    pub(crate) fn with_indicator(self, rgb: Option<[f32; 3]>) -> Self {
+        Self {
+            indicator: rgb,
+            ..self
+        }
+    }
+
+    /// The colour replacing the field's, if any.
+    pub(crate) fn indicator(&self) -> Option<[f32; 3]> {
+        self.indicator
     }
 
     /// The instance's name.

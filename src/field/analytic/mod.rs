@@ -21,6 +21,7 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
 mod erf;
+mod index;
 mod profile;
 mod sh;
 mod spans;
@@ -29,8 +30,9 @@ pub(crate) use profile::{Anchor, Density, Profile};
 pub use sh::ShColor;
 pub(crate) use spans::Line;
 
-use super::{Aabb, Field, Span};
+use super::{Aabb, Field, RegionQuery, Span};
 use crate::error::{Error, Result};
+use index::PrimitiveIndex;
 
 /// Relative padding of [`Field::may_be_occupied`]: much larger than f32 rounding (~1e-7), much
 /// smaller than any cell.
@@ -395,6 +397,10 @@ impl Field for Analytic {
 
     fn may_be_occupied(&self, region: &Aabb) -> bool {
         !region.is_empty() && self.active().any(|p| p.shape.overlaps(region))
+    }
+
+    fn region_query(&self) -> Box<dyn RegionQuery + '_> {
+        Box::new(PrimitiveIndex::new(&self.primitives))
     }
 
     /// For each region, the sum over the primitives whose support meets it (padded as in

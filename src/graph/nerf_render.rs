@@ -27,7 +27,7 @@ use crate::camera::{
     Camera, Eye, Shot, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, DEFAULT_IPD,
 };
 use crate::composite::{over, rgba_pixels, rgba_planes, shutter_average};
-use crate::error::{Error, Result};
+use crate::error::{number, Error, Result};
 use crate::image::{scaled_size, Plane, Planes, BACKGROUND_DEPTH};
 use crate::render::{
     render_with_progress, ColorOutput, Outputs, Quality, RenderSettings, RenderStats,
@@ -294,7 +294,7 @@ fn camera(values: &ParamValues, shot: &Shot, time: f64, scale: f64) -> Result<(S
     if !time.is_finite() {
         return Err(Error::invalid(
             "time",
-            format!("expected a frame, got {time}"),
+            format!("expected a frame, got {}", number(time)),
         ));
     }
     // A sub-frame time (motion blur, a field at t + 0.5) falls between two shot frames.

@@ -419,3 +419,61 @@ impl LoadedScene {
         Ok(scene)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Wrong shapes and values at every level of a scene: each message is in JSON's words,
+    /// with one article, no Rust type or path and no number hundreds of digits long.
+    #[test]
+    fn scene_messages_are_in_the_users_terms() {
+        let sphere = r#"{"sphere": {"center": [0, 0, 0], "radius": 1}}"#;
+        let gauss = r#"{"gaussian": {"center": [0, 0, 0], "sigma": 1}}"#;
+        let scene = |prims: &str| {
+            format!(
+                r#"{{"instances": [{{"name": "a", "field": {{"analytic": {{"primitives": {prims}}}}}}}]}}"#
+            )
+        };
+        let prim = |shape: &str, density: &str| {
+            format!(
+                r#"[{{"shape": {shape}, "density": {density}, "color": {{"rgb": [1, 1, 1]}}}}]"#
+            )
+        };
+        let cases = [
+            scene("{}"),
+            scene("[1]"),
+            scene(&prim(r#"{"sphere": []}"#, "1")),
+            scene(&prim(r#"{"gaussian": "x"}"#, "1")),
+            scene(&prim(r#"{"box": {"min": {}, "max": [1, 1, 1]}}"#, "1")),
+            scene(&prim(sphere, "[]")),
+            scene(&prim(sphere, "1e308")),
+            scene(&prim(
+                &sphere.replace("\"radius\": 1", "\"radius\": 1e308"),
+                "1",
+            )),
+            scene(&prim(&gauss.replace("\"sigma\": 1", "\"sigma\": []"), "1")),
+            r#"{"instances": {}}"#.to_string(),
+            r#"{"instances": [{"name": [], "field": {}}]}"#.to_string(),
+        ];
+        for text in &cases {
+            let e = match SceneDesc::from_json_str(text, Path::new("s.json")).and_then(|d| d.load())
+            {
+                Ok(_) => panic!("accepted: {text}"),
+                Err(e) => e.to_string(),
+            };
+            for bad in [
+                " a a ",
+                " a an ",
+                "::",
+                "Some(",
+                "None",
+                "f32",
+                "f64",
+                "00000000000",
+            ] {
+                assert!(!e.contains(bad), "{bad:?} in: {e}\n(from {text})");
+            }
+        }
+    }
+}

@@ -31,7 +31,7 @@ pub use sh::ShColor;
 pub(crate) use spans::Line;
 
 use super::{Aabb, Field, RegionQuery, Span};
-use crate::error::{Error, Result};
+use crate::error::{number, Error, Result};
 use index::PrimitiveIndex;
 
 /// Relative padding of [`Field::may_be_occupied`]: much larger than f32 rounding (~1e-7), much
@@ -128,7 +128,7 @@ impl Shape {
             } else {
                 Err(Error::invalid(
                     format!("{what}.{name}"),
-                    format!("must be finite and > 0, got {v}"),
+                    format!("must be finite and > 0, got {}", number(v)),
                 ))
             }
         };
@@ -138,7 +138,12 @@ impl Shape {
             } else {
                 Err(Error::invalid(
                     format!("{what}.{name}"),
-                    format!("must be finite, got {v}"),
+                    format!(
+                        "must be finite, got [{}, {}, {}]",
+                        number(v.x),
+                        number(v.y),
+                        number(v.z)
+                    ),
                 ))
             }
         };
@@ -312,7 +317,7 @@ impl Analytic {
             if !(p.density.is_finite() && p.density >= 0.0) {
                 return Err(Error::invalid(
                     format!("primitives[{i}].density"),
-                    format!("must be finite and ≥ 0, got {}", p.density),
+                    format!("must be finite and ≥ 0, got {}", number(p.density)),
                 ));
             }
         }

@@ -528,11 +528,15 @@ fn params_encoding(
             }
         }
     }
+    let declared = match n_params {
+        Some(n) => format!("; n_params says {n}"),
+        None => String::new(),
+    };
     Err(doc.err(
         "snapshot.params_binary",
         format!(
             "{n_bytes} bytes do not hold the network's parameters ({t16}, or {t8} with \
-             CutlassMLP padding; n_params {n_params:?}): truncated or a different architecture"
+             CutlassMLP padding{declared}): truncated or a different architecture"
         ),
     ))
 }

@@ -322,6 +322,19 @@ fn camera(values: &ParamValues, shot: &Shot, time: f64, scale: f64) -> Result<(S
         }
     }
     let (w, h) = c.intrinsics(shot).effective_resolution()?;
+    // Below one pixel a side there is no image to scale the camera to.
+    if f64::from(w.min(h)) * scale < 1.0 {
+        return Err(Error::invalid(
+            "render scale",
+            format!(
+                "{} makes the {w}×{h} image less than one pixel: the smallest scale for it is \
+                 1/{} ({})",
+                number(scale),
+                w.min(h),
+                number(1.0 / f64::from(w.min(h)))
+            ),
+        ));
+    }
     // The shot's format at render scale, holding only this frame (cheap to build per call).
     let one = Shot {
         fps: shot.fps,

@@ -206,6 +206,18 @@ impl SceneDesc {
             crate::json::parse_json(text, path, "a scene: an object {\"instances\": [...]}")?;
         for (i, inst) in desc.instances.iter().enumerate() {
             let at = format!("instances[{i}] ('{}')", inst.name);
+            // Names become Cryptomatte ids and layer names: two alike could not be told apart.
+            if let Some(j) = desc.instances[..i].iter().position(|o| o.name == inst.name) {
+                return Err(Error::format(
+                    path,
+                    format!("{at}.name"),
+                    format!(
+                        "'{}' is the name of instances[{j}] too: each instance needs its own \
+                         name (it becomes its Cryptomatte id)",
+                        inst.name
+                    ),
+                ));
+            }
             match &inst.field {
                 FieldSource::Analytic(a) => a
                     .validate()
@@ -423,6 +435,24 @@ impl LoadedScene {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn duplicate_instance_names_are_refused() {
+        let one = r#"{"name": "ball", "field": {"analytic": {"primitives": []}}}"#;
+        let text = format!(
+            r#"{{"instances": [{one}, {}, {one}]}}"#,
+            one.replace("ball", "box")
+        );
+        let e = SceneDesc::from_json_str(&text, Path::new("s.json"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("s.json")
+                && e.contains("instances[2] ('ball').name")
+                && e.contains("instances[0]"),
+            "{e}"
+        );
+    }
 
     /// Wrong shapes and values at every level of a scene: each message is in JSON's words,
     /// with one article, no Rust type or path and no number hundreds of digits long.

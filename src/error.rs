@@ -3,6 +3,17 @@
 use std::fmt;
 use std::path::PathBuf;
 
+/// A number for a message: as Rust writes it when ordinary, in exponent form (`1e308`,
+/// `3.4028235e38`, `1e-9`) when so large or small that plain digits would run to hundreds.
+pub(crate) fn number<T: Copy + Into<f64> + fmt::Display + fmt::LowerExp>(x: T) -> String {
+    let v: f64 = x.into();
+    if v != 0.0 && v.is_finite() && !(1e-5..1e16).contains(&v.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
 /// Everything that can go wrong in the core, by cause. Each variant carries enough context
 /// (file, field, frame) for an artist to find and fix the input.
 #[derive(Debug)]
@@ -95,5 +106,23 @@ impl std::error::Error for Error {
             Error::Io { source, .. } => Some(source),
             _ => None,
         }
+    }
+}
+
+#[cfg(test)]
+mod number_tests {
+    use super::number;
+
+    #[test]
+    fn numbers_in_messages_stay_short() {
+        assert_eq!(number(1e308), "1e308");
+        assert_eq!(number(-1e300), "-1e300");
+        assert_eq!(number(f32::MAX), "3.4028235e38");
+        assert_eq!(number(1e-9), "1e-9");
+        assert_eq!(number(0.25), "0.25");
+        assert_eq!(number(1920.0), "1920");
+        assert_eq!(number(0.0), "0");
+        assert_eq!(number(f64::NAN), "NaN");
+        assert_eq!(number(f64::INFINITY), "inf");
     }
 }

@@ -312,8 +312,12 @@ fn in_json_words(message: &str) -> String {
             "sequence" => Some("a list".to_string()),
             "map" => Some("an object".to_string()),
             "struct" | "enum" => {
-                // `struct Name` (`with N elements`): an object; `enum Name`: one of its forms.
-                let name = words.next().unwrap_or_default();
+                // `struct Name` (`with N elements`): an object; `enum Name`: one of its forms;
+                // `struct variant Type::Name`: an object too.
+                let mut name = words.next().unwrap_or_default();
+                if name == "variant" {
+                    name = words.next().unwrap_or_default();
+                }
                 let tail = &name[name.trim_end_matches([',', ';', ':']).len()..];
                 if words.peek() == Some(&"with") {
                     for _ in 0..3 {
@@ -332,6 +336,10 @@ fn in_json_words(message: &str) -> String {
             }
             _ => None,
         };
+        // serde writes `a sequence`, `a map`: the replacement brings its own article.
+        if replaced.is_some() && matches!(out.last().map(String::as_str), Some("a" | "an")) {
+            out.pop();
+        }
         match replaced {
             Some(r) if core == "struct" || core == "enum" => out.push(r),
             Some(r) => out.push(format!("{r}{tail}")),
@@ -438,6 +446,23 @@ mod tests {
     struct Item {
         size: f32,
         count: u32,
+    }
+
+    #[test]
+    fn serde_words_become_json_words_with_one_article() {
+        assert_eq!(
+            in_json_words("invalid type: map, expected a sequence"),
+            "invalid type: an object, expected a list"
+        );
+        assert_eq!(
+            in_json_words("invalid type: sequence, expected a map"),
+            "invalid type: a list, expected an object"
+        );
+        assert_eq!(
+            in_json_words("invalid type: string \"x\", expected struct variant Shape::Gaussian"),
+            "invalid type: string \"x\", expected an object"
+        );
+        assert_eq!(in_json_words("expected f32"), "expected a number");
     }
 
     #[test]

@@ -433,3 +433,35 @@ fn nerf_render_blurs_over_the_shots_shutter_as_the_command_line_does() {
     );
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// A render scale that leaves less than one pixel of the shot's image is refused, naming the
+/// smallest scale that works; that one renders.
+#[test]
+fn a_render_scale_below_one_pixel_is_refused() {
+    let (dir, scene, shot_path) = demo_files("tiny", 64, 36);
+    let n = node("org.nerfx.NeRFRender").unwrap();
+    let v = nerf_values(&scene, &shot_path);
+    let frame = demo::FIRST_FRAME as f64;
+    let e = n
+        .render(
+            &v,
+            &RenderRequest::new(frame, Window::new(0, 0, 1, 1), 1e-9),
+        )
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("render scale")
+            && e.contains("1e-9")
+            && e.contains("less than one pixel")
+            && e.contains("1/36"),
+        "{e}"
+    );
+    let smallest = 1.0 / 36.0;
+    assert!(n
+        .render(
+            &v,
+            &RenderRequest::new(frame, Window::new(0, 0, 2, 1), smallest)
+        )
+        .is_ok());
+    std::fs::remove_dir_all(dir).unwrap();
+}

@@ -719,3 +719,82 @@ fn non_finite_weights_and_density_grid_values_are_refused_naming_the_block() {
     std::fs::write(&path, bytes).unwrap();
     IngpField::load(&path).unwrap();
 }
+
+/// The snapshot of `spec` with `edit` applied to its `snapshot` map, written as `name`.
+fn edited(
+    name: &str,
+    spec: &Spec,
+    edit: impl Fn(&mut Vec<(rmpv::Value, rmpv::Value)>),
+) -> std::path::PathBuf {
+    let bytes = common_ingp::snapshot_bytes(spec);
+    let mut top = rmpv::decode::read_value(&mut &bytes[..]).unwrap();
+    let rmpv::Value::Map(entries) = &mut top else {
+        panic!("a map")
+    };
+    for (k, v) in entries.iter_mut() {
+        if let (Some("snapshot"), rmpv::Value::Map(snap)) = (k.as_str(), v) {
+            edit(snap);
+        }
+    }
+    let mut out = Vec::new();
+    rmpv::encode::write_value(&mut out, &top).unwrap();
+    let path = scratch("edited").join(name);
+    std::fs::write(&path, out).unwrap();
+    path
+}
+
+/// An inverted render box and a singular box rotation are refused, naming the key; an
+/// identity rotation written with whole numbers is read as one.
+#[test]
+fn inverted_or_singular_render_boxes_are_refused() {
+    let spec = Spec {
+        n_cascades: 1,
+        log2_table_size: 10,
+        gzip: false,
+        ..Spec::small_8x4()
+    };
+    let set = |key: &'static str, value: rmpv::Value| {
+        move |snap: &mut Vec<(rmpv::Value, rmpv::Value)>| {
+            snap.retain(|(k, _)| k.as_str() != Some(key));
+            snap.push((rmpv::Value::from(key), value.clone()));
+        }
+    };
+    let f = |v: f64| rmpv::Value::F64(v);
+    let row = |a: [f64; 3]| rmpv::Value::Array(a.map(f).to_vec());
+    let inverted = rmpv::Value::Map(vec![
+        (rmpv::Value::from("min"), row([0.0, 0.9, 0.0])),
+        (rmpv::Value::from("max"), row([1.0, 0.1, 1.0])),
+    ]);
+    let path = edited("inverted.msgpack", &spec, set("render_aabb", inverted));
+    let e = IngpField::load(&path).unwrap_err().to_string();
+    assert!(
+        e.contains("snapshot.render_aabb") && e.contains("inverted") && e.contains(" y"),
+        "{e}"
+    );
+
+    let singular = rmpv::Value::Array(vec![
+        row([1.0, 0.0, 0.0]),
+        row([0.0, 0.0, 0.0]),
+        row([0.0, 0.0, 1.0]),
+    ]);
+    let path = edited(
+        "singular.msgpack",
+        &spec,
+        set("render_aabb_to_local", singular),
+    );
+    let e = IngpField::load(&path).unwrap_err().to_string();
+    assert!(
+        e.contains("render_aabb_to_local") && e.contains("singular"),
+        "{e}"
+    );
+
+    let whole = |a: [i64; 3]| rmpv::Value::Array(a.map(rmpv::Value::from).to_vec());
+    let identity = rmpv::Value::Array(vec![whole([1, 0, 0]), whole([0, 1, 0]), whole([0, 0, 1])]);
+    let plain = IngpField::load(&edited("plain.msgpack", &spec, |_| {})).unwrap();
+    let path = edited(
+        "identity.msgpack",
+        &spec,
+        set("render_aabb_to_local", identity),
+    );
+    assert_eq!(IngpField::load(&path).unwrap().bounds(), plain.bounds());
+}

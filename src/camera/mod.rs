@@ -97,6 +97,10 @@ impl Projection {
     }
 }
 
+/// The largest cosine between two axes of a camera matrix taken as perpendicular: far above
+/// the rounding of a matrix stored in single precision (~1e-7), far below a visible shear.
+const SHEAR_TOLERANCE: f64 = 1e-4;
+
 /// A placed camera: rigid `world_from_camera` and a projection.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Camera {
@@ -108,7 +112,7 @@ pub struct Camera {
 
 impl Camera {
     /// A camera at `world_from_camera` (Blender's `matrix_world`). Scale on the camera object
-    /// is removed, as Blender's renderer does; a matrix with NaN/inf, zero scale or a
+    /// is removed, as Blender's renderer does; a matrix with NaN/inf, zero scale, shear or a
     /// projective row is refused.
     pub fn new(world_from_camera: DMat4, projection: Projection) -> Result<Self> {
         let m = world_from_camera;
@@ -134,6 +138,23 @@ impl Camera {
                 "camera matrix_world",
                 "degenerate or mirrored rotation",
             ));
+        }
+        // Scale is removed below, as Blender does; shear cannot be: the renderers that wrote
+        // the matrix would see through non-perpendicular axes, and nothing here does.
+        let (xu, yu, zu) = (x / lx, y / ly, z / lz);
+        for (a, b, u, v) in [("X", "Y", xu, yu), ("Y", "Z", yu, zu), ("X", "Z", xu, zu)] {
+            let cos = u.dot(v);
+            if cos.abs() > SHEAR_TOLERANCE {
+                return Err(Error::invalid(
+                    "camera matrix_world",
+                    format!(
+                        "sheared: its {a} and {b} axes are {:.3}° apart, not 90° (a camera \
+                         parented to a non-uniformly scaled object?); apply the parent's scale \
+                         or unparent the camera keeping its transform",
+                        cos.clamp(-1.0, 1.0).acos().to_degrees()
+                    ),
+                ));
+            }
         }
         // Orthonormalise (Gram-Schmidt, keeping the view axis −Z exact).
         let zn = z / lz;
@@ -256,6 +277,29 @@ mod tests {
     use glam::DQuat;
 
     use super::*;
+
+    #[test]
+    fn a_sheared_camera_is_refused_a_scaled_one_is_not() {
+        let projection =
+            Projection::Perspective(Perspective::from_vertical_fov(8, 8, 40.0).unwrap());
+        // Scaled non-uniformly but perpendicular: the scale is removed.
+        let scaled = DMat4::from_scale(DVec3::new(2.0, 0.5, 3.0));
+        assert!(Camera::new(scaled, projection.clone()).is_ok());
+        // Y leans 5.7° towards X.
+        let mut sheared = DMat4::IDENTITY;
+        sheared.y_axis.x = 0.1;
+        let e = Camera::new(sheared, projection.clone())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("sheared") && e.contains("X and Y axes are 84.289°"),
+            "{e}"
+        );
+        // Rounding of a single-precision matrix is not shear.
+        let mut rounded = DMat4::from_rotation_y(0.3);
+        rounded.x_axis.y += 1e-7;
+        assert!(Camera::new(rounded, projection).is_ok());
+    }
 
     /// A window's rays, worked out together, are the rays [`Camera::ray`] gives pixel by
     /// pixel, bit for bit, for a perspective camera (the shared path) and a panoramic one.

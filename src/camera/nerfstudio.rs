@@ -444,10 +444,14 @@ fn read_crop(c: &Obj) -> Result<PathCrop> {
             None => [0.0; 3],
         },
     };
-    if let Some(i) = bounds.scale.iter().position(|&s| s < 0.0) {
+    // A side of 0 crops everything away: the render would be the background alone.
+    if let Some(i) = bounds.scale.iter().position(|&s| !(s > 0.0)) {
         return Err(c.error(
             "crop_scale",
-            format!("side {i} is {}; expected ≥ 0", bounds.scale[i]),
+            format!(
+                "side {i} is {}; expected > 0 (a crop box of no size leaves nothing to render)",
+                crate::error::number(bounds.scale[i])
+            ),
         ));
     }
     Ok(PathCrop { bounds, bg_color })
@@ -783,6 +787,22 @@ mod tests {
             let r = p.camera(0, Eye::Left).unwrap().ray(32.0, 16.0).unwrap();
             assert!((r.dir - DVec3::NEG_Z).length() < 1e-12, "{name}");
         }
+    }
+
+    #[test]
+    fn a_crop_of_no_size_is_refused() {
+        let text = r#"{"camera_type": "perspective", "render_width": 32, "render_height": 16,
+            "seconds": 1, "camera_path": [{"camera_to_world": [1,0,0,0, 0,1,0,0, 0,0,1,4, 0,0,0,1], "fov": 30}],
+            "keyframes": [], "crop": {"crop_center": [0, 0, 0], "crop_scale": [2, 0, 2]}}"#;
+        let e = CameraPath::from_json_str(text, "p.json")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("crop_scale") && e.contains("side 1 is 0; expected > 0"),
+            "{e}"
+        );
+        let ok = text.replace("[2, 0, 2]", "[2, 1e-3, 2]");
+        assert!(CameraPath::from_json_str(&ok, "p.json").is_ok());
     }
 
     #[test]

@@ -24,7 +24,7 @@ use serde::{Deserialize, Serialize};
 
 use super::equirect::{check_size, equirect_direction};
 use super::CameraRay;
-use crate::error::{Error, Result};
+use crate::error::{number, Error, Result};
 
 /// nerfstudio's interpupillary distance, in scene units (metres at true scale).
 pub const DEFAULT_IPD: f64 = 0.064;
@@ -54,7 +54,7 @@ fn check_ipd(what: &str, ipd: f64) -> Result<()> {
     if !(ipd.is_finite() && ipd >= 0.0) {
         return Err(Error::invalid(
             format!("{what} ipd"),
-            format!("expected a finite distance ≥ 0, got {ipd}"),
+            format!("expected a finite distance ≥ 0, got {}", number(ipd)),
         ));
     }
     Ok(())

@@ -6,7 +6,7 @@
 //! change, so the unpremultiplied colour is kept: `rgb_out = rgb · α/m` where `m > 0`.
 
 use super::{check_range, finite, rgba_pixels, rgba_planes, same_size, Rgba};
-use crate::error::{Error, Result};
+use crate::error::{number, Error, Result};
 use crate::image::{Plane, Planes};
 
 /// The matte controls: black point, white point, gamma, floater clip.
@@ -53,7 +53,7 @@ impl MatteCurve {
         if !(self.gamma.is_finite() && self.gamma > 0.0) {
             return Err(Error::invalid(
                 what,
-                format!("gamma must be > 0, got {}", self.gamma),
+                format!("gamma must be > 0, got {}", number(self.gamma)),
             ));
         }
         Ok(())

@@ -34,7 +34,7 @@ pub use over::over;
 pub use shadow_catcher::shadow_catcher_merge;
 pub use shutter::shutter_average;
 
-use crate::error::{Error, Result};
+use crate::error::{number, Error, Result};
 use crate::image::{Plane, Planes, BACKGROUND_DEPTH};
 
 /// One premultiplied pixel: red, green, blue, alpha.
@@ -117,7 +117,7 @@ fn check_range(what: &str, name: &str, v: f32, lo: f32, hi: f32) -> Result<()> {
     if !(v.is_finite() && (lo..=hi).contains(&v)) {
         return Err(Error::invalid(
             what,
-            format!("{name} must be in [{lo}, {hi}], got {v}"),
+            format!("{name} must be in [{lo}, {hi}], got {}", number(v)),
         ));
     }
     Ok(())

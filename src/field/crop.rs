@@ -20,14 +20,22 @@ pub struct CropBox {
 }
 
 impl CropBox {
-    /// Refuses non-finite values and negative sides.
+    /// Refuses non-finite values and sides that are not positive (a side of 0 crops
+    /// everything away).
     pub fn validate(&self, what: &str) -> Result<()> {
         let all = self.center.iter().chain(&self.scale).chain(&self.rotation);
         if all.clone().any(|v| !v.is_finite()) {
             return Err(Error::invalid(what, "crop box holds NaN or infinity"));
         }
-        if self.scale.iter().any(|&s| s < 0.0) {
-            return Err(Error::invalid(what, "crop box has a negative side"));
+        if let Some(i) = self.scale.iter().position(|&s| s <= 0.0) {
+            return Err(Error::invalid(
+                what,
+                format!(
+                    "crop box side {i} is {}: expected > 0 (a box of no size leaves nothing to \
+                     render)",
+                    self.scale[i]
+                ),
+            ));
         }
         Ok(())
     }

@@ -118,6 +118,24 @@ pub struct Span {
     pub varies: bool,
 }
 
+/// [`Field::may_be_occupied`] asked of regions inside regions (see [`Field::region_query`]).
+pub trait RegionQuery: Sync {
+    /// Whether the field may have density in `region`: [`Field::may_be_occupied`]'s answer.
+    /// `within` is what the call for a region holding this one left in its `left` (`None`:
+    /// there was none); `left` receives what a call for a region inside this one needs to
+    /// look at (what it holds is the query's own business).
+    fn may_be_occupied(&self, region: &Aabb, within: Option<&[u32]>, left: &mut Vec<u32>) -> bool;
+}
+
+/// A field asked directly.
+struct Plain<'a, F: ?Sized>(&'a F);
+
+impl<F: Field + ?Sized> RegionQuery for Plain<'_, F> {
+    fn may_be_occupied(&self, region: &Aabb, _: Option<&[u32]>, _: &mut Vec<u32>) -> bool {
+        self.0.may_be_occupied(region)
+    }
+}
+
 /// A radiance field in its own frame ("field space").
 ///
 /// Queries are batched: the marcher gathers a tile's samples and asks once, so an
@@ -250,6 +268,14 @@ pub trait Field: Send + Sync {
     /// Whether the density may be non-zero anywhere in `region`. Must be *conservative*:
     /// `false` only where the density is exactly zero throughout.
     fn may_be_occupied(&self, region: &Aabb) -> bool;
+
+    /// [`Field::may_be_occupied`] prepared for many nested regions (an occupancy grid's
+    /// build asks for every cell it may split): the same answers, from an index the field
+    /// builds once where it has one, so that the build grows with the cells, not with cells
+    /// times content. By default the field itself.
+    fn region_query(&self) -> Box<dyn RegionQuery + '_> {
+        Box::new(Plain(self))
+    }
 
     /// For each point, whether the density there is certainly zero (`empty.len() ==
     /// points.len()`): `true` only where [`Field::density`] gives exactly zero. The marcher

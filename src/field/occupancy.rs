@@ -52,7 +52,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::{Aabb, Field};
+use super::{Aabb, Field, RegionQuery};
 
 /// Largest accepted resolution (512³ cells of one byte = 128 MiB).
 const MAX_RESOLUTION: u32 = 512;
@@ -202,7 +202,8 @@ impl Bits {
 /// Marks, in one z-slice, the cells the field may occupy: a quadtree over (x, y) that only
 /// splits boxes the field says may be occupied.
 struct SliceMarker<'a> {
-    field: &'a dyn Field,
+    /// [`Field::region_query`] of the field.
+    query: &'a dyn RegionQuery,
     grid: Grid,
     pad: f32,
     z: u32,
@@ -210,15 +211,27 @@ struct SliceMarker<'a> {
 }
 
 impl SliceMarker<'_> {
-    /// Visits the `s × s` square of cells at (`x0`, `y0`) (clipped to the grid).
-    fn visit(&self, words: &mut [u64], x0: u32, y0: u32, s: u32) {
+    /// Visits the `s × s` square of cells at (`x0`, `y0`) (clipped to the grid). `scopes[0]`
+    /// holds what the visit of the square holding this one left to look at (`None`: this is
+    /// the slice's whole square); the rest is scratch for the squares inside.
+    fn visit(
+        &self,
+        words: &mut [u64],
+        x0: u32,
+        y0: u32,
+        s: u32,
+        scopes: &mut [Vec<u32>],
+        top: bool,
+    ) {
         let n = self.grid.n;
         if x0 >= n || y0 >= n {
             return;
         }
         let k1 = [(x0 + s).min(n), (y0 + s).min(n), self.z + 1];
         let region = self.grid.cell_box([x0, y0, self.z], k1).grow(self.pad);
-        if !self.field.may_be_occupied(&region) {
+        let (within, inside) = scopes.split_at_mut(1);
+        let within = (!top).then_some(within[0].as_slice());
+        if !self.query.may_be_occupied(&region, within, &mut inside[0]) {
             return;
         }
         if s == 1 {
@@ -227,7 +240,7 @@ impl SliceMarker<'_> {
         }
         let h = s / 2;
         for (dx, dy) in [(0, 0), (h, 0), (0, h), (h, h)] {
-            self.visit(words, x0 + dx, y0 + dy, h);
+            self.visit(words, x0 + dx, y0 + dy, h, &mut scopes[1..], false);
         }
     }
 }
@@ -369,8 +382,9 @@ impl Occupancy {
         };
         let mut occupied = Bits::new(n);
         if !field_bounds.is_empty() {
+            let query = field.region_query();
             let marker = SliceMarker {
-                field,
+                query: &*query,
                 grid,
                 pad: BUILD_PAD * grid.min_cell(),
                 z: 0,
@@ -386,7 +400,10 @@ impl Occupancy {
                         z: z as u32,
                         ..marker
                     };
-                    m.visit(words, 0, 0, n.next_power_of_two());
+                    let side = n.next_power_of_two();
+                    // One scope per level of the quadtree, and the first one unused.
+                    let mut scopes = vec![Vec::new(); side.trailing_zeros() as usize + 2];
+                    m.visit(words, 0, 0, side, &mut scopes, true);
                 });
         }
         let occupied_cells = occupied.count();
@@ -628,6 +645,61 @@ mod tests {
 
     fn sphere(center: Vec3, radius: f32) -> Shape {
         Shape::Sphere { center, radius }
+    }
+
+    /// An analytic field asked primitive by primitive (no index).
+    struct Scan(Analytic);
+
+    impl Field for Scan {
+        fn bounds(&self) -> Aabb {
+            self.0.bounds()
+        }
+        fn density(&self, points: &[Vec3], sigma: &mut [f32]) {
+            self.0.density(points, sigma);
+        }
+        fn radiance(&self, points: &[Vec3], dirs: &[Vec3], rgb: &mut [Vec3]) {
+            self.0.radiance(points, dirs, rgb);
+        }
+        fn may_be_occupied(&self, region: &Aabb) -> bool {
+            self.0.may_be_occupied(region)
+        }
+    }
+
+    /// A thousand scattered spheres, boxes and blobs of every size: the grid built through the
+    /// field's index is the grid built by asking every primitive of every cell.
+    #[test]
+    fn the_indexed_build_is_the_scanning_build() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let primitives = (0..1000)
+            .map(|i| {
+                let c = Vec3::new(rnd(), rnd(), rnd()) * 4.0 - 2.0;
+                let r = 0.002 + 0.2 * rnd().powi(3);
+                Primitive::white(match i % 3 {
+                    0 => sphere(c, r),
+                    1 => Shape::Box {
+                        min: c,
+                        max: c + Vec3::new(rnd(), rnd(), rnd()) * r + Vec3::splat(1e-4),
+                    },
+                    _ => Shape::Gaussian {
+                        center: c,
+                        sigma: r / 3.0,
+                        cutoff: 3.0,
+                    },
+                })
+            })
+            .collect();
+        let field = Analytic { primitives };
+        let indexed = Occupancy::build(&field, 96);
+        let scanned = Occupancy::build(&Scan(field), 96);
+        assert!(indexed.occupied_cells > 1000);
+        assert_eq!(indexed.occupied_cells, scanned.occupied_cells);
+        assert!(indexed.cells == scanned.cells);
     }
 
     /// Every cell's (occupied, radius), from the per-cell bytes.

@@ -318,8 +318,19 @@ fn read_node(entry: &Json, base: &Path) -> Result<GraphNode> {
                 format!("no such parameter (parameters: {})", names.join(", ")),
             )
         })?;
-        let value = to_value(&param.kind, json, base)
-            .ok_or_else(|| Error::invalid(format!("params.{key}"), describe(&param.kind)))?;
+        let value = to_value(&param.kind, json, base).ok_or_else(|| {
+            Error::invalid(
+                format!("params.{key}"),
+                match non_finite_entry(json) {
+                    Some(i) => format!(
+                        "entry {i} is NaN or infinite (written as null: JSON cannot hold it); \
+                         {}",
+                        describe(&param.kind)
+                    ),
+                    None => describe(&param.kind),
+                },
+            )
+        })?;
         values.set(key, value).map_err(|e| match e {
             Error::Invalid { message, .. } => Error::invalid(format!("params.{key}"), message),
             other => other,
@@ -428,6 +439,18 @@ fn to_value(kind: &ParamKind, json: &Json, base: &Path) -> Option<Value> {
             }
         }
     })
+}
+
+/// The index, counted over a list or a list of rows, of its first null entry: a NaN or
+/// infinity the file held (JSON has no such numbers; they read as null).
+fn non_finite_entry(json: &Json) -> Option<usize> {
+    let rows = json.as_array()?;
+    let flat: Vec<&Json> = if rows.iter().all(Json::is_array) {
+        rows.iter().filter_map(Json::as_array).flatten().collect()
+    } else {
+        rows.iter().collect()
+    };
+    flat.iter().position(|v| v.is_null())
 }
 
 /// What a parameter of `kind` is written as.
@@ -597,6 +620,32 @@ mod tests {
             0.25
         );
         assert_eq!(g.layers, [("env".to_string(), "env".to_string())]);
+    }
+
+    #[test]
+    fn a_nan_in_a_matrix_is_named() {
+        for (from, to) in [
+            ("[0,2,0,0]", "[0,NaN,0,0]"),
+            ("[0,2,0,0]", "[0,2,Infinity,0]"),
+        ] {
+            let e = parse(&GOOD.replace(from, to)).unwrap_err().to_string();
+            let at = if to.contains("NaN") { 5 } else { 6 };
+            assert!(
+                e.contains("objectTransform")
+                    && e.contains(&format!("entry {at} is NaN or infinite")),
+                "{e}"
+            );
+        }
+        // A flat list too; a short one is still described by its shape.
+        let flat = GOOD.replace(
+            "[[2,0,0,1],[0,2,0,0],[0,0,2,0],[0,0,0,1]]",
+            "[2,0,0,1, 0,2,0,0, 0,0,NaN,0, 0,0,0,1]",
+        );
+        let e = parse(&flat).unwrap_err().to_string();
+        assert!(e.contains("entry 10 is NaN"), "{e}");
+        let short = GOOD.replace("[[2,0,0,1],[0,2,0,0],[0,0,2,0],[0,0,0,1]]", "[1, 2]");
+        let e = parse(&short).unwrap_err().to_string();
+        assert!(e.contains("16") && !e.contains("NaN"), "{e}");
     }
 
     #[test]

@@ -27,7 +27,7 @@ use crate::camera::{
     Camera, Eye, Shot, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, DEFAULT_IPD,
 };
 use crate::composite::{over, rgba_pixels, rgba_planes, shutter_average};
-use crate::error::{Error, Result};
+use crate::error::{number, Error, Result};
 use crate::image::{scaled_size, OutputColorSpace, Plane, Planes, BACKGROUND_DEPTH};
 use crate::render::{
     render_with_progress, ColorOutput, Outputs, Quality, RenderSettings, RenderStats,
@@ -322,7 +322,7 @@ fn camera(values: &ParamValues, shot: &Shot, time: f64, scale: f64) -> Result<(S
     if !time.is_finite() {
         return Err(Error::invalid(
             "time",
-            format!("expected a frame, got {time}"),
+            format!("expected a frame, got {}", number(time)),
         ));
     }
     // A sub-frame time (motion blur, a field at t + 0.5) falls between two shot frames.
@@ -350,6 +350,19 @@ fn camera(values: &ParamValues, shot: &Shot, time: f64, scale: f64) -> Result<(S
         }
     }
     let (w, h) = c.intrinsics(shot).effective_resolution()?;
+    // Below one pixel a side there is no image to scale the camera to.
+    if f64::from(w.min(h)) * scale < 1.0 {
+        return Err(Error::invalid(
+            "render scale",
+            format!(
+                "{} makes the {w}×{h} image less than one pixel: the smallest scale for it is \
+                 1/{} ({})",
+                number(scale),
+                w.min(h),
+                number(1.0 / f64::from(w.min(h)))
+            ),
+        ));
+    }
     // The shot's format at render scale, holding only this frame (cheap to build per call).
     let one = Shot {
         fps: shot.fps,

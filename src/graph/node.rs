@@ -4,7 +4,7 @@ use std::collections::BTreeMap;
 
 use super::desc::{ClipKind, NodeDesc};
 use super::values::ParamValues;
-use crate::error::{Error, Result};
+use crate::error::{number, Error, Result};
 use crate::image::{OutputColorSpace, Plane, Planes, Window};
 use crate::render::RenderStats;
 
@@ -70,7 +70,7 @@ pub fn check_render_scale(s: f64) -> Result<()> {
     } else {
         Err(Error::invalid(
             "render scale",
-            format!("expected (0, 1], got {s}"),
+            format!("expected (0, 1], got {}", number(s)),
         ))
     }
 }
@@ -288,7 +288,7 @@ impl Node {
         if !(par.is_finite() && par > 0.0) {
             return Err(Error::invalid(
                 format!("{}: pixel aspect", self.desc.id),
-                format!("expected a number > 0, got {par}"),
+                format!("expected a number > 0, got {}", number(par)),
             ));
         }
         Ok(Some(par))

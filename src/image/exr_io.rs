@@ -29,7 +29,7 @@ use exr::prelude::{
     WritableImage,
 };
 
-use crate::error::{Error, Result};
+use crate::error::{number, Error, Result};
 use crate::image::{CameraMatrices, ExrHeader, OutputColorSpace, Plane, Planes};
 
 /// Depth written where nothing was hit (the plane holds `inf` there): Blender's background
@@ -61,7 +61,7 @@ pub fn write_exr_layers(
     if !(pixel_aspect.is_finite() && pixel_aspect > 0.0) {
         return Err(Error::invalid(
             format!("EXR {}: pixel aspect", path.display()),
-            format!("expected a positive number, got {pixel_aspect}"),
+            format!("expected a positive number, got {}", number(pixel_aspect)),
         ));
     }
     let mut channels = channels_of(main, "")?;

@@ -235,6 +235,18 @@ impl SceneDesc {
             crate::json::parse_json(text, path, "a scene: an object {\"instances\": [...]}")?;
         for (i, inst) in desc.instances.iter().enumerate() {
             let at = format!("instances[{i}] ('{}')", inst.name);
+            // Names become Cryptomatte ids and layer names: two alike could not be told apart.
+            if let Some(j) = desc.instances[..i].iter().position(|o| o.name == inst.name) {
+                return Err(Error::format(
+                    path,
+                    format!("{at}.name"),
+                    format!(
+                        "'{}' is the name of instances[{j}] too: each instance needs its own \
+                         name (it becomes its Cryptomatte id)",
+                        inst.name
+                    ),
+                ));
+            }
             match &inst.field {
                 FieldSource::Analytic(a) => a
                     .validate()
@@ -473,5 +485,81 @@ impl LoadedScene {
             }
         }
         Ok(scene)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn duplicate_instance_names_are_refused() {
+        let one = r#"{"name": "ball", "field": {"analytic": {"primitives": []}}}"#;
+        let text = format!(
+            r#"{{"instances": [{one}, {}, {one}]}}"#,
+            one.replace("ball", "box")
+        );
+        let e = SceneDesc::from_json_str(&text, Path::new("s.json"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("s.json")
+                && e.contains("instances[2] ('ball').name")
+                && e.contains("instances[0]"),
+            "{e}"
+        );
+    }
+
+    /// Wrong shapes and values at every level of a scene: each message is in JSON's words,
+    /// with one article, no Rust type or path and no number hundreds of digits long.
+    #[test]
+    fn scene_messages_are_in_the_users_terms() {
+        let sphere = r#"{"sphere": {"center": [0, 0, 0], "radius": 1}}"#;
+        let gauss = r#"{"gaussian": {"center": [0, 0, 0], "sigma": 1}}"#;
+        let scene = |prims: &str| {
+            format!(
+                r#"{{"instances": [{{"name": "a", "field": {{"analytic": {{"primitives": {prims}}}}}}}]}}"#
+            )
+        };
+        let prim = |shape: &str, density: &str| {
+            format!(
+                r#"[{{"shape": {shape}, "density": {density}, "color": {{"rgb": [1, 1, 1]}}}}]"#
+            )
+        };
+        let cases = [
+            scene("{}"),
+            scene("[1]"),
+            scene(&prim(r#"{"sphere": []}"#, "1")),
+            scene(&prim(r#"{"gaussian": "x"}"#, "1")),
+            scene(&prim(r#"{"box": {"min": {}, "max": [1, 1, 1]}}"#, "1")),
+            scene(&prim(sphere, "[]")),
+            scene(&prim(sphere, "1e308")),
+            scene(&prim(
+                &sphere.replace("\"radius\": 1", "\"radius\": 1e308"),
+                "1",
+            )),
+            scene(&prim(&gauss.replace("\"sigma\": 1", "\"sigma\": []"), "1")),
+            r#"{"instances": {}}"#.to_string(),
+            r#"{"instances": [{"name": [], "field": {}}]}"#.to_string(),
+        ];
+        for text in &cases {
+            let e = match SceneDesc::from_json_str(text, Path::new("s.json")).and_then(|d| d.load())
+            {
+                Ok(_) => panic!("accepted: {text}"),
+                Err(e) => e.to_string(),
+            };
+            for bad in [
+                " a a ",
+                " a an ",
+                "::",
+                "Some(",
+                "None",
+                "f32",
+                "f64",
+                "00000000000",
+            ] {
+                assert!(!e.contains(bad), "{bad:?} in: {e}\n(from {text})");
+            }
+        }
     }
 }

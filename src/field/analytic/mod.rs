@@ -21,6 +21,7 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
 mod erf;
+mod index;
 mod profile;
 mod sh;
 mod spans;
@@ -29,8 +30,9 @@ pub(crate) use profile::{Anchor, Density, Profile};
 pub use sh::ShColor;
 pub(crate) use spans::Line;
 
-use super::{Aabb, Field, Span};
-use crate::error::{Error, Result};
+use super::{Aabb, Field, RegionQuery, Span};
+use crate::error::{number, Error, Result};
+use index::PrimitiveIndex;
 
 /// Relative padding of [`Field::may_be_occupied`]: much larger than f32 rounding (~1e-7), much
 /// smaller than any cell.
@@ -126,7 +128,7 @@ impl Shape {
             } else {
                 Err(Error::invalid(
                     format!("{what}.{name}"),
-                    format!("must be finite and > 0, got {v}"),
+                    format!("must be finite and > 0, got {}", number(v)),
                 ))
             }
         };
@@ -136,7 +138,12 @@ impl Shape {
             } else {
                 Err(Error::invalid(
                     format!("{what}.{name}"),
-                    format!("must be finite, got {v}"),
+                    format!(
+                        "must be finite, got [{}, {}, {}]",
+                        number(v.x),
+                        number(v.y),
+                        number(v.z)
+                    ),
                 ))
             }
         };
@@ -310,7 +317,7 @@ impl Analytic {
             if !(p.density.is_finite() && p.density >= 0.0) {
                 return Err(Error::invalid(
                     format!("primitives[{i}].density"),
-                    format!("must be finite and ≥ 0, got {}", p.density),
+                    format!("must be finite and ≥ 0, got {}", number(p.density)),
                 ));
             }
         }
@@ -395,6 +402,10 @@ impl Field for Analytic {
 
     fn may_be_occupied(&self, region: &Aabb) -> bool {
         !region.is_empty() && self.active().any(|p| p.shape.overlaps(region))
+    }
+
+    fn region_query(&self) -> Box<dyn RegionQuery + '_> {
+        Box::new(PrimitiveIndex::new(&self.primitives))
     }
 
     /// For each region, the sum over the primitives whose support meets it (padded as in

@@ -164,7 +164,8 @@ fn method_name(method: CompressionMethod) -> String {
         .map_or_else(|| format!("{method:?}"), |(_, name)| name.to_string())
 }
 
-/// A zip error as an error naming the archive (and the entry, when `what` names one).
+/// A zip error as an error naming the archive (and the entry, when `what` names one), in
+/// the format's words: the zip library's own texts name its internals (`EOCD`, its types).
 fn corrupt(path: &Path, what: &str, e: ZipError) -> Error {
     let message = match e {
         ZipError::Io(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => {
@@ -174,14 +175,21 @@ fn corrupt(path: &Path, what: &str, e: ZipError) -> Error {
             "CRC-32 mismatch: the data is corrupt".to_owned()
         }
         ZipError::Io(e) if e.kind() == std::io::ErrorKind::InvalidData => {
-            format!("zip archive corrupt: {e}")
+            "zip archive corrupt: the entry's compressed data does not decode".to_owned()
         }
-        ZipError::UnsupportedArchive(m) => format!("unsupported zip archive: {m}"),
-        e if what.is_empty() => format!(
-            "not a readable zip archive, truncated or corrupt ({e}): a torch checkpoint is a \
-             zip archive"
-        ),
-        e => format!("zip archive corrupt: {e}"),
+        ZipError::Io(e) => format!("zip archive unreadable: {e}"),
+        ZipError::UnsupportedArchive(_) => {
+            "unsupported zip archive: split over several files, encrypted, or using a zip \
+             feature nerfx does not read"
+                .to_owned()
+        }
+        ZipError::InvalidPassword => "unsupported zip archive: it is encrypted".to_owned(),
+        _ if what.is_empty() => "not a readable zip archive (its directory at the end of the \
+                                 file is missing or damaged: truncated or corrupt): a torch \
+                                 checkpoint is a zip archive"
+            .to_owned(),
+        _ => "zip archive corrupt: the entry's header disagrees with the archive's directory"
+            .to_owned(),
     };
     Error::format(path, what, message)
 }

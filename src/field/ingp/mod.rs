@@ -528,11 +528,15 @@ fn params_encoding(
             }
         }
     }
+    let declared = match n_params {
+        Some(n) => format!("; n_params says {n}"),
+        None => String::new(),
+    };
     Err(doc.err(
         "snapshot.params_binary",
         format!(
             "{n_bytes} bytes do not hold the network's parameters ({t16}, or {t8} with \
-             CutlassMLP padding; n_params {n_params:?}): truncated or a different architecture"
+             CutlassMLP padding{declared}): truncated or a different architecture"
         ),
     ))
 }
@@ -587,20 +591,41 @@ fn render_aabb(doc: &Doc, snap: &Value) -> Result<Option<(Vec3, Vec3)>> {
         return Ok(None);
     };
     if let Some(m) = doc.find(snap, "render_aabb_to_local") {
+        let number = |x: &Value| {
+            x.as_f64()
+                .or_else(|| x.as_i64().map(|i| i as f64))
+                .unwrap_or(f64::NAN)
+        };
         let flat: Vec<f64> = m
             .as_array()
             .into_iter()
             .flatten()
             .flat_map(|r| match r.as_array() {
-                Some(a) => a.iter().map(|x| x.as_f64().unwrap_or(f64::NAN)).collect(),
-                None => vec![r.as_f64().unwrap_or(f64::NAN)],
+                Some(a) => a.iter().map(number).collect(),
+                None => vec![number(r)],
             })
             .collect();
-        let identity = flat.len() == 9
-            && flat
-                .iter()
-                .enumerate()
-                .all(|(i, v)| (v - if i % 4 == 0 { 1.0 } else { 0.0 }).abs() < 1e-6);
+        // A matrix that is not a rotation cannot place the box: refused, not ignored.
+        let at = "snapshot.render_aabb_to_local";
+        if flat.len() != 9 || flat.iter().any(|v| !v.is_finite()) {
+            return Err(doc.err(at, "expected a 3x3 matrix of finite numbers"));
+        }
+        let mut cols = [0.0; 9];
+        cols.copy_from_slice(&flat);
+        let det = glam::DMat3::from_cols_array(&cols).determinant();
+        if !(det.abs() > 1e-6) {
+            return Err(doc.err(
+                at,
+                format!(
+                    "singular (determinant {}): the render box's rotation must be invertible",
+                    crate::error::number(det)
+                ),
+            ));
+        }
+        let identity = flat
+            .iter()
+            .enumerate()
+            .all(|(i, v)| (v - if i % 4 == 0 { 1.0 } else { 0.0 }).abs() < 1e-6);
         if !identity {
             return Ok(None);
         }
@@ -613,6 +638,18 @@ fn render_aabb(doc: &Doc, snap: &Value) -> Result<Option<(Vec3, Vec3)>> {
         doc.get(b, "snapshot.render_aabb", "max")?,
         "snapshot.render_aabb.max",
     )?;
+    if let Some(axis) = (0..3).find(|&a| lo[a] > hi[a]) {
+        return Err(doc.err(
+            "snapshot.render_aabb",
+            format!(
+                "inverted: min {} is above max {} on {}; a box with min <= max on every axis \
+                 was expected",
+                lo[axis],
+                hi[axis],
+                ["x", "y", "z"][axis]
+            ),
+        ));
+    }
     Ok(Some((lo, hi)))
 }
 

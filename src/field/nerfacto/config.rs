@@ -56,6 +56,7 @@ pub(crate) fn scan(text: &str, path: &str, file: &Path) -> Result<Option<String>
             stack.pop();
         }
         stack.push((indent, key));
+        too_deep(&stack, n, file)?;
         let here = stack.iter().map(|(_, k)| *k).collect::<Vec<_>>().join(".");
         if here == path {
             if found.is_some() {
@@ -66,6 +67,17 @@ pub(crate) fn scan(text: &str, path: &str, file: &Path) -> Result<Option<String>
                 ));
             }
             let v = rest.trim();
+            if let Some(name) = v.strip_prefix('*') {
+                return Err(Error::format(
+                    file,
+                    format!("line {}", n + 1),
+                    format!(
+                        "'{path}' is the YAML alias *{name}: nerfx reads config.yml without \
+                         expanding aliases (a file of aliases can expand without bound); \
+                         write the value itself"
+                    ),
+                ));
+            }
             let v = v
                 .strip_prefix('\'')
                 .and_then(|v| v.strip_suffix('\''))
@@ -75,6 +87,22 @@ pub(crate) fn scan(text: &str, path: &str, file: &Path) -> Result<Option<String>
         }
     }
     Ok(found)
+}
+
+/// The deepest nesting of mappings read: nerfstudio's configs nest about eight deep.
+const MAX_NESTING: usize = 64;
+
+/// Refuses a mapping nested deeper than [`MAX_NESTING`] (line `n`, from 0): a file nested
+/// that deep is not a nerfstudio config, and each line's key path grows with the depth.
+fn too_deep(stack: &[(usize, &str)], n: usize, file: &Path) -> Result<()> {
+    if stack.len() > MAX_NESTING {
+        return Err(Error::format(
+            file,
+            format!("line {}", n + 1),
+            format!("mappings nested more than {MAX_NESTING} deep: not a nerfstudio config.yml"),
+        ));
+    }
+    Ok(())
 }
 
 /// One item of a YAML sequence: its `key: value` pairs.
@@ -94,7 +122,7 @@ pub(crate) fn scan_items(text: &str, path: &str, file: &Path) -> Result<Option<V
     let mut stack: Vec<(usize, &str)> = Vec::new();
     let mut key_indent = None;
     let mut items: Vec<Item> = Vec::new();
-    for line in text.lines() {
+    for (n, line) in text.lines().enumerate() {
         let content = line.trim_start();
         let indent = line.len() - content.len();
         if content.is_empty() || content.starts_with('#') {
@@ -127,6 +155,7 @@ pub(crate) fn scan_items(text: &str, path: &str, file: &Path) -> Result<Option<V
             stack.pop();
         }
         stack.push((indent, key));
+        too_deep(&stack, n, file)?;
         if stack.iter().map(|(_, k)| *k).collect::<Vec<_>>().join(".") == path {
             key_indent = Some(indent);
         }
@@ -416,6 +445,35 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
     disable_scene_contraction: false
   num_levels: 3
 ";
+
+    #[test]
+    fn nesting_and_alias_bombs_are_refused() {
+        let file = Path::new("config.yml");
+        // 100 000 levels: refused at level 65, not walked (each line's path grows with it).
+        let deep: String = (0..100_000)
+            .map(|d| format!("{}k{d}:\n", " ".repeat(d)))
+            .collect();
+        let e = scan(&deep, "pipeline.model.max_res", file)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("line 65") && e.contains("nested more than 64"),
+            "{e}"
+        );
+        let e = scan_items(&deep, "a.b", file).unwrap_err().to_string();
+        assert!(e.contains("nested more than 64"), "{e}");
+        // An alias is never expanded: a key nerfx reads given as one is refused.
+        let alias = TEXT.replace("hidden_dim: 32", "hidden_dim: *id001");
+        let e = scan(&alias, "pipeline.model.hidden_dim", file)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line") && e.contains("alias *id001"), "{e}");
+        // Anchors and aliases elsewhere (PyYAML writes them for shared objects) are passed by.
+        assert_eq!(
+            scan(&alias, "pipeline.model.log2_hashmap_size", file).unwrap(),
+            Some("12".to_owned())
+        );
+    }
 
     #[test]
     fn reads_model_keys_by_indentation() {

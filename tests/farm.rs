@@ -5,6 +5,8 @@
 //! `nerfx render`. Also: a split frame assembles bit for bit, a task killed mid-frame runs
 //! again leaving no partial file, and a bad scene fails at once with the no-retry status.
 
+mod common_ofx;
+
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
@@ -646,4 +648,44 @@ fn a_bad_scene_exits_with_the_no_retry_status_and_a_split_frame_is_the_whole_fra
         "the assembled file is the whole-frame render's, byte for byte"
     );
     assert_eq!(channels(&frame(&split, 1005)).len(), 7);
+}
+
+#[test]
+fn a_graph_in_stripes_assembles_to_the_whole_frame_every_layer() {
+    let work = tempfile::tempdir().unwrap();
+    let graph = nerfx::demo::write_graph(work.path(), WIDTH, HEIGHT).unwrap();
+    let bundle = common_ofx::bundle();
+    let render = |pattern: &Path, stripe: Option<String>| {
+        let mut c = nerfx();
+        c.arg("render")
+            .arg(&graph)
+            .args(["--frames", "1003", "--bundle"])
+            .arg(&bundle)
+            .arg("-o")
+            .arg(pattern);
+        if let Some(stripe) = stripe {
+            c.args(["--stripe", &stripe]);
+        }
+        run(&mut c);
+    };
+    let whole = work.path().join("whole/comp.####.exr");
+    render(&whole, None);
+    let split = work.path().join("split/comp.####.exr");
+    for k in 1..=3 {
+        render(&split, Some(format!("{k}/3")));
+    }
+    run(nerfx()
+        .args(["assemble", "--frames", "1003", "--split-frame", "3", "-o"])
+        .arg(&split));
+    assert_eq!(
+        std::fs::read(frame(&split, 1003)).unwrap(),
+        std::fs::read(frame(&whole, 1003)).unwrap(),
+        "the assembled graph frame is the whole-frame render's, byte for byte"
+    );
+    let names: Vec<String> = channels(&frame(&split, 1003))
+        .into_iter()
+        .map(|(n, _)| n)
+        .collect();
+    assert!(names.iter().any(|n| n.starts_with("object.")), "{names:?}");
+    assert!(names.iter().any(|n| n.starts_with("shadow.")), "{names:?}");
 }

@@ -107,8 +107,8 @@ enum Command {
         /// `openjd_progress:` and `openjd_status:` lines as well.
         #[arg(long, value_enum, default_value_t = Progress::Plain)]
         progress: Progress,
-        /// Scenes: render stripe K of N of each frame (`2/4`), to the frame's name with
-        /// `.stripe2of4` before the extension; `nerfx assemble` joins the stripes.
+        /// Render stripe K of N of each frame (`2/4`), to the frame's name with `.stripe2of4`
+        /// before the extension; `nerfx assemble` joins the stripes.
         #[arg(long)]
         stripe: Option<String>,
     },
@@ -304,7 +304,7 @@ struct FarmArgs {
     #[arg(short, long)]
     output: PathBuf,
     /// Render each frame as this many stripes, each a task of its own, and join them in a last
-    /// step (scenes only).
+    /// step.
     #[arg(long, default_value_t = 1)]
     split_frame: u32,
     /// CPUs a task asks for.
@@ -333,12 +333,6 @@ impl FarmArgs {
             &self.output,
             self.split_frame,
         )?;
-        if self.split_frame > 1 && self.inputs.len() < 2 {
-            return Err(Error::invalid(
-                "--split-frame",
-                "a node graph renders whole frames: split the frames of a scene and a shot",
-            ));
-        }
         if let Some(program) = &self.program {
             job.program = std::path::absolute(program).map_err(|e| Error::io(program, e))?;
         }
@@ -454,6 +448,7 @@ fn run(cli: Cli) -> Result<()> {
                 resume,
                 progress,
                 inputs,
+                stripe,
             };
             let Some(shot) = shot else {
                 if passes.is_some() {
@@ -462,11 +457,10 @@ fn run(cli: Cli) -> Result<()> {
                         "a graph's NeRF Render nodes choose their own outputs",
                     ));
                 }
-                if stripe.is_some() {
+                if png && stripe.is_some() {
                     return Err(Error::invalid(
-                        "--stripe",
-                        "a node graph renders whole frames: split the frames of a scene and a \
-                         shot",
+                        "--png",
+                        "a preview is of a whole frame: render it after `nerfx assemble`",
                     ));
                 }
                 return graph::render(&scene, frames, &output, png, bundle, scale, &task);
@@ -558,6 +552,7 @@ fn run(cli: Cli) -> Result<()> {
                 resume: true,
                 progress,
                 inputs: Vec::new(),
+                stripe: None,
             };
             for (done, &frame) in frames.iter().enumerate() {
                 let path = frame_path(&output, frame, frames.len() > 1);
@@ -803,6 +798,8 @@ struct Task {
     progress: Progress,
     /// The files the frames are rendered from: a frame older than one is rendered again.
     inputs: Vec<PathBuf>,
+    /// The stripe of each frame to render (`--stripe`), or the whole frames.
+    stripe: Option<Stripe>,
 }
 
 impl Task {
@@ -1029,6 +1026,7 @@ mod graph {
         task: &Task,
     ) -> Result<()> {
         let graph = Graph::read(path)?;
+        let stripe = task.stripe;
         let nodes = graph.needed().iter().filter(|&&n| n).count();
         let mut graph = OfxGraph::new(graph, &load_bundle(bundle)?)?;
         let frames = match frames {
@@ -1053,13 +1051,16 @@ mod graph {
         // The sequence is ended on every path, a failed frame included.
         let target = |frame| frame_path(output, frame, frames.len() > 1);
         let rendered = frames.iter().enumerate().try_for_each(|(done, &frame)| {
-            let path = target(frame);
-            let what = if task.resume && task.is_done(&path) {
+            let whole = target(frame);
+            let path = stripe.map_or_else(|| whole.clone(), |s| s.path(&whole));
+            // A stripe is done too when the frame it belongs to has been assembled.
+            let done_already = task.is_done(&path) || (stripe.is_some() && task.is_done(&whole));
+            let what = if task.resume && done_already {
                 bar.inc(nodes as u64);
                 format!("frame {frame}: {} is already whole", path.display())
             } else {
                 task.clear(&path)?;
-                render_frame(&mut graph, frame, &path, png, scale, &bar)?;
+                render_frame(&mut graph, frame, &path, png, scale, stripe, &bar)?;
                 format!("frame {frame} → {}", path.display())
             };
             bar.suspend(|| task.report(done + 1, frames.len(), &what));
@@ -1077,12 +1078,17 @@ mod graph {
         target: &Path,
         png: bool,
         scale: f64,
+        stripe: Option<Stripe>,
         bar: &ProgressBar,
     ) -> Result<()> {
         if let Some(dir) = target.parent() {
             create_dir(dir)?;
         }
-        let images = graph.render(frame as f64, scale, false, &|node| {
+        let window_of = |w, h| match stripe {
+            Some(s) => s.window(w, h, nerfx::render::TILE_SIZE),
+            None => Ok(nerfx::image::Window::new(0, 0, w, h)),
+        };
+        let images = graph.render_window(frame as f64, scale, false, &window_of, &|node| {
             bar.set_message(format!("frame {frame} {node}"));
             bar.inc(1);
         })?;

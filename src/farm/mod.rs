@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
 use crate::frames::parse_frames;
-use crate::render::{Outputs, Quality, RenderSettings};
+use crate::render::TILE_SIZE;
 
 pub use split::{assemble, Stripe};
 pub use task::{is_done, ExitStatus, Progress};
@@ -119,7 +119,6 @@ impl FarmJob {
             return Ok(());
         };
         let shot = crate::frames::read_shot(shot_path, crate::demo::NERF_OBJECT)?;
-        let settings = RenderSettings::new(Quality::Draft.params(), Outputs::all());
         for &frame in &self.frames {
             let camera = shot.frame(frame)?.camera(&shot)?;
             if self.split > 1 {
@@ -127,7 +126,7 @@ impl FarmJob {
                 Stripe::new(self.split, self.split)?.window(
                     full.width(),
                     full.height(),
-                    settings.tile_size,
+                    TILE_SIZE,
                 )?;
             }
         }

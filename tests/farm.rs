@@ -468,6 +468,9 @@ fn openjd_runs_the_template_and_its_split_frames() {
             .arg(&pattern)
             .args(["--", "--quality", "draft"]));
         run(Command::new("openjd").arg("check").arg(&template));
+        run(Command::new("openjd")
+            .arg("check")
+            .arg(bundle.join("template.yaml")));
         for file in [
             "template.yaml",
             "parameter_values.yaml",

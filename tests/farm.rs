@@ -339,9 +339,15 @@ exec {} \"$@\"\n",
     std::fs::set_permissions(&flaky, std::fs::Permissions::from_mode(0o755)).unwrap();
     let retried = work.path().join("retried/f.####.exr");
     let retry_job = submit(&retried, &[], Some(&flaky));
-    // A bad scene: the task ends at once with status 2, and is not requeued.
+    // A bad scene (its splat file is not a PLY; the job is checked, the file only read when
+    // a task renders): the task ends at once with status 2, and is not requeued.
     let bad = work.path().join("bad.json");
-    std::fs::write(&bad, "{ \"instances\": [ { \"name\": 3 } ] }").unwrap();
+    std::fs::write(work.path().join("bad.ply"), "not a ply\n").unwrap();
+    std::fs::write(
+        &bad,
+        "{\"instances\": [{\"name\": \"scan\", \"field\": {\"splats\": {\"path\": \"bad.ply\"}}}]}",
+    )
+    .unwrap();
     let bad_out = run(cluster
         .command(env!("CARGO_BIN_EXE_nerfx"))
         .args(["farm", "slurm"])
@@ -430,11 +436,13 @@ exec {} \"$@\"\n",
     let logs = work.path().join("bad/logs");
     let text: String = std::fs::read_dir(&logs)
         .unwrap()
-        .filter_map(|e| std::fs::read_to_string(e.unwrap().path()).ok())
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "log"))
+        .filter_map(|p| std::fs::read_to_string(p).ok())
         .collect();
     assert!(
-        text.contains("bad.json"),
-        "the log names the scene:\n{text}"
+        text.contains("bad.ply"),
+        "the task's log names the file:\n{text}"
     );
 }
 

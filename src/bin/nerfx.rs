@@ -340,6 +340,9 @@ impl FarmArgs {
         job.cpus = self.cpus;
         job.memory_mib = self.mem;
         job.retries = self.retries;
+        if let [scene, _shot] = &job.inputs[..] {
+            job.sources = SceneDesc::for_path(scene)?.sources();
+        }
         job.check()?;
         Ok(job)
     }
@@ -444,7 +447,7 @@ fn run(cli: Cli) -> Result<()> {
             let frames = frames.as_deref().map(parse_frames).transpose()?;
             let stripe = stripe.as_deref().map(Stripe::parse).transpose()?;
             let inputs: Vec<PathBuf> = std::iter::once(scene.clone()).chain(shot.clone()).collect();
-            let task = Task {
+            let mut task = Task {
                 resume,
                 progress,
                 inputs,
@@ -478,7 +481,12 @@ fn run(cli: Cli) -> Result<()> {
                     "a preview is of a whole frame: render it after `nerfx assemble`",
                 ));
             }
-            let scene = SceneDesc::for_path(&scene)?.load()?;
+            let scene = SceneDesc::for_path(&scene)?;
+            // A frame older than a field file is rendered again on resume (a run folder's
+            // time says nothing about its checkpoints: only files count).
+            task.inputs
+                .extend(scene.sources().into_iter().filter(|p| p.is_file()));
+            let scene = scene.load()?;
             for warning in scene.warnings() {
                 eprintln!("nerfx: warning: {warning}");
             }

@@ -176,6 +176,7 @@ mod tests {
             cpus: Some(8),
             memory_mib: Some(16384),
             retries: 3,
+            sources: vec![],
         }
     }
 

@@ -286,6 +286,21 @@ impl SceneDesc {
         Ok(desc)
     }
 
+    /// The files and folders the scene's fields are read from (field and splat files,
+    /// nerfacto run folders), in instance order: what a farm must ship with the scene, and
+    /// what a frame rendered from it is older or newer than.
+    pub fn sources(&self) -> Vec<PathBuf> {
+        self.instances
+            .iter()
+            .filter_map(|inst| match &inst.field {
+                FieldSource::Ingp { path, .. }
+                | FieldSource::Nerfacto { path, .. }
+                | FieldSource::Splats { path, .. } => Some(path.clone()),
+                FieldSource::Analytic(_) => None,
+            })
+            .collect()
+    }
+
     /// Writes the scene as JSON.
     pub fn write(&self, path: &Path) -> Result<()> {
         let text = serde_json::to_string_pretty(self)

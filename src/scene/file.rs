@@ -434,3 +434,30 @@ impl LoadedScene {
         Ok(scene)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sources_are_the_field_files_from_the_scene_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("scene.json");
+        std::fs::write(
+            &path,
+            r#"{"instances": [
+                {"name": "scan", "field": {"splats": {"path": "scan.ply"}}},
+                {"name": "box", "field": {"analytic": {"primitives": []}}},
+                {"name": "run", "field": {"nerfacto": {"path": "/show/runs/plant"}}}]}"#,
+        )
+        .unwrap();
+        let desc = SceneDesc::read(&path).unwrap();
+        assert_eq!(
+            desc.sources(),
+            [
+                dir.path().join("scan.ply"),
+                PathBuf::from("/show/runs/plant")
+            ]
+        );
+    }
+}

@@ -5,6 +5,8 @@
 //! `nerfx render`. Also: a split frame assembles bit for bit, a task killed mid-frame runs
 //! again leaving no partial file, and a bad scene fails at once with the no-retry status.
 
+mod common_ofx;
+
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
@@ -337,9 +339,15 @@ exec {} \"$@\"\n",
     std::fs::set_permissions(&flaky, std::fs::Permissions::from_mode(0o755)).unwrap();
     let retried = work.path().join("retried/f.####.exr");
     let retry_job = submit(&retried, &[], Some(&flaky));
-    // A bad scene: the task ends at once with status 2, and is not requeued.
+    // A bad scene (its splat file is not a PLY; the job is checked, the file only read when
+    // a task renders): the task ends at once with status 2, and is not requeued.
     let bad = work.path().join("bad.json");
-    std::fs::write(&bad, "{ \"instances\": [ { \"name\": 3 } ] }").unwrap();
+    std::fs::write(work.path().join("bad.ply"), "not a ply\n").unwrap();
+    std::fs::write(
+        &bad,
+        "{\"instances\": [{\"name\": \"scan\", \"field\": {\"splats\": {\"path\": \"bad.ply\"}}}]}",
+    )
+    .unwrap();
     let bad_out = run(cluster
         .command(env!("CARGO_BIN_EXE_nerfx"))
         .args(["farm", "slurm"])
@@ -428,11 +436,13 @@ exec {} \"$@\"\n",
     let logs = work.path().join("bad/logs");
     let text: String = std::fs::read_dir(&logs)
         .unwrap()
-        .filter_map(|e| std::fs::read_to_string(e.unwrap().path()).ok())
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "log"))
+        .filter_map(|p| std::fs::read_to_string(p).ok())
         .collect();
     assert!(
-        text.contains("bad.json"),
-        "the log names the scene:\n{text}"
+        text.contains("bad.ply"),
+        "the task's log names the file:\n{text}"
     );
 }
 
@@ -466,6 +476,9 @@ fn openjd_runs_the_template_and_its_split_frames() {
             .arg(&pattern)
             .args(["--", "--quality", "draft"]));
         run(Command::new("openjd").arg("check").arg(&template));
+        run(Command::new("openjd")
+            .arg("check")
+            .arg(bundle.join("template.yaml")));
         for file in [
             "template.yaml",
             "parameter_values.yaml",
@@ -646,4 +659,44 @@ fn a_bad_scene_exits_with_the_no_retry_status_and_a_split_frame_is_the_whole_fra
         "the assembled file is the whole-frame render's, byte for byte"
     );
     assert_eq!(channels(&frame(&split, 1005)).len(), 7);
+}
+
+#[test]
+fn a_graph_in_stripes_assembles_to_the_whole_frame_every_layer() {
+    let work = tempfile::tempdir().unwrap();
+    let graph = nerfx::demo::write_graph(work.path(), WIDTH, HEIGHT).unwrap();
+    let bundle = common_ofx::bundle();
+    let render = |pattern: &Path, stripe: Option<String>| {
+        let mut c = nerfx();
+        c.arg("render")
+            .arg(&graph)
+            .args(["--frames", "1003", "--bundle"])
+            .arg(&bundle)
+            .arg("-o")
+            .arg(pattern);
+        if let Some(stripe) = stripe {
+            c.args(["--stripe", &stripe]);
+        }
+        run(&mut c);
+    };
+    let whole = work.path().join("whole/comp.####.exr");
+    render(&whole, None);
+    let split = work.path().join("split/comp.####.exr");
+    for k in 1..=3 {
+        render(&split, Some(format!("{k}/3")));
+    }
+    run(nerfx()
+        .args(["assemble", "--frames", "1003", "--split-frame", "3", "-o"])
+        .arg(&split));
+    assert_eq!(
+        std::fs::read(frame(&split, 1003)).unwrap(),
+        std::fs::read(frame(&whole, 1003)).unwrap(),
+        "the assembled graph frame is the whole-frame render's, byte for byte"
+    );
+    let names: Vec<String> = channels(&frame(&split, 1003))
+        .into_iter()
+        .map(|(n, _)| n)
+        .collect();
+    assert!(names.iter().any(|n| n.starts_with("object.")), "{names:?}");
+    assert!(names.iter().any(|n| n.starts_with("shadow.")), "{names:?}");
 }

@@ -123,8 +123,8 @@ enum Command {
         /// `openjd_progress:` and `openjd_status:` lines as well.
         #[arg(long, value_enum, default_value_t = Progress::Plain)]
         progress: Progress,
-        /// Scenes: render stripe K of N of each frame (`2/4`), to the frame's name with
-        /// `.stripe2of4` before the extension; `nerfx assemble` joins the stripes.
+        /// Render stripe K of N of each frame (`2/4`), to the frame's name with `.stripe2of4`
+        /// before the extension; `nerfx assemble` joins the stripes.
         #[arg(long)]
         stripe: Option<String>,
     },
@@ -325,7 +325,7 @@ struct FarmArgs {
     #[arg(short, long)]
     output: PathBuf,
     /// Render each frame as this many stripes, each a task of its own, and join them in a last
-    /// step (scenes only).
+    /// step.
     #[arg(long, default_value_t = 1)]
     split_frame: u32,
     /// CPUs a task asks for.
@@ -354,12 +354,6 @@ impl FarmArgs {
             &self.output,
             self.split_frame,
         )?;
-        if self.split_frame > 1 && self.inputs.len() < 2 {
-            return Err(Error::invalid(
-                "--split-frame",
-                "a node graph renders whole frames: split the frames of a scene and a shot",
-            ));
-        }
         if let Some(program) = &self.program {
             job.program = std::path::absolute(program).map_err(|e| Error::io(program, e))?;
         }
@@ -367,6 +361,9 @@ impl FarmArgs {
         job.cpus = self.cpus;
         job.memory_mib = self.mem;
         job.retries = self.retries;
+        if let [scene, _shot] = &job.inputs[..] {
+            job.sources = SceneDesc::for_path(scene)?.sources();
+        }
         job.check()?;
         Ok(job)
     }
@@ -490,10 +487,11 @@ fn run(cli: Cli) -> Result<()> {
             let frames = frames.as_deref().map(parse_frames).transpose()?;
             let stripe = stripe.as_deref().map(Stripe::parse).transpose()?;
             let inputs: Vec<PathBuf> = std::iter::once(scene.clone()).chain(shot.clone()).collect();
-            let task = Task {
+            let mut task = Task {
                 resume,
                 progress,
                 inputs,
+                stripe,
             };
             let Some(shot) = shot else {
                 if passes.is_some() {
@@ -502,11 +500,10 @@ fn run(cli: Cli) -> Result<()> {
                         "a graph's NeRF Render nodes choose their own outputs",
                     ));
                 }
-                if stripe.is_some() {
+                if png && stripe.is_some() {
                     return Err(Error::invalid(
-                        "--stripe",
-                        "a node graph renders whole frames: split the frames of a scene and a \
-                         shot",
+                        "--png",
+                        "a preview is of a whole frame: render it after `nerfx assemble`",
                     ));
                 }
                 if cryptomatte {
@@ -554,7 +551,12 @@ fn run(cli: Cli) -> Result<()> {
                     ),
                 ));
             }
-            let scene = SceneDesc::for_path(&scene)?.load()?;
+            let scene = SceneDesc::for_path(&scene)?;
+            // A frame older than a field file is rendered again on resume (a run folder's
+            // time says nothing about its checkpoints: only files count).
+            task.inputs
+                .extend(scene.sources().into_iter().filter(|p| p.is_file()));
+            let scene = scene.load()?;
             for warning in scene.warnings() {
                 eprintln!("nerfx: warning: {warning}");
             }
@@ -653,6 +655,7 @@ fn run(cli: Cli) -> Result<()> {
                 resume: true,
                 progress,
                 inputs: Vec::new(),
+                stripe: None,
             };
             for (done, &frame) in frames.iter().enumerate() {
                 let path = frame_path(&output, frame, frames.len() > 1);
@@ -898,6 +901,8 @@ struct Task {
     progress: Progress,
     /// The files the frames are rendered from: a frame older than one is rendered again.
     inputs: Vec<PathBuf>,
+    /// The stripe of each frame to render (`--stripe`), or the whole frames.
+    stripe: Option<Stripe>,
 }
 
 impl Task {
@@ -1124,6 +1129,7 @@ mod graph {
         task: &Task,
     ) -> Result<()> {
         let graph = Graph::read(path)?;
+        let stripe = task.stripe;
         let nodes = graph.needed().iter().filter(|&&n| n).count();
         let mut graph = OfxGraph::new(graph, &load_bundle(bundle)?)?;
         let frames = match frames {
@@ -1148,13 +1154,16 @@ mod graph {
         // The sequence is ended on every path, a failed frame included.
         let target = |frame| frame_path(output, frame, frames.len() > 1);
         let rendered = frames.iter().enumerate().try_for_each(|(done, &frame)| {
-            let path = target(frame);
-            let what = if task.resume && task.is_done(&path) {
+            let whole = target(frame);
+            let path = stripe.map_or_else(|| whole.clone(), |s| s.path(&whole));
+            // A stripe is done too when the frame it belongs to has been assembled.
+            let done_already = task.is_done(&path) || (stripe.is_some() && task.is_done(&whole));
+            let what = if task.resume && done_already {
                 bar.inc(nodes as u64);
                 format!("frame {frame}: {} is already whole", path.display())
             } else {
                 task.clear(&path)?;
-                render_frame(&mut graph, frame, &path, png, scale, &bar)?;
+                render_frame(&mut graph, frame, &path, png, scale, stripe, &bar)?;
                 format!("frame {frame} → {}", path.display())
             };
             bar.suspend(|| task.report(done + 1, frames.len(), &what));
@@ -1172,12 +1181,17 @@ mod graph {
         target: &Path,
         png: bool,
         scale: f64,
+        stripe: Option<Stripe>,
         bar: &ProgressBar,
     ) -> Result<()> {
         if let Some(dir) = target.parent() {
             create_dir(dir)?;
         }
-        let images = graph.render(frame as f64, scale, false, &|node| {
+        let window_of = |w, h| match stripe {
+            Some(s) => s.window(w, h, nerfx::render::TILE_SIZE),
+            None => Ok(nerfx::image::Window::new(0, 0, w, h)),
+        };
+        let images = graph.render_window(frame as f64, scale, false, &window_of, &|node| {
             bar.set_message(format!("frame {frame} {node}"));
             bar.inc(1);
         })?;

@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
 use crate::frames::parse_frames;
-use crate::render::{Outputs, Quality, RenderSettings};
+use crate::render::TILE_SIZE;
 
 pub use split::{assemble, Stripe};
 pub use task::{is_done, ExitStatus, Progress};
@@ -46,6 +46,8 @@ pub struct FarmJob {
     pub memory_mib: Option<u64>,
     /// How often the engine may run a task again after a transient failure.
     pub retries: u32,
+    /// What the inputs read besides themselves: a scene's field files and run folders.
+    pub sources: Vec<PathBuf>,
 }
 
 impl FarmJob {
@@ -108,18 +110,22 @@ impl FarmJob {
             cpus: None,
             memory_mib: None,
             retries: 2,
+            sources: Vec::new(),
         })
     }
 
     /// Checks what can be checked before the job is submitted, so that a bad job fails here
-    /// and not on every worker: a shot (the second input) must hold every frame, and a split
-    /// frame must have a row of tiles for each stripe. (A graph is checked when it renders.)
+    /// and not on every worker: the scene's sources must exist, a shot (the second input)
+    /// must hold every frame, and a split frame must have a row of tiles for each stripe. (A
+    /// graph is checked when it renders.)
     pub fn check(&self) -> Result<()> {
         let Some(shot_path) = self.inputs.get(1) else {
             return Ok(());
         };
+        for source in &self.sources {
+            std::fs::metadata(source).map_err(|e| Error::io(source, e))?;
+        }
         let shot = crate::frames::read_shot(shot_path, crate::demo::NERF_OBJECT)?;
-        let settings = RenderSettings::new(Quality::Draft.params(), Outputs::all());
         for &frame in &self.frames {
             let camera = shot.frame(frame)?.camera(&shot)?;
             if self.split > 1 {
@@ -127,7 +133,7 @@ impl FarmJob {
                 Stripe::new(self.split, self.split)?.window(
                     full.width(),
                     full.height(),
-                    settings.tile_size,
+                    TILE_SIZE,
                 )?;
             }
         }

@@ -125,6 +125,7 @@ mod tests {
             cpus: Some(2),
             memory_mib: Some(4096),
             retries: 2,
+            sources: vec![],
         };
         let s = script(&job).unwrap();
         assert!(

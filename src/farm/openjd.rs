@@ -257,9 +257,14 @@ pub fn parameter_values(job: &FarmJob) -> String {
     to_yaml(&doc)
 }
 
-/// Deadline Cloud's `asset_references.yaml`: the inputs, and the output folder.
+/// Deadline Cloud's `asset_references.yaml`: the inputs and what they read (a scene's field
+/// files and run folders), and the output folder.
 pub fn asset_references(job: &FarmJob) -> String {
-    let inputs: Vec<String> = job.inputs.iter().map(|p| p.display().to_string()).collect();
+    let shown = |p: &std::path::PathBuf| p.display().to_string();
+    let (folders, files): (Vec<_>, Vec<_>) = job.sources.iter().partition(|p| p.is_dir());
+    let mut inputs: Vec<String> = job.inputs.iter().map(shown).collect();
+    inputs.extend(files.into_iter().map(shown));
+    let folders: Vec<String> = folders.into_iter().map(shown).collect();
     let doc = map([(
         "assetReferences",
         map([
@@ -267,7 +272,7 @@ pub fn asset_references(job: &FarmJob) -> String {
                 "inputs",
                 map([
                     ("filenames", strings(&inputs)),
-                    ("directories", Node::List(vec![])),
+                    ("directories", strings(&folders)),
                 ]),
             ),
             (
@@ -315,6 +320,7 @@ mod tests {
             cpus: Some(4),
             memory_mib: None,
             retries: 2,
+            sources: vec![],
         }
     }
 
@@ -355,5 +361,11 @@ mod tests {
              OutputDir: \"/show/out\"\n"
         );
         assert!(asset_references(&job()).contains("- \"/show/out\""));
+        let with_fields = FarmJob {
+            sources: vec!["/show/fields/plant.ply".into()],
+            ..job()
+        };
+        let refs = asset_references(&with_fields);
+        assert!(refs.contains("  - \"/show/fields/plant.ply\""), "{refs}");
     }
 }

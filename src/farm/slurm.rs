@@ -86,6 +86,11 @@ pub fn script(job: &FarmJob, options: &SlurmOptions, array: Array) -> String {
         job.retries
     );
     s.push_str("set -u\n");
+    if let Some(cpus) = job.cpus {
+        // nerfx renders on as many threads as the machine has cores unless told otherwise;
+        // a task keeps to the CPUs it asked for, so tasks sharing a node do not oversubscribe.
+        let _ = writeln!(s, "export RAYON_NUM_THREADS={cpus}");
+    }
     let specs: Vec<String> = chunks.iter().map(|c| shell_quote(&frame_spec(c))).collect();
     let _ = writeln!(s, "chunks=({})", specs.join(" "));
     let program = &job.program;
@@ -171,6 +176,7 @@ mod tests {
             cpus: Some(8),
             memory_mib: Some(16384),
             retries: 3,
+            sources: vec![],
         }
     }
 
@@ -186,6 +192,7 @@ mod tests {
             "#SBATCH --array=0-2%5",
             "#SBATCH --output=/show/logs/nerfx-comp_%A_%a.log",
             "#SBATCH --cpus-per-task=8",
+            "export RAYON_NUM_THREADS=8",
             "#SBATCH --mem=16384M",
             "#SBATCH --partition=render",
             "chunks=(1-4 5-8 9-10)",

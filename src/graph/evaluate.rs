@@ -12,22 +12,23 @@ use super::node::RenderRequest;
 use crate::error::{Error, Result};
 use crate::image::{scaled_size, Planes, Window};
 
-/// Renders one node for `request` (whose inputs are its upstream nodes' whole images).
+/// Renders one node for `request` (whose inputs are its upstream nodes' images of the
+/// request's window).
 pub type RenderNode<'a> = dyn FnMut(&GraphNode, &RenderRequest) -> Result<Planes> + 'a;
 
 /// The image size of `node` at `render_scale`: its own region of definition (a NeRF Render:
-/// the shot's resolution, `ceil(n·s)` as the camera has it), else that of its inputs, which
-/// must agree.
+/// the shot's resolution, `ceil(n·s)` as the camera has it), else that of its inputs (their
+/// whole images' sizes, by clip), which must agree.
 fn image_size(
     node: &GraphNode,
     time: f64,
     render_scale: f64,
-    inputs: &BTreeMap<String, Planes>,
+    inputs: &[(&String, (u32, u32))],
 ) -> Result<(u32, u32)> {
     if let Some((w, h)) = node.node.region_of_definition(&node.values, time)? {
         return Ok((scaled_size(w, render_scale), scaled_size(h, render_scale)));
     }
-    let mut sizes = inputs.iter().map(|(clip, p)| (clip, (p.width, p.height)));
+    let mut sizes = inputs.iter().copied();
     let Some((_, size)) = sizes.next() else {
         return Err(Error::invalid(
             format!("graph node {}", node.name),
@@ -57,6 +58,32 @@ pub fn evaluate(
     render_node: &mut RenderNode<'_>,
     on_node: &dyn Fn(&str),
 ) -> Result<BTreeMap<String, Planes>> {
+    let whole = |w, h| Ok(Window::new(0, 0, w, h));
+    evaluate_window(
+        graph,
+        time,
+        render_scale,
+        draft,
+        &whole,
+        render_node,
+        on_node,
+    )
+}
+
+/// [`evaluate`] over part of each image: every node renders the window `window_of(width,
+/// height)` of its whole image (its inputs are their nodes' images of that window), so the
+/// images returned are that window of the whole images. Every node composites pixel by
+/// pixel, so the window's pixels are the whole images' (a frame rendered in stripes on
+/// several machines joins into the whole frame).
+pub fn evaluate_window(
+    graph: &Graph,
+    time: f64,
+    render_scale: f64,
+    draft: bool,
+    window_of: &dyn Fn(u32, u32) -> Result<Window>,
+    render_node: &mut RenderNode<'_>,
+    on_node: &dyn Fn(&str),
+) -> Result<BTreeMap<String, Planes>> {
     let need = graph.needed();
     let index: HashMap<&str, usize> = graph
         .nodes
@@ -76,14 +103,19 @@ pub fn evaluate(
             readers[*up] += 1;
         }
     }
-    // The images still to be read, by node index.
+    // The images still to be read, by node index, and the sizes of the whole images.
     let mut images: BTreeMap<usize, Planes> = BTreeMap::new();
+    let mut sizes: HashMap<usize, (u32, u32)> = HashMap::new();
     for (i, node) in graph.nodes.iter().enumerate().filter(|(i, _)| need[*i]) {
         let mut inputs = BTreeMap::new();
+        let mut input_sizes = Vec::new();
         for (clip, up) in &node.inputs {
             let Some(&j) = index.get(up.as_str()) else {
                 continue;
             };
+            if let Some(&size) = sizes.get(&j) {
+                input_sizes.push((clip, size));
+            }
             readers[j] -= 1;
             // The last reader takes the image; earlier ones (and outputs) copy it.
             let image = if readers[j] == 0 && !kept[j] {
@@ -105,11 +137,13 @@ pub fn evaluate(
                 other.to_string(),
             ),
         };
-        let (w, h) = image_size(node, time, render_scale, &inputs).map_err(named)?;
+        let (w, h) = image_size(node, time, render_scale, &input_sizes).map_err(named)?;
+        let window = window_of(w, h).map_err(named)?;
         let request = RenderRequest {
             draft,
             inputs,
-            ..RenderRequest::new(time, Window::new(0, 0, w, h), render_scale)
+            image_size: (w, h),
+            ..RenderRequest::new(time, window, render_scale)
         };
         let planes = render_node(node, &request).map_err(named)?;
         // The inputs go before the next node's are gathered.
@@ -117,6 +151,7 @@ pub fn evaluate(
         on_node(&node.name);
         if readers[i] > 0 || kept[i] {
             images.insert(i, planes);
+            sizes.insert(i, (w, h));
         }
     }
     Ok(images

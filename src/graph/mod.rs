@@ -39,7 +39,7 @@ use std::sync::OnceLock;
 
 pub use cache::{cached_scene, cached_shot, purge_caches, FileCache, CAMERA_PATH_OBJECT};
 pub use desc::{ClipDesc, ClipKind, Context, NodeDesc, ParamDesc, ParamKind, Range};
-pub use evaluate::{evaluate, render_direct, RenderNode};
+pub use evaluate::{evaluate, evaluate_window, render_direct, RenderNode};
 pub use file::{Graph, GraphNode};
 pub use matrix_text::{matrix_text, parse_matrix};
 pub use node::{

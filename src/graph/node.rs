@@ -21,10 +21,14 @@ pub struct RenderRequest {
     pub draft: bool,
     /// Input images by clip name, each exactly the window's size; absent clips are left out.
     pub inputs: BTreeMap<String, Planes>,
+    /// The size of the node's whole image at `render_scale`, which the window lies in (a
+    /// frame rendered in stripes asks for one stripe of it).
+    pub image_size: (u32, u32),
 }
 
 impl RenderRequest {
-    /// A full-quality request for `window` at `time` and `render_scale`, without inputs.
+    /// A full-quality request for `window` at `time` and `render_scale`, without inputs, of
+    /// an image that ends where the window does.
     pub fn new(time: f64, window: Window, render_scale: f64) -> Self {
         RenderRequest {
             time,
@@ -32,6 +36,7 @@ impl RenderRequest {
             render_scale,
             draft: false,
             inputs: BTreeMap::new(),
+            image_size: (window.x1, window.y1),
         }
     }
 

@@ -9,9 +9,9 @@ use std::sync::Arc;
 use super::{Bundle, ClipSource, Instance};
 use crate::error::{Error, Result};
 use crate::graph::{
-    evaluate, matrix_text, Context, Graph, GraphNode, ParamKind, RenderRequest, Value,
+    evaluate_window, matrix_text, Context, Graph, GraphNode, ParamKind, RenderRequest, Value,
 };
-use crate::image::Planes;
+use crate::image::{Planes, Window};
 
 /// The context a graph node is instantiated in: Generator without inputs, Filter when its
 /// only input is `Source`, otherwise General — each where the node supports it.
@@ -143,6 +143,20 @@ impl OfxGraph {
         draft: bool,
         on_node: &dyn Fn(&str),
     ) -> Result<BTreeMap<String, Planes>> {
+        let whole = |w, h| Ok(Window::new(0, 0, w, h));
+        self.render_window(time, render_scale, draft, &whole, on_node)
+    }
+
+    /// [`OfxGraph::render`] of the window `window_of(width, height)` of every image, as
+    /// [`evaluate_window`] does.
+    pub fn render_window(
+        &mut self,
+        time: f64,
+        render_scale: f64,
+        draft: bool,
+        window_of: &dyn Fn(u32, u32) -> Result<Window>,
+        on_node: &dyn Fn(&str),
+    ) -> Result<BTreeMap<String, Planes>> {
         let instances = &mut self.instances;
         let warnings = &mut self.warnings;
         warnings.clear();
@@ -154,7 +168,13 @@ impl OfxGraph {
             let mut held = Vec::with_capacity(request.inputs.len());
             for (clip, image) in &request.inputs {
                 let image = Arc::new(image.clone());
-                instance.connect(clip, upstream(&image, request.render_scale))?;
+                let source = upstream(
+                    &image,
+                    request.render_scale,
+                    request.window,
+                    request.image_size,
+                );
+                instance.connect(clip, source)?;
                 held.push(image);
             }
             let planes = instance.render(
@@ -170,7 +190,15 @@ impl OfxGraph {
             }
             Ok(planes)
         };
-        evaluate(&self.graph, time, render_scale, draft, &mut render, on_node)
+        evaluate_window(
+            &self.graph,
+            time,
+            render_scale,
+            draft,
+            window_of,
+            &mut render,
+            on_node,
+        )
     }
 }
 
@@ -190,14 +218,15 @@ fn as_published(node: &GraphNode, name: &str, value: &Value) -> Value {
     }
 }
 
-/// An upstream node's whole image at `scale` as a clip source; its region of definition in
-/// full-resolution pixels is the image's size undone by the scale. The source holds the image
-/// weakly: once the render that connected it is over, the instance keeps no pixels.
-fn upstream(image: &Arc<Planes>, scale: f64) -> ClipSource {
+/// An upstream node's image of `window` (of its whole image, `image_size` at `scale`) as a
+/// clip source; its region of definition in full-resolution pixels is the whole image's size
+/// undone by the scale. The source holds the image weakly: once the render that connected it
+/// is over, the instance keeps no pixels.
+fn upstream(image: &Arc<Planes>, scale: f64, window: Window, image_size: (u32, u32)) -> ClipSource {
     let full = |n: u32| (f64::from(n) / scale).floor().max(1.0) as u32;
-    let rod = (full(image.width), full(image.height));
+    let rod = (full(image_size.0), full(image_size.1));
     let image = Arc::downgrade(image);
-    ClipSource::new(rod, move |_, window, s| {
+    ClipSource::new(rod, move |_, asked: Window, s| {
         if s != scale {
             return Err(Error::invalid(
                 "clip source",
@@ -210,6 +239,18 @@ fn upstream(image: &Arc<Planes>, scale: f64) -> ClipSource {
                 "its upstream image was released after the render it was connected for",
             )
         })?;
-        image.crop(window)
+        // The pixels held are those of `window`: the request is cut from them.
+        if asked.intersect(&window) != asked {
+            return Err(Error::invalid(
+                "clip source",
+                format!("asked for {asked:?}, holds only {window:?}"),
+            ));
+        }
+        image.crop(Window::new(
+            asked.x0 - window.x0,
+            asked.y0 - window.y0,
+            asked.x1 - window.x0,
+            asked.y1 - window.y0,
+        ))
     })
 }

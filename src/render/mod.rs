@@ -107,13 +107,16 @@ pub struct RenderSettings {
     pub shutter_samples: u32,
 }
 
+/// The side of the tiles a render is cut into unless its settings say otherwise.
+pub const TILE_SIZE: u32 = 16;
+
 impl RenderSettings {
-    /// Settings with 16-pixel tiles.
+    /// Settings with [`TILE_SIZE`] tiles.
     pub fn new(march: MarchParams, outputs: Outputs) -> Self {
         RenderSettings {
             march,
             outputs,
-            tile_size: 16,
+            tile_size: TILE_SIZE,
             color: ColorOutput::Linear,
             shutter_samples: 1,
         }

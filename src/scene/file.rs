@@ -327,6 +327,21 @@ impl SceneDesc {
         Ok(desc)
     }
 
+    /// The files and folders the scene's fields are read from (field and splat files,
+    /// nerfacto run folders), in instance order: what a farm must ship with the scene, and
+    /// what a frame rendered from it is older or newer than.
+    pub fn sources(&self) -> Vec<PathBuf> {
+        self.instances
+            .iter()
+            .filter_map(|inst| match &inst.field {
+                FieldSource::Ingp { path, .. }
+                | FieldSource::Nerfacto { path, .. }
+                | FieldSource::Splats { path, .. } => Some(path.clone()),
+                FieldSource::Analytic(_) => None,
+            })
+            .collect()
+    }
+
     /// Writes the scene as JSON.
     pub fn write(&self, path: &Path) -> Result<()> {
         let text = serde_json::to_string_pretty(self)
@@ -561,5 +576,27 @@ mod tests {
                 assert!(!e.contains(bad), "{bad:?} in: {e}\n(from {text})");
             }
         }
+    }
+
+    #[test]
+    fn sources_are_the_field_files_from_the_scene_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("scene.json");
+        std::fs::write(
+            &path,
+            r#"{"instances": [
+                {"name": "scan", "field": {"splats": {"path": "scan.ply"}}},
+                {"name": "box", "field": {"analytic": {"primitives": []}}},
+                {"name": "run", "field": {"nerfacto": {"path": "/show/runs/plant"}}}]}"#,
+        )
+        .unwrap();
+        let desc = SceneDesc::read(&path).unwrap();
+        assert_eq!(
+            desc.sources(),
+            [
+                dir.path().join("scan.ply"),
+                PathBuf::from("/show/runs/plant")
+            ]
+        );
     }
 }

@@ -227,6 +227,19 @@ impl Cluster {
 
 impl Drop for Cluster {
     fn drop(&mut self) {
+        // A check that failed may leave jobs running: cancel them (every job of this cluster)
+        // and give their tasks a moment to end before the daemons go.
+        if self.daemons.len() == 3 {
+            let _ = self.command("scancel").args(["--user", "root"]).output();
+            let start = Instant::now();
+            while start.elapsed() < Duration::from_secs(5) {
+                let queued = self.command("squeue").args(["-h", "-o", "%i"]).output();
+                if queued.map_or(true, |o| o.stdout.iter().all(u8::is_ascii_whitespace)) {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(100));
+            }
+        }
         // slurmd, then slurmctld, then munged.
         for child in self.daemons.iter_mut().rev() {
             let _ = child.kill();

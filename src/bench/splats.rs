@@ -2,11 +2,13 @@
 //! surfaces of nested spheres, SH degree 3, sizes, opacities and overdraw spread as in real
 //! captures), timed as a whole and with the projection, sort and binning alone.
 
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
 use glam::{DVec3, Quat, Vec3};
 
+use super::memory::{peak_during, HeapUse};
 use crate::camera::{BlenderIntrinsics, Camera, Perspective, Projection};
 use crate::demo::look_at;
 use crate::error::{Error, Result};
@@ -84,19 +86,115 @@ pub fn generated_splats(n: usize) -> Splats {
     s
 }
 
-/// Writes `splats` as a PLY into `dir` and reads it back: `(seconds to load, file bytes)`.
-pub fn time_load(splats: &Splats, dir: &std::path::Path) -> Result<(f64, u64)> {
-    let path = dir.join("nerfx-bench-splats.ply");
-    splats.write_ply(&path)?;
-    let bytes = std::fs::metadata(&path)
-        .map_err(|e| crate::error::Error::io(&path, e))?
+/// Writes `splats` as an INRIA PLY at `path` and reads it back: `(seconds to load, file
+/// bytes)`. The file is kept (other tools convert it to the compact formats).
+pub fn time_load(splats: &Splats, path: &Path) -> Result<(f64, u64)> {
+    splats.write_ply(path)?;
+    let bytes = std::fs::metadata(path)
+        .map_err(|e| Error::io(path, e))?
         .len();
     let start = Instant::now();
-    let read = Splats::load(&path);
+    Splats::load(path)?;
+    Ok((start.elapsed().as_secs_f64(), bytes))
+}
+
+/// What loading one splat file cost.
+#[derive(Clone, Debug)]
+pub struct LoadTiming {
+    /// The splats read.
+    pub splats: Splats,
+    /// Wall seconds to read and decode the file.
+    pub seconds: f64,
+    /// The file's size in bytes.
+    pub file_bytes: u64,
+    /// The most heap live at once while it loaded, and the heap still held once loaded
+    /// (where the counting allocator is installed, as in the `nerfx` binary).
+    pub heap: Option<HeapUse>,
+}
+
+/// Loads the splat file at `path` (any format [`Splats::load`] reads), timed, with the heap
+/// it took.
+pub fn time_file(path: &Path) -> Result<LoadTiming> {
+    let file_bytes = std::fs::metadata(path)
+        .map_err(|e| Error::io(path, e))?
+        .len();
+    let start = Instant::now();
+    let (splats, heap) = peak_during(|| Splats::load(path));
     let seconds = start.elapsed().as_secs_f64();
-    let _ = std::fs::remove_file(&path);
-    read?;
-    Ok((seconds, bytes))
+    Ok(LoadTiming {
+        splats: splats?,
+        seconds,
+        file_bytes,
+        heap,
+    })
+}
+
+/// The splat benchmark's report (Markdown): `n` generated capture-like splats written as a
+/// PLY in `out` and read back, then each of `files` loaded; a table of what each load cost
+/// (seconds, seconds per million, the decoded arrays' bytes, the heap held once loaded and
+/// its peak while loading) and one of what a `width × height` RGBA frame of each cost (best of
+/// `repeats`: projection, sort and binning, blending, fragments per pixel, the frame's heap).
+pub fn report(
+    n: usize,
+    files: &[PathBuf],
+    out: &Path,
+    (width, height): (u32, u32),
+    repeats: u32,
+) -> Result<String> {
+    let mib = |b: f64| b / f64::from(1 << 20);
+    let generated = generated_splats(n);
+    let ply = out.join(format!("generated_{n}.ply"));
+    let (seconds, file_bytes) = time_load(&generated, &ply)?;
+    let mut sets = vec![(
+        format!("generated, {n} splats ({})", ply.display()),
+        LoadTiming {
+            splats: generated,
+            seconds,
+            file_bytes,
+            heap: None,
+        },
+    )];
+    for path in files {
+        sets.push((path.display().to_string(), time_file(path)?));
+    }
+    let mut text = String::from(
+        "| splats | format | count | file (MiB) | load (s) | s per million | arrays (MiB) | \
+         held once loaded (MiB) | peak while loading (MiB) |\n\
+         |---|---|---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    for (name, load) in &sets {
+        let source = &load.splats.source;
+        let version = source.version.map_or_else(String::new, |v| format!(" {v}"));
+        let [kept, peak] = load.heap.map_or_else(
+            || ["–".to_string(), "–".to_string()],
+            |h| [h.kept as f64, h.peak as f64].map(|b| format!("{:.1}", mib(b))),
+        );
+        text.push_str(&format!(
+            "| {name} | {}{version} | {} | {:.1} | {:.2} | {:.2} | {:.1} | {kept} | {peak} |\n",
+            source.format,
+            load.splats.len(),
+            mib(load.file_bytes as f64),
+            load.seconds,
+            load.seconds * 1e6 / load.splats.len().max(1) as f64,
+            mib(load.splats.memory_bytes() as f64),
+        ));
+    }
+    text.push_str(&format!(
+        "\n| splats at {width}×{height} | frame (ms) | projection (ms) | sort + bin (ms) | \
+         blending (ms) | fragments / pixel | frame heap (MiB) |\n|---|---:|---:|---:|---:|---:|---:|\n"
+    ));
+    for (name, load) in sets {
+        let (timing, heap) =
+            peak_during(|| time_splats(Arc::new(load.splats), width, height, repeats));
+        let t = timing?;
+        let blending = t.frame_ms - t.projection_ms - t.binning_ms;
+        let heap = heap.map_or_else(|| "–".to_string(), |h| format!("{:.0}", mib(h.peak as f64)));
+        text.push_str(&format!(
+            "| {name} | {:.0} | {:.0} | {:.0} | {blending:.0} | {:.1} | {heap} |\n",
+            t.frame_ms, t.projection_ms, t.binning_ms, t.fragments_per_pixel,
+        ));
+    }
+    Ok(text)
 }
 
 /// Renders `splats` at `width × height` from a camera at distance 3, `repeats` times, and

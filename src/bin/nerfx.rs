@@ -234,12 +234,14 @@ enum Command {
         /// `--scene` selects scenes.
         #[arg(long)]
         scaling: bool,
-        /// Time splat rasterisation instead: a generated scene of this many splats (SH degree
-        /// 3), and each `--ply` file, one RGBA frame each (best of `repeats`).
+        /// Time splat loading and rasterisation instead: a generated capture-like scene of
+        /// this many splats (SH degree 3, written as `generated_N.ply` in the output folder and
+        /// read back), and each `--ply` file; a table of loads (time, decoded size, heap) and
+        /// one of RGBA frames (best of `repeats`).
         #[arg(long)]
         splats: Option<usize>,
-        /// Splat files to time with `--splats`; the first is also the suite's splat scene
-        /// (else generated splats).
+        /// Splat files (any format nerfx reads) to time with `--splats`; the first is also the
+        /// suite's splat scene (else generated splats).
         #[arg(long)]
         ply: Vec<PathBuf>,
         /// Time what extra passes of one field cost instead: NeRF Render nodes asking RGBA
@@ -819,45 +821,10 @@ fn run(cli: Cli) -> Result<()> {
             repeats,
             ..
         } => {
-            use nerfx::bench::splats::{generated_splats, time_load, time_splats};
-            let generated = generated_splats(n);
             create_dir(&out)?;
-            let (load_s, file_bytes) = time_load(&generated, &out)?;
-            println!(
-                "load: {n} splats, a {:.1} MiB PLY, read in {:.2} s ({:.2} s per million)",
-                file_bytes as f64 / (1 << 20) as f64,
-                load_s,
-                load_s * 1e6 / n.max(1) as f64
-            );
-            let mut sets = vec![(format!("generated, {n} splats"), generated)];
-            for path in ply {
-                let splats = nerfx::field::Splats::load(&path)?;
-                sets.push((path.display().to_string(), splats));
-            }
-            println!(
-                "| splats | frame (ms) | projection (ms) | sort + bin (ms) | blending (ms) | \
-                 fragments / pixel | memory (MiB) |"
-            );
-            println!("|---|---:|---:|---:|---:|---:|---:|");
-            for (name, splats) in sets {
-                let t = time_splats(
-                    std::sync::Arc::new(splats),
-                    width,
-                    height,
-                    repeats.unwrap_or(3),
-                )?;
-                let blending = t.frame_ms - t.projection_ms - t.binning_ms;
-                println!(
-                    "| {name} ({}) at {width}×{height} | {:.0} | {:.0} | {:.0} | {blending:.0} | \
-                     {:.1} | {:.1} |",
-                    t.splats,
-                    t.frame_ms,
-                    t.projection_ms,
-                    t.binning_ms,
-                    t.fragments_per_pixel,
-                    t.memory_bytes as f64 / (1 << 20) as f64
-                );
-            }
+            let report =
+                bench::splats::report(n, &ply, &out, (width, height), repeats.unwrap_or(3))?;
+            print!("{report}");
             Ok(())
         }
         Command::Bench {

@@ -1,6 +1,6 @@
 //! Splat rasterisation speed: a frame of a generated capture-like scene (splats on the
-//! surfaces of nested spheres, SH degree 3, opacities and sizes spread as in trained scenes),
-//! timed as a whole and with the projection, sort and binning alone.
+//! surfaces of nested spheres, SH degree 3, with the opacities, shapes and overdraw of a real
+//! trained capture), timed as a whole and with the projection, sort and binning alone.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -31,7 +31,39 @@ pub struct SplatTiming {
     pub memory_bytes: usize,
 }
 
-/// `n` splats on three nested spheres around the origin (radii 0.6, 0.8, 1.0), seeded.
+/// Deciles (0 %, 10 %, … 100 %) of a real trained capture's splats (`tests/data/`
+/// `splat_plane_sh3.ply`, 13 982 splats): opacity; largest standard deviation over the
+/// scene's extent (the largest interquartile range of the means); middle and smallest over
+/// largest.
+const CAPTURE_OPACITY: [f32; 11] = [
+    0.002, 0.008, 0.04, 0.09, 0.172, 0.337, 0.67, 0.967, 0.998, 1.0, 1.0,
+];
+const CAPTURE_LARGEST: [f32; 11] = [
+    0.0049, 0.0302, 0.0399, 0.0487, 0.0574, 0.0677, 0.0788, 0.0933, 0.1133, 0.1468, 1.676,
+];
+const CAPTURE_MIDDLE: [f32; 11] = [
+    0.003, 0.083, 0.133, 0.18, 0.233, 0.295, 0.368, 0.459, 0.574, 0.731, 0.999,
+];
+const CAPTURE_SMALLEST: [f32; 11] = [
+    1e-5, 1e-4, 5e-4, 0.0013, 0.0033, 0.0078, 0.0167, 0.0351, 0.072, 0.1465, 0.9413,
+];
+/// Splats in that capture: its splats' summed area over the extent squared (its overdraw)
+/// is held at any count by scaling the sizes by `√(CAPTURE_SPLATS / n)`.
+const CAPTURE_SPLATS: f32 = 13_982.0;
+
+/// The value at quantile `u` (0–1) of a decile table, interpolated geometrically (sizes and
+/// opacities spread over decades).
+fn decile(table: &[f32; 11], u: f32) -> f32 {
+    let x = (u.clamp(0.0, 1.0) * 10.0).min(9.999_999);
+    let (i, f) = (x as usize, x.fract());
+    let (a, b) = (table[i].max(1e-6), table[i + 1].max(1e-6));
+    a * (b / a).powf(f)
+}
+
+/// `n` capture-like splats on three nested spheres around the origin (radii 0.6, 0.8, 1.0),
+/// seeded: opacities and shapes drawn from a real capture's deciles, sizes relative to the
+/// spheres' extent as that capture's are to its own, scaled with the count so that their
+/// overdraw seen from [`framing_camera`] is the capture's, SH degree 3.
 pub fn generated_splats(n: usize) -> Splats {
     let mut state = 0x2545_f491_4f6c_dd1du64;
     let mut uniform = move || {
@@ -48,22 +80,38 @@ pub fn generated_splats(n: usize) -> Splats {
         let r = (1.0 - z * z).max(0.0).sqrt();
         s.means
             .push(Vec3::new(r * phi.cos(), r * phi.sin(), z) * radius);
-        // Flat discs, 2–8 mm across, as trained surfaces hold.
-        let size = 0.002 + 0.006 * uniform();
-        s.scales
-            .push(Vec3::new(size, size * (0.5 + uniform()), 0.0005));
+    }
+    // The extent framing_camera frames: the largest interquartile range of the means.
+    let extent = (0..3)
+        .map(|axis| {
+            let mut v: Vec<f32> = s.means.iter().map(|m| m[axis]).collect();
+            let mut at = |q: f64| {
+                let k = ((v.len().max(1) - 1) as f64 * q) as usize;
+                *v.select_nth_unstable_by(k, f32::total_cmp).1
+            };
+            let hi = at(0.75);
+            hi - at(0.25)
+        })
+        .fold(1e-3, f32::max);
+    let size = extent * (CAPTURE_SPLATS / n.max(1) as f32).sqrt();
+    for _ in 0..n {
+        let largest = size * decile(&CAPTURE_LARGEST, uniform());
+        let middle = largest * decile(&CAPTURE_MIDDLE, uniform());
+        let smallest = largest * decile(&CAPTURE_SMALLEST, uniform());
+        s.scales.push(Vec3::new(largest, middle, smallest));
         let axis = Vec3::new(uniform() - 0.5, uniform() - 0.5, uniform() - 0.5);
         s.rotations.push(Quat::from_axis_angle(
             axis.normalize_or(Vec3::Z),
             6.0 * uniform(),
         ));
-        s.opacities.push(0.1 + 0.9 * uniform());
+        s.opacities.push(decile(&CAPTURE_OPACITY, uniform()));
         for k in 0..16 {
             let spread = if k == 0 { 1.5 } else { 0.2 };
             s.coefficients
                 .extend([0; 3].map(|_| spread * (uniform() - 0.5)));
         }
     }
+    s.source.quantisation = "none: generated".into();
     s
 }
 

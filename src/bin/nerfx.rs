@@ -183,12 +183,13 @@ enum Command {
         /// `--scene` selects scenes.
         #[arg(long)]
         scaling: bool,
-        /// Time splat rasterisation instead: a generated scene of this many splats (SH degree
-        /// 3), and each `--ply` file, one RGBA frame each (best of `repeats`).
+        /// Time splat rasterisation instead: a generated capture-like scene of this many
+        /// splats (SH degree 3), and each `--ply` file, one RGBA frame each (best of
+        /// `repeats`); each file's load is timed and its memory counted too.
         #[arg(long)]
         splats: Option<usize>,
-        /// Splat files to time with `--splats`; the first is also the suite's splat scene
-        /// (else generated splats).
+        /// Splat files (any format nerfx reads) to time with `--splats`; the first is also
+        /// the suite's splat scene (else generated splats).
         #[arg(long)]
         ply: Vec<PathBuf>,
         /// Time what extra passes of one field cost instead: NeRF Render nodes asking RGBA
@@ -505,43 +506,77 @@ fn run(cli: Cli) -> Result<()> {
             repeats,
             ..
         } => {
+            use nerfx::bench::memory::peak_during;
             use nerfx::bench::splats::{generated_splats, time_load, time_splats};
+            let mib = |b: f64| b / (1 << 20) as f64;
             let generated = generated_splats(n);
             create_dir(&out)?;
             let (load_s, file_bytes) = time_load(&generated, &out)?;
             println!(
-                "load: {n} splats, a {:.1} MiB PLY, read in {:.2} s ({:.2} s per million)",
-                file_bytes as f64 / (1 << 20) as f64,
+                "load: {n} capture-like splats, a {:.1} MiB PLY, read in {:.2} s ({:.2} s per \
+                 million)",
+                mib(file_bytes as f64),
                 load_s,
                 load_s * 1e6 / n.max(1) as f64
             );
-            let mut sets = vec![(format!("generated, {n} splats"), generated)];
+            let mut sets = vec![(format!("generated, {n} capture-like splats"), generated)];
+            if !ply.is_empty() {
+                println!(
+                    "\n| file | format | splats | load (s) | s per million | peak while \
+                     loading (MiB) | held once loaded (MiB) | splats' arrays (MiB) |"
+                );
+                println!("|---|---|---:|---:|---:|---:|---:|---:|");
+            }
             for path in ply {
-                let splats = nerfx::field::Splats::load(&path)?;
+                let (loaded, heap) = peak_during(|| {
+                    let start = Instant::now();
+                    nerfx::field::Splats::load(&path).map(|s| (s, start.elapsed().as_secs_f64()))
+                });
+                let (splats, seconds) = loaded?;
+                let (peak, kept) = heap.map_or((f64::NAN, f64::NAN), |h| {
+                    (mib(h.peak as f64), mib(h.kept as f64))
+                });
+                let version = splats
+                    .source
+                    .version
+                    .map_or_else(String::new, |v| format!(" {v}"));
+                println!(
+                    "| {} | {}{version} | {} | {seconds:.2} | {:.2} | {peak:.1} | {kept:.1} | \
+                     {:.1} |",
+                    path.display(),
+                    splats.source.format,
+                    splats.len(),
+                    seconds * 1e6 / splats.len().max(1) as f64,
+                    mib(splats.memory_bytes() as f64),
+                );
                 sets.push((path.display().to_string(), splats));
             }
             println!(
-                "| splats | frame (ms) | projection (ms) | sort + bin (ms) | blending (ms) | \
-                 fragments / pixel | memory (MiB) |"
+                "\n| splats | frame (ms) | projection (ms) | sort + bin (ms) | blending (ms) | \
+                 fragments / pixel | splats (MiB) | peak while rendering (MiB) |"
             );
-            println!("|---|---:|---:|---:|---:|---:|---:|");
+            println!("|---|---:|---:|---:|---:|---:|---:|---:|");
             for (name, splats) in sets {
-                let t = time_splats(
-                    std::sync::Arc::new(splats),
-                    width,
-                    height,
-                    repeats.unwrap_or(3),
-                )?;
+                let (timing, heap) = peak_during(|| {
+                    time_splats(
+                        std::sync::Arc::new(splats),
+                        width,
+                        height,
+                        repeats.unwrap_or(3),
+                    )
+                });
+                let t = timing?;
                 let blending = t.frame_ms - t.projection_ms - t.binning_ms;
                 println!(
                     "| {name} ({}) at {width}×{height} | {:.0} | {:.0} | {:.0} | {blending:.0} | \
-                     {:.1} | {:.1} |",
+                     {:.1} | {:.1} | {:.1} |",
                     t.splats,
                     t.frame_ms,
                     t.projection_ms,
                     t.binning_ms,
                     t.fragments_per_pixel,
-                    t.memory_bytes as f64 / (1 << 20) as f64
+                    mib(t.memory_bytes as f64),
+                    heap.map_or(f64::NAN, |h| mib(h.peak as f64)),
                 );
             }
             Ok(())

@@ -4,7 +4,8 @@
 //! As in gsplat, a splat reaches every pixel of each 16×16 image tile its bounding square
 //! touches (tiles anchored at the image's corner, whatever window is rendered, so a crop of a
 //! render equals the render cropped), and a pixel meets its splats in order of the camera z of
-//! their means. Only tiles of the render window are binned.
+//! their means. Only tiles of the render window are binned, and a splat only in the tiles
+//! where its opacity can reach 1/255 (the others would skip it pixel by pixel).
 
 use rayon::prelude::*;
 
@@ -145,24 +146,30 @@ impl SplatLayer {
             window.y1.div_ceil(TILE),
         ];
         let tiles_x = (tiles[2] - tiles[0]) as usize;
-        let range = |p: &Projected| {
-            let (x, y, r) = (
-                p.xy[0] / TILE as f32,
-                p.xy[1] / TILE as f32,
-                p.radius / TILE as f32,
-            );
+        // gsplat's bounding square, narrowed on each axis to where the splat can give a
+        // fragment at all (opacity ≥ 1/255: the ellipse's reach): the tiles left out are
+        // ones whose pixels would all skip it, so the render is unchanged and each tile
+        // walks fewer splats.
+        let range = |(p, e): (&Projected, &Entry)| {
+            let (x, y) = (p.xy[0] / TILE as f32, p.xy[1] / TILE as f32);
+            let rx = p.radius.min(e.extent[0]) / TILE as f32;
+            let ry = p.radius.min(e.extent[1]) / TILE as f32;
             let clamp = |v: f32, lo: u32, hi: u32| (v.max(0.0) as u32).clamp(lo, hi);
             [
-                clamp((x - r).floor(), tiles[0], tiles[2]),
-                clamp((y - r).floor(), tiles[1], tiles[3]),
-                clamp((x + r).ceil(), tiles[0], tiles[2]),
-                clamp((y + r).ceil(), tiles[1], tiles[3]),
+                clamp((x - rx).floor(), tiles[0], tiles[2]),
+                clamp((y - ry).floor(), tiles[1], tiles[3]),
+                clamp((x + rx).ceil(), tiles[0], tiles[2]),
+                clamp((y + ry).ceil(), tiles[1], tiles[3]),
             ]
         };
         // Each splat is listed in the rows of tiles it touches (in depth order), then each
         // row is binned on its own (in parallel), so every tile's list comes out sorted.
-        let ranges: Vec<[u32; 4]> = projected.par_iter().map(range).collect();
         let splat_entries: Vec<Entry> = projected.par_iter().map(Entry::new).collect();
+        let ranges: Vec<[u32; 4]> = projected
+            .par_iter()
+            .zip(&splat_entries)
+            .map(range)
+            .collect();
         let rows_n = (tiles[3] - tiles[1]) as usize;
         let mut row_starts = vec![0usize; rows_n + 1];
         for r in &ranges {

@@ -388,10 +388,23 @@ fn walk_part_lanes<A: RowAction>(tile: &[Entry], part: Window, action: &mut A) {
             }
             // The row's sixteen fragments at once: opacity, or 0 where the pixel gets none.
             let dy = e.xy[1] - ((part.y0 + r as u32) as f32 + 0.5);
-            let mut alphas = [0f32; LANES];
+            // The quadratic form first: a row whose live lanes all lie past the cut-off (most
+            // rows of a large, thin or faint splat's box) skips the exponential.
+            let mut sigmas = [0f32; LANES];
+            let mut inside = 0u32;
             for l in 0..LANES {
                 let dx = e.xy[0] - px[l];
                 let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
+                sigmas[l] = sigma;
+                let reach = (sigma >= 0.0) & (sigma <= e.sigma_cut) & (live[r][l] != 0.0);
+                inside |= u32::from(reach);
+            }
+            if inside == 0 {
+                continue;
+            }
+            let mut alphas = [0f32; LANES];
+            for l in 0..LANES {
+                let sigma = sigmas[l];
                 let alpha = (e.opacity * exp_neg(sigma.clamp(0.0, 80.0))).min(MAX_ALPHA);
                 let met = (sigma >= 0.0) & (sigma <= e.sigma_cut) & (alpha >= MIN_ALPHA);
                 alphas[l] = if met { alpha * live[r][l] } else { 0.0 };

@@ -760,3 +760,151 @@ fn scenes_take_every_format_with_axes_and_the_antialiased_mode() {
         "{text}"
     );
 }
+
+/// A lossless RGBA WebP of `pixels` (4 bytes each) in a `width`-wide image, padded.
+fn webp(pixels: &[u8], width: usize) -> Vec<u8> {
+    let height = (pixels.len() / 4).div_ceil(width).max(1);
+    let mut data = pixels.to_vec();
+    data.resize(width * height * 4, 0);
+    let mut out = Vec::new();
+    image_webp::WebPEncoder::new(&mut out)
+        .encode(
+            &data,
+            width as u32,
+            height as u32,
+            image_webp::ColorType::Rgba8,
+        )
+        .unwrap();
+    out
+}
+
+/// SOG version 1 (a folder: `meta.json` with per-channel ranges, WebP images), written from
+/// its description, with SH degree 1 through a palette of one entry per splat; and the splats
+/// the description decodes it to.
+fn sog_v1_folder(dir: &Path, splats: &[Plain]) -> Splats {
+    let n = splats.len();
+    let width = 16;
+    let log = |v: f32| v.signum() * (v.abs() + 1.0).ln();
+    let range = |values: &mut dyn Iterator<Item = f32>| {
+        values.fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        })
+    };
+    let ranges3 = |f: &dyn Fn(&Plain) -> Vec3| {
+        let r: Vec<(f32, f32)> = (0..3)
+            .map(|k| range(&mut splats.iter().map(|p| f(p)[k])))
+            .collect();
+        ([r[0].0, r[1].0, r[2].0], [r[0].1, r[1].1, r[2].1])
+    };
+    let (mean_lo, mean_hi) = ranges3(&|p| Vec3::new(log(p.mean.x), log(p.mean.y), log(p.mean.z)));
+    let (scale_lo, scale_hi) = ranges3(&|p| p.log_scale);
+    let (dc_lo, dc_hi) = ranges3(&|p| Vec3::new(p.sh[0], p.sh[1], p.sh[2]));
+    let logit = |o: f32| (o / (1.0 - o)).ln();
+    let (op_lo, op_hi) = range(&mut splats.iter().map(|p| logit(p.opacity)));
+    let (sh_lo, sh_hi) = range(&mut splats.iter().flat_map(|p| p.sh[3..12].iter().copied()));
+    let quantise = |v: f32, lo: f32, hi: f32, steps: f32| {
+        if hi > lo {
+            ((v - lo) / (hi - lo) * steps).round()
+        } else {
+            0.0
+        }
+    };
+    let lerp = |lo: f32, hi: f32, b: f32, steps: f32| lo + (hi - lo) * (b / steps);
+    let (mut means_l, mut means_u, mut quats, mut scales, mut sh0, mut labels, mut centroids) =
+        (vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
+    let mut want = Splats::with_capacity(n, SplatColor::Sh { degree: 1 }, SplatFormat::Sog);
+    for (i, p) in splats.iter().enumerate() {
+        let mut mean = Vec3::ZERO;
+        for k in 0..3 {
+            let v = quantise(log(p.mean[k]), mean_lo[k], mean_hi[k], 65535.0) as u16;
+            means_l.push(v as u8);
+            means_u.push((v >> 8) as u8);
+            let t = lerp(mean_lo[k], mean_hi[k], f32::from(v), 65535.0);
+            mean[k] = t.signum() * (t.abs().exp() - 1.0);
+        }
+        means_l.push(255);
+        means_u.push(255);
+        // Smallest three of w x y z, the largest made positive, each (b/255·2 − 1)/√2.
+        let q = p.rotation;
+        let largest = (0..4)
+            .max_by(|&a, &b| q[a].abs().total_cmp(&q[b].abs()))
+            .unwrap();
+        let sign = q[largest].signum();
+        let mut rotation = [0.0f32; 4];
+        let mut sum = 0.0;
+        for (k, v) in q.iter().enumerate() {
+            if k != largest {
+                let b = ((v * sign * std::f32::consts::SQRT_2 + 1.0) / 2.0 * 255.0).round();
+                quats.push(b as u8);
+                rotation[k] = (b / 255.0 * 2.0 - 1.0) / std::f32::consts::SQRT_2;
+                sum += rotation[k] * rotation[k];
+            }
+        }
+        quats.push(252 + largest as u8);
+        rotation[largest] = (1.0 - sum).max(0.0).sqrt();
+        let mut log_scale = Vec3::ZERO;
+        for k in 0..3 {
+            let b = quantise(p.log_scale[k], scale_lo[k], scale_hi[k], 255.0);
+            scales.push(b as u8);
+            log_scale[k] = lerp(scale_lo[k], scale_hi[k], b, 255.0);
+        }
+        scales.push(255);
+        let mut coeffs = [0.0f32; 12];
+        for k in 0..3 {
+            let b = quantise(p.sh[k], dc_lo[k], dc_hi[k], 255.0);
+            sh0.push(b as u8);
+            coeffs[k] = lerp(dc_lo[k], dc_hi[k], b, 255.0);
+        }
+        let b = quantise(logit(p.opacity), op_lo, op_hi, 255.0);
+        sh0.push(b as u8);
+        let opacity = 1.0 / (1.0 + (-lerp(op_lo, op_hi, b, 255.0)).exp());
+        // Palette entry i: three pixels (one a coefficient), r g b the channels.
+        labels.extend_from_slice(&[(i & 255) as u8, (i >> 8) as u8, 0, 255]);
+        for j in 0..3 {
+            for c in 0..3 {
+                let b = quantise(p.sh[(j + 1) * 3 + c], sh_lo, sh_hi, 255.0);
+                centroids.push(b as u8);
+                coeffs[(j + 1) * 3 + c] = lerp(sh_lo, sh_hi, b, 255.0);
+            }
+            centroids.push(255);
+        }
+        assert!(want.push_activated(mean, log_scale.exp(), rotation, opacity, &coeffs));
+    }
+    for (name, pixels, w) in [
+        ("means_l.webp", &means_l, width),
+        ("means_u.webp", &means_u, width),
+        ("quats.webp", &quats, width),
+        ("scales.webp", &scales, width),
+        ("sh0.webp", &sh0, width),
+        ("shN_labels.webp", &labels, width),
+        ("shN_centroids.webp", &centroids, 192),
+    ] {
+        std::fs::write(dir.join(name), webp(pixels, w)).unwrap();
+    }
+    let meta = serde_json::json!({
+        "means": { "shape": [n, 3], "mins": mean_lo, "maxs": mean_hi,
+                   "files": ["means_l.webp", "means_u.webp"] },
+        "scales": { "mins": scale_lo, "maxs": scale_hi, "files": ["scales.webp"] },
+        "quats": { "files": ["quats.webp"] },
+        "sh0": { "mins": [dc_lo[0], dc_lo[1], dc_lo[2], op_lo],
+                 "maxs": [dc_hi[0], dc_hi[1], dc_hi[2], op_hi], "files": ["sh0.webp"] },
+        "shN": { "mins": sh_lo, "maxs": sh_hi,
+                 "files": ["shN_centroids.webp", "shN_labels.webp"] },
+    });
+    std::fs::write(dir.join("meta.json"), meta.to_string()).unwrap();
+    want
+}
+
+#[test]
+fn a_sog_version_1_folder_decodes_as_its_description_says() {
+    let dir = tempfile::tempdir().unwrap();
+    let want = sog_v1_folder(dir.path(), &plain_splats(100));
+    for path in [dir.path().join("meta.json"), dir.path().to_path_buf()] {
+        let got = Splats::load(&path).unwrap();
+        assert_eq!(got.source.version, Some(1));
+        let d = differences(&got, &want);
+        println!("SOG 1: {d:?}");
+        assert!(d[0] <= 1e-5 && d[1] <= 1e-5 && d[2] <= 1e-6, "{d:?}");
+        assert!(d[3] <= 1e-6 && d[4] <= 1e-5, "{d:?}");
+    }
+}

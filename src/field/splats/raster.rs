@@ -4,7 +4,8 @@
 //! As in gsplat, a splat reaches every pixel of each 16×16 image tile its bounding square
 //! touches (tiles anchored at the image's corner, whatever window is rendered, so a crop of a
 //! render equals the render cropped), and a pixel meets its splats in order of the camera z of
-//! their means. Only tiles of the render window are binned.
+//! their means. Only tiles of the render window are binned, and a splat only in the tiles
+//! where its opacity can reach 1/255 (the others would skip it pixel by pixel).
 
 use rayon::prelude::*;
 
@@ -158,24 +159,30 @@ impl SplatLayer {
             window.y1.div_ceil(TILE),
         ];
         let tiles_x = (tiles[2] - tiles[0]) as usize;
-        let range = |p: &Projected| {
-            let (x, y, r) = (
-                p.xy[0] / TILE as f32,
-                p.xy[1] / TILE as f32,
-                p.radius / TILE as f32,
-            );
+        // gsplat's bounding square, narrowed on each axis to where the splat can give a
+        // fragment at all (opacity ≥ 1/255: the ellipse's reach): the tiles left out are
+        // ones whose pixels would all skip it, so the render is unchanged and each tile
+        // walks fewer splats.
+        let range = |(p, e): (&Projected, &Entry)| {
+            let (x, y) = (p.xy[0] / TILE as f32, p.xy[1] / TILE as f32);
+            let rx = p.radius.min(e.extent[0]) / TILE as f32;
+            let ry = p.radius.min(e.extent[1]) / TILE as f32;
             let clamp = |v: f32, lo: u32, hi: u32| (v.max(0.0) as u32).clamp(lo, hi);
             [
-                clamp((x - r).floor(), tiles[0], tiles[2]),
-                clamp((y - r).floor(), tiles[1], tiles[3]),
-                clamp((x + r).ceil(), tiles[0], tiles[2]),
-                clamp((y + r).ceil(), tiles[1], tiles[3]),
+                clamp((x - rx).floor(), tiles[0], tiles[2]),
+                clamp((y - ry).floor(), tiles[1], tiles[3]),
+                clamp((x + rx).ceil(), tiles[0], tiles[2]),
+                clamp((y + ry).ceil(), tiles[1], tiles[3]),
             ]
         };
         // Each splat is listed in the rows of tiles it touches (in depth order), then each
         // row is binned on its own (in parallel), so every tile's list comes out sorted.
-        let ranges: Vec<[u32; 4]> = order.par_iter().map(|k| range(in_order(k))).collect();
         let splat_entries: Vec<Entry> = order.par_iter().map(|k| Entry::new(in_order(k))).collect();
+        let ranges: Vec<[u32; 4]> = order
+            .par_iter()
+            .zip(&splat_entries)
+            .map(|(k, e)| range((in_order(k), e)))
+            .collect();
         let rows_n = (tiles[3] - tiles[1]) as usize;
         let mut row_starts = vec![0usize; rows_n + 1];
         for r in &ranges {
@@ -439,10 +446,23 @@ fn walk_part_lanes<A: RowAction>(entries: &[Entry], tile: &[u32], part: Window, 
             }
             // The row's sixteen fragments at once: opacity, or 0 where the pixel gets none.
             let dy = e.xy[1] - ((part.y0 + r as u32) as f32 + 0.5);
-            let mut alphas = [0f32; LANES];
+            // The quadratic form first: a row whose live lanes all lie past the cut-off (most
+            // rows of a large, thin or faint splat's box) skips the exponential.
+            let mut sigmas = [0f32; LANES];
+            let mut inside = 0u32;
             for l in 0..LANES {
                 let dx = e.xy[0] - px[l];
                 let sigma = 0.5 * (a * dx * dx + c * dy * dy) + b * dx * dy;
+                sigmas[l] = sigma;
+                let reach = (sigma >= 0.0) & (sigma <= e.sigma_cut) & (live[r][l] != 0.0);
+                inside |= u32::from(reach);
+            }
+            if inside == 0 {
+                continue;
+            }
+            let mut alphas = [0f32; LANES];
+            for l in 0..LANES {
+                let sigma = sigmas[l];
                 let alpha = (e.opacity * exp_neg(sigma.clamp(0.0, 80.0))).min(MAX_ALPHA);
                 let met = (sigma >= 0.0) & (sigma <= e.sigma_cut) & (alpha >= MIN_ALPHA);
                 alphas[l] = if met { alpha * live[r][l] } else { 0.0 };

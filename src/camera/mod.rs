@@ -168,6 +168,32 @@ impl Camera {
         })
     }
 
+    /// [`Camera::new`] for a matrix whose shear is carried elsewhere: a nerfstudio camera path
+    /// written in a non-uniformly scaled object's frame, whose shot puts the difference
+    /// between the path's matrix and this camera into that object (see
+    /// `CameraPath::to_shot`). The camera is the matrix's rigid part (its −Z axis kept
+    /// exact); a matrix [`Camera::new`] would refuse for any other reason is refused.
+    pub fn from_affine(world_from_camera: DMat4, projection: Projection) -> Result<Self> {
+        let m = world_from_camera;
+        let (x, y, z) = (
+            m.x_axis.truncate(),
+            m.y_axis.truncate(),
+            m.z_axis.truncate(),
+        );
+        if !(m.is_finite() && x.cross(y).dot(z) > 0.0) {
+            return Self::new(m, projection);
+        }
+        let zn = z.normalize();
+        let xn = (x - zn * x.dot(zn)).normalize();
+        let rigid = DMat4::from_cols(
+            xn.extend(0.0),
+            zn.cross(xn).extend(0.0),
+            zn.extend(0.0),
+            m.w_axis,
+        );
+        Self::new(rigid, projection)
+    }
+
     /// The camera seeing only depths in `[start, end]` (Blender's `clip_start`, `clip_end`;
     /// depth as its Z pass measures it); by default everything in front of it.
     pub fn with_clip(mut self, start: f64, end: f64) -> Result<Self> {

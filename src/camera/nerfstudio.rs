@@ -271,7 +271,7 @@ impl CameraPath {
                 Projection::Vr180(Vr180::new(w, h, eye, DEFAULT_IPD).map_err(in_context)?)
             }
         };
-        Camera::new(frame.camera_to_world, projection).map_err(in_context)
+        Camera::from_affine(frame.camera_to_world, projection).map_err(in_context)
     }
 
     /// The path as a nerfx shot: frame `i` becomes `first_frame + i`. A vertical FOV becomes

@@ -445,7 +445,7 @@ fn read_crop(c: &Obj) -> Result<PathCrop> {
         },
     };
     // A side of 0 crops everything away: the render would be the background alone.
-    if let Some(i) = bounds.scale.iter().position(|&s| !(s > 0.0)) {
+    if let Some(i) = bounds.scale.iter().position(|&s| s.is_nan() || s <= 0.0) {
         return Err(c.error(
             "crop_scale",
             format!(

@@ -77,6 +77,9 @@ fn binaries() -> &'static Mutex<HashMap<PathBuf, Weak<Binary>>> {
     BINARIES.get_or_init(Default::default)
 }
 
+/// A plugin's descriptor in one context: plugin id, context, descriptor.
+type Described = (String, Context, Arc<Effect>);
+
 /// A loaded OFX bundle (or bare `.ofx` binary) and the record of what its plugins did.
 #[derive(Clone)]
 pub struct Bundle {
@@ -87,7 +90,7 @@ pub struct Bundle {
     /// Each plugin's descriptor per context, described once and shared by its instances
     /// (as hosts do): a descriptor holds every parameter's properties, a hundred kilobytes
     /// that a graph of thousands of nodes would otherwise hold once per node.
-    descriptors: Arc<Mutex<Vec<(String, Context, Arc<Effect>)>>>,
+    descriptors: Arc<Mutex<Vec<Described>>>,
 }
 
 /// What a plugin declared for one context.

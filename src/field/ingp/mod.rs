@@ -613,7 +613,7 @@ fn render_aabb(doc: &Doc, snap: &Value) -> Result<Option<(Vec3, Vec3)>> {
         let mut cols = [0.0; 9];
         cols.copy_from_slice(&flat);
         let det = glam::DMat3::from_cols_array(&cols).determinant();
-        if !(det.abs() > 1e-6) {
+        if det.abs() <= 1e-6 {
             return Err(doc.err(
                 at,
                 format!(

@@ -1071,3 +1071,179 @@ fn checkpoint_entries_declaring_more_than_they_can_hold_are_refused() {
     assert!(e.contains("declares") && e.contains("more than"), "{e}");
     assert!(peak < 64 << 20, "held {peak} bytes");
 }
+
+// ---------------------------------------------------------------------------------------
+// Output paths: what stands where an output is written.
+
+/// A 2×2 image to write.
+fn tiny_image() -> Planes {
+    let p = nerfx::image::Plane::filled(2, 2, 0.5);
+    Planes {
+        width: 2,
+        height: 2,
+        rgb: Some([p.clone(), p.clone(), p.clone()]),
+        alpha: Some(p),
+        depth_z: None,
+        depth_ray: None,
+        depth_median: None,
+    }
+}
+
+/// Every kind of thing that can stand at an output path, made inside a temporary folder
+/// (devices by `mknod` as root; never the machine's `/dev`): a regular file keeps its
+/// permissions, a link stays a link to a replaced target, a dangling link's target is
+/// created, a character device and a FIFO are written directly and stay what they were, a
+/// block device, a socket and a folder are refused naming what is there; and, as a user who
+/// cannot write the folder, a writable file in it is refused naming the folder.
+#[test]
+fn output_paths_of_every_kind() {
+    use std::os::unix::fs::{FileTypeExt, MetadataExt, PermissionsExt};
+    // Its allocations would count in the bombs' peaks.
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(PoisonError::into_inner);
+    let dir = tempfile::tempdir().unwrap();
+    let at = |n: &str| dir.path().join(n);
+    let image = tiny_image();
+    let write = |p: &Path| nerfx::image::write_png_preview(p, &image);
+    let png = |p: &Path| std::fs::read(p).unwrap().starts_with(b"\x89PNG");
+
+    // A regular file of mode 0600 stays 0600.
+    let file = at("file.png");
+    std::fs::write(&file, b"old").unwrap();
+    std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o600)).unwrap();
+    write(&file).unwrap();
+    assert!(png(&file));
+    assert_eq!(std::fs::metadata(&file).unwrap().mode() & 0o777, 0o600);
+
+    // A link stays a link; its target is replaced. A dangling link's target is created.
+    let target = at("target.png");
+    std::fs::write(&target, b"old").unwrap();
+    std::os::unix::fs::symlink(&target, at("link.png")).unwrap();
+    write(&at("link.png")).unwrap();
+    assert!(std::fs::symlink_metadata(at("link.png"))
+        .unwrap()
+        .file_type()
+        .is_symlink());
+    assert!(png(&target));
+    std::os::unix::fs::symlink(at("later.png"), at("dangling.png")).unwrap();
+    write(&at("dangling.png")).unwrap();
+    assert!(std::fs::symlink_metadata(at("dangling.png"))
+        .unwrap()
+        .file_type()
+        .is_symlink());
+    assert!(png(&at("later.png")));
+
+    // A FIFO is written directly: a reader gets the image, the FIFO stays a FIFO.
+    let fifo = at("fifo");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap();
+    assert!(made.success());
+    let reader = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::read(&fifo).unwrap())
+    };
+    write(&fifo).unwrap();
+    assert!(reader.join().unwrap().starts_with(b"\x89PNG"));
+    assert!(std::fs::symlink_metadata(&fifo)
+        .unwrap()
+        .file_type()
+        .is_fifo());
+
+    // Devices, as root: a character device (a null device made here) is written to and
+    // stays a device; a block device is refused.
+    let root = unsafe { libc_geteuid() } == 0;
+    if root {
+        let null = at("null");
+        let ok = std::process::Command::new("mknod")
+            .arg(&null)
+            .args(["c", "1", "3"])
+            .status();
+        if ok.is_ok_and(|s| s.success()) {
+            write(&null).unwrap();
+            assert!(std::fs::symlink_metadata(&null)
+                .unwrap()
+                .file_type()
+                .is_char_device());
+            let block = at("block");
+            let ok = std::process::Command::new("mknod")
+                .arg(&block)
+                .args(["b", "7", "200"])
+                .status();
+            if ok.is_ok_and(|s| s.success()) {
+                let e = write(&block).unwrap_err().to_string();
+                assert!(e.contains("block"), "{e}");
+                assert!(std::fs::symlink_metadata(&block)
+                    .unwrap()
+                    .file_type()
+                    .is_block_device());
+            }
+        }
+    }
+
+    // A socket and a folder are refused, and left as they are.
+    let socket = at("socket");
+    let _listener = std::os::unix::net::UnixListener::bind(&socket).unwrap();
+    let e = write(&socket).unwrap_err().to_string();
+    assert!(e.contains("socket"), "{e}");
+    assert!(std::fs::symlink_metadata(&socket)
+        .unwrap()
+        .file_type()
+        .is_socket());
+    std::fs::create_dir(at("folder")).unwrap();
+    let e = write(&at("folder")).unwrap_err().to_string();
+    assert!(e.contains("folder"), "{e}");
+
+    // As nobody: a writable file in a folder nobody may not write is refused naming the
+    // folder (the check runs this test's binary as that user, through `setpriv`).
+    if root && std::env::var_os("NERFX_OUTPUT_AS_NOBODY").is_none() {
+        let locked = at("locked");
+        std::fs::create_dir(&locked).unwrap();
+        std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(0o755)).unwrap();
+        let inside = locked.join("out.png");
+        std::fs::write(&inside, b"old").unwrap();
+        std::fs::set_permissions(&inside, std::fs::Permissions::from_mode(0o666)).unwrap();
+        std::fs::set_permissions(&locked, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let exe = std::env::current_exe().unwrap();
+        let out = std::process::Command::new("setpriv")
+            .args(["--reuid=nobody", "--regid=nogroup", "--clear-groups"])
+            .arg(&exe)
+            .args([
+                "--exact",
+                "output_as_nobody",
+                "--nocapture",
+                "--include-ignored",
+            ])
+            .env("NERFX_OUTPUT_AS_NOBODY", &inside)
+            .output();
+        if let Ok(out) = out {
+            let text = String::from_utf8_lossy(&out.stdout).to_string();
+            assert!(
+                out.status.success(),
+                "{text}{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            assert!(
+                text.contains("refused:") && text.contains("locked"),
+                "{text}"
+            );
+        }
+    }
+}
+
+/// Run as another user by [`output_paths_of_every_kind`]: writes the file it is given and
+/// prints the refusal.
+#[test]
+#[ignore = "run by output_paths_of_every_kind as an unprivileged user"]
+fn output_as_nobody() {
+    let Some(path) = std::env::var_os("NERFX_OUTPUT_AS_NOBODY") else {
+        return;
+    };
+    let e = nerfx::image::write_png_preview(Path::new(&path), &tiny_image()).unwrap_err();
+    println!("refused: {e}");
+}
+
+extern "C" {
+    #[link_name = "geteuid"]
+    fn libc_geteuid() -> u32;
+}

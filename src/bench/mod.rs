@@ -19,6 +19,7 @@ pub mod plot;
 pub mod report;
 pub mod scaling;
 pub mod scenes;
+pub mod setup;
 pub mod snapshot;
 pub mod splats;
 pub mod suite;

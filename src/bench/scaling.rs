@@ -40,6 +40,17 @@ pub struct Point {
 }
 
 impl Point {
+    /// A point of a per-item series: `items` items (in `samples`) cost `cpu_s`.
+    pub fn per_item(label: String, items: u64, cpu_s: f64) -> Point {
+        Point {
+            label,
+            pixels: 0,
+            samples: items,
+            ms: cpu_s * 1e3,
+            cpu_s,
+        }
+    }
+
     /// CPU nanoseconds per density sample.
     pub fn ns_per_sample(&self) -> f64 {
         self.cpu_s * 1e9 / self.samples.max(1) as f64
@@ -58,6 +69,20 @@ pub struct Growth {
     pub title: String,
     /// Smallest first.
     pub points: Vec<Point>,
+    /// For a set-up series, the item counted (`samples` then holds items, not density
+    /// samples); `None` for a frame's cost against its density samples.
+    pub item: Option<&'static str>,
+}
+
+impl Growth {
+    /// A series of set-up cost per `item`.
+    pub fn per_item(title: &str, item: &'static str, points: Vec<Point>) -> Growth {
+        Growth {
+            title: title.into(),
+            points,
+            item: Some(item),
+        }
+    }
 }
 
 /// Runs the three series: resolution (the demo, up to `width × height`), instances (1 to
@@ -76,6 +101,7 @@ pub fn run(width: u32, height: u32, dir: &Path, log: &dyn Fn(&str)) -> Result<Ve
     out.push(Growth {
         title: "resolution (the demo)".into(),
         points,
+        item: None,
     });
     log(&line(&out[0]));
 
@@ -95,6 +121,7 @@ pub fn run(width: u32, height: u32, dir: &Path, log: &dyn Fn(&str)) -> Result<Ve
             quarter.0, quarter.1
         ),
         points,
+        item: None,
     });
     log(&line(&out[1]));
 
@@ -126,8 +153,14 @@ pub fn run(width: u32, height: u32, dir: &Path, log: &dyn Fn(&str)) -> Result<Ve
             quarter.0, quarter.1
         ),
         points,
+        item: None,
     });
     log(&line(&out[2]));
+
+    out.push(super::setup::primitives(&[2_000, 20_000, 200_000])?);
+    log(&line(&out[3]));
+    out.push(super::setup::graph_nodes(&[100, 1_000, 4_000], dir)?);
+    log(&line(&out[4]));
     Ok(out)
 }
 
@@ -217,7 +250,10 @@ fn line(g: &Growth) -> String {
     let points: Vec<String> = g
         .points
         .iter()
-        .map(|p| format!("{}: {:.0} ns/sample", p.label, p.ns_per_sample()))
+        .map(|p| match g.item {
+            Some(item) => format!("{}: {:.2} µs/{item}", p.label, p.ns_per_sample() / 1e3),
+            None => format!("{}: {:.0} ns/sample", p.label, p.ns_per_sample()),
+        })
         .collect();
     format!("{}: {}", g.title, points.join(", "))
 }
@@ -231,6 +267,23 @@ pub fn markdown(growths: &[Growth]) -> String {
         PRESET.name()
     );
     for g in growths {
+        if let Some(item) = g.item {
+            s += &format!(
+                "\n{} (set-up: CPU time per {item} flat means set-up grows no faster than the \
+                 content):\n\n| content | {item}s | CPU s | CPU µs per {item} |\n|---|---:|---:|---:|\n",
+                g.title
+            );
+            for p in &g.points {
+                s += &format!(
+                    "| {} | {} | {:.3} | {:.2} |\n",
+                    p.label,
+                    p.samples,
+                    p.cpu_s,
+                    p.ns_per_sample() / 1e3
+                );
+            }
+            continue;
+        }
         s += &format!(
             "\n{}:\n\n| content | pixels | density samples/px | ms/frame | CPU s/frame | CPU µs/px \
              | CPU ns/sample |\n|---|---:|---:|---:|---:|---:|---:|\n",
@@ -257,6 +310,7 @@ pub fn markdown(growths: &[Growth]) -> String {
 pub fn write_plot(growths: &[Growth], dir: &Path) -> Result<()> {
     let series: Vec<Series> = growths
         .iter()
+        .filter(|g| g.item.is_none())
         .map(|g| Series {
             label: g.title.split(" (").next().unwrap_or(&g.title).to_string(),
             points: g

@@ -77,6 +77,9 @@ fn binaries() -> &'static Mutex<HashMap<PathBuf, Weak<Binary>>> {
     BINARIES.get_or_init(Default::default)
 }
 
+/// A plugin's descriptor in one context: plugin id, context, descriptor.
+type Described = (String, Context, Arc<Effect>);
+
 /// A loaded OFX bundle (or bare `.ofx` binary) and the record of what its plugins did.
 #[derive(Clone)]
 pub struct Bundle {
@@ -84,6 +87,10 @@ pub struct Bundle {
     pub(crate) log: Arc<Log>,
     pub(crate) options: HostOptions,
     host: &'static HostEntry,
+    /// Each plugin's descriptor per context, described once and shared by its instances
+    /// (as hosts do): a descriptor holds every parameter's properties, a hundred kilobytes
+    /// that a graph of thousands of nodes would otherwise hold once per node.
+    descriptors: Arc<Mutex<Vec<Described>>>,
 }
 
 /// What a plugin declared for one context.
@@ -448,12 +455,39 @@ impl Bundle {
             log,
             options,
             host,
+            descriptors: Arc::default(),
         })
     }
 
     /// The identifiers of the image-effect plugins.
     pub fn plugin_ids(&self) -> Vec<String> {
         self.binary.plugins.iter().map(|p| p.id.clone()).collect()
+    }
+
+    /// The descriptor of `id` in `context`, described on first request (see
+    /// [`Bundle::descriptor`]) and shared from then on.
+    pub(crate) fn shared_descriptor(
+        &self,
+        id: &str,
+        context: Context,
+    ) -> Result<(Arc<Effect>, &Plugin)> {
+        let cached = self
+            .descriptors
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .iter()
+            .find(|(i, c, _)| i == id && *c == context)
+            .map(|(_, _, d)| d.clone());
+        if let Some(d) = cached {
+            return Ok((d, self.binary.plugin(id)?));
+        }
+        let (d, plugin) = self.descriptor(id, context)?;
+        let d: Arc<Effect> = Arc::from(d);
+        self.descriptors
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push((id.to_owned(), context, d.clone()));
+        Ok((d, plugin))
     }
 
     /// A fresh descriptor of `id` in `context`, described (describe, then

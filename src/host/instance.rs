@@ -2,7 +2,7 @@
 
 use std::collections::HashMap;
 use std::ffi::c_void;
-use std::sync::{Mutex, MutexGuard, PoisonError};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
 use openfx_sys as ofx;
 
@@ -39,14 +39,14 @@ pub struct Instance {
     plugin: usize,
     context: Context,
     effect: Box<Effect>,
-    _descriptor: Box<Effect>,
+    _descriptor: Arc<Effect>,
     safety: Safety,
     render_lock: Mutex<()>,
 }
 
 impl Instance {
     pub(crate) fn create(bundle: &Bundle, id: &str, context: Context) -> Result<Instance> {
-        let (descriptor, plugin) = bundle.descriptor(id, context)?;
+        let (descriptor, plugin) = bundle.shared_descriptor(id, context)?;
         let plugin_index = bundle
             .plugin_ids()
             .iter()

@@ -1,0 +1,66 @@
+//! The memory a graph's nodes hold as OpenFX instances in the host: instances of one plugin
+//! share its descriptor (each parameter's properties, described once per context), so a node
+//! costs its own instance only. Measured with a counting allocator (the host's heap; the
+//! plugin's own allocations are not counted), so this binary holds a single test.
+
+mod common_ofx;
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use nerfx::graph::Graph;
+use nerfx::host::OfxGraph;
+
+struct Counting;
+
+static NOW: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        let p = System.alloc(layout);
+        if !p.is_null() {
+            NOW.fetch_add(layout.size(), Ordering::Relaxed);
+        }
+        p
+    }
+
+    unsafe fn dealloc(&self, p: *mut u8, layout: Layout) {
+        System.dealloc(p, layout);
+        NOW.fetch_sub(layout.size(), Ordering::Relaxed);
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: Counting = Counting;
+
+/// A NeRF Render followed by `length` Accumulation Mattes, each reading the one before.
+fn chain(dir: &std::path::Path, length: usize) -> Graph {
+    let mut nodes = vec![
+        serde_json::json!({"name": "m0", "node": "org.nerfx.NeRFRender",
+        "params": {"file": "demo_environment.json", "shot": "demo_shot.json",
+                   "quality": "draft"}}),
+    ];
+    for i in 1..=length {
+        nodes.push(serde_json::json!({"name": format!("m{i}"),
+            "node": "org.nerfx.AccumulationMatte", "inputs": {"Source": format!("m{}", i - 1)}}));
+    }
+    let text = serde_json::json!({"nodes": nodes, "output": format!("m{length}")}).to_string();
+    Graph::from_json_str(&text, &dir.join("chain.json")).unwrap()
+}
+
+#[test]
+fn a_node_costs_its_instance_not_a_descriptor_too() {
+    let dir = common_ofx::fixtures::demo_dir(8, 8);
+    let bundle = common_ofx::fixtures::shared();
+    // The first graph describes the plugins; the measured one only instantiates them.
+    drop(OfxGraph::new(chain(dir, 2), bundle).unwrap());
+    let n = 1000;
+    let graph = chain(dir, n);
+    let before = NOW.load(Ordering::Relaxed);
+    let instances = OfxGraph::new(graph, bundle).unwrap();
+    let per_node = (NOW.load(Ordering::Relaxed) - before) / n;
+    println!("{per_node} B of host heap per node");
+    // 82 KB measured; 149 KB while every instance held a descriptor of its own.
+    assert!(per_node < 110_000, "{per_node} B per node");
+    drop(instances);
+}

@@ -512,10 +512,14 @@ fn openjd_runs_the_template_and_its_split_frames() {
             .arg("-o")
             .arg(&pattern)
             .args(["--", "--quality", "draft"]));
-        run(Command::new("openjd").arg("check").arg(&template));
-        run(Command::new("openjd")
-            .arg("check")
-            .arg(bundle.join("template.yaml")));
+        // openjd makes its session folders under the temp folder: this test's own.
+        let openjd = || {
+            let mut c = Command::new("openjd");
+            c.env("TMPDIR", work.path());
+            c
+        };
+        run(openjd().arg("check").arg(&template));
+        run(openjd().arg("check").arg(bundle.join("template.yaml")));
         for file in [
             "template.yaml",
             "parameter_values.yaml",
@@ -525,7 +529,7 @@ fn openjd_runs_the_template_and_its_split_frames() {
         }
         let step = if split == "1" { "Render" } else { "Assemble" };
         let values = template.with_file_name(format!("{name}.parameters.yaml"));
-        let out = run(Command::new("openjd")
+        let out = run(openjd()
             .arg("run")
             .arg(&template)
             .arg("-p")

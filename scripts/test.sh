@@ -16,7 +16,8 @@
 #   slurm-wlm, munge   tests/farm.rs runs a one-node Slurm cluster (slurmctld, slurmd, munged;
 #                  started and stopped by the test, as root)
 #   openjd-cli     `openjd check` and `openjd run` of the Open Job Description templates
-#   opencue-pyoutline  PyOutline loads and serialises the OpenCue scripts (no Cuebot)
+#   opencue-pyoutline  PyOutline loads and serialises the OpenCue scripts (no Cuebot);
+#                  `packaging`, which its Cue back end imports without declaring it
 #
 # Nothing is skipped when a tool is missing: the tests that need one fail. Extra arguments go
 # to `cargo test` (a test name, `-- --nocapture`).
@@ -64,11 +65,13 @@ if ! python3 -c "import numpy, msgpack, mpmath, OpenEXR, PyOpenColorIO, mmh3" 2>
     python3 -c "import numpy, msgpack, mpmath, OpenEXR, PyOpenColorIO, mmh3"
 fi
 
-if ! command -v openjd >/dev/null || ! python3 -c "import outline" 2>/dev/null; then
-    echo "== installing openjd-cli and opencue-pyoutline for $(command -v python3)"
-    python3 -m pip install --quiet openjd-cli opencue-pyoutline 2>/dev/null ||
-        PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install --quiet openjd-cli opencue-pyoutline
-    command -v openjd >/dev/null && python3 -c "import outline"
+# PyOutline's Cue back end imports `packaging` without declaring it.
+if ! command -v openjd >/dev/null || ! python3 -c "import outline, packaging" 2>/dev/null; then
+    echo "== installing openjd-cli, opencue-pyoutline and packaging for $(command -v python3)"
+    python3 -m pip install --quiet openjd-cli opencue-pyoutline packaging 2>/dev/null ||
+        PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install --quiet openjd-cli opencue-pyoutline \
+            packaging
+    command -v openjd >/dev/null && python3 -c "import outline, packaging"
 fi
 
 if ! blender -b --factory-startup --python-exit-code 1 --python-expr "import numpy" \

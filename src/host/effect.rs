@@ -58,6 +58,9 @@ pub(crate) struct Effect {
     pub(crate) options: HostOptions,
     /// The persistent message set on the instance and not cleared since.
     pub(crate) persistent: Mutex<Option<Message>>,
+    /// A descriptor's: the properties its instances start from in each context, made at the
+    /// first instance and shared by all of them until one is written.
+    instance_props: Mutex<Vec<(String, Box<PropSet>)>>,
 }
 
 /// A clip. Boxed and registered while alive.
@@ -69,6 +72,9 @@ pub(crate) struct Clip {
     effect: usize,
     /// What feeds it (inputs of an instance).
     pub(crate) source: Mutex<Option<ClipSource>>,
+    /// A descriptor's: the properties its instances start from, made at the first instance
+    /// and shared by all of them until one is written.
+    instance_props: OnceLock<Box<PropSet>>,
 }
 
 /// Where an image's pixels are: `ptr` is the bottom-left pixel of `bounds`; rows are
@@ -185,6 +191,7 @@ impl Effect {
             output_rod: Mutex::new(None),
             options,
             persistent: Mutex::new(None),
+            instance_props: Mutex::new(Vec::new()),
         });
         handles::register(&*e as *const Effect, Kind::Effect);
         e
@@ -194,17 +201,33 @@ impl Effect {
     pub(crate) fn instantiate(&self, context: &str) -> Box<Effect> {
         let id = &self.id;
         let log = self.log.clone();
-        let props = props::new_set(
-            SetKind::EffectInst,
-            id,
-            format!("{id} instance"),
-            Some(log.clone()),
-        );
-        props.copy_values_from(&self.props);
-        props.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeImageEffectInstance));
-        props.set_str(ofx::kOfxImageEffectPropContext, context);
-        props.set_doubles(ofx::kOfxImageEffectPropProjectSize, &[1920.0, 1080.0]);
-        props.set_doubles(ofx::kOfxImageEffectPropProjectExtent, &[1920.0, 1080.0]);
+        let props = {
+            let mut templates = self
+                .instance_props
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner);
+            let at = match templates.iter().position(|(c, _)| c == context) {
+                Some(at) => at,
+                None => {
+                    let props = props::new_set(
+                        SetKind::EffectInst,
+                        id,
+                        format!("{id} instances' defaults in {context}"),
+                        Some(log.clone()),
+                    );
+                    props.copy_values_from(&self.props);
+                    props.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeImageEffectInstance));
+                    props.set_str(ofx::kOfxImageEffectPropContext, context);
+                    props.set_doubles(ofx::kOfxImageEffectPropProjectSize, &[1920.0, 1080.0]);
+                    props.set_doubles(ofx::kOfxImageEffectPropProjectExtent, &[1920.0, 1080.0]);
+                    templates.push((context.to_string(), props));
+                    templates.len() - 1
+                }
+            };
+            templates[at]
+                .1
+                .share(format!("{id} instance"), Some(log.clone()))
+        };
         let params = self
             .params
             .instantiate(&format!("{id} instance"), log.clone());
@@ -214,47 +237,52 @@ impl Effect {
             .lock_clips()
             .iter()
             .map(|d| {
-                let p = props::new_set(
-                    SetKind::ClipInst,
-                    &d.name,
-                    format!("{id} clip {}", d.name),
-                    Some(log.clone()),
-                );
-                p.copy_values_from(&d.props);
-                let supported = d.props.strings(ofx::kOfxImageEffectPropSupportedComponents);
-                let rgba = cstr(ofx::kOfxImageComponentRGBA);
-                let components = if supported.is_empty() || supported.iter().any(|c| c == rgba) {
-                    rgba.to_string()
-                } else {
-                    supported[0].clone()
-                };
-                for name in [
-                    &ofx::kOfxImageEffectPropComponents[..],
-                    ofx::kOfxImageClipPropUnmappedComponents,
-                ] {
-                    p.set_str(name, &components);
-                }
-                let output = d.name == "Output";
-                let depth = cstr(if output {
-                    ofx::kOfxBitDepthFloat
-                } else {
-                    ofx::kOfxBitDepthNone
+                let template = d.instance_props.get_or_init(|| {
+                    let p = props::new_set(
+                        SetKind::ClipInst,
+                        &d.name,
+                        format!("{id} clip {}", d.name),
+                        Some(log.clone()),
+                    );
+                    p.copy_values_from(&d.props);
+                    let supported = d.props.strings(ofx::kOfxImageEffectPropSupportedComponents);
+                    let rgba = cstr(ofx::kOfxImageComponentRGBA);
+                    let components = if supported.is_empty() || supported.iter().any(|c| c == rgba)
+                    {
+                        rgba.to_string()
+                    } else {
+                        supported[0].clone()
+                    };
+                    for name in [
+                        &ofx::kOfxImageEffectPropComponents[..],
+                        ofx::kOfxImageClipPropUnmappedComponents,
+                    ] {
+                        p.set_str(name, &components);
+                    }
+                    let output = d.name == "Output";
+                    let depth = cstr(if output {
+                        ofx::kOfxBitDepthFloat
+                    } else {
+                        ofx::kOfxBitDepthNone
+                    });
+                    for name in [
+                        &ofx::kOfxImageEffectPropPixelDepth[..],
+                        ofx::kOfxImageClipPropUnmappedPixelDepth,
+                    ] {
+                        p.set_str(name, depth);
+                    }
+                    let said_connected = output || e.options.absent_clip != AbsentClip::Unconnected;
+                    p.set_ints(
+                        ofx::kOfxImageClipPropConnected,
+                        &[i32::from(said_connected)],
+                    );
+                    p.set_str(
+                        ofx::kOfxImageEffectPropPreMultiplication,
+                        cstr(premultiplication(&e.options, output)),
+                    );
+                    p
                 });
-                for name in [
-                    &ofx::kOfxImageEffectPropPixelDepth[..],
-                    ofx::kOfxImageClipPropUnmappedPixelDepth,
-                ] {
-                    p.set_str(name, depth);
-                }
-                let said_connected = output || e.options.absent_clip != AbsentClip::Unconnected;
-                p.set_ints(
-                    ofx::kOfxImageClipPropConnected,
-                    &[i32::from(said_connected)],
-                );
-                p.set_str(
-                    ofx::kOfxImageEffectPropPreMultiplication,
-                    cstr(premultiplication(&e.options, output)),
-                );
+                let p = template.share(format!("{id} clip {}", d.name), Some(log.clone()));
                 Clip::boxed(&d.name, p, addr)
             })
             .collect();
@@ -368,6 +396,7 @@ impl Clip {
             props,
             effect,
             source: Mutex::new(None),
+            instance_props: OnceLock::new(),
         });
         handles::register(&*c as *const Clip, Kind::Clip);
         c

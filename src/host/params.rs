@@ -7,7 +7,7 @@
 //! [`shape`] how to read their arguments and forward arrays to [`get`] and [`set`].
 
 use std::ffi::{c_char, c_int, c_uint, c_void, CStr, CString};
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 
 use openfx_sys as ofx;
 use openfx_sys::{OfxParamHandle, OfxParamSetHandle, OfxPropertySetHandle, OfxStatus, OfxTime};
@@ -39,6 +39,9 @@ pub(crate) struct Param {
     value: Mutex<Val>,
     instance: bool,
     log: Arc<Log>,
+    /// A descriptor's: the properties its instances start from, made at the first instance
+    /// and shared by all of them until one is written.
+    instance_props: OnceLock<Box<PropSet>>,
 }
 
 impl Param {
@@ -57,6 +60,7 @@ impl Param {
             value,
             instance,
             log,
+            instance_props: OnceLock::new(),
         });
         handles::register(&*p as *const Param, Kind::Param);
         p
@@ -205,14 +209,18 @@ impl ParamSet {
             .unwrap_or_else(PoisonError::into_inner)
             .iter()
         {
-            let props = props::new_set(
-                SetKind::ParamInst(d.ty),
-                &d.name,
-                format!("{what} parameter {}", d.name),
-                Some(log.clone()),
-            );
-            props.copy_values_from(&d.props);
-            props.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeParameterInstance));
+            let template = d.instance_props.get_or_init(|| {
+                let props = props::new_set(
+                    SetKind::ParamInst(d.ty),
+                    &d.name,
+                    format!("{} parameter {} (instances' defaults)", self.what, d.name),
+                    Some(log.clone()),
+                );
+                props.copy_values_from(&d.props);
+                props.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeParameterInstance));
+                props
+            });
+            let props = template.share(format!("{what} parameter {}", d.name), Some(log.clone()));
             params.push(Param::boxed(&d.name, d.ty, props, true, log.clone()));
         }
         *set.params.lock().unwrap_or_else(PoisonError::into_inner) = params;

@@ -31,7 +31,7 @@ pub enum PropValue {
 
 /// The stored form: strings as C strings, so the pointers handed out stay valid until the
 /// property changes.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub(crate) enum Stored {
     Int(Vec<i32>),
     Double(Vec<f64>),
@@ -121,7 +121,9 @@ pub(crate) struct PropSet {
     kind: SetKind,
     /// Names the set in violations (`org.nerfx.DepthMerge clip A`).
     what: String,
-    entries: Mutex<BTreeMap<String, Entry>>,
+    /// Shared (copy on write) with the template a parameter instance's set starts from, until
+    /// the first write.
+    entries: Mutex<Arc<BTreeMap<String, Entry>>>,
     /// Where violations go; `None`: the log of the action running on the calling thread
     /// (the host's own set, shared by every bundle).
     log: Option<Arc<Log>>,
@@ -233,7 +235,7 @@ impl PropSet {
         let set = Box::new(PropSet {
             kind,
             what,
-            entries: Mutex::new(entries),
+            entries: Mutex::new(Arc::new(entries)),
             log,
         });
         handles::register(&*set as *const PropSet, Kind::PropSet);
@@ -250,8 +252,24 @@ impl PropSet {
         self.log.clone().unwrap_or_else(super::log::current)
     }
 
-    fn lock(&self) -> MutexGuard<'_, BTreeMap<String, Entry>> {
+    fn lock(&self) -> MutexGuard<'_, Arc<BTreeMap<String, Entry>>> {
         self.entries.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// A set of this one's kind holding its entries as they are now, shared until either set
+    /// is written (so a graph's instances of one parameter hold one copy of its properties
+    /// until a plugin or the host changes one of them). String pointers handed out by either
+    /// stay valid: a write copies the entries and leaves the shared ones as they were.
+    pub(crate) fn share(&self, what: String, log: Option<Arc<Log>>) -> Box<PropSet> {
+        let entries = Arc::clone(&self.lock());
+        let set = Box::new(PropSet {
+            kind: self.kind,
+            what,
+            entries: Mutex::new(entries),
+            log,
+        });
+        handles::register(&*set as *const PropSet, Kind::PropSet);
+        set
     }
 
     fn violate(&self, function: &str, name: &str, why: String) {
@@ -274,20 +292,47 @@ impl PropSet {
         &self,
         function: &str,
         name: &str,
+        f: impl FnOnce(&Entry) -> Result<R, (Status, String)>,
+    ) -> Result<R, Status> {
+        let entries = self.lock();
+        let Some(entry) = entries.get(name) else {
+            drop(entries);
+            return Err(self.unknown(function, name));
+        };
+        f(entry).map_err(|(s, why)| {
+            self.violate(function, name, why);
+            s
+        })
+    }
+
+    /// [`Self::with_entry`] for a change: the entries are copied first where they are shared.
+    fn with_entry_mut<R>(
+        &self,
+        function: &str,
+        name: &str,
         f: impl FnOnce(&mut Entry) -> Result<R, (Status, String)>,
     ) -> Result<R, Status> {
         let mut entries = self.lock();
-        let Some(entry) = entries.get_mut(name) else {
+        if !entries.contains_key(name) {
             drop(entries);
-            if let Some(why) = self.missing(name) {
-                self.violate(function, name, why);
-            }
+            return Err(self.unknown(function, name));
+        }
+        let Some(entry) = Arc::make_mut(&mut entries).get_mut(name) else {
             return Err(status::ERR_UNKNOWN);
         };
         f(entry).map_err(|(s, why)| {
             self.violate(function, name, why);
             s
         })
+    }
+
+    /// The status for a property `name` the set does not have, reporting it where probing
+    /// for it is not legitimate.
+    fn unknown(&self, function: &str, name: &str) -> Status {
+        if let Some(why) = self.missing(name) {
+            self.violate(function, name, why);
+        }
+        status::ERR_UNKNOWN
     }
 
     /// The plugin reads component `index` of `name` as `ty`; strings come back as pointers
@@ -349,7 +394,7 @@ impl PropSet {
         index: i32,
         value: One,
     ) -> Result<(), Status> {
-        self.with_entry(function, name, |e| {
+        self.with_entry_mut(function, name, |e| {
             check_writable(e)?;
             check_type(e, value.ty())?;
             let len = e.value.len();
@@ -380,7 +425,7 @@ impl PropSet {
         ty: PropType,
         values: &[One],
     ) -> Result<(), Status> {
-        self.with_entry(function, name, |e| {
+        self.with_entry_mut(function, name, |e| {
             check_writable(e)?;
             check_type(e, ty)?;
             if let Dim::Fixed(n) = e.dim {
@@ -400,7 +445,7 @@ impl PropSet {
 
     /// The plugin resets `name` to its default.
     pub(crate) fn plugin_reset(&self, function: &str, name: &str) -> Result<(), Status> {
-        self.with_entry(function, name, |e| {
+        self.with_entry_mut(function, name, |e| {
             check_writable(e)?;
             e.value = e.default.clone();
             Ok(())
@@ -415,7 +460,7 @@ impl PropSet {
     /// The host sets `name`; its type must be the property's (a host bug otherwise).
     pub(crate) fn set(&self, name: &str, value: PropValue) -> crate::Result<()> {
         let mut entries = self.lock();
-        let entry = entries.get_mut(name).ok_or_else(|| {
+        let entry = entries.get(name).ok_or_else(|| {
             crate::Error::invalid(format!("host: {} {name}", self.what), "no such property")
         })?;
         let stored = Stored::from_value(&value);
@@ -433,7 +478,13 @@ impl PropSet {
                 ),
             ));
         }
-        entry.value = stored;
+        // Setting what is there already leaves shared entries shared.
+        if entry.value == stored {
+            return Ok(());
+        }
+        if let Some(entry) = Arc::make_mut(&mut entries).get_mut(name) {
+            entry.value = stored;
+        }
         Ok(())
     }
 
@@ -513,9 +564,9 @@ impl PropSet {
     /// A copy of every value into a new set of `kind` (a descriptor's values into an
     /// instance), keeping the new set's own writability.
     pub(crate) fn copy_values_from(&self, other: &PropSet) {
-        let source = other.lock().clone();
+        let source = Arc::clone(&other.lock());
         let mut entries = self.lock();
-        for (name, e) in entries.iter_mut() {
+        for (name, e) in Arc::make_mut(&mut entries).iter_mut() {
             if let Some(s) = source.get(name) {
                 if s.value.ty() == e.value.ty() {
                     e.value = s.value.clone();

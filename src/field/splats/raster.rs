@@ -66,9 +66,9 @@ pub(crate) struct Fragment {
     pub rgb: [f32; 3],
 }
 
-/// What a pixel loop reads of a splat, stored per tile entry so the loop walks memory in
-/// order.
-#[derive(Clone, Copy, Debug, Default)]
+/// What a pixel loop reads of a splat: one per projected splat, in depth order, which the
+/// tiles' lists index.
+#[derive(Clone, Copy, Debug)]
 struct Entry {
     xy: [f32; 2],
     conic: [f32; 3],

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Writes src/field/analytic/erf/tables.rs: the polynomial tables of the closed-form
-integrator's error functions (src/field/analytic/erf/mod.rs), fitted here with mpmath at 40
+"""Writes crates/core/src/field/analytic/erf/tables.rs: the polynomial tables of the closed-form
+integrator's error functions (crates/core/src/field/analytic/erf/mod.rs), fitted here with mpmath at 40
 digits.
 
 - erfcx(x) = exp(x^2) erfc(x), x >= 0, as y*g(y) with y = 4/(4 + x) in (0, 1]: g is smooth on
@@ -18,7 +18,7 @@ import mpmath as mp
 mp.mp.dps = 40
 INTERVALS, DEGREE = 64, 6
 SMALL_DEGREE = 9
-OUT = "src/field/analytic/erf/tables.rs"
+OUT = "crates/core/src/field/analytic/erf/tables.rs"
 
 
 def g(y):

@@ -18,10 +18,10 @@ use std::process::Command;
 use std::sync::Arc;
 
 use glam::{DMat4, DVec3, Vec3};
-use nerfx::camera::{CameraPath, Projection, Shot};
-use nerfx::field::{Analytic, Primitive, ShColor, Shape};
-use nerfx::render::{render, Outputs, Quality, RenderSettings};
-use nerfx::scene::{FieldHandle, Instance, Scene};
+use nerfx_core::camera::{CameraPath, Projection, Shot};
+use nerfx_core::field::{Analytic, Primitive, ShColor, Shape};
+use nerfx_core::render::{render, Outputs, Quality, RenderSettings};
+use nerfx_core::scene::{FieldHandle, Instance, Scene};
 use serde_json::Value;
 
 /// Where Blender is, or `None` after printing a skip line when `NERFX_SKIP_BLENDER=1`.

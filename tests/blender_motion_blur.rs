@@ -11,9 +11,9 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-use nerfx::frames::{read_shot, render_frame};
-use nerfx::render::{Outputs, Quality, RenderSettings};
-use nerfx::scene::SceneDesc;
+use nerfx_core::frames::{read_shot, render_frame};
+use nerfx_core::render::{Outputs, Quality, RenderSettings};
+use nerfx_core::scene::SceneDesc;
 use serde_json::Value;
 
 fn blender() -> Option<PathBuf> {

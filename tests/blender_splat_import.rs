@@ -9,7 +9,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use nerfx::field::Splats;
+use nerfx_core::field::Splats;
 
 /// What Blender made of importing `file`: vertex count, NeRF object, points (x y z r g b).
 fn blender_import(file: &Path, executable: Option<&Path>) -> Option<(u64, String, Vec<Vec<f64>>)> {

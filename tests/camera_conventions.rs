@@ -2,7 +2,7 @@
 //! where independent pinhole / panorama formulas, written out here, say they must.
 
 use glam::{DMat3, DMat4, DQuat, DVec2, DVec3, EulerRot};
-use nerfx::camera::{
+use nerfx_core::camera::{
     BlenderIntrinsics, Camera, Equirect, Eye, Ods, Perspective, Projection, SensorFit, Shot,
 };
 

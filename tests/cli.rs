@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use nerfx::image::read_exr_channels;
+use nerfx_core::image::read_exr_channels;
 
 fn nerfx(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_nerfx"))
@@ -175,7 +175,9 @@ fn render_passes_choose_the_channels_written() {
 fn bad_input_fails_with_a_message_naming_the_file() {
     let dir = scratch_dir("bad");
     let scene = dir.join("scene.json");
-    nerfx::demo::scene_desc().write(&scene).expect("scene file");
+    nerfx_core::demo::scene_desc()
+        .write(&scene)
+        .expect("scene file");
     let corrupt = dir.join("shot.json");
     std::fs::write(&corrupt, "{\"version\": 1, \"frames\": [").expect("write");
     let missing = dir.join("missing.json");

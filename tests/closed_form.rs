@@ -14,14 +14,14 @@ use std::sync::Arc;
 
 use common::*;
 use glam::{DMat4, DVec3, Vec3};
-use nerfx::camera::Camera;
-use nerfx::field::{Primitive, Shape};
-use nerfx::image::Planes;
-use nerfx::reference::ErrorReport;
-use nerfx::render::{
+use nerfx_core::camera::Camera;
+use nerfx_core::field::{Primitive, Shape};
+use nerfx_core::image::Planes;
+use nerfx_core::render::{
     render_with_progress, MarchParams, Outputs, Quality, RenderSettings, RenderStats,
 };
-use nerfx::scene::{CropBox, FieldHandle, Instance, Scene};
+use nerfx_core::scene::{CropBox, FieldHandle, Instance, Scene};
+use nerfx_testkit::reference::ErrorReport;
 
 /// Every plane of the camera's image with `params`, and what the render did.
 fn render_stats(scene: &Scene, camera: &Camera, params: MarchParams) -> (Planes, RenderStats) {
@@ -33,7 +33,7 @@ fn render_stats(scene: &Scene, camera: &Camera, params: MarchParams) -> (Planes,
 /// alpha is at least `min_alpha`.
 fn depth_errors(got: &Planes, want: &Planes, min_alpha: f32) -> [f64; 2] {
     let alpha = &want.alpha.as_ref().expect("alpha").data;
-    let worst = |g: &Option<nerfx::image::Plane>, w: &Option<nerfx::image::Plane>| {
+    let worst = |g: &Option<nerfx_core::image::Plane>, w: &Option<nerfx_core::image::Plane>| {
         let (g, w) = (
             &g.as_ref().expect("plane").data,
             &w.as_ref().expect("plane").data,
@@ -54,7 +54,7 @@ fn depth_errors(got: &Planes, want: &Planes, min_alpha: f32) -> [f64; 2] {
 /// where alpha is at least 0.1, and no ray at its node budget.
 #[test]
 fn the_demo_is_within_every_presets_target() {
-    let (scene, camera) = nerfx::demo::scene_and_camera(480, 270).expect("demo");
+    let (scene, camera) = nerfx_core::demo::scene_and_camera(480, 270).expect("demo");
     let want = reference_full(&scene, &camera);
     for quality in Quality::ALL {
         let params = quality.params();
@@ -118,8 +118,9 @@ fn one_pixel(eye: DVec3, target: DVec3) -> Camera {
 /// The pixel of a 1×1 render at `quality`: `[r, g, b, alpha, depth_ray, depth_median]`.
 fn pixel(scene: &Scene, camera: &Camera, quality: Quality) -> [f64; 6] {
     let (p, _) = render_stats(scene, camera, quality.params());
-    let at =
-        |plane: &Option<nerfx::image::Plane>| f64::from(plane.as_ref().expect("plane").data[0]);
+    let at = |plane: &Option<nerfx_core::image::Plane>| {
+        f64::from(plane.as_ref().expect("plane").data[0])
+    };
     let rgb = p.rgb.as_ref().expect("rgb");
     [
         f64::from(rgb[0].data[0]),
@@ -260,7 +261,8 @@ fn overlapping_gaussians_and_a_gaussian_in_a_box() {
         (&in_box, 5.0 * 0.3 * root + 0.2 * 6.0),
     ] {
         let want = reference_full(scene, &camera);
-        let at = |p: &Option<nerfx::image::Plane>| f64::from(p.as_ref().expect("plane").data[0]);
+        let at =
+            |p: &Option<nerfx_core::image::Plane>| f64::from(p.as_ref().expect("plane").data[0]);
         for q in Quality::ALL {
             let target = f64::from(q.params().error_target);
             let [r, g, b, a, depth, med] = pixel(scene, &camera, q);
@@ -312,7 +314,8 @@ fn a_faint_gaussian_inside_a_dense_box() {
             ),
         ]);
         let want = reference_full(&scene, &camera);
-        let at = |p: &Option<nerfx::image::Plane>| f64::from(p.as_ref().expect("plane").data[0]);
+        let at =
+            |p: &Option<nerfx_core::image::Plane>| f64::from(p.as_ref().expect("plane").data[0]);
         let rgb = want.rgb.as_ref().expect("rgb");
         for q in Quality::ALL {
             let target = f64::from(q.params().error_target);
@@ -344,7 +347,7 @@ fn extreme_densities_thin_boxes_and_grazing_rays() {
     ]);
     // The blob's far tail is already opaque, well before the sphere (at 4).
     let want = reference_full(&dense, &camera);
-    let at = |p: &Option<nerfx::image::Plane>| f64::from(p.as_ref().expect("plane").data[0]);
+    let at = |p: &Option<nerfx_core::image::Plane>| f64::from(p.as_ref().expect("plane").data[0]);
     assert!(at(&want.depth_median) < 3.0);
     for q in Quality::ALL {
         let [r, g, b, a, depth, med] = pixel(&dense, &camera, q);
@@ -436,7 +439,7 @@ fn a_scene_with_a_field_that_is_not_analytic_is_marched() {
         prim(sphere([0.0; 3], 0.8), 4.0, [0.8, 0.4, 0.2]),
         prim(gaussian([0.5, 0.2, 0.0], 0.3), 6.0, [0.2, 0.4, 0.8]),
     ];
-    let plain = FieldHandle::new(Arc::new(nerfx::field::Analytic {
+    let plain = FieldHandle::new(Arc::new(nerfx_core::field::Analytic {
         primitives: primitives.clone(),
     }));
     let analytic = instance("a", primitives, DMat4::IDENTITY, None);

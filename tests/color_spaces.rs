@@ -10,13 +10,13 @@
 use std::path::Path;
 use std::process::Command;
 
-use nerfx::image::{write_exr_layers, ExrHeader, OutputColorSpace, Planes};
-use nerfx::render::{render, Outputs, Quality, RenderSettings};
+use nerfx_core::image::{write_exr_layers, ExrHeader, OutputColorSpace, Planes};
+use nerfx_core::render::{render, Outputs, Quality, RenderSettings};
 
 /// A render with partial coverage and values above 1 (the demo, brightened), as linear
 /// Rec.709 RGBA.
 fn render_rgba() -> Planes {
-    let (scene, camera) = nerfx::demo::scene_and_camera(48, 27).unwrap();
+    let (scene, camera) = nerfx_core::demo::scene_and_camera(48, 27).unwrap();
     let settings = RenderSettings::new(Quality::Draft.params(), Outputs::rgba());
     let mut planes = render(&scene, &camera, camera.full_window(), &settings).unwrap();
     for c in planes.rgb.as_mut().unwrap() {

@@ -1,11 +1,11 @@
 //! The compositing functions against their formulas written out again here, on seeded random
 //! premultiplied pixels; their identities; and finite output for alpha 0, NaN and inf input.
 
-use nerfx::composite::{
+use nerfx_core::composite::{
     accumulation_matte, depth_merge, mix, over, rgba_pixels, rgba_planes, shadow_catcher_merge,
     MatteCurve, Rgba,
 };
-use nerfx::image::{Plane, Planes};
+use nerfx_core::image::{Plane, Planes};
 
 const W: u32 = 17;
 const H: u32 = 9;

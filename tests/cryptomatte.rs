@@ -14,13 +14,13 @@ mod common_ingp;
 use std::path::Path;
 use std::process::Command;
 
-use nerfx::image::read_exr_channels;
+use nerfx_core::image::read_exr_channels;
 
 #[test]
 fn mattes_decode_per_the_specification_and_add_up_to_alpha() {
     let (w, h) = (96u32, 64u32);
     let dir = tempfile::tempdir().unwrap();
-    let mut shot = nerfx::demo::shot(w, h);
+    let mut shot = nerfx_core::demo::shot(w, h);
     shot.frames.truncate(1);
     let camera = shot.frames[0].camera(&shot).unwrap();
     let at = |x: f64, y: f64, depth: f64| {
@@ -126,9 +126,9 @@ fn mattes_decode_per_the_specification_and_add_up_to_alpha() {
 /// error target, and each instance is seen.
 #[test]
 fn coverage_of_a_trained_field_splats_and_a_ball_adds_up_to_alpha() {
-    use nerfx::bench::snapshot::Weights;
-    use nerfx::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
-    use nerfx::scene::SceneDesc;
+    use nerfx_core::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
+    use nerfx_core::scene::SceneDesc;
+    use nerfx_testkit::bench::snapshot::Weights;
     let dir = tempfile::tempdir().unwrap();
     let fog = common_ingp::write_snapshot(
         dir.path(),
@@ -138,8 +138,8 @@ fn coverage_of_a_trained_field_splats_and_a_ball_adds_up_to_alpha() {
             ..common_ingp::Spec::small_8x4()
         },
     );
-    let splats = nerfx::bench::splats::generated_splats(3000);
-    let camera = nerfx::bench::splats::framing_camera(&splats, 64, 40).unwrap();
+    let splats = nerfx_testkit::bench::splats::generated_splats(3000);
+    let camera = nerfx_testkit::bench::splats::framing_camera(&splats, 64, 40).unwrap();
     let ply = dir.path().join("splats.ply");
     splats.write_ply(&ply).unwrap();
     // The snapshot marched by nerfx's marcher, then by instant-ngp's own (fragments).
@@ -158,7 +158,8 @@ fn coverage_of_a_trained_field_splats_and_a_ball_adds_up_to_alpha() {
             ..RenderSettings::new(Quality::Preview.params(), Outputs::rgba())
         };
         let identity = glam::DMat4::IDENTITY;
-        let place = |s: &nerfx::scene::LoadedScene| s.place(identity, &|_| Ok(identity)).unwrap();
+        let place =
+            |s: &nerfx_core::scene::LoadedScene| s.place(identity, &|_| Ok(identity)).unwrap();
         let window = camera.full_window();
         let plain = render(&place(&loaded), &camera, window, &settings).unwrap();
         let lit = loaded.with_indicator_colours(&glam::Vec3::AXES).unwrap();
@@ -169,7 +170,7 @@ fn coverage_of_a_trained_field_splats_and_a_ball_adds_up_to_alpha() {
         for (p, &want) in alpha.iter().enumerate() {
             worst = worst.max((a.data[p] + b.data[p] + c.data[p] - want).abs());
         }
-        let seen = |p: &nerfx::image::Plane| p.data.iter().cloned().fold(0.0, f32::max);
+        let seen = |p: &nerfx_core::image::Plane| p.data.iter().cloned().fold(0.0, f32::max);
         eprintln!(
             "{sampler}: coverage sums to alpha within {worst:.2e}; most of fog {:.3}, splats \
          {:.3}, ball {:.3}",

@@ -4,9 +4,9 @@
 use std::path::Path;
 
 use glam::{DMat4, DVec3, Vec3};
-use nerfx::field::{Analytic, Primitive, ShColor, Shape, Splats};
-use nerfx::scene::{FieldHandle, Instance, Scene, SceneDesc};
-use nerfx::standin::{field_points, points, write_ply};
+use nerfx_core::field::{Analytic, Primitive, ShColor, Shape, Splats};
+use nerfx_core::scene::{FieldHandle, Instance, Scene, SceneDesc};
+use nerfx_core::standin::{field_points, points, write_ply};
 
 fn sphere(center: Vec3, radius: f32) -> Analytic {
     Analytic {
@@ -102,7 +102,7 @@ fn sphere_mesh_vertices_lie_within_root_three_cells_of_its_surface() {
     let resolution = 48;
     let cell = 2.0 * radius / resolution as f32;
     let mesh =
-        nerfx::standin::field_mesh(&sphere(center, radius), DMat4::IDENTITY, resolution, 0.5);
+        nerfx_core::standin::field_mesh(&sphere(center, radius), DMat4::IDENTITY, resolution, 0.5);
     assert!(
         mesh.triangles.len() > 1000,
         "{} triangles",

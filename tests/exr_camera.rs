@@ -11,7 +11,7 @@ use std::path::Path;
 use std::process::Command;
 
 use glam::DVec3;
-use nerfx::image::read_exr_channels;
+use nerfx_core::image::read_exr_channels;
 
 /// The row vector `[p, 1]` times the stored (row-by-row) matrix `m`.
 fn times(p: DVec3, m: &[f64]) -> [f64; 4] {
@@ -24,7 +24,7 @@ fn header_matrices_project_world_points_onto_their_pixels() {
     let (w, h) = (96u32, 64u32);
     let dir = tempfile::tempdir().unwrap();
     // The demo's camera, with a lens shift and an NTSC frame rate.
-    let mut shot = nerfx::demo::shot(w, h);
+    let mut shot = nerfx_core::demo::shot(w, h);
     shot.fps_base = 1.001;
     shot.frames.truncate(1);
     shot.frames[0].camera.shift_x = 0.08;

@@ -11,8 +11,8 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use std::process::Command;
 
-use nerfx::image::{write_exr_layers, ExrHeader, Plane, Planes, BACKGROUND_DEPTH};
-use nerfx::render::{render, Outputs, Quality, RenderSettings};
+use nerfx_core::image::{write_exr_layers, ExrHeader, Plane, Planes, BACKGROUND_DEPTH};
+use nerfx_core::render::{render, Outputs, Quality, RenderSettings};
 
 /// The channels a file of `main` with `layers` holds, each with the plane it was written from
 /// and whether it is a depth.
@@ -40,7 +40,7 @@ fn expected<'a>(main: &'a Planes, layers: &[(&str, &'a Planes)]) -> Vec<(String,
 
 #[test]
 fn openexr_reads_every_channel_bit_for_bit() {
-    let (scene, camera) = nerfx::demo::scene_and_camera(64, 36).unwrap();
+    let (scene, camera) = nerfx_core::demo::scene_and_camera(64, 36).unwrap();
     let settings = RenderSettings::new(Quality::Draft.params(), Outputs::all());
     let main = render(&scene, &camera, camera.full_window(), &settings).unwrap();
     // Another image under a name: every value moved, so that a channel read from the wrong

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use nerfx::image::{read_exr_channels, read_exr_image, Plane};
+use nerfx_core::image::{read_exr_channels, read_exr_image, Plane};
 
 const FRAMES: &str = "1001-1012";
 const WIDTH: u32 = 40;
@@ -37,8 +37,8 @@ fn run(command: &mut Command) -> Output {
 /// The demo's scene and shot, written to `dir`.
 fn scene_and_shot(dir: &Path) -> (PathBuf, PathBuf) {
     let (scene, shot) = (dir.join("scene.json"), dir.join("shot.json"));
-    nerfx::demo::scene_desc().write(&scene).unwrap();
-    nerfx::demo::shot(WIDTH, HEIGHT).write(&shot).unwrap();
+    nerfx_core::demo::scene_desc().write(&scene).unwrap();
+    nerfx_core::demo::shot(WIDTH, HEIGHT).write(&shot).unwrap();
     (scene, shot)
 }
 
@@ -54,7 +54,7 @@ fn local_render(scene: &Path, shot: &Path, dir: &Path) -> PathBuf {
 }
 
 fn frame(pattern: &Path, frame: i64) -> PathBuf {
-    nerfx::frames::frame_path(pattern, frame, true)
+    nerfx_core::frames::frame_path(pattern, frame, true)
 }
 
 fn channels(path: &Path) -> Vec<(String, Plane)> {
@@ -321,7 +321,7 @@ fn slurm_runs_chunks_split_frames_retries_and_refuses_bad_scenes() {
     // A task whose nerfx is killed with SIGKILL mid-frame: larger frames, so that the kill
     // lands inside the second; the program records its pid (and execs nerfx).
     let big_shot = work.path().join("big_shot.json");
-    nerfx::demo::shot(960, 540).write(&big_shot).unwrap();
+    nerfx_core::demo::shot(960, 540).write(&big_shot).unwrap();
     let recorder = work.path().join("record-pid.sh");
     std::fs::write(
         &recorder,
@@ -586,7 +586,7 @@ fn a_task_killed_mid_frame_reruns_without_partial_files() {
     let work = tempfile::tempdir().unwrap();
     let (scene, shot) = scene_and_shot(work.path());
     // Large enough frames that the kill lands inside one.
-    let big = nerfx::demo::shot(480, 270);
+    let big = nerfx_core::demo::shot(480, 270);
     big.write(&shot).unwrap();
     let pattern = work.path().join("out/f.####.exr");
     let render = |frames: &str| {
@@ -705,7 +705,7 @@ fn a_bad_scene_exits_with_the_no_retry_status_and_a_split_frame_is_the_whole_fra
 #[test]
 fn a_graph_in_stripes_assembles_to_the_whole_frame_every_layer() {
     let work = tempfile::tempdir().unwrap();
-    let graph = nerfx::demo::write_graph(work.path(), WIDTH, HEIGHT).unwrap();
+    let graph = nerfx_graph::demo::write_graph(work.path(), WIDTH, HEIGHT).unwrap();
     let bundle = common_ofx::bundle();
     let render = |pattern: &Path, stripe: Option<String>| {
         let mut c = nerfx();

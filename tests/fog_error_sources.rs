@@ -7,11 +7,11 @@
 //! converged enough to judge Final by (against a march twice as fine, it is off by well under
 //! Final's target), which is what makes a preset's miss on these rows the marcher's own.
 
-use nerfx::bench::scenes::{build, BenchScene};
-use nerfx::bench::suite::{fine_params, finer_params, ROW_STRIDE};
-use nerfx::bench::SceneKind;
-use nerfx::image::{Planes, Window};
-use nerfx::render::{render_with_progress, MarchParams, Outputs, Quality, RenderSettings};
+use nerfx_core::image::{Planes, Window};
+use nerfx_core::render::{render_with_progress, MarchParams, Outputs, Quality, RenderSettings};
+use nerfx_testkit::bench::scenes::{build, BenchScene};
+use nerfx_testkit::bench::suite::{fine_params, finer_params, ROW_STRIDE};
+use nerfx_testkit::bench::SceneKind;
 
 const W: u32 = 480;
 const H: u32 = 270;

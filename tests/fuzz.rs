@@ -32,12 +32,12 @@ use std::time::{Duration, Instant};
 use common_fields::SplitMix64;
 use common_fuzz::{mutate, Kind};
 use glam::{DMat4, DVec3};
-use nerfx::camera::{Camera, Perspective, Projection};
-use nerfx::demo::look_at;
-use nerfx::graph::{evaluate, purge_caches, render_direct, Graph};
-use nerfx::image::{Planes, Window};
-use nerfx::render::{render, Outputs, Quality, RenderSettings};
-use nerfx::scene::{LoadedScene, Scene, SceneDesc};
+use nerfx_core::camera::{Camera, Perspective, Projection};
+use nerfx_core::demo::look_at;
+use nerfx_core::image::{Planes, Window};
+use nerfx_core::render::{render, Outputs, Quality, RenderSettings};
+use nerfx_core::scene::{LoadedScene, Scene, SceneDesc};
+use nerfx_graph::{evaluate, purge_caches, render_direct, Graph};
 
 /// The longest a case may take.
 const CASE_TIME: Duration = Duration::from_secs(10);
@@ -202,8 +202,8 @@ fn fixtures() -> &'static Fixtures {
         let demo = Path::new(env!("CARGO_TARGET_TMPDIR"))
             .join(format!("nerfx-fuzz-demo-{}", std::process::id()));
         std::fs::create_dir_all(&demo).unwrap();
-        nerfx::demo::write_graph(&demo, 8, 8).unwrap();
-        let mut desc = nerfx::demo::scene_desc();
+        nerfx_graph::demo::write_graph(&demo, 8, 8).unwrap();
+        let mut desc = nerfx_core::demo::scene_desc();
         for inst in &mut desc.instances {
             inst.object = None;
         }
@@ -282,7 +282,7 @@ fn build_targets() -> Vec<Target> {
             name: TARGET_NAMES[2],
             kind: Kind::Text,
             seeds: vec![
-                serde_json::to_vec_pretty(&nerfx::demo::scene_desc()).unwrap(),
+                serde_json::to_vec_pretty(&nerfx_core::demo::scene_desc()).unwrap(),
                 file(&f.demo.join("demo_shadow.json")),
             ],
             cases: 800,
@@ -543,7 +543,7 @@ fn write(path: &Path, bytes: &[u8]) {
 fn check_shot(f: &Fixtures, dir: &Path, bytes: &[u8]) -> Result<Verdict, String> {
     let path = dir.join("shot.json");
     write(&path, bytes);
-    let shot = attempt!(nerfx::frames::read_shot(&path, "NeRF"));
+    let shot = attempt!(nerfx_core::frames::read_shot(&path, "NeRF"));
     let at = attempt!(shot.frames.first().ok_or("no frames"));
     let camera = attempt!(at.camera(&shot));
     let world = attempt!(at.world_from_scene(&shot));
@@ -575,9 +575,9 @@ fn check_graph(f: &Fixtures, _: &Path, bytes: &[u8]) -> Result<Verdict, String> 
 fn check_frames_and_stripe(_: &Fixtures, _: &Path, bytes: &[u8]) -> Result<Verdict, String> {
     let text = attempt!(std::str::from_utf8(bytes));
     let (frames, stripe) = text.split_once('\n').unwrap_or((text, "1/1"));
-    let frames = attempt!(nerfx::frames::parse_frames(frames));
+    let frames = attempt!(nerfx_core::frames::parse_frames(frames));
     let spec = nerfx::farm::frame_spec(&frames);
-    if nerfx::frames::parse_frames(&spec).ok().as_ref() != Some(&frames) {
+    if nerfx_core::frames::parse_frames(&spec).ok().as_ref() != Some(&frames) {
         return Err(format!(
             "frame spec {spec} does not read back as its frames"
         ));
@@ -972,7 +972,7 @@ fn ingp_params_claiming_gigabytes_are_refused_at_their_header() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("bomb.ingp");
     write(&path, &bomb);
-    let (r, peak) = peak_of(|| nerfx::field::IngpField::load(&path).map(|_| ()));
+    let (r, peak) = peak_of(|| nerfx_core::field::IngpField::load(&path).map(|_| ()));
     let e = r.unwrap_err().to_string();
     assert!(
         e.contains("bomb.ingp") && e.contains("snapshot.params_binary") && e.contains("3221225472"),
@@ -989,7 +989,7 @@ fn ingp_params_before_their_configuration_are_bounded_too() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("bomb.ingp");
     write(&path, &bomb);
-    let (r, peak) = peak_of(|| nerfx::field::IngpField::load(&path).map(|_| ()));
+    let (r, peak) = peak_of(|| nerfx_core::field::IngpField::load(&path).map(|_| ()));
     let e = r.unwrap_err().to_string();
     assert!(
         e.contains("snapshot.params_binary") && e.contains("more than the network"),
@@ -1020,13 +1020,13 @@ fn ingp_snapshot_before_its_configuration_loads_the_same() {
     write(&a, &bytes);
     write(&b, &reordered);
     let (fa, fb) = (
-        nerfx::field::IngpField::load(&a).unwrap(),
-        nerfx::field::IngpField::load(&b).unwrap(),
+        nerfx_core::field::IngpField::load(&a).unwrap(),
+        nerfx_core::field::IngpField::load(&b).unwrap(),
     );
     let points: Vec<glam::Vec3> = (0..64)
         .map(|i| glam::Vec3::new(i as f32 / 64.0 - 0.5, 0.1, -0.2))
         .collect();
-    use nerfx::field::Field;
+    use nerfx_core::field::Field;
     let (mut sa, mut sb) = (vec![0.0; 64], vec![0.0; 64]);
     fa.density(&points, &mut sa);
     fb.density(&points, &mut sb);
@@ -1077,7 +1077,7 @@ fn checkpoint_entries_declaring_more_than_they_can_hold_are_refused() {
 
 /// A 2×2 image to write.
 fn tiny_image() -> Planes {
-    let p = nerfx::image::Plane::filled(2, 2, 0.5);
+    let p = nerfx_core::image::Plane::filled(2, 2, 0.5);
     Planes {
         width: 2,
         height: 2,
@@ -1103,7 +1103,7 @@ fn output_paths_of_every_kind() {
     let dir = tempfile::tempdir().unwrap();
     let at = |n: &str| dir.path().join(n);
     let image = tiny_image();
-    let write = |p: &Path| nerfx::image::write_png_preview(p, &image);
+    let write = |p: &Path| nerfx_core::image::write_png_preview(p, &image);
     let png = |p: &Path| std::fs::read(p).unwrap().starts_with(b"\x89PNG");
 
     // A regular file of mode 0600 stays 0600.
@@ -1239,7 +1239,7 @@ fn output_as_nobody() {
     let Some(path) = std::env::var_os("NERFX_OUTPUT_AS_NOBODY") else {
         return;
     };
-    let e = nerfx::image::write_png_preview(Path::new(&path), &tiny_image()).unwrap_err();
+    let e = nerfx_core::image::write_png_preview(Path::new(&path), &tiny_image()).unwrap_err();
     println!("refused: {e}");
 }
 

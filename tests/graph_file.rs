@@ -4,10 +4,10 @@
 
 use std::path::PathBuf;
 
-use nerfx::composite::{depth_merge, shadow_catcher_merge};
-use nerfx::demo;
-use nerfx::graph::{evaluate, node, render_direct, Graph, ParamValues, RenderRequest, Value};
-use nerfx::image::{Plane, Planes, Window};
+use nerfx_core::composite::{depth_merge, shadow_catcher_merge};
+use nerfx_core::image::{Plane, Planes, Window};
+use nerfx_graph::demo::write_graph;
+use nerfx_graph::{evaluate, node, render_direct, Graph, ParamValues, RenderRequest, Value};
 
 fn scratch_dir(name: &str) -> PathBuf {
     let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
@@ -42,7 +42,7 @@ fn red(p: &Planes) -> Plane {
 fn the_demo_graph_composites_what_its_file_says() {
     let dir = scratch_dir("demo");
     let (w, h) = (40, 24);
-    let graph = Graph::read(&demo::write_graph(&dir, w, h).unwrap()).unwrap();
+    let graph = Graph::read(&write_graph(&dir, w, h).unwrap()).unwrap();
     for scale in [1.0, 0.5] {
         let order = std::cell::RefCell::new(Vec::new());
         let images = evaluate(

@@ -6,7 +6,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use nerfx::graph::{evaluate, render_direct, Graph};
+use nerfx_graph::{evaluate, render_direct, Graph};
 
 /// The system allocator, counting the bytes allocated now and the most ever at once.
 struct Counting;
@@ -64,7 +64,7 @@ fn peak_while_evaluating(graph: &Graph) -> (usize, Vec<String>) {
 #[test]
 fn a_long_chain_holds_as_few_images_as_a_short_one_and_size_is_bounded() {
     let dir = tempfile::tempdir().unwrap();
-    nerfx::demo::write_graph(dir.path(), 64, 36).unwrap();
+    nerfx_graph::demo::write_graph(dir.path(), 64, 36).unwrap();
     let (short, long) = (chain(dir.path(), 8), chain(dir.path(), 4000));
     // The first evaluation loads and caches the scene and shot; the measured ones do not.
     peak_while_evaluating(&short);

@@ -7,18 +7,18 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, SystemTime};
 
-use nerfx::camera::Shot;
-use nerfx::composite::{
+use nerfx_core::camera::Shot;
+use nerfx_core::composite::{
     accumulation_matte, depth_merge, mix, rgba_planes, shadow_catcher_merge, MatteCurve, Rgba,
 };
-use nerfx::demo;
-use nerfx::frames::{read_shot, render_frame};
-use nerfx::graph::{
+use nerfx_core::demo;
+use nerfx_core::frames::{read_shot, render_frame};
+use nerfx_core::image::{Plane, Planes, Window};
+use nerfx_core::render::{Outputs, Quality, RenderSettings};
+use nerfx_core::scene::SceneDesc;
+use nerfx_graph::{
     cached_scene, node, nodes, purge_caches, Context, ParamKind, ParamValues, RenderRequest, Value,
 };
-use nerfx::image::{Plane, Planes, Window};
-use nerfx::render::{Outputs, Quality, RenderSettings};
-use nerfx::scene::SceneDesc;
 
 #[path = "common/rng.rs"]
 mod rng;
@@ -394,7 +394,7 @@ fn scene_cache_reloads_changed_files_and_after_purge() {
 /// without blur renders the same whatever the sample count.
 #[test]
 fn nerf_render_blurs_over_the_shots_shutter_as_the_command_line_does() {
-    use nerfx::camera::{MotionBlur, ShutterPosition};
+    use nerfx_core::camera::{MotionBlur, ShutterPosition};
     let (dir, scene, shot_path) = demo_files("blur", 48, 27);
     let frame = demo::FIRST_FRAME + 3;
     let n = node("org.nerfx.NeRFRender").unwrap();

@@ -9,7 +9,7 @@ mod common_ingp;
 
 use common_ingp::{scratch, write_snapshot, Spec};
 use glam::Vec3;
-use nerfx::field::{Field, IngpField};
+use nerfx_core::field::{Field, IngpField};
 
 #[test]
 fn the_features_route_gives_the_same_samples() {

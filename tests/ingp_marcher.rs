@@ -14,14 +14,14 @@ use std::path::{Path, PathBuf};
 
 use common_ingp::{scratch, write_blob_snapshot, Ball, Spec};
 use glam::{DMat4, DVec3};
-use nerfx::camera::{Camera, Perspective, Projection};
-use nerfx::field::{IngpField, NgpRay, NgpSample, NgpScratch, NGP_MAX_STEPS};
-use nerfx::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
-use nerfx::scene::{Scene, SceneDesc};
+use nerfx_core::camera::{Camera, Perspective, Projection};
+use nerfx_core::field::{IngpField, NgpRay, NgpSample, NgpScratch, NGP_MAX_STEPS};
+use nerfx_core::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
+use nerfx_core::scene::{Scene, SceneDesc};
 
 /// The snapshot at `snapshot` (in `dir`) as the one instance of a scene, at the identity,
 /// with `"sampler": sampler` when given.
-fn placed(dir: &Path, snapshot: &Path, sampler: Option<&str>) -> nerfx::Result<Scene> {
+fn placed(dir: &Path, snapshot: &Path, sampler: Option<&str>) -> nerfx_core::Result<Scene> {
     let scene_file = dir.join("scene.json");
     let sampler = sampler.map_or(String::new(), |s| format!(r#", "sampler": "{s}""#));
     std::fs::write(
@@ -80,7 +80,7 @@ const BALLS_IN_THREE_CASCADES: [Ball; 3] = [
 fn camera(w: u32, h: u32, fov: f64, eye: DVec3, target: DVec3) -> Camera {
     let p = Perspective::from_vertical_fov(w, h, fov).unwrap();
     Camera::new(
-        nerfx::demo::look_at(eye, target),
+        nerfx_core::demo::look_at(eye, target),
         Projection::Perspective(p),
     )
     .unwrap()
@@ -104,7 +104,7 @@ fn samples_of(
     field: &IngpField,
     rays: &[NgpRay],
     max_steps: usize,
-) -> (Vec<Vec<NgpSample>>, nerfx::field::NgpStats) {
+) -> (Vec<Vec<NgpSample>>, nerfx_core::field::NgpStats) {
     let mut out = vec![Vec::new(); rays.len()];
     let stats = field.march_rays(rays, max_steps, &mut out, &mut NgpScratch::default());
     (out, stats)
@@ -346,9 +346,9 @@ fn the_sampler_is_chosen_per_instance_and_refused_where_it_does_not_apply() {
 /// marcher finds its face to a fraction of its base step, itself a fraction of the slab's
 /// size: samples of another instance closer to the face than that may composite on either
 /// side of it, so the slab is no larger than the view needs.)
-fn slab(y0: f32, y1: f32, half: f32) -> nerfx::scene::Instance {
+fn slab(y0: f32, y1: f32, half: f32) -> nerfx_core::scene::Instance {
     use glam::Vec3;
-    use nerfx::field::{Analytic, Primitive, ShColor, Shape};
+    use nerfx_core::field::{Analytic, Primitive, ShColor, Shape};
     let field = Analytic {
         primitives: vec![Primitive {
             shape: Shape::Box {
@@ -359,8 +359,8 @@ fn slab(y0: f32, y1: f32, half: f32) -> nerfx::scene::Instance {
             color: ShColor::constant(Vec3::ONE),
         }],
     };
-    let handle = nerfx::scene::FieldHandle::analytic(field);
-    nerfx::scene::Instance::new("slab", handle, DMat4::IDENTITY, None).unwrap()
+    let handle = nerfx_core::scene::FieldHandle::analytic(field);
+    nerfx_core::scene::Instance::new("slab", handle, DMat4::IDENTITY, None).unwrap()
 }
 
 #[test]
@@ -394,7 +394,7 @@ fn an_ngp_marched_snapshot_occludes_and_is_occluded_by_other_instances() {
     behind.instances.push(slab(30.0, 40.0, 40.0));
     let over = render(&behind, &camera, camera.full_window(), &settings).unwrap();
     let (mut seen, mut hidden, mut worst, mut at) = (0.0f64, 0.0f64, 0.0f64, 0);
-    let pixel = |planes: &nerfx::image::Planes, x: u32, y: u32| {
+    let pixel = |planes: &nerfx_core::image::Planes, x: u32, y: u32| {
         let rgb = planes.rgb.as_ref().unwrap();
         [0, 1, 2].map(|c| f64::from(rgb[c].get(x, y)))
     };
@@ -485,7 +485,7 @@ fn a_fog_takes_1024_steps_along_the_diagonal_and_a_lower_cap_is_counted() {
     // In the field's frame the cube is 0.5 ± 0.5 of instant-ngp's unit over s = 0.33, its
     // diagonal still along (1, 1, 1).
     let corner = DVec3::splat(-0.5 / 0.33);
-    let world = nerfx::camera::Ray {
+    let world = nerfx_core::camera::Ray {
         origin: corner - DVec3::splat(1.0),
         dir: DVec3::ONE.normalize(),
         z_per_t: 1.0,
@@ -530,8 +530,8 @@ fn cpu_seconds() -> Option<f64> {
 #[test]
 #[ignore = "benchmark"]
 fn bench_ngp_sampler_against_final() {
-    use nerfx::reference::metrics::psnr;
-    use nerfx::render::render_with_progress;
+    use nerfx_core::render::render_with_progress;
+    use nerfx_testkit::reference::metrics::psnr;
     use std::time::Instant;
 
     let (w, h) = common_fields::bench_size((320, 180));
@@ -581,7 +581,7 @@ fn bench_ngp_sampler_against_final() {
                 }
             }
         }
-        let alpha = |p: &nerfx::image::Planes| {
+        let alpha = |p: &nerfx_core::image::Planes| {
             p.alpha
                 .as_ref()
                 .unwrap()

@@ -14,10 +14,10 @@ use std::sync::Arc;
 use common_fields::numpy_reference;
 use common_ingp::{scratch, write_blob_snapshot, Ball, Spec};
 use glam::{DMat4, DVec3, Vec3};
-use nerfx::camera::{Camera, Perspective, Projection};
-use nerfx::field::IngpField;
-use nerfx::render::{render_naive, Outputs};
-use nerfx::scene::{FieldHandle, Instance, Scene};
+use nerfx_core::camera::{Camera, Perspective, Projection};
+use nerfx_core::field::IngpField;
+use nerfx_core::render::{render_naive, Outputs};
+use nerfx_core::scene::{FieldHandle, Instance, Scene};
 
 #[test]
 fn naive_render_agrees_with_a_numpy_march() {
@@ -45,7 +45,7 @@ fn naive_render_agrees_with_a_numpy_march() {
     let (w, h) = (12u32, 8u32);
     let p = Perspective::from_vertical_fov(w, h, 30.0).unwrap();
     let camera = Camera::new(
-        nerfx::demo::look_at(DVec3::new(2.0, -2.5, 0.9), DVec3::ZERO),
+        nerfx_core::demo::look_at(DVec3::new(2.0, -2.5, 0.9), DVec3::ZERO),
         Projection::Perspective(p),
     )
     .unwrap();
@@ -122,7 +122,7 @@ fn naive_render_agrees_with_a_numpy_march() {
 /// alpha is the same in both.
 #[test]
 fn linear_output_is_the_as_trained_composite_decoded() {
-    use nerfx::render::{render, ColorOutput, Quality, RenderSettings};
+    use nerfx_core::render::{render, ColorOutput, Quality, RenderSettings};
     let dir = scratch("render-colour");
     let balls = [Ball {
         centre: [0.5, 0.5, 0.5],
@@ -139,7 +139,7 @@ fn linear_output_is_the_as_trained_composite_decoded() {
     .unwrap()]);
     let p = Perspective::from_vertical_fov(16, 12, 30.0).unwrap();
     let camera = Camera::new(
-        nerfx::demo::look_at(DVec3::new(2.0, -2.5, 0.9), DVec3::ZERO),
+        nerfx_core::demo::look_at(DVec3::new(2.0, -2.5, 0.9), DVec3::ZERO),
         Projection::Perspective(p),
     )
     .unwrap();

@@ -13,7 +13,7 @@ use std::process::Command;
 use common_fields::{check_rgb, check_sigma, numpy_reference};
 use common_ingp::{scratch, write_snapshot, Spec, SplitMix64};
 use glam::Vec3;
-use nerfx::field::{Aabb, Field, IngpField, TableStorage};
+use nerfx_core::field::{Aabb, Field, IngpField, TableStorage};
 
 /// Seeded points inside the field's bounds and unit directions.
 fn samples(field: &IngpField, n: usize, seed: u64) -> (Vec<Vec3>, Vec<Vec3>) {
@@ -119,10 +119,10 @@ fn occupancy_is_conservative_where_the_field_has_density() {
     let (pts, _) = samples(&f, 4000, 9);
     let mut sigma = vec![0.0; pts.len()];
     f.density(&pts, &mut sigma);
-    let occ = nerfx::field::Occupancy::build(&f, 64);
+    let occ = nerfx_core::field::Occupancy::build(&f, 64);
     let mut empty_seen = 0;
     for (p, s) in pts.iter().zip(&sigma) {
-        let tiny = nerfx::field::Aabb::new(*p, *p);
+        let tiny = nerfx_core::field::Aabb::new(*p, *p);
         if *s > 0.0 {
             assert!(f.may_be_occupied(&tiny), "{p}");
             assert!(occ.is_occupied_point(*p), "{p}");
@@ -295,7 +295,8 @@ fn bench_field_throughput() {
                 f.density(pts, &mut sigma);
                 let occupied = sigma.iter().filter(|&&s| s > 0.0).count() as f64;
                 for threads in [1, 2] {
-                    let t = nerfx::bench::field::throughput(&f, pts, dirs, threads, 1.0).unwrap();
+                    let t = nerfx_testkit::bench::field::throughput(&f, pts, dirs, threads, 1.0)
+                        .unwrap();
                     println!(
                         "{name} {storage:?} {what:10} ({:2.0}% occupied), {threads} thread(s): \
                          density {:5.2}, density + radiance as renders (features) {:5.2}, \
@@ -318,8 +319,8 @@ fn bench_field_throughput() {
 #[test]
 fn a_scene_file_renders_a_snapshot_next_to_it() {
     use glam::{DMat4, DVec3};
-    use nerfx::camera::{Camera, Perspective, Projection};
-    use nerfx::render::{render, Outputs, Quality, RenderSettings};
+    use nerfx_core::camera::{Camera, Perspective, Projection};
+    use nerfx_core::render::{render, Outputs, Quality, RenderSettings};
     let dir = scratch("scene");
     write_snapshot(&dir, "obj", &Spec::small_8x4());
     let scene_path = dir.join("scene.json");
@@ -328,7 +329,7 @@ fn a_scene_file_renders_a_snapshot_next_to_it() {
         r#"{ "instances": [ { "name": "obj", "field": { "ingp": { "path": "obj.ingp" } } } ] }"#,
     )
     .unwrap();
-    let scene = nerfx::scene::SceneDesc::read(&scene_path)
+    let scene = nerfx_core::scene::SceneDesc::read(&scene_path)
         .unwrap()
         .load()
         .unwrap()
@@ -337,7 +338,7 @@ fn a_scene_file_renders_a_snapshot_next_to_it() {
     let p = Perspective::from_vertical_fov(24, 16, 50.0).unwrap();
     let eye = DVec3::new(0.0, -9.0, 2.0);
     let camera = Camera::new(
-        nerfx::demo::look_at(eye, DVec3::ZERO),
+        nerfx_core::demo::look_at(eye, DVec3::ZERO),
         Projection::Perspective(p),
     )
     .unwrap();
@@ -359,7 +360,7 @@ fn a_scene_file_renders_a_snapshot_next_to_it() {
         r#"{ "instances": [ { "name": "obj", "field": { "ingp": { "path": "gone.ingp" } } } ] }"#,
     )
     .unwrap();
-    let e = nerfx::scene::SceneDesc::read(&scene_path)
+    let e = nerfx_core::scene::SceneDesc::read(&scene_path)
         .unwrap()
         .load()
         .err()
@@ -407,11 +408,11 @@ fn nerfx_info_describes_a_snapshot_and_names_a_corrupt_one() {
 /// The synthetic benchmark scene: a 8×4 fp16 2^19 snapshot whose occupied cells are three
 /// overlapping balls and whose σ row is scaled so rays terminate inside them (instant-ngp
 /// coordinates: the unit cube is cascade 0; s = 0.33, o = 0.5). Prints what it is.
-fn blob_bench_scene(dir: &std::path::Path) -> nerfx::scene::Scene {
+fn blob_bench_scene(dir: &std::path::Path) -> nerfx_core::scene::Scene {
     use glam::DMat4;
-    use nerfx::bench::snapshot::occupied_fraction;
-    use nerfx::render::Quality;
-    use nerfx::scene::{FieldHandle, Instance, Scene};
+    use nerfx_core::render::Quality;
+    use nerfx_core::scene::{FieldHandle, Instance, Scene};
+    use nerfx_testkit::bench::snapshot::occupied_fraction;
     use std::sync::Arc;
 
     // The benchmark suite's blob scene (`nerfx bench --scene blob`).
@@ -461,13 +462,13 @@ fn blob_bench_scene(dir: &std::path::Path) -> nerfx::scene::Scene {
 }
 
 /// The benchmark's camera at `w × h` (40° vertical field of view, looking at the blob).
-fn blob_bench_camera(w: u32, h: u32) -> nerfx::camera::Camera {
+fn blob_bench_camera(w: u32, h: u32) -> nerfx_core::camera::Camera {
     use glam::DVec3;
-    use nerfx::camera::{Camera, Perspective, Projection};
+    use nerfx_core::camera::{Camera, Perspective, Projection};
     let p = Perspective::from_vertical_fov(w, h, 40.0).unwrap();
     let eye = DVec3::new(2.2, -1.6, 0.8);
     Camera::new(
-        nerfx::demo::look_at(eye, DVec3::ZERO),
+        nerfx_core::demo::look_at(eye, DVec3::ZERO),
         Projection::Perspective(p),
     )
     .unwrap()
@@ -480,7 +481,7 @@ fn blob_bench_camera(w: u32, h: u32) -> nerfx::camera::Camera {
 #[test]
 #[ignore]
 fn bench_render_1080p_final() {
-    use nerfx::render::{render_with_progress, Outputs, Quality, RenderSettings};
+    use nerfx_core::render::{render_with_progress, Outputs, Quality, RenderSettings};
     use std::time::Instant;
 
     let dir = scratch("bench-render");
@@ -544,7 +545,9 @@ fn bench_render_1080p_final() {
 #[test]
 #[ignore]
 fn bench_render_final_accuracy() {
-    use nerfx::render::{render_naive, render_with_progress, Outputs, Quality, RenderSettings};
+    use nerfx_core::render::{
+        render_naive, render_with_progress, Outputs, Quality, RenderSettings,
+    };
 
     let dir = scratch("bench-accuracy");
     let scene = blob_bench_scene(&dir);

@@ -11,11 +11,11 @@ use std::sync::Arc;
 
 use common_nerfacto::{scratch, write_run, Spec};
 use glam::{DMat4, DVec3};
-use nerfx::camera::{Camera, Perspective, Projection};
-use nerfx::field::NerfactoField;
-use nerfx::image::Planes;
-use nerfx::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
-use nerfx::scene::{FieldHandle, Instance, Scene};
+use nerfx_core::camera::{Camera, Perspective, Projection};
+use nerfx_core::field::NerfactoField;
+use nerfx_core::image::Planes;
+use nerfx_core::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
+use nerfx_core::scene::{FieldHandle, Instance, Scene};
 
 fn render_scene(instances: Vec<Instance>, camera: &Camera) -> Planes {
     let settings = RenderSettings {
@@ -50,7 +50,7 @@ fn two_trained_runs_occlude_each_other_as_their_renders_composite_by_depth() {
         .collect();
     let (w, h) = (64, 48);
     let camera = Camera::new(
-        nerfx::demo::look_at(DVec3::new(0.0, 6.0, 0.0), DVec3::ZERO),
+        nerfx_core::demo::look_at(DVec3::new(0.0, 6.0, 0.0), DVec3::ZERO),
         Projection::Perspective(Perspective::from_vertical_fov(w, h, 40.0).unwrap()),
     )
     .unwrap();

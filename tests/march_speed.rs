@@ -17,12 +17,12 @@ use std::time::Instant;
 use common_ingp::{scratch, write_blob_snapshot, Ball, Spec, SplitMix64};
 use glam::{DMat4, DVec3};
 use half::f16;
-use nerfx::camera::{Camera, Perspective, Projection};
-use nerfx::field::IngpField;
-use nerfx::image::Planes;
-use nerfx::reference::ErrorReport;
-use nerfx::render::{render_with_progress, MarchParams, Outputs, Quality, RenderSettings};
-use nerfx::scene::{FieldHandle, Instance, Scene};
+use nerfx_core::camera::{Camera, Perspective, Projection};
+use nerfx_core::field::IngpField;
+use nerfx_core::image::Planes;
+use nerfx_core::render::{render_with_progress, MarchParams, Outputs, Quality, RenderSettings};
+use nerfx_core::scene::{FieldHandle, Instance, Scene};
+use nerfx_testkit::reference::ErrorReport;
 
 /// The presets `NERFX_BENCH_QUALITY` names (all by default).
 fn presets() -> Vec<Quality> {
@@ -102,10 +102,11 @@ fn line(name: &str, per_px: [f64; 3], ms: f64, cpu: Option<f64>, error: Option<&
 #[ignore]
 fn bench_demo() {
     let (w, h) = common_fields::bench_size((1920, 1080));
-    let (scene, camera) = nerfx::demo::scene_and_camera(w, h).unwrap();
+    let (scene, camera) = nerfx_core::demo::scene_and_camera(w, h).unwrap();
     let reference = std::env::var("NERFX_BENCH_NO_REFERENCE").is_err().then(|| {
         let t = Instant::now();
-        let truth = nerfx::reference::render(&scene, &camera, camera.full_window()).unwrap();
+        let truth =
+            nerfx_testkit::reference::render(&scene, &camera, camera.full_window()).unwrap();
         println!(
             "exact reference {w}x{h}: {:.0} ms",
             t.elapsed().as_secs_f64() * 1e3
@@ -145,7 +146,7 @@ fn bench_fog() {
     let p = Perspective::from_vertical_fov(w, h, 40.0).unwrap();
     let eye = DVec3::new(3.2, -2.2, 1.1).normalize() * 4.0;
     let camera = Camera::new(
-        nerfx::demo::look_at(eye, DVec3::ZERO),
+        nerfx_core::demo::look_at(eye, DVec3::ZERO),
         Projection::Perspective(p),
     )
     .unwrap();

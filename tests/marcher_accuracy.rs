@@ -11,16 +11,16 @@ use std::sync::Arc;
 
 use common::*;
 use glam::{DMat4, DVec3, Vec3};
-use nerfx::bench::scenes::{build, SceneKind};
-use nerfx::bench::suite::{fine_params, QUADRATURE_TOLERANCE};
-use nerfx::camera::Camera;
-use nerfx::field::{Aabb, Analytic, Field, Shape};
-use nerfx::image::{Plane, Planes, Window};
-use nerfx::render::{
+use nerfx_core::camera::Camera;
+use nerfx_core::field::{Aabb, Analytic, Field, Shape};
+use nerfx_core::image::{Plane, Planes, Window};
+use nerfx_core::render::{
     render, render_naive, render_with_progress, MarchParams, Outputs, Quality, RenderSettings,
     RenderStats,
 };
-use nerfx::scene::{FieldHandle, Instance, Scene};
+use nerfx_core::scene::{FieldHandle, Instance, Scene};
+use nerfx_testkit::bench::scenes::{build, SceneKind};
+use nerfx_testkit::bench::suite::{fine_params, QUADRATURE_TOLERANCE};
 
 const W: u32 = 64;
 const H: u32 = 48;
@@ -88,7 +88,7 @@ fn draft_matches_the_reference_on_random_scenes() {
 /// [`a_dense_sheet_inside_fog_is_not_missed`]).
 #[test]
 fn demo_scene_final_matches_the_reference() {
-    let (scene, camera) = nerfx::demo::scene_and_camera(96, 54).expect("demo scene");
+    let (scene, camera) = nerfx_core::demo::scene_and_camera(96, 54).expect("demo scene");
     let want = reference_full(&scene, &camera);
     let got = render_full(&scene, &camera, marched(Quality::Final.params()));
     assert_sane("demo, Final", &got);
@@ -337,14 +337,18 @@ fn assert_blob_window_within_target_at(
 ) {
     let dir = tempfile::tempdir().unwrap();
     let bench = build(SceneKind::Blob, width, height, dir.path(), None).expect("the blob");
-    let want =
-        nerfx::reference::render_trained(&bench.scene, &bench.camera, window, QUADRATURE_TOLERANCE)
-            .expect("the quadrature");
+    let want = nerfx_testkit::reference::render_trained(
+        &bench.scene,
+        &bench.camera,
+        window,
+        QUADRATURE_TOLERANCE,
+    )
+    .expect("the quadrature");
     let params = marched(quality.params());
     let settings = RenderSettings::new(params, Outputs::all());
     let got = render(&bench.scene, &bench.camera, window, &settings).expect("a render");
     let what = format!("blob at {width}×{height}, {quality:?}");
-    let errors = nerfx::reference::ErrorReport::compare(&want, &got);
+    let errors = nerfx_testkit::reference::ErrorReport::compare(&want, &got);
     println!(
         "{what}, {window:?}: max alpha error {:.2e}, max colour error {:.2e}",
         errors.max_alpha_error, errors.max_color_error
@@ -692,7 +696,7 @@ fn requesting_fewer_outputs_changes_nothing_in_the_rest() {
 fn naive_with_a_fine_step_converges_to_the_reference() {
     let (scene, camera) = seeded_view(2);
     let window = Window::new(16, 12, 48, 36);
-    let want = nerfx::reference::render(&scene, &camera, window).expect("reference");
+    let want = nerfx_testkit::reference::render(&scene, &camera, window).expect("reference");
     let (got, _) = render_naive(&scene, &camera, window, 2.5e-4, &Outputs::all()).expect("naive");
     assert_sane("naive", &got);
     assert_close(
@@ -804,7 +808,7 @@ fn joint_rendering_matches_the_reference_and_separate_compositing_does_not() {
 fn finer_custom_params_converge_further() {
     let (scene, camera) = seeded_view(0);
     let window = Window::new(20, 14, 44, 34);
-    let want = nerfx::reference::render(&scene, &camera, window).expect("reference");
+    let want = nerfx_testkit::reference::render(&scene, &camera, window).expect("reference");
     let fine = MarchParams {
         steps_per_feature: 4.0 * Quality::Final.params().steps_per_feature,
         refine_depth: Quality::Final.params().refine_depth + 2,
@@ -841,10 +845,10 @@ fn finer_custom_params_converge_further() {
 /// (feature/8 ≈ 0.0135), so some of them fall between nodes.
 #[test]
 fn a_dense_sheet_inside_fog_is_not_missed() {
-    let p = nerfx::camera::Perspective::from_vertical_fov(9, 9, 10.0).expect("perspective");
+    let p = nerfx_core::camera::Perspective::from_vertical_fov(9, 9, 10.0).expect("perspective");
     let camera = Camera::new(
         DMat4::from_translation(DVec3::new(0.3, 0.2, 5.0)),
-        nerfx::camera::Projection::Perspective(p),
+        nerfx_core::camera::Projection::Perspective(p),
     )
     .expect("camera");
     for i in 0..=12 {
@@ -906,7 +910,7 @@ fn the_clipping_range_cuts_rays_at_constant_depth() {
 #[test]
 #[ignore = "diagnostic"]
 fn blob_worst_pixels_at_1080p() {
-    use nerfx::bench::suite::{sampled_rows, QUADRATURE_ROW_STRIDE};
+    use nerfx_testkit::bench::suite::{sampled_rows, QUADRATURE_ROW_STRIDE};
     use rayon::prelude::*;
     let dir = tempfile::tempdir().unwrap();
     let bench = build(SceneKind::Blob, 1920, 1080, dir.path(), None).expect("the blob");
@@ -915,7 +919,7 @@ fn blob_worst_pixels_at_1080p() {
     let want: Vec<Vec<f32>> = ys
         .par_iter()
         .map(|&y| {
-            let p = nerfx::reference::render_trained(
+            let p = nerfx_testkit::reference::render_trained(
                 &bench.scene,
                 &bench.camera,
                 row(y),

@@ -15,11 +15,11 @@ use std::sync::Arc;
 use common_fields::numpy_reference;
 use common_nerfacto::{scratch, write_run, Spec};
 use glam::{DMat4, DVec3, Vec3};
-use nerfx::camera::{Camera, Equirect, Perspective, Projection};
-use nerfx::field::NerfactoField;
-use nerfx::image::Planes;
-use nerfx::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
-use nerfx::scene::{FieldHandle, Instance, Scene};
+use nerfx_core::camera::{Camera, Equirect, Perspective, Projection};
+use nerfx_core::field::NerfactoField;
+use nerfx_core::image::Planes;
+use nerfx_core::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
+use nerfx_core::scene::{FieldHandle, Instance, Scene};
 
 fn scene_of(field: NerfactoField, world_from_field: DMat4) -> Scene {
     Scene::new(vec![Instance::new(
@@ -123,7 +123,7 @@ fn a_distant_shell_agrees_with_a_numpy_march() {
     let (w, h) = (12u32, 8u32);
     let eye = DVec3::new(0.2, -0.1, 0.3);
     let camera = Camera::new(
-        nerfx::demo::look_at(eye, eye + DVec3::new(1.0, 0.3, -0.5)),
+        nerfx_core::demo::look_at(eye, eye + DVec3::new(1.0, 0.3, -0.5)),
         Projection::Perspective(Perspective::from_vertical_fov(w, h, 100.0).unwrap()),
     )
     .unwrap();
@@ -224,7 +224,7 @@ fn far_field_cost() {
         let field = NerfactoField::load(&run).unwrap();
         let scene = scene_of(field, DMat4::IDENTITY);
         let (w, h) = (480u32, 270u32);
-        let world_from_camera = nerfx::demo::look_at(eye, eye + look);
+        let world_from_camera = nerfx_core::demo::look_at(eye, eye + look);
         let camera = Camera::new(
             world_from_camera,
             Projection::Perspective(Perspective::from_vertical_fov(w, h, 60.0).unwrap()),
@@ -252,7 +252,7 @@ fn far_field_cost() {
             }
             let settings = RenderSettings::new(quality.params(), Outputs::rgba());
             let started = std::time::Instant::now();
-            let (planes, stats) = nerfx::render::render_with_progress(
+            let (planes, stats) = nerfx_core::render::render_with_progress(
                 &scene,
                 &camera,
                 camera.full_window(),

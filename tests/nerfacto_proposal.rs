@@ -14,10 +14,10 @@ use std::path::Path;
 
 use common_nerfacto::{sampler_split, scratch, write_run, Spec};
 use glam::{DMat4, DVec3};
-use nerfx::camera::{Camera, Perspective, Projection, Ray};
-use nerfx::field::{NerfactoField, Piece, SamplerRay, SamplerScratch};
-use nerfx::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
-use nerfx::scene::SceneDesc;
+use nerfx_core::camera::{Camera, Perspective, Projection, Ray};
+use nerfx_core::field::{NerfactoField, Piece, SamplerRay, SamplerScratch};
+use nerfx_core::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
+use nerfx_core::scene::SceneDesc;
 
 const W: u32 = 24;
 const H: u32 = 16;
@@ -50,7 +50,7 @@ fn camera() -> Camera {
     let p = Perspective::from_vertical_fov(W, H, 50.0).unwrap();
     let eye = DVec3::new(0.5, -3.0, 1.0);
     Camera::new(
-        nerfx::demo::look_at(eye, DVec3::ZERO),
+        nerfx_core::demo::look_at(eye, DVec3::ZERO),
         Projection::Perspective(p),
     )
     .unwrap()
@@ -171,7 +171,7 @@ fn torch_layout_samples_and_renders_as_numpy() {
 }
 
 /// The run of `spec` placed at the identity, sampled as `sampler` says.
-fn placed(dir: &Path, sampler: &str) -> nerfx::Result<nerfx::scene::Scene> {
+fn placed(dir: &Path, sampler: &str) -> nerfx_core::Result<nerfx_core::scene::Scene> {
     let scene_file = dir.join("scene.json");
     std::fs::write(
         &scene_file,
@@ -187,9 +187,9 @@ fn placed(dir: &Path, sampler: &str) -> nerfx::Result<nerfx::scene::Scene> {
 }
 
 /// An opaque slab `y ∈ [y0, y1]` (|x|, |z| ≤ 3000) as an analytic instance.
-fn slab(y0: f32, y1: f32) -> nerfx::scene::Instance {
+fn slab(y0: f32, y1: f32) -> nerfx_core::scene::Instance {
     use glam::Vec3;
-    use nerfx::field::{Analytic, Primitive, ShColor, Shape};
+    use nerfx_core::field::{Analytic, Primitive, ShColor, Shape};
     let field = Analytic {
         primitives: vec![Primitive {
             shape: Shape::Box {
@@ -200,8 +200,8 @@ fn slab(y0: f32, y1: f32) -> nerfx::scene::Instance {
             color: ShColor::constant(Vec3::ONE),
         }],
     };
-    let handle = nerfx::scene::FieldHandle::analytic(field);
-    nerfx::scene::Instance::new("slab", handle, DMat4::IDENTITY, None).unwrap()
+    let handle = nerfx_core::scene::FieldHandle::analytic(field);
+    nerfx_core::scene::Instance::new("slab", handle, DMat4::IDENTITY, None).unwrap()
 }
 
 #[test]
@@ -319,7 +319,7 @@ fn the_occupancy_sampler_is_chosen_per_instance_and_runs_without_proposals_are_m
 #[test]
 #[ignore = "benchmark"]
 fn bench_proposal_render_1080p_final() {
-    use nerfx::render::render_with_progress;
+    use nerfx_core::render::render_with_progress;
     use std::time::Instant;
 
     let (w, h) = common_fields::bench_size((1920, 1080));
@@ -338,7 +338,7 @@ fn bench_proposal_render_1080p_final() {
     );
     let p = Perspective::from_vertical_fov(w, h, 50.0).unwrap();
     let camera = Camera::new(
-        nerfx::demo::look_at(DVec3::new(0.5, -3.0, 1.0), DVec3::ZERO),
+        nerfx_core::demo::look_at(DVec3::new(0.5, -3.0, 1.0), DVec3::ZERO),
         Projection::Perspective(p),
     )
     .unwrap();

@@ -11,7 +11,7 @@ mod common_nerfacto;
 use common_fields::{check_rgb, check_sigma, numpy_reference, rel_err};
 use common_nerfacto::{scratch, write_run, Spec, STEP};
 use glam::Vec3;
-use nerfx::field::{Aabb, Field, NerfactoField};
+use nerfx_core::field::{Aabb, Field, NerfactoField};
 
 /// Seeded points (inside the unit cube and out in the contracted shell) and directions.
 fn samples(n: usize, seed: u64) -> (Vec<Vec3>, Vec<Vec3>) {
@@ -85,7 +85,7 @@ fn torch_fallback_layout_agrees_with_numpy() {
 fn describe_names_the_run_and_architecture() {
     let dir = scratch("describe");
     let run = write_run(&dir, &Spec::tcnn());
-    let text = nerfx::field::describe(&run).unwrap();
+    let text = nerfx_core::field::describe(&run).unwrap();
     println!("{text}");
     for want in [
         "nerfacto",
@@ -193,7 +193,7 @@ fn scene_files_name_runs_relative_to_themselves() {
         r#"{"instances": [{"name": "poster", "field": {"nerfacto": {"path": "run"}}}]}"#,
     )
     .unwrap();
-    let loaded = nerfx::scene::SceneDesc::read(&scene)
+    let loaded = nerfx_core::scene::SceneDesc::read(&scene)
         .unwrap()
         .load()
         .unwrap();
@@ -201,15 +201,15 @@ fn scene_files_name_runs_relative_to_themselves() {
     // It renders: alpha in [0, 1], some coverage.
     {
         use glam::{DMat4, DVec3};
-        use nerfx::camera::{Camera, Perspective, Projection};
-        use nerfx::render::{render, Outputs, Quality, RenderSettings};
+        use nerfx_core::camera::{Camera, Perspective, Projection};
+        use nerfx_core::render::{render, Outputs, Quality, RenderSettings};
         let placed = loaded
             .place(DMat4::IDENTITY, &|_| Ok(DMat4::IDENTITY))
             .unwrap();
         let p = Perspective::from_vertical_fov(16, 12, 50.0).unwrap();
         let eye = DVec3::new(0.5, -5.0, 1.0);
         let camera = Camera::new(
-            nerfx::demo::look_at(eye, DVec3::ZERO),
+            nerfx_core::demo::look_at(eye, DVec3::ZERO),
             Projection::Perspective(p),
         )
         .unwrap();
@@ -230,7 +230,7 @@ fn scene_files_name_runs_relative_to_themselves() {
         r#"{"instances": [{"name": "x", "field": {"nerfacto": {"path": "nowhere"}}}]}"#,
     )
     .unwrap();
-    let e = nerfx::scene::SceneDesc::read(&scene)
+    let e = nerfx_core::scene::SceneDesc::read(&scene)
         .unwrap()
         .load()
         .err()

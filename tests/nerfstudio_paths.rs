@@ -6,10 +6,10 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use glam::{DMat4, DVec3, Vec3};
-use nerfx::camera::{CameraPath, Eye, PathCameraType};
-use nerfx::field::{Analytic, Primitive, ShColor, Shape};
-use nerfx::render::{render, Outputs, Quality, RenderSettings};
-use nerfx::scene::{FieldHandle, Instance, Scene};
+use nerfx_core::camera::{CameraPath, Eye, PathCameraType};
+use nerfx_core::field::{Analytic, Primitive, ShColor, Shape};
+use nerfx_core::render::{render, Outputs, Quality, RenderSettings};
+use nerfx_core::scene::{FieldHandle, Instance, Scene};
 
 /// `tests/data`: copies of real viewer exports (see `tests/data/README.md`).
 fn data(name: &str) -> PathBuf {
@@ -185,15 +185,15 @@ fn a_path_written_for_a_scaled_object_renders_the_bound_field_in_blender_units()
         .to_string(),
     )
     .unwrap();
-    let shot = nerfx::frames::read_shot(&path_file, "NeRF").unwrap();
-    let scene = nerfx::scene::SceneDesc::read(&scene_file)
+    let shot = nerfx_core::frames::read_shot(&path_file, "NeRF").unwrap();
+    let scene = nerfx_core::scene::SceneDesc::read(&scene_file)
         .unwrap()
         .load()
         .unwrap();
     let settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
     let first = shot.frames[0].frame;
     let (planes, _) =
-        nerfx::frames::render_frame(&scene, &shot, first, &settings, &|_| {}).unwrap();
+        nerfx_core::frames::render_frame(&scene, &shot, first, &settings, &|_| {}).unwrap();
     let (alpha, z) = (planes.alpha.unwrap(), planes.depth_z.unwrap());
     let f = (f64::from(h) / 2.0) / (p.frames[0].fov.to_radians() / 2.0).tan();
     let radius_px = f * (r / d).asin().tan();
@@ -274,14 +274,14 @@ fn an_unbound_instance_composes_with_a_scaled_camera_path() {
             serde_json::json!({ "instances": instances }).to_string(),
         )
         .unwrap();
-        let scene = nerfx::scene::SceneDesc::read(&file)
+        let scene = nerfx_core::scene::SceneDesc::read(&file)
             .unwrap()
             .load()
             .unwrap();
-        let shot = nerfx::frames::read_shot(&path_file, "NeRF").unwrap();
+        let shot = nerfx_core::frames::read_shot(&path_file, "NeRF").unwrap();
         let settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
         let first = shot.frames[0].frame;
-        nerfx::frames::render_frame(&scene, &shot, first, &settings, &|_| {})
+        nerfx_core::frames::render_frame(&scene, &shot, first, &settings, &|_| {})
             .unwrap()
             .0
     };

@@ -11,10 +11,10 @@ use std::path::{Path, PathBuf};
 
 use common_nerfacto::scratch;
 use glam::DVec3;
-use nerfx::field::{NerfactoField, SamplerRay, SamplerScratch};
-use nerfx::frames::{read_shot, render_frame};
-use nerfx::render::{ColorOutput, Outputs, Quality, RenderSettings};
-use nerfx::scene::{LoadedScene, SceneDesc};
+use nerfx_core::field::{NerfactoField, SamplerRay, SamplerScratch};
+use nerfx_core::frames::{read_shot, render_frame};
+use nerfx_core::render::{ColorOutput, Outputs, Quality, RenderSettings};
+use nerfx_core::scene::{LoadedScene, SceneDesc};
 
 fn fixture() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/nerfstudio")

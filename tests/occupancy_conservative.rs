@@ -3,7 +3,7 @@
 //! most a cell diagonal each side), and equal to a brute-force walk of the finest grid.
 
 use glam::{DVec3, Vec3};
-use nerfx::field::{Aabb, Analytic, Field, Occupancy, Primitive, ShColor, Shape};
+use nerfx_core::field::{Aabb, Analytic, Field, Occupancy, Primitive, ShColor, Shape};
 
 #[path = "common/rng.rs"]
 mod rng;

@@ -10,9 +10,9 @@ use std::path::{Path, PathBuf};
 
 use common_ofx::fixtures::{instance_with, shared as bundle, text};
 use common_ofx::images::{differing, render_tiled};
-use nerfx::graph::{node, Context, RenderRequest, Value};
-use nerfx::host::Instance;
-use nerfx::image::{scaled_size, Window};
+use nerfx_core::image::{scaled_size, Window};
+use nerfx_graph::{node, Context, RenderRequest, Value};
+use nerfx_ofx_host::Instance;
 
 /// The demo's inputs at 45×27 (frames 1001 to 1024), written once per test binary.
 fn demo_dir() -> &'static Path {
@@ -20,7 +20,7 @@ fn demo_dir() -> &'static Path {
 }
 
 /// A NeRF Render instance in `context` over the demo environment and `shot`, draft quality.
-fn nerf_instance(context: Context, shot: &Path) -> (Instance, nerfx::graph::ParamValues) {
+fn nerf_instance(context: Context, shot: &Path) -> (Instance, nerfx_graph::ParamValues) {
     let set = [
         ("file", text(demo_dir().join("demo_environment.json"))),
         ("shot", text(shot)),

@@ -9,11 +9,12 @@ use std::process::{Command, Output};
 
 use common_ofx::images::rgba_of;
 use common_ofx::load;
-use nerfx::demo;
-use nerfx::graph::{evaluate, render_direct, Graph};
-use nerfx::host::OfxGraph;
-use nerfx::host::{Bundle, HostOptions};
-use nerfx::image::read_exr_channels;
+use nerfx_core::demo;
+use nerfx_core::image::read_exr_channels;
+use nerfx_graph::demo::write_graph;
+use nerfx_graph::{evaluate, render_direct, Graph};
+use nerfx_ofx_host::OfxGraph;
+use nerfx_ofx_host::{Bundle, HostOptions};
 
 fn scratch_dir(name: &str) -> PathBuf {
     let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
@@ -44,7 +45,7 @@ fn assert_succeeded(run: &Output) {
 #[test]
 fn the_demo_graph_through_the_bundle_equals_the_core() {
     let dir = scratch_dir("equal");
-    let graph = Graph::read(&demo::write_graph(&dir, 41, 23).unwrap()).unwrap();
+    let graph = Graph::read(&write_graph(&dir, 41, 23).unwrap()).unwrap();
     let bundle = load(HostOptions::default());
     let mut ofx = OfxGraph::new(graph.clone(), &bundle).unwrap();
     for (frame, scale) in [(1001.0, 1.0), (1012.0, 0.5)] {
@@ -67,7 +68,7 @@ fn the_demo_graph_through_the_bundle_equals_the_core() {
 #[test]
 fn the_command_line_renders_a_subset_of_frames_with_layers() {
     let dir = scratch_dir("cli");
-    let comp = demo::write_graph(&dir, 33, 19).unwrap();
+    let comp = write_graph(&dir, 33, 19).unwrap();
     let pattern = dir.join("out/comp.####.exr");
     let run = render_cli(&[
         &comp.to_string_lossy(),
@@ -127,7 +128,7 @@ fn the_command_line_renders_a_subset_of_frames_with_layers() {
 #[test]
 fn an_anamorphic_shot_keeps_its_pixel_aspect_to_the_exr() {
     let dir = scratch_dir("anamorphic");
-    let comp = demo::write_graph(&dir, 30, 20).unwrap();
+    let comp = write_graph(&dir, 30, 20).unwrap();
     let shot = dir.join("demo_shot.json");
     let mut json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&shot).unwrap()).unwrap();
@@ -156,9 +157,9 @@ fn an_anamorphic_shot_keeps_its_pixel_aspect_to_the_exr() {
     let meta = exr::meta::MetaData::read_from_file(&out, false).unwrap();
     assert_eq!(meta.headers[0].shared_attributes.pixel_aspect, 2.0);
     // The camera of the renders the output comes from, and the graph's colour space.
-    let shot = nerfx::camera::Shot::read(&shot).unwrap();
+    let shot = nerfx_core::camera::Shot::read(&shot).unwrap();
     let camera = shot.frame(1004).unwrap().camera(&shot).unwrap();
-    let want = nerfx::image::CameraMatrices::of(&camera);
+    let want = nerfx_core::image::CameraMatrices::of(&camera);
     let own = &meta.headers[0].own_attributes;
     let close = |got: Option<[f32; 16]>, want: [f32; 16]| {
         got.is_some_and(|g| g.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-5))
@@ -180,7 +181,7 @@ fn an_anamorphic_shot_keeps_its_pixel_aspect_to_the_exr() {
 #[ignore = "benchmark"]
 fn bench_graph_through_the_bundle() {
     let dir = scratch_dir("bench");
-    let graph = Graph::read(&demo::write_graph(&dir, 1280, 720).unwrap()).unwrap();
+    let graph = Graph::read(&write_graph(&dir, 1280, 720).unwrap()).unwrap();
     let bundle = Bundle::load(&common_ofx::release_bundle()).unwrap();
     let mut ofx = OfxGraph::new(graph.clone(), &bundle).unwrap();
     let time = |f: &mut dyn FnMut()| {
@@ -212,7 +213,7 @@ fn bench_graph_through_the_bundle() {
 #[test]
 fn without_frames_the_graph_renders_its_shot_range() {
     let dir = scratch_dir("range");
-    let comp = demo::write_graph(&dir, 12, 8).unwrap();
+    let comp = write_graph(&dir, 12, 8).unwrap();
     let pattern = dir.join("all/c.####.exr");
     let run = render_cli(&[&comp.to_string_lossy(), "-o", &pattern.to_string_lossy()]);
     assert_succeeded(&run);

@@ -9,8 +9,8 @@ mod common_ofx;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use nerfx::graph::Graph;
-use nerfx::host::OfxGraph;
+use nerfx_graph::Graph;
+use nerfx_ofx_host::OfxGraph;
 
 struct Counting;
 

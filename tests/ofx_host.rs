@@ -1,4 +1,4 @@
-//! The OpenFX host (`nerfx::host`): loading, describing every node of the built bundle in
+//! The OpenFX host (`nerfx_ofx_host`): loading, describing every node of the built bundle in
 //! every context, the strictness of the property suite (called directly through the same
 //! function pointers the plugin gets), parameter values and messages through the C shim,
 //! the multithread suite, and concurrent renders. Pixel equality of each node against the
@@ -12,9 +12,9 @@ use std::ptr;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 use common_ofx::images::tiles;
-use nerfx::graph::{node, nodes, Context, ParamKind, Value};
-use nerfx::host::{testing, Bundle, ClipSource, HostOptions, Instance, PropValue};
-use nerfx::image::{scaled_size, Plane, Planes, Window};
+use nerfx_core::image::{scaled_size, Plane, Planes, Window};
+use nerfx_graph::{node, nodes, Context, ParamKind, Value};
+use nerfx_ofx_host::{testing, Bundle, ClipSource, HostOptions, Instance, PropValue};
 use openfx_sys as ofx;
 
 // OpenFX status codes, written out from the spec.

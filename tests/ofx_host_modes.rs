@@ -15,11 +15,11 @@ use std::sync::{Mutex, MutexGuard, PoisonError};
 use common_ofx::fixtures::{instance_with, text};
 use common_ofx::images::{assert_same, at, pattern, rgba, rgba_of, tiled};
 use common_ofx::load;
-use nerfx::graph::{node, Context, ParamValues, RenderRequest, Value};
-use nerfx::host::{
+use nerfx_core::image::{scaled_size, Planes, Window};
+use nerfx_graph::{node, Context, ParamValues, RenderRequest, Value};
+use nerfx_ofx_host::{
     Bundle, ChangeReason, ClipSource, Field, HostOptions, Instance, MessageSuiteOffer,
 };
-use nerfx::image::{scaled_size, Planes, Window};
 
 /// The demo image size.
 const W: u32 = 32;
@@ -625,7 +625,7 @@ fn a_connected_input_without_an_image_is_named() {
         .instance("org.nerfx.AccumulationMatte", Context::General)
         .unwrap();
     let failing = ClipSource::new((12, 9), |_, _, _| {
-        Err(nerfx::Error::invalid(
+        Err(nerfx_core::Error::invalid(
             "test source",
             "no image at this time",
         ))
@@ -674,7 +674,7 @@ fn failing_render_at(instance: &Instance, time: f64) -> String {
 /// image without pixels. Each must give the core's render without a Matte input.
 #[test]
 fn an_absent_matte_falls_back_to_the_sources_alpha_however_the_host_says_it() {
-    use nerfx::host::AbsentClip;
+    use nerfx_ofx_host::AbsentClip;
     let _turn = turn();
     let values = {
         let mut v = node("org.nerfx.AccumulationMatte").unwrap().defaults();

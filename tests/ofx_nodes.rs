@@ -9,9 +9,9 @@ use std::path::Path;
 
 use common_ofx::fixtures::{instance_with, shared as bundle, text};
 use common_ofx::images::{assert_same, paste, pattern, render_tiled, rgba, rgba_of, tiles};
-use nerfx::graph::{node, nodes, Context, ParamKind, Range, RenderRequest, Value};
-use nerfx::host::{ClipSource, Instance, PropValue};
-use nerfx::image::{scaled_size, Planes, Window};
+use nerfx_core::image::{scaled_size, Planes, Window};
+use nerfx_graph::{node, nodes, Context, ParamKind, Range, RenderRequest, Value};
+use nerfx_ofx_host::{ClipSource, Instance, PropValue};
 
 /// The demo's inputs (scenes, shot, graph) at 45×27, written once per test binary.
 fn demo_dir() -> &'static Path {
@@ -167,7 +167,7 @@ fn nerf_instance(
     context: Context,
     scene: &str,
     output: usize,
-) -> (Instance, nerfx::graph::ParamValues) {
+) -> (Instance, nerfx_graph::ParamValues) {
     let dir = demo_dir();
     let set = [
         ("file", text(dir.join(scene))),

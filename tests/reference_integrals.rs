@@ -6,12 +6,12 @@ use std::f64::consts::PI;
 use std::sync::Arc;
 
 use glam::{DMat3, DMat4, DVec3, Vec3};
-use nerfx::camera::{Camera, Perspective, Projection, Ray};
-use nerfx::field::{Aabb, Analytic, Field, Primitive, ShColor, Shape};
-use nerfx::image::Window;
-use nerfx::reference::{self, RayResult, ReferenceScene};
-use nerfx::scene::{CropBox, FieldHandle, Instance, Scene};
-use nerfx::Error;
+use nerfx_core::camera::{Camera, Perspective, Projection, Ray};
+use nerfx_core::field::{Aabb, Analytic, Field, Primitive, ShColor, Shape};
+use nerfx_core::image::Window;
+use nerfx_core::scene::{CropBox, FieldHandle, Instance, Scene};
+use nerfx_core::Error;
+use nerfx_testkit::reference::{self, RayResult, ReferenceScene};
 
 fn rgb(r: f32, g: f32, b: f32) -> ShColor {
     ShColor::constant(Vec3::new(r, g, b))

@@ -17,11 +17,11 @@ use std::sync::{Mutex, MutexGuard, PoisonError};
 use common_ingp::{write_snapshot, Spec};
 use common_ofx::fixtures::{demo_dir, instance_with, text};
 use common_ofx::load;
-use nerfx::bench::snapshot::Weights;
-use nerfx::graph::{node, Context, Graph, ParamValues, RenderRequest};
-use nerfx::host::OfxGraph;
-use nerfx::host::{HostOptions, MessageSuiteOffer};
-use nerfx::image::{Planes, Window};
+use nerfx_core::image::{Planes, Window};
+use nerfx_graph::{node, Context, Graph, ParamValues, RenderRequest};
+use nerfx_ofx_host::OfxGraph;
+use nerfx_ofx_host::{HostOptions, MessageSuiteOffer};
+use nerfx_testkit::bench::snapshot::Weights;
 
 const W: u32 = 32;
 const H: u32 = 18;

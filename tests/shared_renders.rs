@@ -8,14 +8,14 @@
 use std::path::Path;
 use std::time::{Duration, SystemTime};
 
-use nerfx::demo;
-use nerfx::frames::{read_shot, render_frame};
-use nerfx::graph::{
+use nerfx_core::demo;
+use nerfx_core::frames::{read_shot, render_frame};
+use nerfx_core::image::{Plane, Planes, Window};
+use nerfx_core::render::{Outputs, Quality, RenderSettings};
+use nerfx_core::scene::SceneDesc;
+use nerfx_graph::{
     node, purge_caches, shared_render_stats, ParamValues, RenderRequest, SharedRenderStats, Value,
 };
-use nerfx::image::{Plane, Planes, Window};
-use nerfx::render::{Outputs, Quality, RenderSettings};
-use nerfx::scene::SceneDesc;
 
 const W: u32 = 40;
 const H: u32 = 24;
@@ -97,7 +97,7 @@ fn passes_of_one_field_share_one_march() {
             .unwrap()
             .data
             .iter()
-            .map(|z| z.min(nerfx::image::BACKGROUND_DEPTH))
+            .map(|z| z.min(nerfx_core::image::BACKGROUND_DEPTH))
             .collect()
     };
     assert_eq!(depth_z.depth_z.as_ref().unwrap().data, far(&cli.depth_z));

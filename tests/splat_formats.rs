@@ -14,11 +14,11 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use glam::{DMat4, Quat, Vec3};
-use nerfx::bench::splats::framing_camera;
-use nerfx::field::{Axes, SplatColor, SplatFormat, Splats};
-use nerfx::image::Planes;
-use nerfx::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
-use nerfx::scene::{Scene, SplatInstance};
+use nerfx_core::field::{Axes, SplatColor, SplatFormat, Splats};
+use nerfx_core::image::Planes;
+use nerfx_core::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
+use nerfx_core::scene::{Scene, SplatInstance};
+use nerfx_testkit::bench::splats::framing_camera;
 
 fn data(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -473,7 +473,7 @@ fn every_format_is_described_by_name() {
         ("sjeongab_512.splat", "antimatter15 .splat"),
         ("subset_sh3.ply", "INRIA 3DGS PLY"),
     ] {
-        let text = nerfx::field::describe(&data(name)).unwrap();
+        let text = nerfx_core::field::describe(&data(name)).unwrap();
         assert!(text.contains(says) && text.contains("512 splats"), "{text}");
         assert!(
             text.contains("quantisation:") && text.contains("memory:"),
@@ -689,7 +689,7 @@ fn not_finite_or_absurd_quantisation_ranges_are_refused_naming_them() {
 
 /// The splat instances of the scene `path` names (a scene file or one splat file), placed.
 fn placed(path: &Path) -> Vec<SplatInstance> {
-    let scene = nerfx::scene::SceneDesc::for_path(path)
+    let scene = nerfx_core::scene::SceneDesc::for_path(path)
         .and_then(|d| d.load())
         .and_then(|l| l.place(DMat4::IDENTITY, &|_| Ok(DMat4::IDENTITY)))
         .unwrap();
@@ -753,7 +753,7 @@ fn scenes_take_every_format_with_axes_and_the_antialiased_mode() {
     assert!(worst <= 1.0 / 4096.0, "{worst}");
     let modes: Vec<bool> = splats.iter().map(|s| s.antialiased()).collect();
     assert_eq!(modes, [false, true, false, true, false, true]);
-    let text = nerfx::field::describe(&dir.path().join("mip.ply")).unwrap();
+    let text = nerfx_core::field::describe(&dir.path().join("mip.ply")).unwrap();
     assert!(
         text.contains("antialiased (mip-splatting) mode: yes"),
         "{text}"

@@ -12,10 +12,10 @@ use std::process::Command;
 use std::sync::Arc;
 
 use glam::{DMat4, DQuat, DVec3};
-use nerfx::camera::{BlenderIntrinsics, Camera, Perspective, Projection, SensorFit};
-use nerfx::field::Splats;
-use nerfx::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
-use nerfx::scene::{Scene, SplatInstance};
+use nerfx_core::camera::{BlenderIntrinsics, Camera, Perspective, Projection, SensorFit};
+use nerfx_core::field::Splats;
+use nerfx_core::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
+use nerfx_core::scene::{Scene, SplatInstance};
 use serde_json::json;
 
 fn ply() -> std::path::PathBuf {
@@ -132,7 +132,7 @@ fn splats_match_an_independent_numpy_rasteriser() {
     let dir = tempfile::tempdir().unwrap();
     for case in cases() {
         let world_from_camera =
-            nerfx::demo::look_at(case.eye, case.world_from_splats.transform_point3(CENTRE));
+            nerfx_core::demo::look_at(case.eye, case.world_from_splats.transform_point3(CENTRE));
         let camera = Camera::new(
             world_from_camera,
             Projection::Perspective(Perspective::from_blender(&case.intrinsics).unwrap()),
@@ -186,7 +186,7 @@ fn splats_match_an_independent_numpy_rasteriser() {
 }
 
 /// Checks nerfx's planes against the NumPy rasteriser's pixels (`R G B A Z` each).
-fn compare(case: &str, way: &str, planes: &nerfx::image::Planes, want: &[f32]) {
+fn compare(case: &str, way: &str, planes: &nerfx_core::image::Planes, want: &[f32]) {
     let (w, h) = (planes.width, planes.height);
     assert_eq!(want.len(), (w * h * 5) as usize);
     let (rgb, alpha, depth) = (

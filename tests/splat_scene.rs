@@ -11,12 +11,12 @@ use std::process::Command;
 use std::sync::Arc;
 
 use glam::{DMat4, DVec3, Vec3};
-use nerfx::camera::{Camera, Perspective, Projection};
-use nerfx::field::{Analytic, Primitive, ShColor, Shape, SplatColor, SplatFormat, Splats};
-use nerfx::graph::{node, ParamValues, RenderRequest, Value};
-use nerfx::image::Window;
-use nerfx::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
-use nerfx::scene::{CropBox, FieldHandle, Instance, Scene, SplatInstance};
+use nerfx_core::camera::{Camera, Perspective, Projection};
+use nerfx_core::field::{Analytic, Primitive, ShColor, Shape, SplatColor, SplatFormat, Splats};
+use nerfx_core::image::Window;
+use nerfx_core::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
+use nerfx_core::scene::{CropBox, FieldHandle, Instance, Scene, SplatInstance};
+use nerfx_graph::{node, ParamValues, RenderRequest, Value};
 
 /// The SH DC coefficient that gives colour `c` (`c = 0.5 + Y₀·k`).
 fn dc(c: f32) -> f32 {
@@ -71,7 +71,7 @@ fn camera() -> Camera {
     // splat mean is at camera depth 3, so its fragments lie where the rays cross the plane.
     let eye = DVec3::new(0.3, -0.2, 3.0);
     Camera::new(
-        nerfx::demo::look_at(eye, DVec3::new(0.3, -0.2, 0.0)),
+        nerfx_core::demo::look_at(eye, DVec3::new(0.3, -0.2, 0.0)),
         Projection::Perspective(Perspective::from_vertical_fov(48, 40, 30.0).unwrap()),
     )
     .unwrap()
@@ -257,7 +257,7 @@ fn the_command_line_renders_and_describes_a_splat_file() {
     )
     .unwrap();
     let eye = DVec3::new(0.42 - 0.79 * 1.6, 2.33 + 0.61 * 1.6, 3.13 - 0.07 * 1.6);
-    let m = nerfx::demo::look_at(eye, DVec3::new(0.42, 2.33, 3.13)).transpose();
+    let m = nerfx_core::demo::look_at(eye, DVec3::new(0.42, 2.33, 3.13)).transpose();
     let shot = dir.path().join("shot.json");
     std::fs::write(
         &shot,
@@ -349,12 +349,12 @@ fn a_window_or_another_tile_size_gives_the_same_pixels() {
     .unwrap()]);
     let centre = DVec3::new(0.42, 2.33, 3.13);
     let camera = Camera::new(
-        nerfx::demo::look_at(centre + DVec3::new(-1.2, 1.0, 0.2), centre),
+        nerfx_core::demo::look_at(centre + DVec3::new(-1.2, 1.0, 0.2), centre),
         Projection::Perspective(Perspective::from_vertical_fov(70, 50, 40.0).unwrap()),
     )
     .unwrap();
     let full = render(&scene, &camera, camera.full_window(), &settings()).unwrap();
-    let window = nerfx::image::Window::new(13, 7, 61, 41);
+    let window = nerfx_core::image::Window::new(13, 7, 61, 41);
     for tile_size in [16, 7, 64] {
         let mut s = settings();
         s.tile_size = tile_size;
@@ -393,7 +393,7 @@ fn a_window_or_another_tile_size_gives_the_same_pixels() {
 /// px over the 32-px patch compared), on the real trained scene.
 #[test]
 fn panoramic_splats_agree_with_the_rasteriser_where_both_apply() {
-    use nerfx::camera::{Equirect, Eye, Ods, Vr180};
+    use nerfx_core::camera::{Equirect, Eye, Ods, Vr180};
     let ply = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/splat_plane_sh3.ply");
     let splats = Arc::new(Splats::load(&ply).unwrap());
     let scene = Scene::default().with_splats(vec![SplatInstance::new(
@@ -406,7 +406,7 @@ fn panoramic_splats_agree_with_the_rasteriser_where_both_apply() {
     .unwrap()]);
     let centre = DVec3::new(0.42, 2.33, 3.13);
     let eye = centre + DVec3::new(-0.79, 0.61, -0.07) * 1.6;
-    let world_from_camera = nerfx::demo::look_at(eye, centre);
+    let world_from_camera = nerfx_core::demo::look_at(eye, centre);
     let (w, h, side) = (2048u32, 1024u32, 32u32);
     let f = f64::from(w) / std::f64::consts::TAU;
     let fov = 2.0 * (f64::from(side) / 2.0 / f).atan().to_degrees();
@@ -421,7 +421,7 @@ fn panoramic_splats_agree_with_the_rasteriser_where_both_apply() {
     )
     .unwrap();
     let (x0, y0) = ((w - side) / 2, (h - side) / 2);
-    let patch = nerfx::image::Window::new(x0, y0, x0 + side, y0 + side);
+    let patch = nerfx_core::image::Window::new(x0, y0, x0 + side, y0 + side);
     let a = render(&scene, &pinhole, pinhole.full_window(), &settings()).unwrap();
     let b = render(&scene, &pano, patch, &settings()).unwrap();
     let (mut sq, mut max_alpha, mut covered) = (0.0f64, 0.0f32, 0);
@@ -485,8 +485,8 @@ fn dropped_splats_are_reported_by_info_and_render() {
         "{text}"
     );
     let shot = dir.path().join("shot.json");
-    let m =
-        nerfx::demo::look_at(DVec3::new(-0.8, 3.3, 3.0), DVec3::new(0.42, 2.33, 3.13)).transpose();
+    let m = nerfx_core::demo::look_at(DVec3::new(-0.8, 3.3, 3.0), DVec3::new(0.42, 2.33, 3.13))
+        .transpose();
     std::fs::write(
         &shot,
         serde_json::json!({

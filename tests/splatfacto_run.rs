@@ -12,7 +12,7 @@ use std::process::Command;
 
 use common_nerfacto::{checkpoint_of, STEP};
 use glam::Vec3;
-use nerfx::field::{NerfactoField, SplatColor, Splats};
+use nerfx_core::field::{NerfactoField, SplatColor, Splats};
 
 const N: usize = 5;
 
@@ -155,7 +155,7 @@ fn a_splatfacto_run_is_splats_everywhere_and_never_a_nerfacto_field() {
     let text = serde_json::json!({"instances": [{"name": "poster",
         "field": {"nerfacto": {"path": run.to_string_lossy()}}}]});
     std::fs::write(&scene, text.to_string()).unwrap();
-    let err = nerfx::scene::SceneDesc::read(&scene)
+    let err = nerfx_core::scene::SceneDesc::read(&scene)
         .unwrap()
         .load()
         .err()
@@ -182,7 +182,7 @@ fn a_splatfacto_run_is_splats_everywhere_and_never_a_nerfacto_field() {
         "{text}"
     );
 
-    let scene = nerfx::scene::SceneDesc::for_path(&run)
+    let scene = nerfx_core::scene::SceneDesc::for_path(&run)
         .unwrap()
         .load()
         .unwrap();

@@ -10,10 +10,10 @@ mod common;
 
 use common::*;
 use glam::{DMat4, DVec3};
-use nerfx::camera::{Camera, Equirect, Perspective, Projection};
-use nerfx::image::{Planes, Window};
-use nerfx::render::{render, render_naive, MarchParams, Outputs, Quality, RenderSettings};
-use nerfx::scene::{CropBox, Instance, Scene};
+use nerfx_core::camera::{Camera, Equirect, Perspective, Projection};
+use nerfx_core::image::{Planes, Window};
+use nerfx_core::render::{render, render_naive, MarchParams, Outputs, Quality, RenderSettings};
+use nerfx_core::scene::{CropBox, Instance, Scene};
 
 const W: u32 = 48;
 const H: u32 = 36;
@@ -48,7 +48,7 @@ fn moved_camera(camera: &Camera, world_from_scene: DMat4) -> Camera {
 
 /// `planes` with every depth multiplied by `s`.
 fn scaled_depths(planes: &Planes, s: f32) -> Planes {
-    let scale = |p: &Option<nerfx::image::Plane>| {
+    let scale = |p: &Option<nerfx_core::image::Plane>| {
         p.clone().map(|mut p| {
             p.data.iter_mut().for_each(|d| *d *= s);
             p
@@ -151,7 +151,7 @@ fn axis_camera(eye: DVec3, width: u32, height: u32, fov: f64) -> Camera {
     Camera::new(DMat4::from_translation(eye), Projection::Perspective(p)).expect("a camera")
 }
 
-fn single(primitive: nerfx::field::Primitive) -> Scene {
+fn single(primitive: nerfx_core::field::Primitive) -> Scene {
     Scene::new(vec![instance(
         "one",
         vec![primitive],
@@ -299,7 +299,7 @@ fn tiny_steps_still_converge() {
     let window = Window::new(x.saturating_sub(2), y.saturating_sub(1), x + 2, y + 2);
     let got = render(&scene, &camera, window, &settings).expect("render");
     assert_sane("1e5 steps per feature", &got);
-    let want = nerfx::reference::render(&scene, &camera, window).expect("reference");
+    let want = nerfx_testkit::reference::render(&scene, &camera, window).expect("reference");
     assert!(
         want.alpha
             .as_ref()
@@ -407,24 +407,26 @@ fn cameras_inside_fields_match_the_reference() {
     let want = Planes {
         width: 32,
         height: 16,
-        rgb: Some([0.8, 0.3, 0.2].map(|c| nerfx::image::Plane::filled(32, 16, (c * alpha) as f32))),
-        alpha: Some(nerfx::image::Plane::filled(32, 16, alpha as f32)),
-        depth_z: Some(nerfx::image::Plane::filled(32, 16, depth as f32)),
-        depth_ray: Some(nerfx::image::Plane::filled(32, 16, depth as f32)),
+        rgb: Some(
+            [0.8, 0.3, 0.2].map(|c| nerfx_core::image::Plane::filled(32, 16, (c * alpha) as f32)),
+        ),
+        alpha: Some(nerfx_core::image::Plane::filled(32, 16, alpha as f32)),
+        depth_z: Some(nerfx_core::image::Plane::filled(32, 16, depth as f32)),
+        depth_ray: Some(nerfx_core::image::Plane::filled(32, 16, depth as f32)),
         depth_median: None,
     };
     assert_eq!(want.alpha.as_ref().map(|a| a.data.len()), Some(n));
     assert_close("panorama inside a sphere", &got, &want, FINAL);
 }
 
-fn unit_ball() -> nerfx::scene::FieldHandle {
-    nerfx::scene::FieldHandle::analytic(nerfx::field::Analytic {
+fn unit_ball() -> nerfx_core::scene::FieldHandle {
+    nerfx_core::scene::FieldHandle::analytic(nerfx_core::field::Analytic {
         primitives: vec![prim(sphere([0.0; 3], 1.0), 1.0, [1.0; 3])],
     })
 }
 
 /// The message of an error, or a failure naming `what` when there was none.
-fn message<T>(what: &str, r: nerfx::Result<T>) -> String {
+fn message<T>(what: &str, r: nerfx_core::Result<T>) -> String {
     match r {
         Ok(_) => panic!("{what}: accepted"),
         Err(e) => e.to_string(),
@@ -527,7 +529,8 @@ fn degenerate_windows_render_nothing() {
             render_naive(&scene, &camera, window, 0.01, &Outputs::all()).expect("naive");
         assert_eq!(naive.width as usize * naive.height as usize, 0, "{what}");
         let clamped = window.intersect(&camera.full_window());
-        let reference = nerfx::reference::render(&scene, &camera, clamped).expect("reference");
+        let reference =
+            nerfx_testkit::reference::render(&scene, &camera, clamped).expect("reference");
         assert_eq!(reference.alpha.map(|a| a.data.len()), Some(0), "{what}");
     }
     // A tile size of 0 is taken as 1.
@@ -709,9 +712,9 @@ enum Fault {
 /// field with corrupt weights or an overflowing network, as the marcher could meet it.
 struct Broken(Fault);
 
-impl nerfx::field::Field for Broken {
-    fn bounds(&self) -> nerfx::field::Aabb {
-        nerfx::field::Aabb::new(glam::Vec3::splat(-1.0), glam::Vec3::splat(1.0))
+impl nerfx_core::field::Field for Broken {
+    fn bounds(&self) -> nerfx_core::field::Aabb {
+        nerfx_core::field::Aabb::new(glam::Vec3::splat(-1.0), glam::Vec3::splat(1.0))
     }
 
     fn density(&self, points: &[glam::Vec3], sigma: &mut [f32]) {
@@ -736,7 +739,7 @@ impl nerfx::field::Field for Broken {
         }
     }
 
-    fn may_be_occupied(&self, region: &nerfx::field::Aabb) -> bool {
+    fn may_be_occupied(&self, region: &nerfx_core::field::Aabb) -> bool {
         !region.is_empty()
     }
 }
@@ -756,11 +759,11 @@ fn non_finite_fields_give_an_error_or_empty_samples_never_nan() {
         Fault::NanRadiance,
         Fault::InfiniteRadiance,
     ] {
-        let handle = nerfx::scene::FieldHandle::new(std::sync::Arc::new(Broken(fault)));
+        let handle = nerfx_core::scene::FieldHandle::new(std::sync::Arc::new(Broken(fault)));
         let scene = Scene::new(vec![
             Instance::new("broken", handle, DMat4::IDENTITY, None).expect("an instance")
         ]);
-        let check = |what: String, result: nerfx::Result<Planes>| match result {
+        let check = |what: String, result: nerfx_core::Result<Planes>| match result {
             Err(e) => {
                 let m = e.to_string();
                 assert!(

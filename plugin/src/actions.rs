@@ -36,7 +36,7 @@
 //! - begin/endSequenceRender: nothing to prepare (files are cached on first use).
 //! - render: [`crate::render`]. A frame whose renders counted rays stopped at their sample
 //!   budget or NaN densities marks the node with a persistent warning saying how many and
-//!   what to do ([`nerfx::render::RenderStats::warning`]); the render succeeds, and the next
+//!   what to do ([`nerfx_core::render::RenderStats::warning`]); the render succeeds, and the next
 //!   clean frame clears it.
 //! - instanceChanged: an edit by the artist or the plugin (`kOfxPropChangeReason`) clears the
 //!   instance's persistent error (the next action re-checks); a change because the time
@@ -49,7 +49,7 @@
 
 use std::ffi::{c_void, CStr};
 
-use nerfx::graph::{ClipKind, Node, OutputSpace};
+use nerfx_graph::{ClipKind, Node, OutputSpace};
 use openfx_sys::*;
 
 use crate::images::{connected, pixel_aspect};
@@ -123,7 +123,7 @@ pub fn run(
         return Ok(OK);
     }
     if is(kOfxActionPurgeCaches) {
-        nerfx::graph::purge_caches();
+        nerfx_graph::purge_caches();
         return Ok(OK);
     }
     if is(kOfxActionInstanceChanged) {

@@ -2,10 +2,10 @@
 //!
 //! The headers `openfx-sys` binds are OpenFX 1.4's, which have no colour management: the
 //! property and action names are defined here. A node that says the space of its output
-//! ([`nerfx::graph::Node::output_space`]: a NeRF Render) declares the core native style on
+//! ([`nerfx_graph::Node::output_space`]: a NeRF Render) declares the core native style on
 //! its descriptor when the host's descriptor offers any style but none, and answers
 //! `GetOutputColourspace` with its Output Colour Space by its native identifier
-//! ([`nerfx::image::OutputColorSpace::ofx_name`]), or `Raw` for a depth or matte output.
+//! ([`nerfx_core::image::OutputColorSpace::ofx_name`]), or `Raw` for a depth or matte output.
 //! Other nodes composite their inputs as they come and leave the host its default (the
 //! output is in the space of the first input).
 

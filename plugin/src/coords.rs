@@ -9,7 +9,7 @@
 //! rectangle maps to the raster window `[x1 − x0, x2 − x0) × [top − y2, top − y1)` with
 //! `top = y0 + height`.
 
-use nerfx::image::{scaled_size, Window};
+use nerfx_core::image::{scaled_size, Window};
 
 /// A rectangle in OpenFX pixel coordinates (`kOfxImagePropBounds`, render windows).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -15,7 +15,7 @@
 //! Properties that are niceties (description, field handling, clip-preference slaves, …)
 //! are set with [`optional`]: a host that does not know one must not lose the plugin.
 
-use nerfx::graph::{ClipKind, Node, ParamKind};
+use nerfx_graph::{ClipKind, Node, ParamKind};
 use openfx_sys::*;
 
 use crate::effect::{context_from_name, context_name, effect_props, param_set};
@@ -163,7 +163,7 @@ mod tests {
 
     #[test]
     fn fixed_parameters_of_a_node_with_its_own_format_are_clip_preference_slaves() {
-        let nerf = nerfx::graph::node("org.nerfx.NeRFRender").unwrap();
+        let nerf = nerfx_graph::node("org.nerfx.NeRFRender").unwrap();
         let slaves = clip_preference_slaves(nerf);
         // The two files, and the non-animating frame offset that moves the time domain.
         for p in ["file", "shot", "frameOffset"] {
@@ -172,7 +172,7 @@ mod tests {
         // Animating parameters do not change the format.
         assert!(!slaves.contains(&"overrideTransform"), "{slaves:?}");
         // A node sized by its inputs has no file and no format of its own.
-        let merge = nerfx::graph::node("org.nerfx.DepthMerge").unwrap();
+        let merge = nerfx_graph::node("org.nerfx.DepthMerge").unwrap();
         assert!(clip_preference_slaves(merge).is_empty());
     }
 }

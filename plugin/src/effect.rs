@@ -1,7 +1,7 @@
 //! The image effect handle of an action, descriptor or instance: its property set, its
 //! parameter set, and the OpenFX names of the contexts it is described or created in.
 
-use nerfx::graph::Context;
+use nerfx_graph::Context;
 use openfx_sys::*;
 
 use crate::props::{name, Props};

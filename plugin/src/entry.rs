@@ -11,7 +11,7 @@ use std::os::raw::{c_char, c_int};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::OnceLock;
 
-use nerfx::graph::{nodes, Node};
+use nerfx_graph::{nodes, Node};
 use openfx_sys::{
     kOfxImageEffectPluginApi, kOfxImageEffectPluginApiVersion, OfxHost, OfxPlugin,
     OfxPluginEntryPoint, OfxPropertySetHandle, OfxStatus,

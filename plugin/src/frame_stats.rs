@@ -10,8 +10,8 @@
 
 use std::sync::{Mutex, PoisonError};
 
-use nerfx::image::Window;
-use nerfx::render::RenderStats;
+use nerfx_core::image::Window;
+use nerfx_core::render::RenderStats;
 
 /// Windows kept per frame at most: a viewer panning over one frame asks for ever new windows,
 /// and the oldest are forgotten rather than held without bound.

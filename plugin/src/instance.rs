@@ -10,7 +10,7 @@
 use std::ffi::CString;
 use std::sync::Mutex;
 
-use nerfx::graph::{ClipDesc, Node};
+use nerfx_graph::{ClipDesc, Node};
 use openfx_sys::{
     kOfxImageEffectOutputClipName, kOfxImageEffectPropContext, kOfxPropInstanceData,
     OfxImageClipHandle, OfxImageEffectHandle, OfxParamHandle, OfxPropertySetHandle,

@@ -4,10 +4,10 @@
 //! labels, in order; the value is the index), File → string in file-path mode that must
 //! exist and never animates, Text → single-line string, Rgb/Rgba → RGB/RGBA, Double3 →
 //! double3D, Matrix → single-line string of 16 numbers, row-major (OpenFX has no matrix
-//! type; see [`nerfx::graph::parse_matrix`]). Every parameter gets its label, hint,
+//! type; see [`nerfx_graph::parse_matrix`]). Every parameter gets its label, hint,
 //! default, ranges, animation flag and evaluate-on-change.
 
-use nerfx::graph::{matrix_text, ParamDesc, ParamKind, Range};
+use nerfx_graph::{matrix_text, ParamDesc, ParamKind, Range};
 use openfx_sys::*;
 
 use crate::props::{name, optional, Props};
@@ -133,7 +133,7 @@ mod tests {
 
     #[test]
     fn every_registry_parameter_has_a_type_and_matrices_say_row_major() {
-        for node in nerfx::graph::nodes() {
+        for node in nerfx_graph::nodes() {
             for p in &node.desc.params {
                 let t = name(param_type(&p.kind)).to_str().unwrap();
                 assert!(t.starts_with("OfxParamType"), "{}: {t}", p.name);

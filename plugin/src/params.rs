@@ -2,14 +2,14 @@
 //! [`ParamValues`], typed by the registry's [`ParamKind`].
 //!
 //! Choices are read as option indices; a [`ParamKind::Matrix`] lives in a single-line string
-//! parameter holding 16 numbers, row-major ([`nerfx::graph::matrix_text`], [`nerfx::graph::parse_matrix`]). The core then
+//! parameter holding 16 numbers, row-major ([`nerfx_graph::matrix_text`], [`nerfx_graph::parse_matrix`]). The core then
 //! validates every value (ranges, finiteness) with errors naming node and parameter.
 
 use std::ffi::CStr;
 use std::os::raw::{c_char, c_int};
 
-use nerfx::graph::{parse_matrix, Node, ParamKind, ParamValues, Value};
-use nerfx::Error;
+use nerfx_core::Error;
+use nerfx_graph::{parse_matrix, Node, ParamKind, ParamValues, Value};
 use openfx_sys::OfxParamHandle;
 
 use crate::instance::Instance;
@@ -113,7 +113,7 @@ mod tests {
 
     #[test]
     fn a_node_with_an_empty_file_is_not_ready() {
-        let node = nerfx::graph::node("org.nerfx.NeRFRender").unwrap();
+        let node = nerfx_graph::node("org.nerfx.NeRFRender").unwrap();
         let files: Vec<&str> = node
             .desc
             .params
@@ -127,12 +127,12 @@ mod tests {
         assert_eq!(unset_file(node, &values), Some(files[0]));
         for (i, f) in files.iter().enumerate() {
             values
-                .set(f, nerfx::graph::Value::Text(format!("/x/{i}.json")))
+                .set(f, nerfx_graph::Value::Text(format!("/x/{i}.json")))
                 .unwrap();
         }
         assert_eq!(unset_file(node, &values), None);
         // Nodes without files are always ready.
-        for n in nerfx::graph::nodes() {
+        for n in nerfx_graph::nodes() {
             if !n
                 .desc
                 .params

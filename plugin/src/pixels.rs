@@ -8,7 +8,7 @@
 
 use std::ffi::c_void;
 
-use nerfx::image::{Plane, Planes, Window};
+use nerfx_core::image::{Plane, Planes, Window};
 
 use crate::coords::{Frame, PixelRect};
 

@@ -19,9 +19,9 @@
 //! the render time may then be a half frame, at which the core interpolates the shot as at any
 //! sub-frame time.
 
-use nerfx::graph::{check_render_scale, ClipKind, RenderRequest, Rendered};
-use nerfx::image::{Plane, Planes, Window};
-use nerfx::render::RenderStats;
+use nerfx_core::image::{Plane, Planes, Window};
+use nerfx_core::render::RenderStats;
+use nerfx_graph::{check_render_scale, ClipKind, RenderRequest, Rendered};
 use openfx_sys::*;
 
 use crate::coords::{Frame, PixelRect};

@@ -63,8 +63,8 @@ impl Failure {
     }
 }
 
-impl From<nerfx::Error> for Failure {
-    fn from(e: nerfx::Error) -> Self {
+impl From<nerfx_core::Error> for Failure {
+    fn from(e: nerfx_core::Error) -> Self {
         Failure::failed(e.to_string())
     }
 }

@@ -3,13 +3,13 @@
 //! ([`assert_close`]), and the invariants every render must satisfy ([`assert_sane`]).
 
 use glam::{DMat4, DVec3, Vec3};
-use nerfx::camera::{Camera, Perspective, Projection};
-use nerfx::demo::look_at;
-use nerfx::field::{Analytic, Primitive, ShColor, Shape};
-use nerfx::image::{Plane, Planes};
-use nerfx::reference::metrics;
-use nerfx::render::{render, MarchParams, Outputs, RenderSettings};
-use nerfx::scene::{CropBox, FieldHandle, Instance, Scene};
+use nerfx_core::camera::{Camera, Perspective, Projection};
+use nerfx_core::demo::look_at;
+use nerfx_core::field::{Analytic, Primitive, ShColor, Shape};
+use nerfx_core::image::{Plane, Planes};
+use nerfx_core::render::{render, MarchParams, Outputs, RenderSettings};
+use nerfx_core::scene::{CropBox, FieldHandle, Instance, Scene};
+use nerfx_testkit::reference::metrics;
 
 mod rng;
 pub use rng::SplitMix64;
@@ -161,7 +161,7 @@ pub fn render_full(scene: &Scene, camera: &Camera, march: MarchParams) -> Planes
 
 /// The reference of the camera's full image.
 pub fn reference_full(scene: &Scene, camera: &Camera) -> Planes {
-    nerfx::reference::render(scene, camera, camera.full_window()).expect("reference")
+    nerfx_testkit::reference::render(scene, camera, camera.full_window()).expect("reference")
 }
 
 /// How close two renders must be. Every bound is on the worst pixel except `min_psnr`.

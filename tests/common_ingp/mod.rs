@@ -1,24 +1,24 @@
 //! Small instant-ngp snapshots with seeded random weights for the loader's tests and the
-//! NumPy cross-check, from the generator the benchmark uses (`nerfx::bench::snapshot`),
+//! NumPy cross-check, from the generator the benchmark uses (`nerfx_testkit::bench::snapshot`),
 //! with the tests' conveniences: a scratch folder, writing that fails the test on error.
 // Each test crate uses part of it.
 #![allow(unused_imports)]
 
 use std::path::{Path, PathBuf};
 
-pub use nerfx::bench::snapshot::{param_counts, Ball, SnapshotSpec as Spec};
+pub use nerfx_testkit::bench::snapshot::{param_counts, Ball, SnapshotSpec as Spec};
 // The tests' one generator, through the shared harness (which every crate using this
 // writer declares as `mod common_fields`).
 pub use super::common_fields::SplitMix64;
 
 /// The snapshot's msgpack bytes (before any gzip framing).
 pub fn snapshot_bytes(s: &Spec) -> Vec<u8> {
-    nerfx::bench::snapshot::snapshot_bytes(s).unwrap()
+    nerfx_testkit::bench::snapshot::snapshot_bytes(s).unwrap()
 }
 
 /// The file's bytes: msgpack, gzip-framed when `s.gzip`.
 pub fn file_bytes(s: &Spec) -> Vec<u8> {
-    nerfx::bench::snapshot::file_bytes(s).unwrap()
+    nerfx_testkit::bench::snapshot::file_bytes(s).unwrap()
 }
 
 /// A fresh scratch folder for one test.
@@ -32,7 +32,7 @@ pub fn scratch(name: &str) -> PathBuf {
 
 /// Writes the snapshot of `s` into `dir`; returns its path.
 pub fn write_snapshot(dir: &Path, name: &str, s: &Spec) -> PathBuf {
-    nerfx::bench::snapshot::write_snapshot(dir, name, s).unwrap()
+    nerfx_testkit::bench::snapshot::write_snapshot(dir, name, s).unwrap()
 }
 
 /// Writes the snapshot of `s` made surface-like: only `balls` occupied (1 inside, 0 outside,
@@ -51,5 +51,8 @@ pub fn write_blob_snapshot(
         ..s.clone()
     };
     let path = write_snapshot(dir, name, &spec);
-    (path, nerfx::bench::snapshot::occupied_fraction(&spec))
+    (
+        path,
+        nerfx_testkit::bench::snapshot::occupied_fraction(&spec),
+    )
 }

@@ -685,11 +685,11 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
 /// batches on rayon's threads, and says where the sampler's time goes: thread-seconds in the
 /// proposal networks and in the main field, and each one's queries per pixel.
 pub fn sampler_split(
-    field: &nerfx::field::NerfactoField,
-    rays: &[nerfx::field::SamplerRay],
+    field: &nerfx_core::field::NerfactoField,
+    rays: &[nerfx_core::field::SamplerRay],
     pixels: f64,
 ) -> String {
-    use nerfx::field::{SamplerScratch, SamplerStats};
+    use nerfx_core::field::{SamplerScratch, SamplerStats};
     use rayon::prelude::*;
     let t = std::time::Instant::now();
     let split = rays

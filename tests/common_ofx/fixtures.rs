@@ -4,8 +4,8 @@
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use nerfx::graph::{node, Context, ParamValues, Value};
-use nerfx::host::{Bundle, HostOptions, Instance};
+use nerfx_graph::{node, Context, ParamValues, Value};
+use nerfx_ofx_host::{Bundle, HostOptions, Instance};
 
 /// The built bundle, loaded once per test binary by the strict default host and shared by
 /// its tests (their violations and messages go to the same record, so tests that count
@@ -15,7 +15,7 @@ pub fn shared() -> &'static Bundle {
     BUNDLE.get_or_init(|| super::load(HostOptions::default()))
 }
 
-/// The demo's inputs (scenes, shot, graph: `nerfx::demo::write_graph`) at `w × h`, written
+/// The demo's inputs (scenes, shot, graph: `nerfx_graph::demo::write_graph`) at `w × h`, written
 /// once per test binary into a directory of its own.
 ///
 /// Writing them is the slow part, so a binary keeps one size: a call with another size than
@@ -26,7 +26,7 @@ pub fn demo_dir(w: u32, h: u32) -> &'static Path {
         let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
             .join(format!("nerfx-ofx-demo-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        nerfx::demo::write_graph(&dir, w, h).unwrap();
+        nerfx_graph::demo::write_graph(&dir, w, h).unwrap();
         (w, h, dir)
     });
     assert_eq!((*dw, *dh), (w, h), "one demo size per test binary");

@@ -3,8 +3,8 @@
 //!
 //! The host carries RGBA only, so images here have colour and alpha planes and no depth.
 
-use nerfx::host::Instance;
-use nerfx::image::{Plane, Planes, Window};
+use nerfx_core::image::{Plane, Planes, Window};
+use nerfx_ofx_host::Instance;
 
 /// A `w × h` RGBA image whose channel `c` (0–2 colour, 3 alpha) at raster pixel `(x, y)` is
 /// `f(x, y, c)`.

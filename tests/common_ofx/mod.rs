@@ -12,7 +12,7 @@ use std::path::PathBuf;
 use std::process::Command;
 use std::sync::OnceLock;
 
-use nerfx::host::{Bundle, HostOptions};
+use nerfx_ofx_host::{Bundle, HostOptions};
 
 /// Builds `nerfx.ofx.bundle` once per test binary with `bundle/build.sh --profile test` (the
 /// README's build command, at the test profile) and returns its path.

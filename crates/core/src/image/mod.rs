@@ -1,0 +1,19 @@
+//! Images: planar f32 planes, render windows, EXR and PNG output, output colour spaces,
+//! what an EXR's header says, and Cryptomatte layers ([`cryptomatte`]).
+
+mod color_spaces;
+pub mod cryptomatte;
+mod exr_header;
+mod exr_io;
+mod plane;
+mod png;
+
+pub use self::png::write_png_preview;
+pub use self::png::write_png_rgba8;
+pub use color_spaces::{Chromaticities, OutputColorSpace};
+pub use exr_header::{frames_per_second, CameraMatrices, ExrHeader};
+pub use exr_io::{
+    read_exr_channels, read_exr_image, write_exr, write_exr_channels, write_exr_layers,
+    BACKGROUND_DEPTH,
+};
+pub use plane::{scaled_size, Plane, Planes, Window};

@@ -1,0 +1,32 @@
+//! nerfx-core: trained radiance fields and Gaussian splats rendered from Blender cameras.
+//!
+//! Data flows one way: a **shot** (camera per frame, from Blender) gives [`camera::Camera`]s,
+//! cameras give world-space [`camera::Ray`]s, the [`scene::Scene`] carries them into each
+//! field's frame, the [`render`] marcher samples the [`field::Field`]s along them and
+//! composites the samples into [`image::Planes`], which are written as EXR and PNG.
+//!
+//! ```
+//! use nerfx_core::{demo, render::{render, Outputs, RenderSettings, Quality}};
+//! let (scene, camera) = demo::scene_and_camera(64, 36).unwrap();
+//! let settings = RenderSettings::new(Quality::Draft.params(), Outputs::all());
+//! let planes = render(&scene, &camera, camera.full_window(), &settings).unwrap();
+//! assert_eq!(planes.width, 64);
+//! ```
+#![deny(missing_docs)]
+
+pub mod camera;
+pub mod composite;
+pub mod demo;
+pub mod error;
+pub mod field;
+pub mod frames;
+pub mod image;
+pub mod input;
+pub mod json;
+pub mod output;
+pub mod render;
+pub mod rng;
+pub mod scene;
+pub mod standin;
+
+pub use error::{Error, Result};

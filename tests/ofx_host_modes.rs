@@ -18,7 +18,7 @@ use common_ofx::load;
 use nerfx_core::image::{scaled_size, Planes, Window};
 use nerfx_graph::{node, Context, ParamValues, RenderRequest, Value};
 use nerfx_ofx_host::{
-    Bundle, ChangeReason, ClipSource, Field, HostOptions, Instance, MessageSuiteOffer,
+    Bundle, ChangeReason, ClipSource, HostOptions, Instance, InterlacedField, MessageSuiteOffer,
 };
 
 /// The demo image size.
@@ -399,12 +399,12 @@ fn padded_rgb_images_together() {
 
 /// `full` with the rows of the other field than `field` transparent black; raster row `y`
 /// of an image `h` rows high is OFX row `h − 1 − y` (the lower field: even OFX rows).
-fn only_field(full: &Planes, field: Field) -> Planes {
+fn only_field(full: &Planes, field: InterlacedField) -> Planes {
     let h = full.height;
     rgba(full.width, h, |x, y, c| {
         let ofx_row = h - 1 - y;
         let lower = ofx_row.is_multiple_of(2);
-        if lower == (field == Field::Lower) {
+        if lower == (field == InterlacedField::Lower) {
             at(full, x, y, c)
         } else {
             0.0
@@ -418,7 +418,7 @@ fn a_field_render_writes_that_field_rows_only() {
     let b = load(HostOptions::default());
     let (nerf_instance, values) = nerf(&b, &demo_dir().join("demo_environment.json"));
     let (comp, comp_values) = compositing(&b, &cases()[1]);
-    for field in [Field::Lower, Field::Upper] {
+    for field in [InterlacedField::Lower, InterlacedField::Upper] {
         for scale in [1.0, 0.5] {
             let (w, h) = (scaled_size(W, scale), scaled_size(H, scale));
             let got = tiled(w, h, |t| {
@@ -442,11 +442,12 @@ fn a_field_render_writes_that_field_rows_only() {
     });
     let (i, values) = nerf(&padded, &demo_dir().join("demo_environment.json"));
     let got = tiled(W, H, |t| {
-        i.render_field(FRAME, t, 1.0, Field::Upper).unwrap()
+        i.render_field(FRAME, t, 1.0, InterlacedField::Upper)
+            .unwrap()
     });
     assert_same(
         &got,
-        &only_field(&core_nerf(&values, 1.0), Field::Upper),
+        &only_field(&core_nerf(&values, 1.0), InterlacedField::Upper),
         "padded upper field",
     );
     no_violations(&b);

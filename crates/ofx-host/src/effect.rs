@@ -20,7 +20,7 @@ use openfx_sys::{
 
 use super::handles::{self, Kind};
 use super::log::{Log, Message};
-use super::options::{AbsentClip, Field, HostOptions, PADDING, ROW_SLACK};
+use super::options::{AbsentClip, HostOptions, InterlacedField, PADDING, ROW_SLACK};
 use super::params::{put, ParamSet};
 use super::props::{self, PropSet};
 use super::source::ClipSource;
@@ -105,7 +105,7 @@ pub(crate) struct RenderCtx {
     /// The output buffer.
     pub(crate) output: Layout,
     /// The field rendered into the full-frame output, if one.
-    pub(crate) field: Option<Field>,
+    pub(crate) field: Option<InterlacedField>,
 }
 
 /// An image the plugin holds.
@@ -318,7 +318,7 @@ impl Effect {
         scale: f64,
         rois: HashMap<String, [f64; 4]>,
         output: Layout,
-        field: Option<Field>,
+        field: Option<InterlacedField>,
     ) -> u64 {
         let id = NEXT_ID.fetch_add(1, Ordering::Relaxed);
         self.renders

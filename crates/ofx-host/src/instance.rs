@@ -9,7 +9,7 @@ use openfx_sys as ofx;
 use super::bundle::{context_name, failure, Bundle, Plugin};
 use super::effect::{self, Effect, Layout, RenderScope, GUARD, SENTINEL_BITS};
 use super::log::Message;
-use super::options::{ChangeReason, Field, PADDING, ROW_SLACK};
+use super::options::{ChangeReason, InterlacedField, PADDING, ROW_SLACK};
 use super::props::{args, PropSet, PropValue};
 use super::source::ClipSource;
 use super::spec::{cstr, ParamType};
@@ -638,7 +638,7 @@ impl Instance {
         time: f64,
         window: Window,
         render_scale: f64,
-        field: Field,
+        field: InterlacedField,
     ) -> Result<Planes> {
         self.render_impl(time, window, render_scale, false, Some(field))
     }
@@ -649,7 +649,7 @@ impl Instance {
         window: Window,
         render_scale: f64,
         draft: bool,
-        field: Option<Field>,
+        field: Option<InterlacedField>,
     ) -> Result<Planes> {
         let s = render_scale;
         self.check_scale(s)?;
@@ -670,8 +670,8 @@ impl Instance {
         let output = buffer.layout(bounds, [0, 0, ws as i32, hs as i32]);
         let field_name = cstr(match field {
             None => ofx::kOfxImageFieldNone,
-            Some(Field::Lower) => ofx::kOfxImageFieldLower,
-            Some(Field::Upper) => ofx::kOfxImageFieldUpper,
+            Some(InterlacedField::Lower) => ofx::kOfxImageFieldLower,
+            Some(InterlacedField::Upper) => ofx::kOfxImageFieldUpper,
         });
         let in_args = self.args(
             false,

@@ -60,7 +60,9 @@ pub use bundle::{Bundle, ClipDescription, EffectDescription, ParamDescription};
 pub use graph::OfxGraph;
 pub use instance::Instance;
 pub use log::Message;
-pub use options::{AbsentClip, ChangeReason, Field, HostOptions, MessageSuiteOffer, PADDING};
+pub use options::{
+    AbsentClip, ChangeReason, HostOptions, InterlacedField, MessageSuiteOffer, PADDING,
+};
 pub use props::PropValue;
 pub use source::{ClipSource, SourceFn};
 pub use spec::PropType;

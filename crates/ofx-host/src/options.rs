@@ -81,19 +81,19 @@ pub(crate) const ROW_SLACK: usize = 3;
 /// rows 0, 2, 4… of the image counted from its bottom (`y` = 0), the upper field rows 1, 3,
 /// 5….
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Field {
+pub enum InterlacedField {
     /// Even rows (`kOfxImageFieldLower`).
     Lower,
     /// Odd rows (`kOfxImageFieldUpper`).
     Upper,
 }
 
-impl Field {
+impl InterlacedField {
     /// Whether OFX row `y` (pixel coordinates, `y` up) belongs to this field.
     pub fn has_row(self, y: i64) -> bool {
         match self {
-            Field::Lower => y.rem_euclid(2) == 0,
-            Field::Upper => y.rem_euclid(2) == 1,
+            InterlacedField::Lower => y.rem_euclid(2) == 0,
+            InterlacedField::Upper => y.rem_euclid(2) == 1,
         }
     }
 }
@@ -116,10 +116,14 @@ mod tests {
     #[test]
     fn fields_are_row_parities_counted_from_the_bottom() {
         // ofxImageEffect.h: lower = rows 0, 2, 4…; upper = rows 1, 3, 5….
-        assert!(Field::Lower.has_row(0) && Field::Lower.has_row(4) && Field::Lower.has_row(-2));
-        assert!(!Field::Lower.has_row(1) && !Field::Lower.has_row(-1));
-        assert!(Field::Upper.has_row(1) && Field::Upper.has_row(-3));
-        assert!(!Field::Upper.has_row(2));
+        assert!(
+            InterlacedField::Lower.has_row(0)
+                && InterlacedField::Lower.has_row(4)
+                && InterlacedField::Lower.has_row(-2)
+        );
+        assert!(!InterlacedField::Lower.has_row(1) && !InterlacedField::Lower.has_row(-1));
+        assert!(InterlacedField::Upper.has_row(1) && InterlacedField::Upper.has_row(-3));
+        assert!(!InterlacedField::Upper.has_row(2));
     }
 
     #[test]

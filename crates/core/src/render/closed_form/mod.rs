@@ -35,7 +35,7 @@ use glam::DVec3;
 
 use self::piece::{Integral, Piece, Sums};
 use super::composite::Pieces;
-use super::march::{cull_instances, may_meet, Bundle, InstancePlan, PixelResult};
+use super::march::{cull_instances, may_meet, InstancePlan, PixelResult, RayCone};
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
 use crate::field::{Anchor, Density, Profile};
@@ -112,8 +112,8 @@ pub(super) fn integrate_tile(
     out: &mut Vec<PixelResult>,
 ) -> RenderStats {
     camera.window_rays(tile, &mut s.rays);
-    let bundle = Bundle::of(&s.rays, tile.width() as usize, camera.rectilinear());
-    cull_instances(plans, bundle.as_ref(), &mut s.insts);
+    let cone = RayCone::of(&s.rays, tile.width() as usize, camera.rectilinear());
+    cull_instances(plans, cone.as_ref(), &mut s.insts);
     s.prims.clear();
     s.prim_at.clear();
     s.prim_at.push(0);
@@ -123,7 +123,7 @@ pub(super) fn integrate_tile(
             .as_analytic()
             .map_or(0, |a| a.primitives.len());
         s.prims
-            .extend(plans[i as usize].primitives_met(count, bundle.as_ref()));
+            .extend(plans[i as usize].primitives_met(count, cone.as_ref()));
         s.prim_at.push(s.prims.len() as u32);
     }
     let mut stats = RenderStats {

@@ -34,7 +34,7 @@ use glam::{DVec3, Vec3};
 use self::integration::integrate;
 use self::laying::lay_nodes;
 use self::plan::TileFields;
-pub(super) use self::plan::{cull_instances, may_meet, Bundle};
+pub(super) use self::plan::{cull_instances, may_meet, RayCone};
 use self::refinement::refine;
 use self::sampling::evaluate_pending;
 use self::setup::setup_rays;
@@ -99,7 +99,7 @@ pub(super) struct InstancePlan {
     primitive_spheres: Vec<Option<(DVec3, f64)>>,
     /// For an analytic field that gives its spans, each box primitive's placed corners and
     /// the margin its sphere is widened by (`None` for other shapes), to cull it by a
-    /// pinhole tile's pyramid ([`Bundle::may_meet_box`](plan::Bundle::may_meet_box)).
+    /// pinhole tile's pyramid ([`RayCone::may_meet_box`](plan::RayCone::may_meet_box)).
     primitive_boxes: Vec<Option<([DVec3; 8], f64)>>,
 }
 

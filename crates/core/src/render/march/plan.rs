@@ -72,25 +72,25 @@ impl InstancePlan {
     }
 
     /// The indices, ascending, of the first `count` primitives of the instance's analytic
-    /// field that some ray of `bundle` may meet: those whose world sphere it may meet (and,
+    /// field that some ray of `cone` may meet: those whose world sphere it may meet (and,
     /// for a box, whose placed corners are not all outside one side of its pyramid), and
     /// those without one (not finite, or a field that is not culled by primitive); without a
-    /// bundle, all of them.
+    /// cone, all of them.
     pub(in crate::render) fn primitives_met<'a>(
         &'a self,
         count: usize,
-        bundle: Option<&'a Bundle>,
+        cone: Option<&'a RayCone>,
     ) -> impl Iterator<Item = u32> + 'a {
         (0..count as u32).filter(move |&k| {
             let sphere = self.primitive_spheres.get(k as usize).copied().flatten();
-            match (bundle, sphere) {
-                (Some(bundle), Some(sphere)) => {
-                    bundle.may_meet(sphere)
+            match (cone, sphere) {
+                (Some(cone), Some(sphere)) => {
+                    cone.may_meet(sphere)
                         && self
                             .primitive_boxes
                             .get(k as usize)
                             .and_then(Option::as_ref)
-                            .is_none_or(|(corners, margin)| bundle.may_meet_box(corners, *margin))
+                            .is_none_or(|(corners, margin)| cone.may_meet_box(corners, *margin))
                 }
                 _ => true,
             }
@@ -228,7 +228,7 @@ fn largest_stretch(m: DMat3) -> f64 {
 /// `θ` of their mean direction `axis` (kept as `θ`'s sine and cosine). A pinhole's tile is
 /// also a pyramid: its rays share their origin and point inside the four planes through it
 /// and each pair of neighbouring corner pixels' rays (`sides`, their unit normals, inward).
-pub(in crate::render) struct Bundle {
+pub(in crate::render) struct RayCone {
     origin: DVec3,
     axis: DVec3,
     rho: f64,
@@ -237,9 +237,9 @@ pub(in crate::render) struct Bundle {
     sides: Option<[DVec3; 4]>,
 }
 
-impl Bundle {
+impl RayCone {
     /// The cone around `rays`; `None` where it culls nothing: no rays, directions that
-    /// cancel out, or a wide bundle (`θ` of 90° or more: panoramic tiles). `rays` are a
+    /// cancel out, or a wide cone (`θ` of 90° or more: panoramic tiles). `rays` are a
     /// tile's, row by row, `width` to a row; `rectilinear`: they share their origin and
     /// each points inside the pyramid of the tile's corner rays (as a pinhole camera's do,
     /// [`Camera::rectilinear`](crate::camera::Camera::rectilinear)), which then bounds them
@@ -248,10 +248,10 @@ impl Bundle {
         rays: &[Option<Ray>],
         width: usize,
         rectilinear: bool,
-    ) -> Option<Bundle> {
+    ) -> Option<RayCone> {
         if rectilinear {
-            if let Some(bundle) = Bundle::of_pyramid(rays, width) {
-                return Some(bundle);
+            if let Some(cone) = RayCone::of_pyramid(rays, width) {
+                return Some(cone);
             }
         }
         let (mut origin, mut dir, mut n) = (DVec3::ZERO, DVec3::ZERO, 0.0);
@@ -270,19 +270,19 @@ impl Bundle {
             cos_theta = cos_theta.min(ray.dir.dot(axis));
         }
         let rho = rho2.sqrt();
-        Bundle::around(origin, axis, rho, cos_theta, None)
+        RayCone::around(origin, axis, rho, cos_theta, None)
     }
 
-    /// The bundle of a rectilinear tile's rays (see [`of`](Self::of)) from its four corner
+    /// The cone of a rectilinear tile's rays (see [`of`](Self::of)) from its four corner
     /// rays alone: they share the origin, and the angle from an axis inside the pyramid is
     /// greatest at one of its edges' ends, the corners. `None` where the tile has no pyramid
     /// ([`pyramid`]) or its corners spread 90° or more.
-    fn of_pyramid(rays: &[Option<Ray>], width: usize) -> Option<Bundle> {
+    fn of_pyramid(rays: &[Option<Ray>], width: usize) -> Option<RayCone> {
         let (origin, corners) = pyramid_corners(rays, width)?;
         let axis = corners.iter().sum::<DVec3>().try_normalize()?;
         let cos_theta = corners.iter().fold(1.0f64, |m, d| m.min(d.dot(axis)));
         let sides = pyramid(corners, axis)?;
-        Bundle::around(origin, axis, 0.0, cos_theta, Some(sides))
+        RayCone::around(origin, axis, 0.0, cos_theta, Some(sides))
     }
 
     /// The cone about `axis` from within `rho` of `origin` whose rays' directions have
@@ -293,13 +293,13 @@ impl Bundle {
         rho: f64,
         cos_theta: f64,
         sides: Option<[DVec3; 4]>,
-    ) -> Option<Bundle> {
+    ) -> Option<RayCone> {
         if cos_theta.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) || !rho.is_finite() {
             return None;
         }
         // A margin for rounding in the angles.
         let (sin_theta, cos_theta) = (cos_theta.min(1.0).acos() + 1e-6).sin_cos();
-        Some(Bundle {
+        Some(RayCone {
             origin,
             axis,
             rho,
@@ -309,7 +309,7 @@ impl Bundle {
         })
     }
 
-    /// Whether some ray of the bundle may meet the convex hull of `corners`: not where they
+    /// Whether some ray of the cone may meet the convex hull of `corners`: not where they
     /// all lie more than `margin` outside one side of its pyramid (always, without one).
     pub(in crate::render) fn may_meet_box(&self, corners: &[DVec3; 8], margin: f64) -> bool {
         let Some(sides) = &self.sides else {
@@ -320,7 +320,7 @@ impl Bundle {
             .all(|n| corners.iter().any(|&c| n.dot(c - self.origin) >= -margin))
     }
 
-    /// Whether some ray of the bundle may meet the sphere `(b, R)`: a ray starting within
+    /// Whether some ray of the cone may meet the sphere `(b, R)`: a ray starting within
     /// `ρ` of the cone's origin `c` meets it only if the ray from `c` along its direction
     /// meets `(b, R + ρ)`, which needs the angle `α` between the cone's axis and `b − c` to
     /// be at most `θ + β`, `β = asin((R + ρ)/|b − c|)`; as both sides lie in `[0, π]` (`θ + β`
@@ -372,23 +372,23 @@ fn pyramid(corners: [DVec3; 4], axis: DVec3) -> Option<[DVec3; 4]> {
     Some(sides)
 }
 
-/// Lists in `keep`, ascending, the instances some ray of a tile (its [`Bundle`]) may meet;
-/// without a bundle, and for instances without finite bounds, all. This makes a tile's setup cost per
+/// Lists in `keep`, ascending, the instances some ray of a tile (its [`RayCone`]) may meet;
+/// without a cone, and for instances without finite bounds, all. This makes a tile's setup cost per
 /// instance, not per instance and pixel.
 pub(in crate::render) fn cull_instances(
     plans: &[InstancePlan],
-    bundle: Option<&Bundle>,
+    cone: Option<&RayCone>,
     keep: &mut Vec<u32>,
 ) {
     keep.clear();
     keep.extend(0..plans.len() as u32);
-    let Some(bundle) = bundle else {
+    let Some(cone) = cone else {
         return;
     };
     keep.retain(|&i| {
         plans[i as usize]
             .world_sphere
-            .is_none_or(|sphere| bundle.may_meet(sphere))
+            .is_none_or(|sphere| cone.may_meet(sphere))
     });
 }
 
@@ -422,19 +422,19 @@ pub(super) struct TileFields {
 }
 
 impl TileFields {
-    /// Picks the fields for a tile of `bundle`'s rays, whose instances `keep` lists.
+    /// Picks the fields for a tile of `cone`'s rays, whose instances `keep` lists.
     pub(super) fn cull(
         &mut self,
         scene: &Scene,
         plans: &[InstancePlan],
-        bundle: Option<&Bundle>,
+        cone: Option<&RayCone>,
         keep: &[u32],
     ) {
         let n_inst = plans.len();
         self.culled.resize_with(n_inst, Analytic::default);
         self.in_use.clear();
         self.in_use.resize(n_inst, false);
-        let Some(bundle) = bundle else {
+        let Some(cone) = cone else {
             return;
         };
         for &i in keep {
@@ -449,7 +449,7 @@ impl TileFields {
             let culled = &mut self.culled[i].primitives;
             culled.clear();
             culled.extend(
-                plan.primitives_met(analytic.primitives.len(), Some(bundle))
+                plan.primitives_met(analytic.primitives.len(), Some(cone))
                     .map(|k| analytic.primitives[k as usize])
                     // Primitives without density add nothing anywhere.
                     .filter(|p| p.density > 0.0),

@@ -3,7 +3,7 @@
 use glam::DVec3;
 
 use super::integration::{composite_fragment, composite_fragments};
-use super::plan::{cull_instances, may_meet, Bundle};
+use super::plan::{cull_instances, may_meet, RayCone};
 use super::RayState;
 use super::{InstancePlan, Met, Scratch};
 use crate::camera::Camera;
@@ -36,14 +36,14 @@ pub(super) fn setup_rays(
     s.met_at.push(0);
     s.active.clear();
     camera.window_rays(tile, &mut s.world_rays);
-    let bundle = Bundle::of(&s.world_rays, tile.width() as usize, camera.rectilinear());
-    cull_instances(plans, bundle.as_ref(), &mut s.tile_insts);
+    let cone = RayCone::of(&s.world_rays, tile.width() as usize, camera.rectilinear());
+    cull_instances(plans, cone.as_ref(), &mut s.tile_insts);
     s.feature_width = (s.tile_insts.iter())
         .map(|&i| plans[i as usize].features)
         .max()
         .unwrap_or(0);
     s.tile_fields
-        .cull(scene, plans, bundle.as_ref(), &s.tile_insts);
+        .cull(scene, plans, cone.as_ref(), &s.tile_insts);
     for (r, state) in s.rays.iter_mut().enumerate().take(n_rays) {
         let ray = s.world_rays[r];
         state.ray = ray;

@@ -409,8 +409,8 @@ fn tile_culling_keeps_every_instance_a_ray_of_the_tile_meets() {
         let rays: Vec<_> = (0..256)
             .map(|k| camera.ray((x0 + k % 16) as f64 + 0.5, (y0 + k / 16) as f64 + 0.5))
             .collect();
-        let bundle = super::plan::Bundle::of(&rays, 16, camera.rectilinear());
-        super::plan::cull_instances(&plans, bundle.as_ref(), &mut keep);
+        let cone = super::plan::RayCone::of(&rays, 16, camera.rectilinear());
+        super::plan::cull_instances(&plans, cone.as_ref(), &mut keep);
         for (i, inst) in scene.instances.iter().enumerate() {
             let meets = rays
                 .iter()
@@ -496,9 +496,9 @@ fn a_tiles_pyramid_culls_a_thin_box_and_keeps_it_where_a_ray_meets_it() {
         let rays: Vec<_> = (0..256)
             .map(|k| camera.ray((x0 + k % 16) as f64 + 0.5, (y0 + k / 16) as f64 + 0.5))
             .collect();
-        let bundle = super::plan::Bundle::of(&rays, 16, true).expect("a narrow tile");
-        let kept = plans[0].primitives_met(1, Some(&bundle)).count() == 1;
-        let cone = super::plan::Bundle::of(&rays, 16, false).expect("a narrow tile");
+        let pyramid = super::plan::RayCone::of(&rays, 16, true).expect("a narrow tile");
+        let kept = plans[0].primitives_met(1, Some(&pyramid)).count() == 1;
+        let cone = super::plan::RayCone::of(&rays, 16, false).expect("a narrow tile");
         let cone_kept = plans[0].primitives_met(1, Some(&cone)).count() == 1;
         let meets = rays.iter().flatten().any(|r| {
             scene.instances[0]
@@ -574,9 +574,9 @@ fn a_tiles_culled_field_is_the_whole_field_along_its_rays() {
         let rays: Vec<_> = (0..256)
             .map(|k| camera.ray((x0 + k % 16) as f64 + 0.5, (y0 + k / 16) as f64 + 0.5))
             .collect();
-        let bundle = super::plan::Bundle::of(&rays, 16, camera.rectilinear());
-        super::plan::cull_instances(&plans, bundle.as_ref(), &mut keep);
-        tile_fields.cull(&scene, &plans, bundle.as_ref(), &keep);
+        let cone = super::plan::RayCone::of(&rays, 16, camera.rectilinear());
+        super::plan::cull_instances(&plans, cone.as_ref(), &mut keep);
+        tile_fields.cull(&scene, &plans, cone.as_ref(), &keep);
         let tile_field = tile_fields.field(&scene, 0);
         for lr in rays
             .iter()

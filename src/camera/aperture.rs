@@ -59,7 +59,10 @@ impl DepthOfField {
         if self.blades > MAX_BLADES {
             return bad(
                 "blades",
-                format!("{}; expected 0 (a disk) to {MAX_BLADES}", self.blades),
+                format!(
+                    "{}; expected 0 to {MAX_BLADES} (fewer than 3: a round aperture)",
+                    self.blades
+                ),
             );
         }
         if !self.rotation.is_finite() {

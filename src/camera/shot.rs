@@ -403,6 +403,9 @@ impl ShotFrame {
             other => other,
         };
         let c = &self.camera;
+        if let Some(dof) = &c.dof {
+            dof.validate("dof").map_err(in_context)?;
+        }
         let intrinsics = c.intrinsics(shot);
         let projection = match (c.kind, c.stereo) {
             (ShotCameraKind::Perspective, None) => {
@@ -631,7 +634,7 @@ fn read_dof(dof: &Obj) -> Result<DepthOfField> {
             _ => {
                 return Err(dof.error(
                     "blades",
-                    format!("{n}; expected 0 (a round aperture) or 3 to {MAX_BLADES}"),
+                    format!("{n}; expected 0 to {MAX_BLADES} (fewer than 3: a round aperture)"),
                 ))
             }
         }
@@ -1107,6 +1110,13 @@ mod tests {
             &parse_err(&with_dof(dof)),
             &["frames[0].camera.dof.fstop", "missing"],
         );
+        // A shot built in memory is checked when its cameras are built.
+        let mut shot = parse(&with_dof(json!({"focus_distance": 3, "fstop": 4}))).unwrap();
+        if let Some(d) = &mut shot.frames[0].camera.dof {
+            d.fstop = 0.0;
+        }
+        let e = shot.frames[0].camera(&shot).unwrap_err().to_string();
+        assert_mentions(&e, &["shot.json", "frames[0].camera", "dof.fstop"]);
         // Only a perspective camera has a thin lens.
         let mut v = base();
         v["frames"][1]["camera"]["dof"] = ok;

@@ -14,8 +14,8 @@ use crate::scene::LoadedScene;
 
 /// Each instance's coverage of frame `frame` (one plane per instance of `scene`, in its
 /// order): the share of every pixel's opacity its samples and fragments hold, summing to the
-/// pixel's alpha, integrated over the shutter and the aperture as the frame's colour is. Rendered with the
-/// instances in indicator colours, three at a time
+/// pixel's alpha, integrated over the shutter and the aperture as the frame's colour is.
+/// Rendered with the instances in indicator colours, three at a time
 /// ([`LoadedScene::with_indicator_colours`]), at `settings`' quality.
 pub fn render_coverage(
     scene: &LoadedScene,

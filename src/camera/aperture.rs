@@ -11,8 +11,9 @@
 //! towards the point its pinhole ray meets the focus plane.
 //!
 //! nerfx renders one pinhole image per aperture point: the pinhole moved to the lens point
-//! `l = (lx, ly)` and its image plane sheared by `−l/d` (a lens shift of `−l·lens/(d·sensor)`),
-//! so that every point of the focus plane lands on the pixel it has without depth of field.
+//! `l = (lx, ly)` and its image plane sheared by `−l/d` (a lens shift of
+//! `−l·lens/(d·sensor)`), so that every point of the focus plane lands on the pixel it has
+//! without depth of field.
 //! Each pixel of that image is then exactly the thin-lens ray through that lens point, for
 //! every pixel at once, and the frame is the mean of the images over stratified aperture
 //! points ([`aperture_points`]): the same construction for fields and splats.
@@ -79,7 +80,9 @@ impl DepthOfField {
     ///
     /// ```
     /// use nerfx::camera::DepthOfField;
-    /// let dof = DepthOfField { focus_distance: 4.0, fstop: 2.0, blades: 0, rotation: 0.0, ratio: 1.0 };
+    /// let dof = DepthOfField {
+    ///     focus_distance: 4.0, fstop: 2.0, blades: 0, rotation: 0.0, ratio: 1.0,
+    /// };
     /// assert_eq!(dof.aperture_radius(50.0), 0.0125);
     /// ```
     pub fn aperture_radius(&self, lens: f64) -> f64 {

@@ -5,9 +5,11 @@ nerfstudio camera paths as an animated camera.
 A shot file (JSON, schema version 1, read by nerfx's `camera::Shot`) holds per frame the
 camera's `matrix_world` and intrinsics and the NeRF object's `matrix_world` (read at every
 frame: it may be animated). nerfx aligns the field itself (`C_t = N^-1 C_o`) and keeps lens
-shift, pixel aspect and every sensor fit, which a nerfstudio camera path cannot hold.
+shift, pixel aspect and every sensor fit, which a nerfstudio camera path cannot hold. A
+perspective camera's depth of field (`Camera.dof`) is written per frame, a focus object as the
+depth of its origin along the camera's view axis at that frame, as Cycles measures it.
 
-Works in Blender 3.4 and 4.x. The panel is in Output Properties > nerfx. Every operator can be
+Works in Blender 3.4, 4.x and 5.x (tested in 3.4, 4.5 LTS and 5.0). The panel is in Output Properties > nerfx. Every operator can be
 called from a script, e.g.
 
     bpy.ops.nerfx.export_shot(filepath="/tmp/shot.json", frame_start=1, frame_end=24,
@@ -133,6 +135,7 @@ def camera_record(cam_obj, scene):
     }
     if cam.type == "PERSP":
         rec["type"] = "PERSP"
+        rec["dof"] = depth_of_field(cam_obj)
     elif cam.type == "PANO" and panorama_type(cam) == "EQUIRECTANGULAR":
         rec["type"] = "PANO"
         rec["panorama_type"] = "EQUIRECTANGULAR"
@@ -151,13 +154,50 @@ def camera_record(cam_obj, scene):
     return rec
 
 
+def _focus_point(dof):
+    """The world position a focus object (or the bone named by `focus_subtarget` of an
+    armature) puts the focus at."""
+    target = dof.focus_object
+    bone = getattr(dof, "focus_subtarget", "")
+    if bone and target.pose and bone in target.pose.bones:
+        return (target.matrix_world @ target.pose.bones[bone].matrix).translation
+    return target.matrix_world.translation
+
+
+def depth_of_field(cam_obj):
+    """The shot file's `dof` entry of a perspective camera at the current frame, or None when
+    its depth of field is off. The focus distance is Cycles': a focus object's depth along the
+    camera's view axis (the camera's scale cleared), else `focus_distance`."""
+    dof = cam_obj.data.dof
+    if not dof.use_dof:
+        return None
+    if dof.focus_object is not None:
+        m = cam_obj.matrix_world
+        view = m.col[2].xyz.normalized()
+        distance = abs(view.dot(m.translation - _focus_point(dof)))
+    else:
+        distance = dof.focus_distance
+    return {
+        "focus_distance": float(distance),
+        "fstop": float(dof.aperture_fstop),
+        "blades": int(dof.aperture_blades),
+        "rotation": float(dof.aperture_rotation),
+        "ratio": float(dof.aperture_ratio),
+    }
+
+
 def motion_blur(scene):
     """Blender's motion blur as the shot file holds it, or None when it is off."""
     render = scene.render
     if not render.use_motion_blur:
         return None
-    position = getattr(scene.cycles, "motion_blur_position", "CENTER") if hasattr(
-        scene, "cycles") else "CENTER"
+    # Blender 5 keeps the shutter position in the render settings; before, Cycles kept it.
+    if hasattr(render, "motion_blur_position"):
+        position = render.motion_blur_position
+    elif hasattr(scene, "cycles"):
+        position = getattr(scene.cycles, "motion_blur_position", "CENTER")
+    else:
+        position = "CENTER"
     return {"shutter": render.motion_blur_shutter, "position": position.lower()}
 
 

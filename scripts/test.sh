@@ -12,6 +12,9 @@
 #   mmh3           MurmurHash3 for the Cryptomatte decoder written from the specification
 #   python3-numpy  Blender's own Python (Debian's build uses the system's) for the add-on's
 #                  splat import
+#   bpy 4.5, 5.0   Blender as a Python module (PyPI's `bpy`, in two Python 3.11 virtual
+#                  environments under ${NERFX_BPY_DIR:-~/.cache/nerfx-bpy}): the Blender tests
+#                  run the add-on and Cycles in 3.4, 4.5 LTS and 5.0
 #   mdbook         builds the user's guide in docs/ (tests/docs.rs checks its links)
 #   slurm-wlm, munge   tests/farm.rs runs a one-node Slurm cluster (slurmctld, slurmd, munged;
 #                  started and stopped by the test, as root)
@@ -79,6 +82,28 @@ if ! blender -b --factory-startup --python-exit-code 1 --python-expr "import num
     echo "== installing numpy for Blender's Python"
     apt_install python3-numpy
 fi
+
+# PyPI's bpy wheels are built for CPython 3.11 (4.5 and 5.0 alike); without a python3.11 on
+# the machine, uv (from PyPI) fetches one.
+bpy_dir="${NERFX_BPY_DIR:-$HOME/.cache/nerfx-bpy}"
+for version in 4.5.15 5.0.1; do
+    venv="$bpy_dir/bpy-${version%.*}"
+    if ! "$venv/bin/python" -c "import bpy, numpy; assert bpy.app.version_string.startswith('${version%.*}')" \
+        >/dev/null 2>&1; then
+        echo "== installing bpy $version into $venv"
+        python311="$(command -v python3.11 || true)"
+        if [ -z "$python311" ]; then
+            python3 -m pip install --quiet uv 2>/dev/null ||
+                PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install --quiet uv
+            python3 -m uv python install 3.11
+            python311="$(python3 -m uv python find 3.11)"
+        fi
+        rm -rf "$venv"
+        mkdir -p "$bpy_dir"
+        "$python311" -m venv "$venv"
+        "$venv/bin/python" -m pip install --quiet "bpy==$version" numpy
+    fi
+done
 
 if ! command -v mdbook >/dev/null; then
     echo "== installing mdbook"

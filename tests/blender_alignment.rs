@@ -10,11 +10,14 @@
 //!   of Blender's silhouette edge;
 //! - depth (nerfx Z vs Blender's Z pass) within 1e-3 relative away from the edge.
 //!
-//! Blender is found on `PATH`. Without it the test fails (CI installs it: `apt-get install
-//! blender`), unless `NERFX_SKIP_BLENDER=1`, which skips with a message.
+//! It runs in every Blender tested (Debian's 3.4, bpy 4.5 and 5.0; see `common_blender`,
+//! `NERFX_SKIP_BLENDER=1` and `NERFX_SKIP_BPY=1` skip knowingly), each of which must write the
+//! same shot files.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+#[path = "common_blender/mod.rs"]
+mod common_blender;
+
+use std::path::PathBuf;
 use std::sync::Arc;
 
 use glam::{DMat4, DVec3, Vec3};
@@ -24,47 +27,16 @@ use nerfx_core::render::{render, Outputs, Quality, RenderSettings};
 use nerfx_core::scene::{FieldHandle, Instance, Scene};
 use serde_json::Value;
 
-/// Where Blender is, or `None` after printing a skip line when `NERFX_SKIP_BLENDER=1`.
-fn blender() -> Option<PathBuf> {
-    if std::env::var("NERFX_SKIP_BLENDER").as_deref() == Ok("1") {
-        eprintln!(
-            "SKIPPED blender_alignment: NERFX_SKIP_BLENDER=1 (Blender alignment not checked)"
-        );
-        return None;
-    }
-    let found = std::env::var_os("PATH").and_then(|paths| {
-        std::env::split_paths(&paths)
-            .map(|dir| dir.join("blender"))
-            .find(|p| p.is_file())
-    });
-    match found {
-        Some(p) => Some(p),
-        None => panic!(
-            "`blender` is not on PATH: the alignment test needs Blender 3.4+ \
-             (CI: apt-get install -y blender). Set NERFX_SKIP_BLENDER=1 to skip it knowingly."
-        ),
-    }
-}
-
 /// Runs the scene script; returns the reference JSON and the output folder.
-fn run_blender(exe: &Path) -> (Value, PathBuf) {
+fn run_blender(blender: &common_blender::Blender, index: usize) -> (Value, PathBuf) {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("nerfx-blender-{}", std::process::id()));
+        .join(format!("nerfx-blender-{}-{index}", std::process::id()));
     std::fs::create_dir_all(&out).unwrap();
-    let status = Command::new(exe)
-        .args(["-b", "--factory-startup", "--python"])
-        .arg(root.join("tests/blender/alignment_scene.py"))
-        .arg("--")
-        .arg(root.join("blender"))
-        .arg(&out)
-        .output()
-        .expect("blender could not be started");
-    let log = String::from_utf8_lossy(&status.stdout).to_string()
-        + &String::from_utf8_lossy(&status.stderr);
-    assert!(
-        status.status.success() && log.contains("nerfx alignment: wrote"),
-        "blender script failed:\n{log}"
+    blender.run_ok(
+        &root.join("tests/blender/alignment_scene.py"),
+        &[&root.join("blender"), &out],
+        "nerfx alignment: wrote",
     );
     let text = std::fs::read_to_string(out.join("reference.json")).unwrap();
     (serde_json::from_str(&text).unwrap(), out)
@@ -222,9 +194,44 @@ fn check_render(case: &Value, sphere: &Value) -> (f64, u32, f64, u32) {
 }
 
 #[test]
-fn nerfx_agrees_with_blender_projections_silhouettes_and_depth() {
-    let Some(exe) = blender() else { return };
-    let (reference, out) = run_blender(&exe);
+fn nerfx_agrees_with_blender_projections_silhouettes_and_depth_in_every_blender() {
+    let blenders = common_blender::blenders("blender_alignment");
+    let mut first: Option<(String, Vec<(String, String)>)> = None;
+    for (index, blender) in blenders.iter().enumerate() {
+        let (reference, out) = run_blender(blender, index);
+        check_reference(&reference);
+        let shots = shot_texts(&reference);
+        match &first {
+            None => first = Some((blender.name.clone(), shots)),
+            Some((name, texts)) => assert!(
+                *texts == shots,
+                "{}: the add-on wrote other shot files than in {name}",
+                blender.name
+            ),
+        }
+        std::fs::remove_dir_all(out).unwrap();
+    }
+}
+
+/// The text of every shot file and camera path a reference names, by case.
+fn shot_texts(reference: &Value) -> Vec<(String, String)> {
+    reference["cases"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|case| {
+            let path = case.get("shot").or_else(|| case.get("camera_path"))?;
+            let name = case["name"].as_str().unwrap().to_string();
+            Some((
+                name,
+                std::fs::read_to_string(path.as_str().unwrap()).unwrap(),
+            ))
+        })
+        .collect()
+}
+
+/// Every case of one Blender's reference.
+fn check_reference(reference: &Value) {
     eprintln!("Blender {}", reference["blender"]);
     let (mut worst_px, mut n_points, mut renders) = (0f64, 0usize, 0);
     for case in reference["cases"].as_array().unwrap() {
@@ -253,5 +260,4 @@ fn nerfx_agrees_with_blender_projections_silhouettes_and_depth() {
     }
     eprintln!("{n_points} points, max {worst_px:.2e} px; {renders} renders");
     assert!(n_points >= 300 && renders >= 4);
-    std::fs::remove_dir_all(out).unwrap();
 }

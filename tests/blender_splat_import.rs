@@ -4,63 +4,62 @@
 //! becomes the NeRF object. Every other splat format goes through `nerfx export-standin` (the
 //! add-on runs the program): the same holds, colours to 8 bits.
 //!
-//! Blender is found on `PATH`; without it the test fails, unless `NERFX_SKIP_BLENDER=1`.
+//! It runs in every Blender tested (Debian's 3.4, bpy 4.5 and 5.0; see `common_blender`).
+
+#[path = "common_blender/mod.rs"]
+mod common_blender;
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use nerfx_core::field::Splats;
 
-/// What Blender made of importing `file`: vertex count, NeRF object, points (x y z r g b).
-fn blender_import(file: &Path, executable: Option<&Path>) -> Option<(u64, String, Vec<Vec<f64>>)> {
-    if std::env::var("NERFX_SKIP_BLENDER").as_deref() == Ok("1") {
-        eprintln!("SKIPPED blender_splat_import: NERFX_SKIP_BLENDER=1");
-        return None;
-    }
+/// What each Blender made of importing `file`: its name, the vertex count, the NeRF object
+/// and the points (x y z r g b).
+fn blender_imports(
+    file: &Path,
+    executable: Option<&Path>,
+) -> Vec<(String, u64, String, Vec<Vec<f64>>)> {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let out = tempfile::tempdir().unwrap();
-    let json_path = out.path().join("import.json");
-    let mut command = Command::new("blender");
-    command
-        .args(["-b", "--factory-startup", "--python"])
-        .arg(root.join("tests/blender/splat_import_check.py"))
-        .arg("--")
-        .arg(root.join("blender"))
-        .arg(file)
-        .arg(&json_path);
-    if let Some(exe) = executable {
-        command.arg(exe);
+    let mut all = Vec::new();
+    for blender in common_blender::blenders("blender_splat_import") {
+        let out = tempfile::tempdir().unwrap();
+        let json_path = out.path().join("import.json");
+        let addon = root.join("blender");
+        let mut args = vec![addon.as_path(), file, json_path.as_path()];
+        args.extend(executable);
+        let run = blender.run(
+            &root.join("tests/blender/splat_import_check.py"),
+            &args.iter().map(|a| a.as_os_str()).collect::<Vec<_>>(),
+        );
+        let text = std::fs::read_to_string(&json_path).unwrap_or_else(|_| {
+            panic!(
+                "{}: Blender wrote nothing:\n{}\n{}",
+                blender.name,
+                String::from_utf8_lossy(&run.stdout),
+                String::from_utf8_lossy(&run.stderr)
+            )
+        });
+        let got: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let points = got["points"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| {
+                p.as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|v| v.as_f64().unwrap())
+                    .collect()
+            })
+            .collect();
+        all.push((
+            blender.name.clone(),
+            got["vertices"].as_u64().unwrap(),
+            got["nerf_object"].as_str().unwrap().to_string(),
+            points,
+        ));
     }
-    let run = command.output().unwrap_or_else(|e| {
-        panic!(
-            "`blender` did not run ({e}): apt-get install -y blender; NERFX_SKIP_BLENDER=1 skips"
-        )
-    });
-    let text = std::fs::read_to_string(&json_path).unwrap_or_else(|_| {
-        panic!(
-            "Blender wrote nothing:\n{}\n{}",
-            String::from_utf8_lossy(&run.stdout),
-            String::from_utf8_lossy(&run.stderr)
-        )
-    });
-    let got: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let points = got["points"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|p| {
-            p.as_array()
-                .unwrap()
-                .iter()
-                .map(|v| v.as_f64().unwrap())
-                .collect()
-        })
-        .collect();
-    Some((
-        got["vertices"].as_u64().unwrap(),
-        got["nerf_object"].as_str().unwrap().to_string(),
-        points,
-    ))
+    all
 }
 
 /// The largest position and colour errors of Blender's points against the splats.
@@ -82,19 +81,19 @@ fn errors(splats: &Splats, points: &[Vec<f64>]) -> (f64, f64) {
 #[test]
 fn blender_imports_splats_as_points_at_their_means() {
     let ply = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/splat_plane_sh3.ply");
-    let Some((vertices, nerf_object, points)) = blender_import(&ply, None) else {
-        return;
-    };
     let splats = Splats::load(&ply).unwrap();
-    assert_eq!(vertices, splats.len() as u64);
-    assert_eq!(nerf_object, "splat_plane_sh3");
-    let (max_pos, max_col) = errors(&splats, &points);
-    println!(
-        "{} points: max position error {max_pos:.2e}, max colour error {max_col:.2e}",
-        points.len()
-    );
-    assert!(max_pos <= 1e-5, "position error {max_pos}");
-    assert!(max_col <= 1e-6, "colour error {max_col}");
+    for (blender, vertices, nerf_object, points) in blender_imports(&ply, None) {
+        assert_eq!(vertices, splats.len() as u64, "{blender}");
+        assert_eq!(nerf_object, "splat_plane_sh3", "{blender}");
+        let (max_pos, max_col) = errors(&splats, &points);
+        println!(
+            "{blender}: {} points: max position error {max_pos:.2e}, max colour error \
+             {max_col:.2e}",
+            points.len()
+        );
+        assert!(max_pos <= 1e-5, "{blender}: position error {max_pos}");
+        assert!(max_col <= 1e-6, "{blender}: colour error {max_col}");
+    }
 }
 
 #[test]
@@ -108,19 +107,28 @@ fn blender_imports_every_other_format_through_nerfx() {
         "sjeongab_512.splat",
     ] {
         let file = data.join(name);
-        let Some((vertices, nerf_object, points)) = blender_import(&file, Some(exe)) else {
-            return;
-        };
         let splats = Splats::load(&file).unwrap();
-        assert_eq!(vertices, splats.len() as u64, "{name}");
-        assert_eq!(nerf_object, name.split('.').next().unwrap(), "{name}");
-        let (max_pos, max_col) = errors(&splats, &points);
-        println!("{name}: max position error {max_pos:.2e}, max colour error {max_col:.2e}");
-        assert!(max_pos <= 1e-5, "{name}: position error {max_pos}");
-        // The stand-in's colours are bytes.
-        assert!(
-            max_col <= 0.5 / 255.0 + 1e-6,
-            "{name}: colour error {max_col}"
-        );
+        for (blender, vertices, nerf_object, points) in blender_imports(&file, Some(exe)) {
+            assert_eq!(vertices, splats.len() as u64, "{blender}: {name}");
+            assert_eq!(
+                nerf_object,
+                name.split('.').next().unwrap(),
+                "{blender}: {name}"
+            );
+            let (max_pos, max_col) = errors(&splats, &points);
+            println!(
+                "{blender}: {name}: max position error {max_pos:.2e}, max colour error \
+                 {max_col:.2e}"
+            );
+            assert!(
+                max_pos <= 1e-5,
+                "{blender}: {name}: position error {max_pos}"
+            );
+            // The stand-in's colours are bytes.
+            assert!(
+                max_col <= 0.5 / 255.0 + 1e-6,
+                "{blender}: {name}: colour error {max_col}"
+            );
+        }
     }
 }

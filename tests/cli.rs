@@ -154,6 +154,15 @@ fn render_passes_choose_the_channels_written() {
         );
         assert_eq!(channels(&file), want, "--passes {passes}");
     }
+    // An aperture sample count outside 1 to 4096 is refused by its flag, nothing written.
+    let (run, file) = render("no_aperture.exr", &["--aperture-samples", "0"]);
+    assert!(!run.status.success());
+    let said = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        said.contains("--aperture-samples") && said.contains("1 to 4096"),
+        "{said}"
+    );
+    assert!(!file.exists());
     // A preview needs the colour; nothing is written when it is not asked for.
     let (run, file) = render("depth_only.exr", &["--passes", "depthZ", "--png"]);
     assert!(!run.status.success());

@@ -94,6 +94,8 @@ fn header_matrices_project_world_points_onto_their_pixels() {
     assert_eq!(header["nerfx/colorspace"], "ACEScg");
     assert_eq!(header["nerfx/quality"], "draft");
     assert_eq!(header["nerfx/shutterSamples"], "1");
+    // No depth of field in the shot: one pinhole per frame, whatever the preset.
+    assert_eq!(header["nerfx/apertureSamples"], "1");
     assert!(
         (numbers("chromaticities")[0] - 0.713).abs() < 1e-6,
         "AP1 red x"

@@ -34,10 +34,10 @@ use common_fuzz::{mutate, Kind};
 use glam::{DMat4, DVec3};
 use nerfx_core::camera::{Camera, Perspective, Projection};
 use nerfx_core::demo::look_at;
+use nerfx_graph::{evaluate, purge_caches, render_direct, Graph};
 use nerfx_core::image::{Planes, Window};
 use nerfx_core::render::{render, Outputs, Quality, RenderSettings};
 use nerfx_core::scene::{LoadedScene, Scene, SceneDesc};
-use nerfx_graph::{evaluate, purge_caches, render_direct, Graph};
 
 /// The longest a case may take.
 const CASE_TIME: Duration = Duration::from_secs(10);
@@ -438,13 +438,18 @@ fn build_targets() -> Vec<Target> {
     targets
 }
 
-/// The demo shot with motion blur, stereo and a pixel aspect, so that their fields are
-/// mutated too.
+/// The demo shot with motion blur, depth of field, stereo and a pixel aspect, so that their
+/// fields are mutated too.
 fn shot_with_extras(path: &Path) -> Vec<u8> {
     let mut json: serde_json::Value =
         serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap();
     json["pixel_aspect_x"] = 2.0.into();
     json["motion_blur"] = serde_json::json!({"shutter": 0.5, "position": "center"});
+    for frame in json["frames"].as_array_mut().unwrap() {
+        frame["camera"]["dof"] = serde_json::json!(
+            {"focus_distance": 6.0, "fstop": 1.4, "blades": 6, "rotation": 0.2, "ratio": 1.3}
+        );
+    }
     serde_json::to_vec_pretty(&json).unwrap()
 }
 
@@ -544,7 +549,11 @@ fn check_shot(f: &Fixtures, dir: &Path, bytes: &[u8]) -> Result<Verdict, String>
     let path = dir.join("shot.json");
     write(&path, bytes);
     let shot = attempt!(nerfx_core::frames::read_shot(&path, "NeRF"));
-    let at = attempt!(shot.frames.first().ok_or("no frames"));
+    let first = attempt!(shot.frames.first().ok_or("no frames"));
+    // Through a point of the aperture: the pinhole itself when the camera has no depth of
+    // field.
+    let lenses = first.through_aperture(3);
+    let at = attempt!(lenses.last().ok_or("no aperture samples"));
     let camera = attempt!(at.camera(&shot));
     let world = attempt!(at.world_from_scene(&shot));
     let scene = attempt!(f.scene.place(world, &|name| at.object_matrix(name)));

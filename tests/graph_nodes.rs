@@ -465,3 +465,48 @@ fn a_render_scale_below_one_pixel_is_refused() {
         .is_ok());
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// With the shot camera's depth of field, the node averages renders over the aperture exactly
+/// as `nerfx render` does (its own sample count, or the quality preset's with 0).
+#[test]
+fn nerf_render_defocuses_through_the_aperture_as_the_command_line_does() {
+    let (dir, scene, shot_path) = demo_files("dof", 48, 27);
+    let frame = demo::FIRST_FRAME + 3;
+    let n = node("org.nerfx.NeRFRender").unwrap();
+    let mut v = nerf_values(&scene, &shot_path);
+    v.set("apertureSamples", Value::Int(6)).unwrap();
+    let request = RenderRequest::new(frame as f64, Window::new(0, 0, 48, 27), 1.0);
+    let sharp = n.render(&v, &request).unwrap();
+
+    let mut shot = demo::shot(48, 27);
+    for f in &mut shot.frames {
+        f.camera.dof = Some(nerfx_core::camera::DepthOfField {
+            focus_distance: 4.0,
+            fstop: 0.1,
+            blades: 6,
+            rotation: 0.3,
+            ratio: 1.2,
+        });
+    }
+    shot.write(&shot_path).unwrap();
+    let loaded = SceneDesc::read(&scene).unwrap().load().unwrap();
+    let cli = |samples: u32| {
+        let settings = RenderSettings {
+            aperture_samples: samples,
+            ..RenderSettings::new(Quality::Preview.params(), Outputs::rgba())
+        };
+        render_frame(&loaded, &shot, frame, &settings, &|_| {})
+            .unwrap()
+            .0
+    };
+    let got = n.render(&v, &request).unwrap();
+    same_rgba("6 samples", &got, &cli(6));
+    assert_ne!(got.alpha, sharp.alpha, "the defocus changes the image");
+    v.set("apertureSamples", Value::Int(0)).unwrap();
+    same_rgba(
+        "the preset's samples",
+        &n.render(&v, &request).unwrap(),
+        &cli(Quality::Preview.aperture_samples()),
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}

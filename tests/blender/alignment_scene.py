@@ -4,6 +4,7 @@ writes what Blender itself says: projections of world points (world_to_camera_vi
 Cycles renders of a sphere mesh (alpha and Z).
 
 Run: blender -b --factory-startup --python alignment_scene.py -- ADDON_DIR OUT_DIR
+ or: python alignment_scene.py -- ADDON_DIR OUT_DIR   (Blender as a Python module, bpy)
 
 OUT_DIR/reference.json lists the cases; each case names its shot file and holds either
 `points` (NeRF-local point, frame, Blender's pixel position and depth) or `render` (frame,
@@ -12,6 +13,7 @@ width, height, top-down rows of alpha and Z, the sphere's local centre and radiu
 
 import json
 import math
+import os
 import random
 import sys
 
@@ -94,16 +96,23 @@ view_layer.cycles.use_denoising = False
 view_layer.use_pass_z = True
 
 # Compositor: alpha in R, Z in G of the written image (a float EXR, bottom row first).
-scene.use_nodes = True
-tree = scene.node_tree
-tree.nodes.clear()
+if hasattr(scene, "compositing_node_group"):
+    # Blender 5: the compositor is a node group whose output is the image written.
+    tree = bpy.data.node_groups.new("nerfx alignment", "CompositorNodeTree")
+    tree.interface.new_socket(name="Image", in_out="OUTPUT", socket_type="NodeSocketColor")
+    scene.compositing_node_group = tree
+    composite = tree.nodes.new("NodeGroupOutput")
+else:
+    scene.use_nodes = True
+    tree = scene.node_tree
+    tree.nodes.clear()
+    composite = tree.nodes.new("CompositorNodeComposite")
+    composite.use_alpha = False
 rl = tree.nodes.new("CompositorNodeRLayers")
 try:  # Blender 3.3+; older ones have CombineRGBA
     comb = tree.nodes.new("CompositorNodeCombineColor")
 except RuntimeError:
     comb = tree.nodes.new("CompositorNodeCombineRGBA")
-composite = tree.nodes.new("CompositorNodeComposite")
-composite.use_alpha = False
 tree.links.new(rl.outputs["Alpha"], comb.inputs[0])
 tree.links.new(rl.outputs["Depth"], comb.inputs[1])
 tree.links.new(comb.outputs[0], composite.inputs[0])
@@ -112,6 +121,17 @@ settings.file_format = "OPEN_EXR"
 settings.color_depth = "32"
 settings.color_mode = "RGBA"
 scene.render.use_compositing = True
+
+
+def fcurves(obj):
+    """The object's F-curves: Blender 5 keeps them in the action's channel bag of the
+    object's slot (`Action.fcurves` is gone)."""
+    action = obj.animation_data.action
+    if hasattr(action, "fcurves"):
+        return action.fcurves
+    from bpy_extras import anim_utils
+
+    return anim_utils.action_get_channelbag_for_slot(action, obj.animation_data.action_slot).fcurves
 
 
 def set_format(w, h, pct, pa):
@@ -194,7 +214,7 @@ res = bpy.ops.nerfx.import_camera_path(filepath=ns_path, nerf_object="", frame_s
 assert res == {"FINISHED"}, res
 imported = scene.camera
 assert imported is not original and len(bpy.data.cameras) == cameras_before + 1
-keyed = sorted({int(k.co.x) for fc in imported.animation_data.action.fcurves for k in fc.keyframe_points})
+keyed = sorted({int(k.co.x) for fc in fcurves(imported) for k in fc.keyframe_points})
 assert keyed == [1, 2, 3], keyed
 bpy.data.objects.remove(imported)
 bpy.data.cameras.remove(bpy.data.cameras["NerfstudioCamera"])
@@ -225,3 +245,7 @@ with open("%s/reference.json" % OUT, "w") as f:
         f,
     )
 print("nerfx alignment: wrote %d cases" % len(cases))
+# Blender as a Python module (bpy 4.5) can hang in its exit handlers after a Cycles render:
+# everything is written, so leave at once.
+sys.stdout.flush()
+os._exit(0)

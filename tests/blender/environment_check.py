@@ -65,3 +65,7 @@ for i, d in enumerate(probes["directions"]):
 with open(os.path.join(OUT, "environment.json"), "w") as f:
     json.dump({"colours": colours}, f)
 print("nerfx environment: wrote")
+# Blender as a Python module (bpy 4.5) can hang in its exit handlers: everything is written,
+# so leave at once.
+sys.stdout.flush()
+os._exit(0)

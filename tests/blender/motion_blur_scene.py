@@ -2,11 +2,13 @@
 add-on (which writes Blender's motion blur and the frames the shutter reaches).
 
 Usage: blender -b --factory-startup --python motion_blur_scene.py -- ADDON_DIR OUT
+   or: python motion_blur_scene.py -- ADDON_DIR OUT   (Blender as a Python module, bpy)
 Writes OUT/shot.json and OUT/reference.json: {"radius", "width", "height", "frame",
 "blurred": [alpha rows, seed 1], "blurred_again": [seed 2], "sharp": [motion blur off]}, rows
 top first.
 """
 import json
+import os
 import sys
 
 import bpy
@@ -29,7 +31,20 @@ ball.name = "Ball"
 for f, x in ((1, -1.5), (2, 0.0), (3, 1.5)):
     ball.location = (x, 0.0, 0.1 * (f - 2))
     ball.keyframe_insert("location", frame=f)
-for curve in ball.animation_data.action.fcurves:
+
+
+def fcurves(obj):
+    """The object's F-curves: Blender 5 keeps them in the action's channel bag of the
+    object's slot (`Action.fcurves` is gone)."""
+    action = obj.animation_data.action
+    if hasattr(action, "fcurves"):
+        return action.fcurves
+    from bpy_extras import anim_utils
+
+    return anim_utils.action_get_channelbag_for_slot(action, obj.animation_data.action_slot).fcurves
+
+
+for curve in fcurves(ball):
     for key in curve.keyframe_points:
         key.interpolation = "LINEAR"
 mat = bpy.data.materials.new("glow")
@@ -55,7 +70,9 @@ r.film_transparent = True
 scene.cycles.filter_width = 0.01
 r.use_motion_blur = True
 r.motion_blur_shutter = 0.6
-scene.cycles.motion_blur_position = "CENTER"
+# Blender 5 moved the shutter position from Cycles' settings to the render settings.
+settings = r if hasattr(r, "motion_blur_position") else scene.cycles
+settings.motion_blur_position = "END"
 scene.cycles.samples = 256
 scene.cycles.use_denoising = False
 scene.view_layers[0].cycles.use_denoising = False
@@ -86,3 +103,7 @@ reference["sharp"] = alpha_rows("sharp", 1)
 with open(OUT + "/reference.json", "w") as f:
     json.dump(reference, f)
 print("nerfx motion blur: wrote")
+# Blender as a Python module (bpy 4.5) can hang in its exit handlers after a Cycles render:
+# everything is written, so leave at once.
+sys.stdout.flush()
+os._exit(0)

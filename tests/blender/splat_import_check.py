@@ -7,6 +7,7 @@ vertex, world coordinates (the object's matrix_world applied), colours from the 
 attribute.
 """
 import json
+import os
 import sys
 
 import bpy
@@ -31,3 +32,7 @@ for v, c in zip(mesh.vertices, colours):
     points.append([p.x, p.y, p.z, c.color[0], c.color[1], c.color[2]])
 with open(OUT, "w") as f:
     json.dump({"vertices": len(mesh.vertices), "nerf_object": obj.name, "points": points}, f)
+# Blender as a Python module (bpy 4.5) can hang in its exit handlers: everything is written,
+# so leave at once.
+sys.stdout.flush()
+os._exit(0)

@@ -101,6 +101,10 @@ enum Command {
         /// quality preset's, 4 / 8 / 16).
         #[arg(long)]
         shutter_samples: Option<u32>,
+        /// Scenes whose shot's camera has depth of field: points of the aperture each shutter
+        /// time is rendered through (default: the quality preset's, 4 / 16 / 64).
+        #[arg(long)]
+        aperture_samples: Option<u32>,
         /// Also write a PNG preview beside each EXR.
         #[arg(long)]
         png: bool,
@@ -479,6 +483,7 @@ fn run(cli: Cli) -> Result<()> {
             cryptomatte,
             cryptomatte_ranks,
             shutter_samples,
+            aperture_samples,
             png,
             passes,
             bundle,
@@ -576,9 +581,21 @@ fn run(cli: Cli) -> Result<()> {
                     ))
                 }
             };
+            let max = nerfx_core::camera::MAX_APERTURE_SAMPLES;
+            let aperture_samples = match aperture_samples {
+                None => quality.aperture_samples(),
+                Some(n) if (1..=max).contains(&n) => n,
+                Some(n) => {
+                    return Err(Error::invalid(
+                        "--aperture-samples",
+                        format!("{n}; expected 1 to {max}"),
+                    ))
+                }
+            };
             let settings = RenderSettings {
                 color: colour,
                 shutter_samples,
+                aperture_samples,
                 ..RenderSettings::new(quality.params(), outputs)
             };
             let bar = progress_bar(frames.len() as u64, "frames");
@@ -1222,12 +1239,12 @@ mod graph {
             for (key, param) in [
                 ("nerfx/quality", "quality"),
                 ("nerfx/shutterSamples", "shutterSamples"),
+                ("nerfx/apertureSamples", "apertureSamples"),
             ] {
                 if let Some(value) = param_text(&node.values, param) {
                     entries.push((key.to_string(), value));
                 }
             }
-            entries.push(("nerfx/apertureSamples".to_string(), "1".to_string()));
         }
         Ok(ExrHeader {
             pixel_aspect: graph.pixel_aspect(&g.output),
@@ -1304,7 +1321,15 @@ fn render_entries(
             }
             .to_string(),
         ),
-        ("nerfx/apertureSamples", "1".to_string()),
+        // Points of the aperture per time: only where a frame's camera has depth of field.
+        (
+            "nerfx/apertureSamples",
+            match shot.frames.iter().any(|f| f.camera.dof.is_some()) {
+                true => settings.aperture_samples,
+                false => 1,
+            }
+            .to_string(),
+        ),
         ("nerfx/colorspace", space.ocio_name().to_string()),
     ]
     .into_iter()

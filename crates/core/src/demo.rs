@@ -256,6 +256,7 @@ pub fn shot(width: u32, height: u32) -> Shot {
                 clip_start: CLIP[0],
                 clip_end: CLIP[1],
                 stereo: None,
+                dof: None,
             },
             objects: BTreeMap::from([(NERF_OBJECT.to_string(), object_matrix(frame))]),
         })

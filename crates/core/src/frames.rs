@@ -14,8 +14,8 @@ use crate::scene::LoadedScene;
 
 /// Each instance's coverage of frame `frame` (one plane per instance of `scene`, in its
 /// order): the share of every pixel's opacity its samples and fragments hold, summing to the
-/// pixel's alpha, integrated over the shutter as the frame's colour is. Rendered with the
-/// instances in indicator colours, three at a time
+/// pixel's alpha, integrated over the shutter and the aperture as the frame's colour is.
+/// Rendered with the instances in indicator colours, three at a time
 /// ([`LoadedScene::with_indicator_colours`]), at `settings`' quality.
 pub fn render_coverage(
     scene: &LoadedScene,
@@ -170,9 +170,13 @@ pub fn read_shot(path: &Path, nerf_object: &str) -> Result<Shot> {
 /// the [`shutter_average`] of renders at `settings.shutter_samples` stratified times over the
 /// shutter, camera and objects interpolated between the shot's frames ([`Shot::frame_at`]:
 /// the shot must hold the frames around the shutter interval); a closed shutter or one
-/// sample renders the frame itself. The average weighs each sample's depths by its alpha, so
-/// depths asked for without alpha are averaged with it all the same (and it is dropped
-/// after): a depth pass is the same number whichever passes come with it.
+/// sample renders the frame itself. With the camera's depth of field on, each time is the
+/// mean of renders through `settings.aperture_samples` stratified points of the aperture
+/// ([`ShotFrame::through_aperture`]: shutter × aperture, the product of both patterns); depth
+/// of field off, or one aperture sample, is the pinhole render, bit for bit. The average
+/// weighs each sample's depths by its alpha, so depths asked for without alpha are averaged
+/// with it all the same (and it is dropped after): a depth pass is the same number whichever
+/// passes come with it.
 pub fn render_frame(
     scene: &LoadedScene,
     shot: &Shot,
@@ -204,8 +208,11 @@ pub fn render_frame_window(
         || vec![frame as f64],
         |blur| blur.times(frame as f64, settings.shutter_samples),
     );
+    let through_aperture = |at: &ShotFrame| at.through_aperture(settings.aperture_samples);
     if let [_] = times[..] {
-        return render_at(shot.frame(frame)?, settings);
+        if let [at] = &through_aperture(shot.frame(frame)?)[..] {
+            return render_at(at, settings);
+        }
     }
     let outputs = settings.outputs;
     let depths = outputs.depth_z || outputs.depth_ray || outputs.depth_median;
@@ -216,6 +223,9 @@ pub fn render_frame_window(
         },
         ..*settings
     };
+    // The mean over each time's aperture points, then over the times: with alpha-weighted
+    // depths it is the mean over every (time, lens point) pair, and holds one time's renders
+    // at once rather than all of them.
     let mut samples = Vec::with_capacity(times.len());
     let mut stats = RenderStats::default();
     for t in times {
@@ -225,9 +235,14 @@ pub fn render_frame_window(
                 format!("the shutter needs the shot at frame {t}: {e}"),
             )
         })?;
-        let (planes, s) = render_at(&at, &weighed)?;
-        stats = stats + s;
-        samples.push(planes);
+        let lenses = through_aperture(&at);
+        let mut through = Vec::with_capacity(lenses.len());
+        for lens in &lenses {
+            let (planes, s) = render_at(lens, &weighed)?;
+            stats = stats + s;
+            through.push(planes);
+        }
+        samples.push(shutter_average(through)?);
     }
     let mut average = shutter_average(samples)?;
     if !outputs.alpha {
@@ -357,6 +372,46 @@ mod tests {
         let first = crate::demo::FIRST_FRAME;
         let e = render_frame(&scene, &shot, first, &settings, &|_| {}).unwrap_err();
         assert!(e.to_string().contains("motion blur"), "{e}");
+    }
+
+    /// Depth of field off, or one aperture sample, is the pinhole render bit for bit; on, it
+    /// blurs, and each instance's coverage still sums to the averaged alpha.
+    #[test]
+    fn depth_of_field_off_is_the_pinhole_bit_for_bit() {
+        let scene = crate::demo::scene_desc().load().unwrap();
+        let mut shot = crate::demo::shot(32, 18);
+        let settings = RenderSettings {
+            aperture_samples: 8,
+            ..RenderSettings::new(Quality::Draft.params(), Outputs::all())
+        };
+        let frame = crate::demo::FIRST_FRAME + 3;
+        let pinhole = render_frame(&scene, &shot, frame, &settings, &|_| {})
+            .unwrap()
+            .0;
+        let index = shot.frames.iter().position(|f| f.frame == frame).unwrap();
+        shot.frames[index].camera.dof = Some(crate::camera::DepthOfField {
+            focus_distance: 0.5,
+            fstop: 0.05,
+            blades: 0,
+            rotation: 0.0,
+            ratio: 1.0,
+        });
+        let one = RenderSettings {
+            aperture_samples: 1,
+            ..settings
+        };
+        let lens_centre = render_frame(&scene, &shot, frame, &one, &|_| {}).unwrap().0;
+        assert_eq!(pinhole, lens_centre);
+        let defocused = render_frame(&scene, &shot, frame, &settings, &|_| {})
+            .unwrap()
+            .0;
+        assert_ne!(pinhole, defocused);
+        let coverage = render_coverage(&scene, &shot, frame, &settings).unwrap();
+        let alpha = defocused.alpha.as_ref().unwrap();
+        for (i, a) in alpha.data.iter().enumerate() {
+            let sum: f32 = coverage.iter().map(|p| p.data[i]).sum();
+            assert!((sum - a).abs() < 1e-4, "pixel {i}: {sum} vs {a}");
+        }
     }
 
     #[test]

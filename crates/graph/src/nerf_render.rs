@@ -25,6 +25,7 @@ use super::shared_renders::{shared_render, RenderKey};
 use super::values::ParamValues;
 use nerfx_core::camera::{
     Camera, Eye, Shot, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, DEFAULT_IPD,
+    MAX_APERTURE_SAMPLES,
 };
 use nerfx_core::composite::{over, rgba_pixels, rgba_planes, shutter_average};
 use nerfx_core::error::{number, Error, Result};
@@ -235,6 +236,17 @@ pub(crate) fn nerf_render_node() -> Node {
                     },
                 ),
                 ParamDesc::new(
+                    "apertureSamples",
+                    "Aperture Samples",
+                    "Points of the lens aperture the render is averaged over per shutter time \
+                     when the shot's camera has depth of field (0: the quality preset's; 1: a \
+                     pinhole).",
+                    ParamKind::Int {
+                        default: 0,
+                        range: Range::display(0.0, 4096.0, 0.0, 64.0),
+                    },
+                ),
+                ParamDesc::new(
                     "background",
                     "Background",
                     "Colour (premultiplied) behind the render.",
@@ -319,6 +331,14 @@ fn pixel_aspect(values: &ParamValues, time: f64) -> Result<f64> {
 
 /// The shot frame for `time` and its camera at render scale `scale`.
 fn camera(values: &ParamValues, shot: &Shot, time: f64, scale: f64) -> Result<(ShotFrame, Camera)> {
+    let at = node_frame(values, shot, time)?;
+    let camera = scaled_camera(shot, &at, scale)?;
+    Ok((at, camera))
+}
+
+/// The shot's frame at `time` as the node sees it: the frame offset applied, the camera
+/// model and eye overridden (a panoramic model has no depth of field).
+fn node_frame(values: &ParamValues, shot: &Shot, time: f64) -> Result<ShotFrame> {
     if !time.is_finite() {
         return Err(Error::invalid(
             "time",
@@ -335,6 +355,7 @@ fn camera(values: &ParamValues, shot: &Shot, time: f64, scale: f64) -> Result<(S
     };
     if values.choice("cameraModel")? != "shot" {
         c.kind = ShotCameraKind::Equirect;
+        c.dof = None;
         c.stereo = mode.map(|mode| ShotStereo {
             mode,
             eye: c.stereo.map_or(Eye::Both, |s| s.eye),
@@ -349,7 +370,12 @@ fn camera(values: &ParamValues, shot: &Shot, time: f64, scale: f64) -> Result<(S
             _ => {}
         }
     }
-    let (w, h) = c.intrinsics(shot).effective_resolution()?;
+    Ok(at)
+}
+
+/// The camera of `at` with the shot's format at render scale `scale`.
+fn scaled_camera(shot: &Shot, at: &ShotFrame, scale: f64) -> Result<Camera> {
+    let (w, h) = at.camera.intrinsics(shot).effective_resolution()?;
     // Below one pixel a side there is no image to scale the camera to.
     if f64::from(w.min(h)) * scale < 1.0 {
         return Err(Error::invalid(
@@ -378,8 +404,7 @@ fn camera(values: &ParamValues, shot: &Shot, time: f64, scale: f64) -> Result<(S
         scene_world: shot.scene_world,
         source: shot.source.clone(),
     };
-    let camera = at.camera(&one)?;
-    Ok((at, camera))
+    at.camera(&one)
 }
 
 /// The scene placed at `at`, with the transform override and crop box applied.
@@ -502,7 +527,6 @@ fn render_node(values: &ParamValues, request: &RenderRequest) -> Result<Rendered
 /// Every pass of the node's scene for `request`, from one march per shutter time, and the
 /// marches' statistics summed.
 fn march(values: &ParamValues, shot: &Shot, request: &RenderRequest) -> Result<Rendered> {
-    let window = request.window;
     let quality = match values.choice("quality")? {
         _ if request.draft => Quality::Draft,
         "draft" => Quality::Draft,
@@ -530,30 +554,54 @@ fn march(values: &ParamValues, shot: &Shot, request: &RenderRequest) -> Result<R
             .collect(),
         _ => vec![request.time],
     };
+    // With the camera's depth of field, each time is the mean over the aperture.
+    let lenses = match values.int("apertureSamples")? {
+        0 => quality.aperture_samples(),
+        n => n.clamp(1, i64::from(MAX_APERTURE_SAMPLES)) as u32,
+    };
     let mut renders = Vec::with_capacity(times.len());
     let mut stats = RenderStats::default();
     for time in times {
-        let (at, camera) = camera(values, shot, time, request.render_scale)?;
-        if camera.clamp_window(window)? != window {
-            let (w, h) = camera.resolution();
-            return Err(Error::invalid(
-                "render window",
-                format!(
-                    "{window:?} is not inside the {w}×{h} image at render scale {}",
-                    request.render_scale
-                ),
-            ));
+        let mut through = Vec::new();
+        for at in node_frame(values, shot, time)?.through_aperture(lenses) {
+            let (planes, s) = render_through(values, shot, &at, request, &settings)?;
+            through.push(planes);
+            stats = stats + s;
         }
-        let scene = placed_scene(values, shot, &at)?;
-        let (planes, s) = render_with_progress(&scene, &camera, window, &settings, &|_| {})?;
-        renders.push(planes);
-        stats = stats + s;
+        renders.push(match through.len() {
+            1 => through.remove(0),
+            _ => shutter_average(through)?,
+        });
     }
     let planes = match renders.len() {
         1 => renders.remove(0),
         _ => shutter_average(renders)?,
     };
     Ok(Rendered { planes, stats })
+}
+
+/// One pinhole render of the node's window from the camera of `at`.
+fn render_through(
+    values: &ParamValues,
+    shot: &Shot,
+    at: &ShotFrame,
+    request: &RenderRequest,
+    settings: &RenderSettings,
+) -> Result<(Planes, RenderStats)> {
+    let window = request.window;
+    let camera = scaled_camera(shot, at, request.render_scale)?;
+    if camera.clamp_window(window)? != window {
+        let (w, h) = camera.resolution();
+        return Err(Error::invalid(
+            "render window",
+            format!(
+                "{window:?} is not inside the {w}×{h} image at render scale {}",
+                request.render_scale
+            ),
+        ));
+    }
+    let scene = placed_scene(values, shot, at)?;
+    render_with_progress(&scene, &camera, window, settings, &|_| {})
 }
 
 /// The output the node shows of `planes`: one pass, exposed and over the background.

@@ -9,7 +9,8 @@
 //! `c(u) = c_a + (c_b − c_a)·u`, `R(u) = slerp(q_a, q_b, u)` (the shorter arc) and
 //! `P(u) = P_a + (P_b − P_a)·u`, so a non-uniform scale held by both frames is kept exactly
 //! while the object turns. The camera's lens, sensor, shift and clipping are linear in `u`;
-//! its type, sensor fit and stereo mode are frame `a`'s. A whole `t` returns frame `t`
+//! so are its depth of field's focus distance, f-stop, rotation and ratio; its type, sensor
+//! fit, stereo mode and aperture blades are frame `a`'s. A whole `t` returns frame `t`
 //! itself, bit for bit.
 
 use glam::{DMat3, DMat4, DQuat};
@@ -62,6 +63,16 @@ fn between(a: &ShotFrame, b: &ShotFrame, u: f64) -> ShotFrame {
                 ..s
             },
             _ => s,
+        }),
+        dof: ca.dof.map(|d| match cb.dof {
+            Some(e) => super::DepthOfField {
+                focus_distance: lerp(d.focus_distance, e.focus_distance),
+                fstop: lerp(d.fstop, e.fstop),
+                rotation: lerp(d.rotation, e.rotation),
+                ratio: lerp(d.ratio, e.ratio),
+                ..d
+            },
+            None => d,
         }),
     };
     // Objects held by both frames (one appearing or vanishing between them is absent).
@@ -167,6 +178,7 @@ mod tests {
             clip_start: 0.1,
             clip_end: 100.0,
             stereo: None,
+            dof: None,
         }
     }
 

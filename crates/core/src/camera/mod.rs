@@ -9,6 +9,7 @@
 //! into every field instance's frame (see [`crate::scene`]), so several fields with their own
 //! object transforms can be marched jointly.
 
+mod aperture;
 mod environment;
 mod equirect;
 mod interpolate;
@@ -18,6 +19,7 @@ mod shot;
 mod shutter;
 mod stereo;
 
+pub use aperture::{aperture_points, DepthOfField, MAX_APERTURE_SAMPLES, MAX_BLADES};
 pub use environment::environment_camera;
 pub use equirect::Equirect;
 pub use nerfstudio::{CameraPath, PathCameraType, PathCrop, PathFrame, PathKeyframe};

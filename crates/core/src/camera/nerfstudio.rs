@@ -323,6 +323,7 @@ impl CameraPath {
                     clip_start: 0.05,
                     clip_end: 1000.0,
                     stereo,
+                    dof: None,
                 },
                 objects: BTreeMap::from([(nerf_object.to_string(), object)]),
             });

@@ -10,7 +10,9 @@
 //!     "camera": {"matrix_world": [[1,0,0,0],[0,1,0,0],[0,0,1,5],[0,0,0,1]],
 //!                "type": "PERSP", "lens": 50, "sensor_width": 36, "sensor_height": 24,
 //!                "sensor_fit": "AUTO", "shift_x": 0, "shift_y": 0,
-//!                "clip_start": 0.1, "clip_end": 1000, "stereo": null},
+//!                "clip_start": 0.1, "clip_end": 1000, "stereo": null,
+//!                "dof": {"focus_distance": 5, "fstop": 2.8, "blades": 0, "rotation": 0,
+//!                        "ratio": 1}},
 //!     "objects": {"NeRF": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}}]}
 //! ```
 //!
@@ -20,7 +22,11 @@
 //! "ipd": 0.064}`; the resolution is then per eye. For `PERSP`, `lens`, `sensor_width`,
 //! `sensor_height` and `sensor_fit` are required. Optional, with Blender's defaults:
 //! `fps_base` (1), `resolution_percentage` (100), `pixel_aspect_x/y` (1), `shift_x/y` (0),
-//! `clip_start` (0.1), `clip_end` (1000), `stereo` (none). Unknown fields are ignored.
+//! `clip_start` (0.1), `clip_end` (1000), `stereo` (none), `dof` (none: no depth of field).
+//! `dof` is a perspective camera's depth of field at that frame (see [`DepthOfField`]):
+//! `focus_distance` (camera depth of the focus plane, scene units; the add-on resolves a focus
+//! object per frame) and `fstop` are required, `blades` (0), `rotation` (0, radians) and
+//! `ratio` (1) optional. Unknown fields are ignored.
 //!
 //! Reading parses the text with serde into a JSON tree, then walks it with typed accessors
 //! that know where they are, so that every message names the file, the frame index and the
@@ -38,8 +44,8 @@ use serde::Serialize;
 use serde_json::Value;
 
 use super::{
-    BlenderIntrinsics, Camera, Equirect, Eye, MotionBlur, Ods, Perspective, Projection, SensorFit,
-    ShutterPosition, Vr180,
+    BlenderIntrinsics, Camera, DepthOfField, Equirect, Eye, MotionBlur, Ods, Perspective,
+    Projection, SensorFit, ShutterPosition, Vr180, MAX_BLADES,
 };
 use crate::error::{Error, Result};
 use crate::json::{self, short, Describe, Obj, Style};
@@ -127,6 +133,9 @@ pub struct ShotCamera {
     pub clip_end: f64,
     /// Stereo settings of a panoramic camera; `None` for a mono camera.
     pub stereo: Option<ShotStereo>,
+    /// Depth of field of a perspective camera; `None` for a pinhole (Blender's `use_dof`
+    /// off).
+    pub dof: Option<DepthOfField>,
 }
 
 /// The camera types a shot file may hold.
@@ -343,6 +352,16 @@ impl Shot {
                     clip_start: finite(at("clip_start"), c.clip_start)?,
                     clip_end: finite(at("clip_end"), c.clip_end)?,
                     stereo: c.stereo,
+                    dof: match &c.dof {
+                        None => None,
+                        Some(d) => Some(RawDof {
+                            focus_distance: finite(at("dof.focus_distance"), d.focus_distance)?,
+                            fstop: finite(at("dof.fstop"), d.fstop)?,
+                            blades: d.blades,
+                            rotation: finite(at("dof.rotation"), d.rotation)?,
+                            ratio: finite(at("dof.ratio"), d.ratio)?,
+                        }),
+                    },
                 },
                 objects,
             });
@@ -384,6 +403,9 @@ impl ShotFrame {
             other => other,
         };
         let c = &self.camera;
+        if let Some(dof) = &c.dof {
+            dof.validate("dof").map_err(in_context)?;
+        }
         let intrinsics = c.intrinsics(shot);
         let projection = match (c.kind, c.stereo) {
             (ShotCameraKind::Perspective, None) => {
@@ -414,6 +436,41 @@ impl ShotFrame {
         Camera::new(c.world_from_camera, projection)
             .and_then(|camera| camera.with_clip(c.clip_start, c.clip_end))
             .map_err(in_context)
+    }
+
+    /// The frames a render of this frame averages over its camera's aperture: with depth of
+    /// field on (a perspective camera with `dof`) and `samples` > 1, one frame per
+    /// [`DepthOfField::lens_points`] point `l`, its camera moved by `l` in its own x–y plane
+    /// (unit axes: Cycles clears the camera's scale too) and its shift changed by
+    /// `−l·lens / (focus_distance·sensor)` (the sensor length the fit uses), so that every point
+    /// of the focus plane keeps its pixel and each pixel sees the thin-lens ray through `l`
+    /// (see the [`aperture`](super::aperture) module). Otherwise this frame alone, unchanged.
+    pub fn through_aperture(&self, samples: u32) -> Vec<ShotFrame> {
+        let c = &self.camera;
+        let dof = match (c.kind, c.dof) {
+            (ShotCameraKind::Perspective, Some(dof)) if samples > 1 => dof,
+            _ => return vec![self.clone()],
+        };
+        let sensor = match c.sensor_fit {
+            SensorFit::Vertical => c.sensor_height,
+            _ => c.sensor_width,
+        };
+        let m = c.world_from_camera;
+        let z = m.z_axis.truncate().normalize();
+        let x = (m.x_axis.truncate() - z * m.x_axis.truncate().dot(z)).normalize();
+        let y = z.cross(x);
+        dof.lens_points(c.lens, samples)
+            .into_iter()
+            .map(|l| {
+                let mut frame = self.clone();
+                let cam = &mut frame.camera;
+                cam.world_from_camera.w_axis += (x * l.x + y * l.y).extend(0.0);
+                let slope = l / dof.focus_distance;
+                cam.shift_x -= slope.x * c.lens / sensor;
+                cam.shift_y -= slope.y * c.lens / sensor;
+                frame
+            })
+            .collect()
     }
 
     /// The matrix taking a scene's fixed placements into the shot's world at this frame (see
@@ -544,7 +601,18 @@ fn read_camera(cam: &Obj) -> Result<ShotCamera> {
                 })
             }
         },
+        dof: None,
     };
+    let mut camera = camera;
+    if cam.opt("dof").is_some() {
+        if !persp {
+            return Err(cam.error(
+                "dof",
+                "depth of field is read for perspective cameras only (type PERSP)",
+            ));
+        }
+        camera.dof = Some(read_dof(&cam.object("dof")?)?);
+    }
     if camera.clip_end <= camera.clip_start {
         return Err(cam.error(
             "clip_end",
@@ -555,6 +623,43 @@ fn read_camera(cam: &Obj) -> Result<ShotCamera> {
         ));
     }
     Ok(camera)
+}
+
+/// A camera's `dof` object; every value is checked here, so the message names the field.
+fn read_dof(dof: &Obj) -> Result<DepthOfField> {
+    let blades = if dof.has("blades") {
+        let n = dof.get::<i64>("blades", "a whole number of blades")?;
+        match u32::try_from(n) {
+            Ok(b) if b <= MAX_BLADES => b,
+            _ => {
+                return Err(dof.error(
+                    "blades",
+                    format!("{n}; expected 0 to {MAX_BLADES} (fewer than 3: a round aperture)"),
+                ))
+            }
+        }
+    } else {
+        0
+    };
+    let positive = |key: &str, what: &str| -> Result<f64> {
+        let v = dof.finite(key, what)?;
+        if v > 0.0 {
+            Ok(v)
+        } else {
+            Err(dof.error(key, format!("expected {what} > 0, got {v}")))
+        }
+    };
+    Ok(DepthOfField {
+        focus_distance: positive("focus_distance", "a distance")?,
+        fstop: positive("fstop", "an f-number")?,
+        blades,
+        rotation: dof.number_or("rotation", 0.0)?,
+        ratio: if dof.has("ratio") {
+            positive("ratio", "a ratio")?
+        } else {
+            1.0
+        },
+    })
 }
 
 /// How a shot file's messages are worded: `null` is refused (it is what a `NaN` token became),
@@ -704,6 +809,17 @@ struct RawCamera {
     clip_start: f64,
     clip_end: f64,
     stereo: Option<ShotStereo>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    dof: Option<RawDof>,
+}
+
+#[derive(Serialize)]
+struct RawDof {
+    focus_distance: f64,
+    fstop: f64,
+    blades: u32,
+    rotation: f64,
+    ratio: f64,
 }
 
 #[cfg(test)]
@@ -829,6 +945,190 @@ mod tests {
         let shot = parse(&v).unwrap();
         let eq = shot.frame(1002).unwrap().camera(&shot).unwrap();
         assert!(matches!(eq.projection(), Projection::Equirect(_)));
+    }
+
+    /// The base shot with depth of field on frame 1001's camera.
+    fn with_dof(dof: Value) -> Value {
+        let mut v = base();
+        v["frames"][0]["camera"]["dof"] = dof;
+        v
+    }
+
+    fn project(cam: &Camera, world: DVec3) -> glam::DVec2 {
+        let Projection::Perspective(p) = cam.projection() else {
+            panic!("a perspective camera");
+        };
+        let local = cam.world_from_camera().inverse().transform_point3(world);
+        p.project(local).unwrap()
+    }
+
+    /// Each aperture sample's camera is Cycles' thin lens for every pixel: its ray through a
+    /// pixel starts at the lens point and meets the pinhole ray of that pixel on the focus
+    /// plane; a point off the plane moves by `fx·l·(1/d − 1/z)` pixels (its circle of
+    /// confusion).
+    #[test]
+    fn aperture_cameras_are_the_thin_lens() {
+        let shot = parse(&with_dof(json!({
+            "focus_distance": 4.0, "fstop": 0.7, "blades": 5, "rotation": 0.3, "ratio": 1.5
+        })))
+        .unwrap();
+        let frame = shot.frame(1001).unwrap();
+        let pinhole = frame.camera(&shot).unwrap();
+        let lenses = frame.through_aperture(8);
+        assert_eq!(lenses.len(), 8);
+        let world_from_camera = pinhole.world_from_camera();
+        let fx = match pinhole.projection() {
+            Projection::Perspective(p) => p.intrinsics()[0],
+            _ => unreachable!(),
+        };
+        let mut moved = 0.0f64;
+        for at in &lenses {
+            let cam = at.camera(&shot).unwrap();
+            // The lens point, in the pinhole camera's frame: in its x–y plane, inside the
+            // aperture (35 mm at f/0.7: radius 0.025; x squeezed by the ratio).
+            let l = world_from_camera
+                .inverse()
+                .transform_point3(cam.world_from_camera().w_axis.truncate());
+            assert!(l.z.abs() < 1e-12, "{l}");
+            assert!((l.x * 1.5).hypot(l.y) <= 0.025 + 1e-12, "{l}");
+            moved = moved.max(l.length());
+            for (x, y) in [(0.5, 0.5), (480.0, 270.0), (900.25, 77.5), (13.0, 530.0)] {
+                let a = pinhole.ray(x, y).unwrap();
+                let b = cam.ray(x, y).unwrap();
+                assert!(b
+                    .origin
+                    .abs_diff_eq(cam.world_from_camera().w_axis.truncate(), 1e-12));
+                // Both rays reach camera depth 4 at the same point.
+                let depth = |r: &crate::camera::Ray, t: f64| r.z_per_t * t;
+                let focus_a = a.origin + a.dir * (4.0 / depth(&a, 1.0));
+                let focus_b = b.origin + b.dir * (4.0 / depth(&b, 1.0));
+                assert!(focus_a.abs_diff_eq(focus_b, 1e-9), "{focus_a} {focus_b}");
+            }
+            // A point at depth 10 on the pixel (480, 270)'s pinhole ray.
+            let a = pinhole.ray(480.0, 270.0).unwrap();
+            let p = a.origin + a.dir * (10.0 / a.z_per_t);
+            let shift = project(&cam, p) - glam::DVec2::new(480.0, 270.0);
+            let expected = glam::DVec2::new(l.x, -l.y) * fx * (1.0 / 4.0 - 1.0 / 10.0);
+            assert!((shift - expected).length() < 1e-6, "{shift} vs {expected}");
+        }
+        assert!(moved > 0.015, "{moved}");
+    }
+
+    /// Without depth of field, or with one aperture sample, a frame is its own pinhole; the
+    /// camera's scale does not scale the aperture.
+    #[test]
+    fn no_depth_of_field_is_the_frame_itself() {
+        let shot = parse(&base()).unwrap();
+        let frame = shot.frame(1001).unwrap();
+        assert_eq!(frame.through_aperture(64), vec![frame.clone()]);
+        let dof = json!({"focus_distance": 2.0, "fstop": 2.0});
+        let shot = parse(&with_dof(dof.clone())).unwrap();
+        let frame = shot.frame(1001).unwrap();
+        assert_eq!(frame.through_aperture(1), vec![frame.clone()]);
+        assert_eq!(frame.through_aperture(0), vec![frame.clone()]);
+        let mut v = with_dof(dof);
+        let scaled = DMat4::from_scale_rotation_translation(
+            DVec3::splat(3.0),
+            DQuat::from_rotation_y(0.3),
+            DVec3::new(1.0, 2.0, 5.0),
+        );
+        v["frames"][0]["camera"]["matrix_world"] = rows(scaled);
+        let shot = parse(&v).unwrap();
+        for at in shot.frame(1001).unwrap().through_aperture(16) {
+            let offset = at.camera.world_from_camera.w_axis.truncate() - DVec3::new(1.0, 2.0, 5.0);
+            assert!(offset.length() <= 35e-3 / 4.0 + 1e-12, "{offset}");
+        }
+    }
+
+    #[test]
+    fn depth_of_field_round_trips_and_bad_values_name_the_field() {
+        let shot = parse(&with_dof(json!({
+            "focus_distance": 4.5, "fstop": 2.8, "blades": 6, "rotation": 0.25, "ratio": 1.2
+        })))
+        .unwrap();
+        let dof = shot.frame(1001).unwrap().camera.dof.unwrap();
+        assert_eq!(
+            dof,
+            DepthOfField {
+                focus_distance: 4.5,
+                fstop: 2.8,
+                blades: 6,
+                rotation: 0.25,
+                ratio: 1.2
+            }
+        );
+        assert_eq!(shot.frame(1002).unwrap().camera.dof, None);
+        let text = shot.to_json_string(Path::new("shot.json")).unwrap();
+        let back = Shot::from_json_str(&text, "shot.json").unwrap();
+        assert_eq!(back.frames, shot.frames);
+        // Defaults: a round aperture, unturned, not anamorphic; null is no depth of field.
+        let d = parse(&with_dof(json!({"focus_distance": 3, "fstop": 4})))
+            .unwrap()
+            .frames[0]
+            .camera
+            .dof
+            .unwrap();
+        assert_eq!((d.blades, d.rotation, d.ratio), (0, 0.0, 1.0));
+        let none = parse(&with_dof(Value::Null)).unwrap();
+        assert_eq!(none.frames[0].camera.dof, None);
+
+        let ok = json!({"focus_distance": 3, "fstop": 4});
+        let cases: Vec<(&str, Value, &[&str])> = vec![
+            ("fstop", json!(0), &["frames[0].camera.dof.fstop", "> 0"]),
+            ("fstop", json!(-1.4), &["frames[0].camera.dof.fstop"]),
+            ("fstop", Value::Null, &["frames[0].camera.dof.fstop", "NaN"]),
+            (
+                "focus_distance",
+                Value::Null,
+                &["frames[0].camera.dof.focus_distance"],
+            ),
+            (
+                "focus_distance",
+                json!(-2),
+                &["frames[0].camera.dof.focus_distance"],
+            ),
+            ("blades", json!(-3), &["frames[0].camera.dof.blades", "-3"]),
+            ("blades", json!(2.5), &["frames[0].camera.dof.blades"]),
+            ("blades", json!(101), &["frames[0].camera.dof.blades"]),
+            ("ratio", json!(0), &["frames[0].camera.dof.ratio"]),
+            (
+                "rotation",
+                json!("a lot"),
+                &["frames[0].camera.dof.rotation"],
+            ),
+        ];
+        for (field, value, parts) in cases {
+            let mut dof = ok.clone();
+            dof[field] = value;
+            let e = parse_err(&with_dof(dof));
+            assert_mentions(&e, &["shot.json"]);
+            assert_mentions(&e, parts);
+        }
+        let mut dof = ok.clone();
+        dof.as_object_mut().unwrap().remove("fstop");
+        assert_mentions(
+            &parse_err(&with_dof(dof)),
+            &["frames[0].camera.dof.fstop", "missing"],
+        );
+        // A shot built in memory is checked when its cameras are built.
+        let mut shot = parse(&with_dof(json!({"focus_distance": 3, "fstop": 4}))).unwrap();
+        if let Some(d) = &mut shot.frames[0].camera.dof {
+            d.fstop = 0.0;
+        }
+        let e = shot.frames[0].camera(&shot).unwrap_err().to_string();
+        assert_mentions(&e, &["shot.json", "frames[0].camera", "dof.fstop"]);
+        // Only a perspective camera has a thin lens.
+        let mut v = base();
+        v["frames"][1]["camera"]["dof"] = ok;
+        assert_mentions(&parse_err(&v), &["frames[1].camera.dof", "PERSP"]);
+        // A NaN token (what Python writes) is refused by name.
+        let text = with_dof(json!({"focus_distance": 12345.5, "fstop": 2}))
+            .to_string()
+            .replace("12345.5", "NaN");
+        let e = Shot::from_json_str(&text, "shot.json")
+            .unwrap_err()
+            .to_string();
+        assert_mentions(&e, &["shot.json", "frames[0].camera.dof.focus_distance"]);
     }
 
     #[test]

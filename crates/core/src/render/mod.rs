@@ -104,6 +104,14 @@ pub struct RenderSettings {
     /// Times per frame a shot with motion blur is rendered at over its shutter (1: none);
     /// see [`Quality::shutter_samples`].
     pub shutter_samples: u32,
+    /// Points of the aperture a shot with depth of field is rendered through per shutter
+    /// time (1: a pinhole); see [`Quality::aperture_samples`].
+    #[serde(default = "one_sample")]
+    pub aperture_samples: u32,
+}
+
+fn one_sample() -> u32 {
+    1
 }
 
 /// The side of the tiles a render is cut into unless its settings say otherwise.
@@ -118,6 +126,7 @@ impl RenderSettings {
             tile_size: TILE_SIZE,
             color: ColorOutput::Linear,
             shutter_samples: 1,
+            aperture_samples: 1,
         }
     }
 }

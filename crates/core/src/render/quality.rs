@@ -140,6 +140,18 @@ impl Quality {
         }
     }
 
+    /// The preset's number of points of the aperture a frame with depth of field is rendered
+    /// through (per shutter time): an out-of-focus point spreads over its circle of confusion
+    /// as that many copies until their spacing falls below a pixel, and smooth defocus
+    /// converges as the stratified mean does.
+    pub fn aperture_samples(self) -> u32 {
+        match self {
+            Quality::Draft => 4,
+            Quality::Preview => 16,
+            Quality::Final => 64,
+        }
+    }
+
     /// The preset's identifier, as the command line and the NeRF Render node name it.
     pub fn name(self) -> &'static str {
         match self {

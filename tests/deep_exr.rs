@@ -7,6 +7,10 @@
 //! proposal-sampled nerfacto run; the CLI writes it beside the flat file with the flat
 //! file's header entries, and refuses what it cannot do.
 //!
+//! OpenEXR's Python bindings (3.5) refuse a file with a `deepImageState` attribute, which
+//! nerfx writes: the script reads the state from the header bytes and the pixels from a copy
+//! without it.
+//!
 //! Needs `python3` with `numpy` and `OpenEXR` ≥ 3.3 (`scripts/test.sh` installs them), and a
 //! build with OpenEXR (`libopenexr-dev`); without them it fails with a message saying so.
 
@@ -16,7 +20,7 @@ use std::process::Command;
 use nerfx::bench::scenes::build;
 use nerfx::bench::SceneKind;
 use nerfx::camera::Camera;
-use nerfx::image::{write_deep_exr, write_deep_exr_untagged, DeepImage, ExrHeader, Planes};
+use nerfx::image::{write_deep_exr, DeepImage, ExrHeader, Planes};
 use nerfx::render::{render_deep, DeepParams, Outputs, Quality, RenderSettings};
 use nerfx::scene::Scene;
 
@@ -82,6 +86,8 @@ fn check(what: &str, file: &Path, planes: &Planes, cap: u32) -> ReadBack {
         "{what}: {h}"
     );
     assert_eq!(h["compression"], "ZIPS_COMPRESSION", "{what}");
+    // deepImageState DIS_TIDY (3), read from the header bytes by the script.
+    assert_eq!(h["deepImageState"], 3, "{what}: {h}");
     assert_eq!(
         (h["width"].as_u64(), h["height"].as_u64()),
         (Some(planes.width.into()), Some(planes.height.into())),
@@ -166,26 +172,8 @@ fn render_and_write(
         &|_| {},
     )
     .unwrap();
-    write_for_python(file, &image);
+    write_deep_exr(file, &image, &ExrHeader::default()).unwrap();
     (planes, image)
-}
-
-/// Writes `image` to `file` for OpenEXR's Python bindings, which refuse a file with a
-/// `deepImageState` attribute: without it, after checking that the file as nerfx writes it
-/// differs only there (its header says the state is tidy: attribute `deepImageState` of type
-/// `deepImageState`, one byte, `DIS_TIDY` = 3).
-fn write_for_python(file: &Path, image: &DeepImage) {
-    assert!(image.is_tidy(), "the samples are tidy");
-    write_deep_exr(file, image, &ExrHeader::default()).unwrap();
-    let tagged = std::fs::read(file).unwrap();
-    let attribute = b"deepImageState\0deepImageState\0\x01\0\0\0\x03";
-    assert!(
-        tagged.windows(attribute.len()).any(|w| w == attribute),
-        "the header says the samples are tidy"
-    );
-    write_deep_exr_untagged(file, image, &ExrHeader::default()).unwrap();
-    let untagged = std::fs::read(file).unwrap();
-    assert!(!untagged.windows(14).any(|w| w == b"deepImageState"));
 }
 
 /// Where a pixel is one opaque surface (its first sample takes all but 1e-4 of it), its
@@ -263,7 +251,7 @@ fn splats_flatten_and_sit_at_their_depths() {
         &|_| {},
     )
     .unwrap();
-    write_for_python(&file, &image);
+    write_deep_exr(&file, &image, &ExrHeader::default()).unwrap();
     let back = check("splats (unmerged)", &file, &planes, 4096);
     assert!(back.z.iter().zip(&back.z_back).all(|(a, b)| a == b));
 }
@@ -306,7 +294,7 @@ fn proposal_sampled_nerfacto_flattens() {
     )
     .unwrap();
     let file = dir.path().join("nerfacto.deep.exr");
-    write_for_python(&file, &image);
+    write_deep_exr(&file, &image, &ExrHeader::default()).unwrap();
     check("nerfacto (proposal sampler)", &file, &planes, 16);
 }
 
@@ -325,4 +313,197 @@ fn copy_dir(from: &Path, to: &Path) {
 
 fn nerfx_bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_nerfx"))
+}
+
+fn nerfx(args: &[&str]) -> std::process::Output {
+    Command::new(nerfx_bin())
+        .args(args)
+        .output()
+        .expect("the nerfx binary runs")
+}
+
+/// The demo's scene and a shot of it, `blur`red or not, written to `dir`.
+fn demo_files(dir: &Path, blur: bool) -> (String, String) {
+    let scene = dir.join("scene.json");
+    nerfx::demo::scene_desc().write(&scene).unwrap();
+    let mut shot = nerfx::demo::shot(32, 18);
+    if blur {
+        shot.motion_blur = Some(nerfx::camera::MotionBlur {
+            shutter: 1.0,
+            position: nerfx::camera::ShutterPosition::Center,
+        });
+    }
+    let shot_file = dir.join("shot.json");
+    shot.write(&shot_file).unwrap();
+    (
+        scene.to_string_lossy().into_owned(),
+        shot_file.to_string_lossy().into_owned(),
+    )
+}
+
+/// The flat file's planes as nerfx's own reader gives them.
+fn flat_planes(path: &Path) -> Planes {
+    let channels = nerfx::image::read_exr_channels(path).unwrap();
+    let find = |name: &str| {
+        channels
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, p)| p.clone())
+            .unwrap_or_else(|| panic!("{name} in {}", path.display()))
+    };
+    let r = find("R");
+    Planes {
+        width: r.width,
+        height: r.height,
+        rgb: Some([r, find("G"), find("B")]),
+        alpha: Some(find("A")),
+        depth_z: Some(find("Z")),
+        depth_ray: None,
+        depth_median: None,
+    }
+}
+
+fn header_of(path: &Path) -> serde_json::Value {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/openexr/read_header.py");
+    let run = Command::new("python3")
+        .arg(script)
+        .arg(path)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    serde_json::from_slice(&run.stdout).unwrap()
+}
+
+#[test]
+fn the_cli_writes_a_deep_file_beside_the_flat_one_with_its_header() {
+    let dir = tempfile::tempdir().unwrap();
+    let (scene, shot) = demo_files(dir.path(), false);
+    let frame = (nerfx::demo::FIRST_FRAME + 2).to_string();
+    let flat = dir.path().join("flat.####.exr");
+    let deep = dir.path().join("deep/deep.####.exr");
+    let run = nerfx(&[
+        "render",
+        &scene,
+        &shot,
+        "--frames",
+        &frame,
+        "--quality",
+        "draft",
+        "--colorspace",
+        "acescg",
+        "-o",
+        &flat.to_string_lossy(),
+        "--deep",
+        &deep.to_string_lossy(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let flat_file = dir.path().join(format!("flat.{frame:0>4}.exr"));
+    let deep_file = dir.path().join(format!("deep/deep.{frame:0>4}.exr"));
+    let planes = flat_planes(&flat_file);
+    let back = check(
+        "CLI, ACEScg",
+        &deep_file,
+        &planes,
+        Quality::Draft.deep_samples(),
+    );
+    check_surface_depth("CLI, ACEScg", &back, &planes);
+    // The flat file's header entries, as OpenEXR reads them from both.
+    let flat_header = header_of(&flat_file);
+    let entries = back.header["entries"].as_object().unwrap();
+    for key in [
+        "chromaticities",
+        "worldToCamera",
+        "worldToNDC",
+        "framesPerSecond",
+        "pixelAspectRatio",
+        "nerfx/version",
+        "nerfx/quality",
+        "nerfx/colorspace",
+        "nerfx/fieldFiles",
+    ] {
+        assert_eq!(entries.get(key), flat_header.get(key), "{key}");
+        assert!(entries.contains_key(key), "{key}");
+    }
+}
+
+#[test]
+fn a_motion_blurred_deep_frame_flattens_to_the_averaged_flat_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let (scene, shot) = demo_files(dir.path(), true);
+    let frame = (nerfx::demo::FIRST_FRAME + 3).to_string();
+    let flat = dir.path().join("flat.exr");
+    let deep = dir.path().join("deep.exr");
+    let run = nerfx(&[
+        "render",
+        &scene,
+        &shot,
+        "--frames",
+        &frame,
+        "--quality",
+        "draft",
+        "--shutter-samples",
+        "3",
+        "--deep-samples",
+        "64",
+        "-o",
+        &flat.to_string_lossy(),
+        "--deep",
+        &deep.to_string_lossy(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    check("CLI, motion blur", &deep, &flat_planes(&flat), 64);
+}
+
+#[test]
+fn the_cli_refuses_what_deep_output_cannot_do_and_keeps_what_stands() {
+    let dir = tempfile::tempdir().unwrap();
+    let (scene, shot) = demo_files(dir.path(), false);
+    let deep = dir.path().join("deep.exr");
+    std::fs::write(&deep, b"an earlier frame").unwrap();
+    let deep_arg = deep.to_string_lossy().into_owned();
+    let frame = nerfx::demo::FIRST_FRAME.to_string();
+    let base = ["render", &scene, &shot, "--quality", "draft", "--frames"];
+    for (extra, says) in [
+        (
+            vec![&frame, "--deep", &deep_arg, "--stripe", "1/2"],
+            "whole frames",
+        ),
+        (
+            vec![&frame, "--deep", &deep_arg, "--deep-samples", "0"],
+            "expected 1 to 4096",
+        ),
+        (
+            vec![&frame, "--deep", &deep_arg, "--deep-samples", "5000"],
+            "expected 1 to 4096",
+        ),
+        (vec![&frame, "--deep-samples", "8"], "add --deep"),
+        (
+            vec![&frame, "--deep", &deep_arg, "--passes", "depthZ"],
+            "add rgba",
+        ),
+        (vec!["99999", "--deep", &deep_arg], "99999"),
+    ] {
+        let args: Vec<&str> = base.iter().copied().chain(extra.iter().copied()).collect();
+        let run = nerfx(&args);
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success(), "{extra:?}");
+        assert!(stderr.contains(says), "{extra:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        assert_eq!(std::fs::read(&deep).unwrap(), b"an earlier frame");
+    }
+    // A graph names its outputs itself.
+    let run = nerfx(&["render", &scene, "--deep", &deep_arg]);
+    assert!(String::from_utf8_lossy(&run.stderr).contains("graphs do not write deep files"));
 }

@@ -102,22 +102,6 @@ pub fn deep_exr_available() -> bool {
 /// offsets disagree with its size, a sample is not finite, or OpenEXR refuses the file
 /// (its message); [`Error::Io`] naming `path`.
 pub fn write_deep_exr(path: &Path, image: &DeepImage, header: &ExrHeader) -> Result<()> {
-    write_deep_exr_tagged(path, image, header, true)
-}
-
-/// [`write_deep_exr`] without the `deepImageState` attribute: for readers that refuse it
-/// (OpenEXR's Python bindings, 3.5, refuse to open a file that has one: "unsupported
-/// attribute type"); the samples are as tidy all the same.
-pub fn write_deep_exr_untagged(path: &Path, image: &DeepImage, header: &ExrHeader) -> Result<()> {
-    write_deep_exr_tagged(path, image, header, false)
-}
-
-fn write_deep_exr_tagged(
-    path: &Path,
-    image: &DeepImage,
-    header: &ExrHeader,
-    tag: bool,
-) -> Result<()> {
     let what = || format!("deep EXR {}", path.display());
     if !deep_exr_available() {
         return Err(Error::invalid(
@@ -162,7 +146,7 @@ fn write_deep_exr_tagged(
         ));
     }
     crate::output::replace_file(path, |temp| {
-        ffi::write(temp, path, image, header, tag && image.is_tidy())
+        ffi::write(temp, path, image, header, image.is_tidy())
     })
 }
 

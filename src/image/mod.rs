@@ -15,9 +15,7 @@ pub(crate) use self::png::decode_rgba8;
 pub use self::png::write_png_preview;
 pub(crate) use self::png::write_png_rgba8;
 pub use color_spaces::{Chromaticities, OutputColorSpace};
-pub use deep_exr::{
-    deep_exr_available, write_deep_exr, write_deep_exr_untagged, DeepImage, DeepSample,
-};
+pub use deep_exr::{deep_exr_available, write_deep_exr, DeepImage, DeepSample};
 pub use exr_header::{frames_per_second, CameraMatrices, ExrHeader};
 pub use exr_io::{
     read_exr_channels, read_exr_image, write_exr, write_exr_channels, write_exr_layers,

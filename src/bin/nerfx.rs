@@ -257,6 +257,11 @@ enum Command {
         /// alone, RGBA and depth Z, and every output of the demo frame, at this preset.
         #[arg(long, value_enum)]
         passes: Option<Quality>,
+        /// Time deep output instead: each scene (`--scene`, default all) rendered flat and
+        /// deep at this preset, written as EXRs: the deep file's samples per pixel (mean,
+        /// max), both files' sizes and both times (best of `repeats`).
+        #[arg(long, value_enum)]
+        deep: Option<Quality>,
     },
     /// Print a reference page of the user's guide, generated from the code: `nodes` (every
     /// node and parameter, from the node registry) or `cli` (every command and option).
@@ -846,6 +851,33 @@ fn run(cli: Cli) -> Result<()> {
                     mesh_path.display()
                 );
             }
+            Ok(())
+        }
+        Command::Bench {
+            deep: Some(quality),
+            out,
+            width,
+            height,
+            repeats,
+            scene,
+            ply,
+            ..
+        } => {
+            create_dir(&out)?;
+            let scenes = if scene.is_empty() {
+                bench::SceneKind::ALL.to_vec()
+            } else {
+                scene
+            };
+            let timings = bench::deep::time_deep(
+                &out,
+                &scenes,
+                (width, height),
+                quality,
+                repeats.unwrap_or(3),
+                ply.first().map(PathBuf::as_path),
+            )?;
+            print!("{}", bench::deep::table(&timings, quality, (width, height)));
             Ok(())
         }
         Command::Bench {

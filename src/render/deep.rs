@@ -122,7 +122,7 @@ pub(super) fn finish_pixel(
     s.samples.clear();
     let mut transmittance = 1.0f64;
     for p in pieces {
-        if !(p.weight > 0.0) || transmittance <= 0.0 {
+        if p.weight.is_nan() || p.weight <= 0.0 || transmittance <= 0.0 {
             continue;
         }
         let alpha = (p.weight / transmittance).min(1.0);
@@ -207,7 +207,7 @@ pub fn conform_to(deep: &mut DeepImage, planes: &Planes) {
 #[inline]
 fn split(m: &Sample, z: f64) -> (f64, [f64; 3]) {
     let length = m.back - m.front;
-    if !(length > 0.0) {
+    if length.is_nan() || length <= 0.0 {
         return (1.0 - m.alpha, m.rgb);
     }
     let f = ((z - m.front) / length).clamp(0.0, 1.0);
@@ -354,8 +354,8 @@ pub fn average_pixels(lists: &[&[DeepSample]], params: &DeepParams, out: &mut Ve
             if s.front >= s.back {
                 let slot = &mut added[2 * at(s.front)];
                 slot.0 += transmittance * alpha;
-                for k in 0..3 {
-                    slot.1[k] += transmittance * rgb[k];
+                for (added, c) in slot.1.iter_mut().zip(rgb) {
+                    *added += transmittance * c;
                 }
                 transmittance *= 1.0 - alpha;
                 continue;
@@ -509,8 +509,8 @@ mod tests {
     fn flatten(samples: &[Sample]) -> ([f64; 3], f64) {
         let (mut c, mut t) = ([0.0; 3], 1.0);
         for s in samples {
-            for k in 0..3 {
-                c[k] += t * s.rgb[k];
+            for (c, v) in c.iter_mut().zip(s.rgb) {
+                *c += t * v;
             }
             t *= 1.0 - s.alpha;
         }

@@ -106,7 +106,9 @@ struct RayScratch {
     panels: Vec<(f64, f64, Sums)>,
 }
 
-/// Integrates one tile in closed form. `out` receives the tile's pixels row by row.
+/// Integrates one tile in closed form. `out` receives the tile's pixels row by row, and
+/// `deep`'s tile their deep samples where it is given.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn integrate_tile(
     scene: &Scene,
     plans: &[InstancePlan],

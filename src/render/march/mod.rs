@@ -397,7 +397,8 @@ pub(super) struct DeepPass {
     pub decode: bool,
 }
 
-/// Marches one tile. `out` receives the tile's pixels row by row.
+/// Marches one tile. `out` receives the tile's pixels row by row, and `deep`'s tile their
+/// deep samples where it is given.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn march_tile(
     scene: &Scene,

@@ -94,7 +94,7 @@ pub fn time_deep(
 /// The timings as a Markdown table.
 pub fn table(timings: &[DeepTiming], quality: Quality, (width, height): (u32, u32)) -> String {
     let mut out = format!(
-        "| scene ({}, {width}×{height}, cap {}) | samples/px mean | max | flat KB | deep KB | flat ms | flat + deep ms | × flat |\n",
+        "| scene ({}, {width}×{height}, cap {}) | samples/px mean | max | flat KB | deep KB | flat ms | deep ms (both files) | × flat |\n",
         quality.name(),
         quality.deep_samples()
     );

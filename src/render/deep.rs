@@ -264,7 +264,11 @@ fn merge(
                 (group.back, inside.0, inside.1),
                 (next.front, inside.0, inside.1),
             ];
-            if !(bounds.iter().all(fits) && new.iter().all(fits)) {
+            // Behind an opaque enough front no boundary can see more than the bound: the
+            // change in transmittance is at most 1, in colour at most the group's colour.
+            let brightest = candidate.rgb.iter().fold(1.0f64, |m, c| m.max(c.abs()));
+            let unseen = in_front * brightest < target;
+            if !(unseen || (bounds.iter().all(fits) && new.iter().all(fits))) {
                 break;
             }
             bounds.extend(new);

@@ -3,10 +3,13 @@
 # (idempotent: a few checks and nothing else when everything is present), then runs them.
 #
 #   libclang-dev   openfx-sys generates the OpenFX bindings from the official headers (bindgen)
+#   libopenexr-dev, pkg-config   OpenEXR's C++ library, which writes the deep EXR output
+#                  (build.rs builds the deep writer only where pkg-config finds it)
 #   blender        the reference for camera alignment (Debian's 3.4, run headless)
 #   numpy, msgpack the independent NumPy references of the trained fields and splats
 #   mpmath         the quadrature reference of the renderer's far share of a linear piece
-#   OpenEXR        OpenEXR's own library (PyPI's bindings), reading back the EXR output
+#   OpenEXR        OpenEXR's own library (PyPI's bindings, ≥ 3.3 for deep files), reading
+#                  back the EXR output, flat and deep
 #   opencolorio    OpenColorIO's own built-in configuration, the reference of the output
 #                  colour spaces
 #   mmh3           MurmurHash3 for the Cryptomatte decoder written from the specification
@@ -47,6 +50,8 @@ apt_install() {
 need_apt=()
 command -v cc >/dev/null || need_apt+=(build-essential)
 dpkg -s libclang-dev >/dev/null 2>&1 || need_apt+=(libclang-dev)
+command -v pkg-config >/dev/null || need_apt+=(pkg-config)
+dpkg -s libopenexr-dev >/dev/null 2>&1 || need_apt+=(libopenexr-dev)
 command -v blender >/dev/null || need_apt+=(blender)
 command -v python3 >/dev/null || need_apt+=(python3)
 command -v slurmctld >/dev/null || need_apt+=(slurm-wlm)
@@ -56,14 +61,16 @@ if ((${#need_apt[@]})); then
     apt_install "${need_apt[@]}"
 fi
 
-if ! python3 -c "import numpy, msgpack, mpmath, OpenEXR, PyOpenColorIO, mmh3" 2>/dev/null; then
+# OpenEXR's bindings read deep files from 3.3 on.
+if ! python3 -c "import numpy, msgpack, mpmath, OpenEXR, PyOpenColorIO, mmh3
+assert tuple(map(int, OpenEXR.__version__.split('.')[:2])) >= (3, 3)" 2>/dev/null; then
     echo "== installing numpy, msgpack, mpmath, OpenEXR, opencolorio and mmh3 for $(command -v python3)"
     # A pip-managed Python (pyenv, a venv) takes them from PyPI; Debian's own python3 refuses
     # pip (externally managed) and takes its packages, and OpenEXR, which Debian does not
     # package for Python, from PyPI beside them.
-    python3 -m pip install --quiet numpy msgpack mpmath OpenEXR opencolorio mmh3 2>/dev/null || {
+    python3 -m pip install --quiet numpy msgpack mpmath 'OpenEXR>=3.3' opencolorio mmh3 2>/dev/null || {
         apt_install python3-numpy python3-msgpack python3-mpmath python3-pip
-        PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install --quiet OpenEXR opencolorio mmh3
+        PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install --quiet 'OpenEXR>=3.3' opencolorio mmh3
     }
     python3 -c "import numpy, msgpack, mpmath, OpenEXR, PyOpenColorIO, mmh3"
 fi

@@ -14,13 +14,13 @@ use glam::DVec3;
 use nerfx::farm::{is_done, ExitStatus, FarmJob, Progress, Stripe};
 use nerfx_core::frames::{
     frame_path, parse_frames, read_shot, render_coverage, render_environment, render_frame_window,
-    EnvironmentOrigin,
+    render_frame_window_deep, EnvironmentOrigin,
 };
 use nerfx_core::image::{
-    frames_per_second, write_exr, write_exr_layers, write_png_preview, CameraMatrices, ExrHeader,
-    OutputColorSpace,
+    frames_per_second, write_deep_exr, write_exr, write_exr_layers, write_png_preview,
+    CameraMatrices, ExrHeader, OutputColorSpace,
 };
-use nerfx_core::render::{ColorOutput, Outputs, Quality, RenderSettings};
+use nerfx_core::render::{ColorOutput, DeepParams, Outputs, Quality, RenderSettings};
 use nerfx_core::scene::SceneDesc;
 use nerfx_core::{demo, Error, Result};
 use nerfx_testkit::bench;
@@ -132,6 +132,15 @@ enum Command {
         /// before the extension; `nerfx assemble` joins the stripes.
         #[arg(long)]
         stripe: Option<String>,
+        /// Scenes: also write a deep scanline EXR per frame to this pattern (`####`: the
+        /// frame number), beside the flat one: samples R G B A Z ZBack that flatten to the
+        /// flat render (Nuke: DeepRead). Needs a build with OpenEXR (libopenexr-dev).
+        #[arg(long)]
+        deep: Option<PathBuf>,
+        /// With --deep: most samples a deep pixel keeps, 1 to 4096 (default: the quality
+        /// preset's, 8 / 16 / 32).
+        #[arg(long)]
+        deep_samples: Option<u32>,
     },
     /// Join the stripes of frames rendered with `nerfx render --stripe K/N` into the frames,
     /// bit for bit the whole-frame render, every pass and layer, and remove the stripes.
@@ -253,6 +262,11 @@ enum Command {
         /// alone, RGBA and depth Z, and every output of the demo frame, at this preset.
         #[arg(long, value_enum)]
         passes: Option<Quality>,
+        /// Time deep output instead: each scene (`--scene`, default all) rendered flat and
+        /// deep at this preset, written as EXRs: the deep file's samples per pixel (mean,
+        /// max), both files' sizes and both times (best of `repeats`).
+        #[arg(long, value_enum)]
+        deep: Option<Quality>,
     },
     /// Print a reference page of the user's guide, generated from the code: `nodes` (every
     /// node and parameter, from the node registry) or `cli` (every command and option).
@@ -491,7 +505,11 @@ fn run(cli: Cli) -> Result<()> {
             resume,
             progress,
             stripe,
+            deep,
+            deep_samples,
         } => {
+            let deep_params =
+                deep_settings(deep.as_deref(), deep_samples, quality, stripe.is_some())?;
             let frames = frames.as_deref().map(parse_frames).transpose()?;
             let stripe = stripe.as_deref().map(Stripe::parse).transpose()?;
             let inputs: Vec<PathBuf> = std::iter::once(scene.clone()).chain(shot.clone()).collect();
@@ -520,6 +538,12 @@ fn run(cli: Cli) -> Result<()> {
                         "graphs do not write Cryptomatte yet; render the scene with its shot",
                     ));
                 }
+                if deep.is_some() {
+                    return Err(Error::invalid(
+                        "--deep",
+                        "graphs do not write deep files yet; render the scene with its shot",
+                    ));
+                }
                 if colorspace.is_some() {
                     return Err(Error::invalid(
                         "--colorspace",
@@ -530,6 +554,12 @@ fn run(cli: Cli) -> Result<()> {
                 return graph::render(&scene, frames, &output, png, bundle, scale, &task);
             };
             let outputs = passes.as_deref().map_or_else(Outputs::all, Pass::outputs);
+            if deep.is_some() && !(outputs.rgb && outputs.alpha) {
+                return Err(Error::invalid(
+                    "--deep",
+                    "deep samples carry colour and alpha: add rgba to --passes",
+                ));
+            }
             if png && !outputs.rgb {
                 return Err(Error::invalid(
                     "--png",
@@ -605,8 +635,20 @@ fn run(cli: Cli) -> Result<()> {
                 if let Some(dir) = path.parent() {
                     create_dir(dir)?;
                 }
-                // A stripe is done too when the frame it belongs to has been assembled.
+                let deep_path = deep
+                    .as_deref()
+                    .map(|pattern| frame_path(pattern, frame, frames.len() > 1));
+                if let Some(dir) = deep_path.as_deref().and_then(Path::parent) {
+                    create_dir(dir)?;
+                }
+                // A stripe is done too when the frame it belongs to has been assembled; a
+                // frame with a deep file when that was written after the inputs too (it is
+                // written before the flat file).
+                let deep_done = deep_path
+                    .as_deref()
+                    .is_none_or(|d| written_after(d, &task.inputs));
                 if task.resume
+                    && deep_done
                     && (task.is_done(&path) || (stripe.is_some() && task.is_done(&whole)))
                 {
                     bar.inc(1);
@@ -623,8 +665,25 @@ fn run(cli: Cli) -> Result<()> {
                     }
                     None => camera.full_window(),
                 };
-                let (mut planes, stats) =
-                    render_frame_window(&scene, &shot, frame, window, &settings, &|_| {})?;
+                let (mut planes, mut deep_image, stats) = match &deep_params {
+                    Some(params) => {
+                        let (planes, image, stats) = render_frame_window_deep(
+                            &scene,
+                            &shot,
+                            frame,
+                            window,
+                            &settings,
+                            params,
+                            &|_| {},
+                        )?;
+                        (planes, Some(image), stats)
+                    }
+                    None => {
+                        let (planes, stats) =
+                            render_frame_window(&scene, &shot, frame, window, &settings, &|_| {})?;
+                        (planes, None, stats)
+                    }
+                };
                 if let Some(warning) = stats.warning() {
                     bar.suspend(|| eprintln!("nerfx: warning: frame {frame}: {warning}"));
                 }
@@ -636,6 +695,14 @@ fn run(cli: Cli) -> Result<()> {
                     frames_per_second: frames_per_second(shot.fps, shot.fps_base),
                     entries: render_entries(&scene, &shot, quality, &settings, space),
                 };
+                // The deep file first: a flat file that reads back whole then says the frame's
+                // deep file was written too (see `deep_done`).
+                if let (Some(image), Some(deep_path)) = (&mut deep_image, &deep_path) {
+                    space.convert_deep(image);
+                    nerfx_core::render::conform_to(image, &planes);
+                    task.clear(deep_path)?;
+                    write_deep_exr(deep_path, image, &header)?;
+                }
                 let mattes = if cryptomatte {
                     let coverage = render_coverage(&scene, &shot, frame, &settings)?;
                     let names: Vec<&str> = scene
@@ -809,6 +876,33 @@ fn run(cli: Cli) -> Result<()> {
                     mesh_path.display()
                 );
             }
+            Ok(())
+        }
+        Command::Bench {
+            deep: Some(quality),
+            out,
+            width,
+            height,
+            repeats,
+            scene,
+            ply,
+            ..
+        } => {
+            create_dir(&out)?;
+            let scenes = if scene.is_empty() {
+                bench::SceneKind::ALL.to_vec()
+            } else {
+                scene
+            };
+            let timings = bench::deep::time_deep(
+                &out,
+                &scenes,
+                (width, height),
+                quality,
+                repeats.unwrap_or(3),
+                ply.first().map(PathBuf::as_path),
+            )?;
+            print!("{}", bench::deep::table(&timings, quality, (width, height)));
             Ok(())
         }
         Command::Bench {
@@ -1335,6 +1429,59 @@ fn render_entries(
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))
     .collect()
+}
+
+/// The deep settings `--deep` and `--deep-samples` ask for, or `None` without `--deep`:
+/// refuses a cap out of range, `--deep-samples` alone, a stripe (deep files are written
+/// with whole frames) and a build without OpenEXR, before anything renders.
+fn deep_settings(
+    deep: Option<&Path>,
+    samples: Option<u32>,
+    quality: Quality,
+    striped: bool,
+) -> Result<Option<DeepParams>> {
+    let Some(_) = deep else {
+        if samples.is_some() {
+            return Err(Error::invalid(
+                "--deep-samples",
+                "is for --deep: add --deep PATTERN",
+            ));
+        }
+        return Ok(None);
+    };
+    if striped {
+        return Err(Error::invalid(
+            "--deep",
+            "deep files are written with whole frames: render without --stripe",
+        ));
+    }
+    if !nerfx_core::image::deep_exr_available() {
+        return Err(Error::invalid(
+            "--deep",
+            "this build of nerfx has no OpenEXR library, which writes deep files: install \
+             OpenEXR's development files (Debian: apt-get install libopenexr-dev) and build \
+             nerfx again",
+        ));
+    }
+    let params = DeepParams {
+        max_samples: samples.unwrap_or_else(|| quality.deep_samples()),
+        error_target: quality.params().error_target,
+    };
+    params.validate().map_err(|e| match e {
+        Error::Invalid { message, .. } => Error::invalid("--deep-samples", message),
+        other => other,
+    })?;
+    Ok(Some(params))
+}
+
+/// Whether `path` exists and was written after every one of `inputs` last changed.
+fn written_after(path: &Path, inputs: &[PathBuf]) -> bool {
+    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    modified(path).is_some_and(|written| {
+        inputs
+            .iter()
+            .all(|input| modified(input).is_some_and(|changed| changed <= written))
+    })
 }
 
 fn create_dir(dir: &Path) -> Result<()> {

@@ -8,8 +8,11 @@ use glam::DVec3;
 use crate::camera::{environment_camera, CameraPath, Shot, ShotFrame};
 use crate::composite::shutter_average;
 use crate::error::{Error, Result};
-use crate::image::{Planes, Window};
-use crate::render::{render_with_progress, Outputs, RenderSettings, RenderStats};
+use crate::image::{DeepImage, Planes, Window};
+use crate::render::{
+    average_images, render_deep, render_with_progress, DeepParams, Outputs, RenderSettings,
+    RenderStats,
+};
 use crate::scene::LoadedScene;
 
 /// Each instance's coverage of frame `frame` (one plane per instance of `scene`, in its
@@ -249,6 +252,51 @@ pub fn render_frame_window(
         average.alpha = None;
     }
     Ok((average, stats))
+}
+
+/// Renders the pixels of `window` of `frame` as [`render_frame_window`] does, and their deep
+/// image ([`render_deep`]): with motion blur, the deep pixels of the shutter samples averaged
+/// ([`average_images`]: cut at every depth where one of them has a sample boundary, the
+/// opacity and colour each adds in a slot averaged), which flattens to the averaged flat
+/// frame exactly. The settings must ask for colour and alpha.
+pub fn render_frame_window_deep(
+    scene: &LoadedScene,
+    shot: &Shot,
+    frame: i64,
+    window: Window,
+    settings: &RenderSettings,
+    deep: &DeepParams,
+    on_tile: &(dyn Fn(u64) + Sync),
+) -> Result<(Planes, DeepImage, RenderStats)> {
+    let render_at = |at: &ShotFrame| {
+        let camera = at.camera(shot)?;
+        let placed = scene.place(at.world_from_scene(shot)?, &|name| at.object_matrix(name))?;
+        render_deep(&placed, &camera, window, settings, deep, on_tile)
+    };
+    let times = shot.motion_blur.map_or_else(
+        || vec![frame as f64],
+        |blur| blur.times(frame as f64, settings.shutter_samples),
+    );
+    if let [_] = times[..] {
+        return render_at(shot.frame(frame)?);
+    }
+    let mut flats = Vec::with_capacity(times.len());
+    let mut deeps = Vec::with_capacity(times.len());
+    let mut stats = RenderStats::default();
+    for t in times {
+        let at = shot.frame_at(t).map_err(|e| {
+            Error::invalid(
+                format!("frame {frame}: motion blur"),
+                format!("the shutter needs the shot at frame {t}: {e}"),
+            )
+        })?;
+        let (planes, deep_image, s) = render_at(&at)?;
+        stats = stats + s;
+        flats.push(planes);
+        deeps.push(deep_image);
+    }
+    let deep_image = average_images(&deeps, deep)?;
+    Ok((shutter_average(flats)?, deep_image, stats))
 }
 
 /// Where an environment map is rendered from.

@@ -18,7 +18,7 @@ use glam::{DMat3, DVec3};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::image::Planes;
+use crate::image::{DeepImage, Planes};
 
 /// CIE 1931 xy chromaticities of a colour space's red, green and blue primaries and its white
 /// point: what an EXR's `chromaticities` attribute holds.
@@ -226,6 +226,21 @@ impl OutputColorSpace {
             let a = alpha.map_or(1.0, |a| a.data[i]);
             [r.data[i], g.data[i], b.data[i]] =
                 converter.apply([r.data[i], g.data[i], b.data[i]], a);
+        }
+    }
+
+    /// Converts the colour of every sample of a deep image from linear Rec.709 as
+    /// [`convert_planes`](Self::convert_planes) converts a pixel, each with its own alpha. A
+    /// display encoding is not linear in the colours, so a deep pixel converted this way
+    /// flattens near, not exactly to, the converted flat pixel: scale it there after
+    /// ([`conform_to`](crate::render::conform_to)).
+    pub fn convert_deep(self, deep: &mut DeepImage) {
+        if self == OutputColorSpace::LinRec709 {
+            return;
+        }
+        let converter = self.converter();
+        for s in &mut deep.samples {
+            s.rgb = converter.apply(s.rgb, s.alpha);
         }
     }
 

@@ -9,6 +9,7 @@
 
 mod closed_form;
 mod composite;
+mod deep;
 mod march;
 mod naive;
 mod ngp;
@@ -20,6 +21,7 @@ mod splats;
 pub use splats::splat_stage_timings;
 
 pub use composite::{crossing_depth, opacity, srgb_composite_to_linear, Pieces};
+pub use deep::{average_images, conform_to, DeepParams, MAX_DEEP_SAMPLES};
 pub use naive::render_naive;
 pub use quality::{MarchParams, Quality};
 
@@ -31,10 +33,11 @@ use serde::{Deserialize, Serialize};
 use crate::camera::Camera;
 use crate::error::Result;
 use crate::field::ColorSpace;
-use crate::image::{Plane, Planes, Window};
+use crate::image::{DeepImage, Plane, Planes, Window};
 use crate::scene::Scene;
 use closed_form::ClosedScratch;
-use march::{march_tile, InstancePlan, PixelResult, Scratch};
+use deep::DeepTile;
+use march::{march_tile, DeepPass, InstancePlan, PixelResult, Scratch};
 
 /// Which planes to produce. Work for planes nobody asked for is not done (no colour
 /// queries without `rgb`, no median log without `depth_median`).
@@ -216,6 +219,41 @@ pub fn render_with_progress(
     settings: &RenderSettings,
     on_tile: &(dyn Fn(u64) + Sync),
 ) -> Result<(Planes, RenderStats)> {
+    render_planes(scene, camera, window, settings, None, on_tile).map(|(p, _, s)| (p, s))
+}
+
+/// [`render_with_progress`], and the window's deep image as well: every pixel's pieces and
+/// fragments as deep samples (module `deep`), kept as `deep` says, flattening to the planes'
+/// colour and alpha. The planes must include colour and alpha.
+pub fn render_deep(
+    scene: &Scene,
+    camera: &Camera,
+    window: Window,
+    settings: &RenderSettings,
+    deep: &DeepParams,
+    on_tile: &(dyn Fn(u64) + Sync),
+) -> Result<(Planes, DeepImage, RenderStats)> {
+    deep.validate()?;
+    if !(settings.outputs.rgb && settings.outputs.alpha) {
+        return Err(crate::error::Error::invalid(
+            "deep output",
+            "needs the colour and alpha planes (the samples flatten to them)",
+        ));
+    }
+    let (planes, image, stats) =
+        render_planes(scene, camera, window, settings, Some(deep), on_tile)?;
+    Ok((planes, image.unwrap_or_default(), stats))
+}
+
+/// The one render loop: planes, and a deep image where `deep` is given.
+fn render_planes(
+    scene: &Scene,
+    camera: &Camera,
+    window: Window,
+    settings: &RenderSettings,
+    deep: Option<&DeepParams>,
+    on_tile: &(dyn Fn(u64) + Sync),
+) -> Result<(Planes, Option<DeepImage>, RenderStats)> {
     let window = camera.clamp_window(window)?;
     let plans = InstancePlan::for_scene(scene, &settings.march);
     let closed = closed_form::applies(scene, &settings.march);
@@ -228,12 +266,19 @@ pub fn render_with_progress(
         .into_iter()
         .map(Mutex::new)
         .collect();
+    let pass = deep.map(|params| DeepPass {
+        params: *params,
+        decode,
+    });
+    let deep_tiles: Mutex<Vec<(Window, DeepTile)>> = Mutex::new(Vec::new());
     let stats = tiles(window, size)
         .into_par_iter()
         .map_init(
             || (Scratch::default(), ClosedScratch::default(), Vec::new()),
             |(scratch, closed_scratch, out), tile| {
                 out.clear();
+                let mut deep_tile = DeepTile::default();
+                let deep = pass.as_ref().map(|p| (p, &mut deep_tile));
                 let stats = if closed {
                     closed_form::integrate_tile(
                         scene,
@@ -243,6 +288,7 @@ pub fn render_with_progress(
                         settings,
                         closed_scratch,
                         out,
+                        deep,
                     )
                 } else {
                     march_tile(
@@ -254,8 +300,15 @@ pub fn render_with_progress(
                         settings,
                         scratch,
                         out,
+                        deep,
                     )
                 };
+                if pass.is_some() {
+                    deep_tiles
+                        .lock()
+                        .unwrap_or_else(PoisonError::into_inner)
+                        .push((tile, deep_tile));
+                }
                 let band = &bands[((tile.y0 - window.y0) / size) as usize];
                 // Writing a tile cannot panic, so the lock is never poisoned; if it were,
                 // the rows are still whole.
@@ -271,7 +324,13 @@ pub fn render_with_progress(
         )
         .reduce(RenderStats::default, |a, b| a + b);
     drop(bands);
-    Ok((planes, stats))
+    let deep = pass.map(|_| {
+        let tiles = deep_tiles
+            .into_inner()
+            .unwrap_or_else(PoisonError::into_inner);
+        deep::assemble(window, tiles)
+    });
+    Ok((planes, deep, stats))
 }
 
 /// `window` cut into tiles of `size` pixels, row by row.

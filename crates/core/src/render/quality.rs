@@ -152,6 +152,18 @@ impl Quality {
         }
     }
 
+    /// The preset's cap on the samples a deep pixel keeps
+    /// ([`DeepParams::max_samples`](crate::render::DeepParams::max_samples)): its merging
+    /// rule keeps far fewer in fog and on surfaces; the cap bounds the file where content
+    /// has many distinct layers (splats seen edge on, sheets).
+    pub fn deep_samples(self) -> u32 {
+        match self {
+            Quality::Draft => 8,
+            Quality::Preview => 16,
+            Quality::Final => 32,
+        }
+    }
+
     /// The preset's identifier, as the command line and the NeRF Render node name it.
     pub fn name(self) -> &'static str {
         match self {

@@ -10,8 +10,9 @@
 //! and as plots of time against PSNR ([`report`]); [`scaling`] measures how cost grows
 //! with resolution, instances and occupied space. [`snapshot`] generates the trained
 //! fields (and the tests' snapshot fixtures); [`splats`], [`passes`] and [`field`] time
-//! splat rasterisation, extra passes and field throughput.
+//! splat rasterisation, extra passes and field throughput; [`deep`] what deep output costs.
 
+pub mod deep;
 pub mod field;
 pub mod memory;
 pub mod passes;

@@ -34,8 +34,10 @@ mod piece;
 use glam::DVec3;
 
 use self::piece::{Integral, Piece, Sums};
+use super::composite::srgb_composite_to_linear;
 use super::composite::Pieces;
-use super::march::{cull_instances, may_meet, InstancePlan, PixelResult, RayCone};
+use super::deep::{finish_pixel, DeepScratch, DeepTile, RawPiece};
+use super::march::{cull_instances, may_meet, RayCone, DeepPass, InstancePlan, PixelResult};
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
 use crate::field::{Anchor, Density, Profile};
@@ -78,6 +80,7 @@ pub(super) struct ClosedScratch {
     prims: Vec<u32>,
     prim_at: Vec<u32>,
     ray: RayScratch,
+    deep: DeepScratch,
 }
 
 /// What one ray's integration works in.
@@ -93,6 +96,8 @@ struct RayScratch {
     anchors: Vec<Anchor>,
     /// The pieces composited, for the median depth.
     log: Vec<Logged>,
+    /// A deep render: the pieces composited, with their weights and colours.
+    deep: Option<Vec<RawPiece>>,
     /// The logged Gaussian piece that `active` and `anchors` still describe, if any: the
     /// median's solve takes them as they are when its piece is that one (a ray's last).
     anchored: Option<usize>,
@@ -101,7 +106,9 @@ struct RayScratch {
     panels: Vec<(f64, f64, Sums)>,
 }
 
-/// Integrates one tile in closed form. `out` receives the tile's pixels row by row.
+/// Integrates one tile in closed form. `out` receives the tile's pixels row by row, and
+/// `deep`'s tile their deep samples where it is given.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn integrate_tile(
     scene: &Scene,
     plans: &[InstancePlan],
@@ -110,6 +117,7 @@ pub(super) fn integrate_tile(
     settings: &RenderSettings,
     s: &mut ClosedScratch,
     out: &mut Vec<PixelResult>,
+    mut deep: Option<(&DeepPass, &mut DeepTile)>,
 ) -> RenderStats {
     camera.window_rays(tile, &mut s.rays);
     let cone = RayCone::of(&s.rays, tile.width() as usize, camera.rectilinear());
@@ -140,11 +148,40 @@ pub(super) fn integrate_tile(
         outputs: &settings.outputs,
     };
     out.clear();
+    if let Some((_, tile_out)) = &mut deep {
+        tile_out.clear();
+    }
     for ray in &s.rays {
-        out.push(match ray {
+        match &mut s.ray.deep {
+            Some(pieces) => pieces.clear(),
+            None if deep.is_some() => s.ray.deep = Some(Vec::new()),
+            None => {}
+        }
+        let px = match ray {
             Some(ray) => ctx.integrate(ray, &mut s.ray, &mut stats),
             None => finish(&Pieces::new(), DVec3::ZERO, 1.0, f64::INFINITY),
-        });
+        };
+        if let (Some((pass, tile_out)), Some(pieces)) = (&mut deep, &s.ray.deep) {
+            let rgb = if pass.decode {
+                srgb_composite_to_linear(px.rgb, px.alpha)
+            } else {
+                px.rgb
+            };
+            let z_per_t = ray.as_ref().map_or(1.0, |r| r.z_per_t);
+            finish_pixel(
+                pieces,
+                z_per_t,
+                rgb,
+                pass.decode,
+                &pass.params,
+                &mut s.deep,
+                tile_out,
+            );
+        }
+        out.push(px);
+    }
+    if deep.is_none() {
+        s.ray.deep = None;
     }
     stats
 }
@@ -200,6 +237,14 @@ impl Context<'_> {
                 Some((k, colour)) => {
                     let w = pieces.add(a, b - a, k);
                     rgb += w * colour;
+                    if let Some(deep) = &mut s.deep {
+                        deep.push(RawPiece {
+                            t0: a,
+                            t1: b,
+                            weight: w,
+                            rgb: w * colour,
+                        });
+                    }
                     (k * (b - a), Some(k))
                 }
                 None => {
@@ -218,6 +263,14 @@ impl Context<'_> {
                     );
                     rgb += t_enter * colour;
                     pieces.add_integrated(t_enter * weight, t_enter * moment);
+                    if let Some(deep) = &mut s.deep {
+                        deep.push(RawPiece {
+                            t0: a,
+                            t1: b,
+                            weight: t_enter * weight,
+                            rgb: t_enter * colour,
+                        });
+                    }
                     s.anchored = Some(s.log.len());
                     (optical_depth, None)
                 }

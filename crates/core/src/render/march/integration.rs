@@ -3,9 +3,10 @@
 use glam::Vec3;
 
 use super::refinement::{change, larger_side, step_curvature, trapezoid_bias, LastDifference};
-use super::{Node, RayState};
+use super::{DeepPiece, Node, RayState, NO_NODE, PENDING_NODE};
 use crate::field::{Fragment, SPLAT_MIN_TRANSMITTANCE};
 use crate::render::composite::far_share;
+use crate::render::deep::RawPiece;
 use crate::render::{MarchParams, Outputs};
 
 /// What the error rule aims a step's weighted error estimate at, as a fraction of the target
@@ -33,13 +34,22 @@ pub(super) fn integrate(
     let mut measured = false;
     // The pieces come in order: each shares a second difference with the one before.
     let mut last_difference = LastDifference::default();
+    if state.deep {
+        // This round's nodes are numbered from here on (a carried node anew: its shading
+        // this round is for this round's pieces).
+        state.deep_base = state.deep_nodes.len() as u32;
+        let n = state.deep_nodes.len() + nodes.len();
+        state.deep_nodes.resize(n, (0.0, glam::DVec3::ZERO));
+    }
     for i in 0..nodes.len() {
         let b = nodes[i];
         state.densest = state.densest.max(b.sigma);
         let stopped = if b.extent > 0.0 {
             // A constant run: one piece, its weight all this node's.
+            let first = state.deep_pieces.len();
             let (w, stopped) = composite_piece(state, [b.t, b.t + b.extent], [b.sigma; 2], outputs);
             nodes[i].weight += w;
+            name_deep_nodes(state, first, [i, i], 0.0);
             stopped
         } else if i > 0 && !b.starts_run {
             let a = nodes[i - 1];
@@ -73,6 +83,7 @@ pub(super) fn integrate(
             } else {
                 [a.sigma, b.sigma]
             };
+            let first = state.deep_pieces.len();
             let (w, stopped) = composite_piece(state, [a.t, b.t], ends, outputs);
             if w > 0.0 {
                 // An empty end's colour is not asked for: the other end gets all the weight.
@@ -85,6 +96,7 @@ pub(super) fn integrate(
                 };
                 nodes[i - 1].weight += w * (1.0 - far);
                 nodes[i].weight += w * far;
+                name_deep_nodes(state, first, [i - 1, i], far);
             }
             stopped
         } else {
@@ -112,6 +124,25 @@ pub(super) fn integrate(
         state.allowed = allowed_step(rate, params);
     }
     adapt_step(state, params);
+}
+
+/// Names the nodes (this round's `i` and `j`) whose colours the deep pieces from `first` on
+/// get, `1 − far` of each piece's weight from `i` and `far` from `j`, as the flat render
+/// splits the weight of the piece they were cut from.
+fn name_deep_nodes(state: &mut RayState, first: usize, [i, j]: [usize; 2], far: f64) {
+    if !state.deep {
+        return;
+    }
+    let base = state.deep_base;
+    for p in &mut state.deep_pieces[first..] {
+        if p.nodes[0].0 == PENDING_NODE {
+            let w = p.piece.weight;
+            p.nodes = [
+                (base + i as u32, w * (1.0 - far)),
+                (base + j as u32, w * far),
+            ];
+        }
+    }
 }
 
 /// The densities a step of an exact run is composited with: its ends', scaled so that their
@@ -179,6 +210,17 @@ fn composite_piece(
         let t1 = fragment.map_or(b, |t| t.max(t0));
         let t_enter = state.pieces.transmittance();
         let w = state.pieces.add(t0, t1 - t0, mean);
+        if w > 0.0 && state.deep {
+            state.deep_pieces.push(DeepPiece {
+                piece: RawPiece {
+                    t0,
+                    t1,
+                    weight: w,
+                    rgb: glam::DVec3::ZERO,
+                },
+                nodes: [(PENDING_NODE, 0.0), (NO_NODE, 0.0)],
+            });
+        }
         if w > 0.0 && outputs.depth_median {
             // A piece cut by a fragment keeps the mean.
             let delta = t1 - t0;
@@ -260,7 +302,19 @@ fn composite_volume_fragment(state: &mut RayState, f: Fragment, outputs: &Output
     let alpha = f64::from(f.alpha);
     let t_enter = state.pieces.transmittance();
     let w = state.pieces.add_fragment(f.t, alpha);
-    state.rgb += Vec3::from_array(f.rgb).as_dvec3() * w;
+    let rgb = Vec3::from_array(f.rgb).as_dvec3() * w;
+    state.rgb += rgb;
+    if state.deep && w > 0.0 {
+        state.deep_pieces.push(DeepPiece {
+            piece: RawPiece {
+                t0: f.t,
+                t1: f.t,
+                weight: w,
+                rgb,
+            },
+            nodes: [(NO_NODE, 0.0); 2],
+        });
+    }
     if outputs.depth_median && alpha > 0.0 {
         let x = -(-alpha).ln_1p();
         state.log_piece([f.t, 0.0, x, x, t_enter]);

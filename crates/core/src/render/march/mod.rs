@@ -39,7 +39,8 @@ use self::refinement::refine;
 use self::sampling::evaluate_pending;
 use self::setup::setup_rays;
 use self::shading::{clear_colour_queries, queue_colours, shade};
-use super::composite::{crossing_depth, Pieces};
+use super::composite::{crossing_depth, srgb_composite_to_linear, Pieces};
+use super::deep::{finish_pixel, DeepParams, DeepScratch, DeepTile, RawPiece};
 use super::ngp::NgpFill;
 use super::proposal::ProposalScratch;
 use super::runs::{Run, RunScratch};
@@ -221,6 +222,43 @@ struct RayState {
     /// long steps (`refinement::split_candidates`): a round's nodes may all lie past the
     /// density that the surface it is inside reaches.
     densest: f64,
+    /// A deep render: the ray's composited pieces and fragments are kept ([`DeepPiece`]).
+    deep: bool,
+    deep_pieces: Vec<DeepPiece>,
+    /// Per node integrated (numbered across the ray's rounds), the weight its pieces gave it
+    /// and the premultiplied colour its shading added, for the pieces' colours.
+    deep_nodes: Vec<(f64, DVec3)>,
+    /// The number of this round's first node in `deep_nodes`.
+    deep_base: u32,
+}
+
+/// A piece or fragment of a deep render's ray, before its colour is known: its own colour
+/// contribution (a fragment's), plus shares of up to two nodes' colours (a marched piece's
+/// weight goes to its end nodes as the flat render's does); `NO_NODE` where there is none.
+#[derive(Clone, Copy, Debug)]
+struct DeepPiece {
+    piece: RawPiece,
+    nodes: [(u32, f64); 2],
+}
+
+/// No node: see [`DeepPiece`].
+const NO_NODE: u32 = u32::MAX;
+/// A piece whose nodes the integrator names once it has split its weight.
+const PENDING_NODE: u32 = u32::MAX - 1;
+
+impl DeepPiece {
+    /// The piece with its colour: its own plus its nodes' shares.
+    fn resolved(&self, nodes: &[(f64, DVec3)]) -> RawPiece {
+        let mut piece = self.piece;
+        for &(n, share) in &self.nodes {
+            if let Some(&(weight, rgb)) = nodes.get(n as usize) {
+                if weight > 0.0 {
+                    piece.rgb += rgb * (share / weight);
+                }
+            }
+        }
+        piece
+    }
 }
 
 impl RayState {
@@ -274,10 +312,14 @@ struct FieldQuery {
     dirs: Vec<Vec3>,
     features: Vec<f32>,
     owners: Vec<(u32, f64)>,
+    /// A deep render's colour query: per owner, the node (numbered as in
+    /// `RayState::deep_nodes`) the colour is for.
+    deep_nodes: Vec<u32>,
 }
 
 impl FieldQuery {
     fn clear(&mut self) {
+        self.deep_nodes.clear();
         self.points.clear();
         self.dirs.clear();
         self.features.clear();
@@ -342,9 +384,21 @@ pub(super) struct Scratch {
     proposal: ProposalScratch,
     ngp: NgpFill,
     stats: RenderStats,
+    /// A deep render's per-pixel finishing scratch, and its pieces resolved.
+    deep: DeepScratch,
+    deep_raw: Vec<RawPiece>,
 }
 
-/// Marches one tile. `out` receives the tile's pixels row by row.
+/// What a deep render asks of a tile: the samples to keep, and whether the flat colours are
+/// decoded from the sRGB-encoded composite.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct DeepPass {
+    pub params: DeepParams,
+    pub decode: bool,
+}
+
+/// Marches one tile. `out` receives the tile's pixels row by row, and `deep`'s tile their
+/// deep samples where it is given.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn march_tile(
     scene: &Scene,
@@ -355,10 +409,20 @@ pub(super) fn march_tile(
     settings: &RenderSettings,
     s: &mut Scratch,
     out: &mut Vec<PixelResult>,
+    deep: Option<(&DeepPass, &mut DeepTile)>,
 ) -> RenderStats {
     let (params, outputs) = (&settings.march, &settings.outputs);
     let n_rays = tile.area();
-    setup_rays(scene, plans, splats, camera, tile, outputs, s);
+    setup_rays(
+        scene,
+        plans,
+        splats,
+        camera,
+        tile,
+        outputs,
+        deep.is_some(),
+        s,
+    );
     let width = s.feature_width;
     let empty_is_known = plans.iter().all(|p| p.bounded);
 
@@ -418,6 +482,29 @@ pub(super) fn march_tile(
 
     out.clear();
     out.extend(s.rays[..n_rays].iter().map(|st| finish(st, outputs)));
+    if let Some((pass, tile_out)) = deep {
+        tile_out.clear();
+        for (st, px) in s.rays[..n_rays].iter().zip(out.iter()) {
+            s.deep_raw.clear();
+            s.deep_raw
+                .extend(st.deep_pieces.iter().map(|p| p.resolved(&st.deep_nodes)));
+            let rgb = if pass.decode {
+                srgb_composite_to_linear(px.rgb, px.alpha)
+            } else {
+                px.rgb
+            };
+            let z_per_t = st.ray.map_or(1.0, |r| r.z_per_t);
+            finish_pixel(
+                &s.deep_raw,
+                z_per_t,
+                rgb,
+                pass.decode,
+                &pass.params,
+                &mut s.deep,
+                tile_out,
+            );
+        }
+    }
     RenderStats {
         pixels: n_rays as u64,
         ..std::mem::take(&mut s.stats)

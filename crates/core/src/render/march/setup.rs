@@ -19,6 +19,7 @@ use crate::scene::Scene;
 
 /// Builds each pixel's world ray, its local rays, its occupied segments and its splat
 /// fragments; a pixel with fragments and no segments is composited here and done.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn setup_rays(
     scene: &Scene,
     plans: &[InstancePlan],
@@ -26,6 +27,7 @@ pub(super) fn setup_rays(
     camera: &Camera,
     tile: Window,
     outputs: &Outputs,
+    deep: bool,
     s: &mut Scratch,
 ) {
     let n_rays = tile.area();
@@ -62,6 +64,10 @@ pub(super) fn setup_rays(
         state.smooth = f64::INFINITY;
         state.densest = 0.0;
         state.log.clear();
+        state.deep = deep;
+        state.deep_pieces.clear();
+        state.deep_nodes.clear();
+        state.deep_base = 0;
         state.runs.clear();
         state.run = 0;
         state.inset = 0.0;
@@ -120,7 +126,7 @@ pub(super) fn setup_rays(
     }
     if let Some(layer) = splats {
         // A tile of splats alone is composited sixteen pixels at once.
-        if s.active.is_empty() && !scene.has_sampled() && !outputs.depth_median {
+        if s.active.is_empty() && !scene.has_sampled() && !outputs.depth_median && !deep {
             let depth = outputs.depth_z || outputs.depth_ray;
             let composited = layer.composite(
                 tile,

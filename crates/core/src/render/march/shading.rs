@@ -31,7 +31,13 @@ pub(super) fn queue_colours(
     let budget = params.color_skip_budget as f64;
     let state = &mut s.rays[r];
     let met = &s.met[s.met_at[r] as usize..s.met_at[r + 1] as usize];
-    for node in s.nodes[r].iter_mut() {
+    for (k, node) in s.nodes[r].iter_mut().enumerate() {
+        let deep_id = state.deep_base + k as u32;
+        if state.deep {
+            if let Some(entry) = state.deep_nodes.get_mut(deep_id as usize) {
+                entry.0 = node.weight;
+            }
+        }
         if node.weight > 0.0 && state.skipped_weight + node.weight <= budget {
             state.skipped_weight += node.weight;
             node.weight = 0.0;
@@ -52,6 +58,9 @@ pub(super) fn queue_colours(
                 query.points.push(lr.at(node.probe));
                 query.dirs.push(lr.dir);
                 query.owners.push((r as u32, share));
+                if state.deep {
+                    query.deep_nodes.push(deep_id);
+                }
                 let at = slot * width;
                 query
                     .features
@@ -75,7 +84,7 @@ pub(super) fn shade(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
             .field(scene, i as usize)
             .radiance_with_features(&query.points, &query.dirs, &query.features, &mut s.rgb_out);
         s.stats.color_samples += query.points.len() as u64;
-        for (&(r, share), c) in query.owners.iter().zip(&s.rgb_out) {
+        for (k, (&(r, share), c)) in query.owners.iter().zip(&s.rgb_out).enumerate() {
             let c = if plan.encode {
                 c.map(linear_to_srgb)
             } else {
@@ -83,7 +92,13 @@ pub(super) fn shade(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
             };
             let c = c.as_dvec3().max(DVec3::ZERO);
             if c.is_finite() {
-                s.rays[r as usize].rgb += c * share;
+                let state = &mut s.rays[r as usize];
+                state.rgb += c * share;
+                if let Some(&id) = query.deep_nodes.get(k) {
+                    if let Some(entry) = state.deep_nodes.get_mut(id as usize) {
+                        entry.1 += c * share;
+                    }
+                }
             }
         }
     }

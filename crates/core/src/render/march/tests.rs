@@ -642,6 +642,7 @@ fn a_ray_lists_exactly_the_instances_it_meets() {
             &camera,
             tile,
             &Outputs::rgba(),
+            false,
             &mut s,
         );
         for (r, ray) in s.world_rays.clone().iter().enumerate() {

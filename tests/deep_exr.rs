@@ -17,12 +17,12 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use nerfx_testkit::bench::scenes::build;
-use nerfx_testkit::bench::SceneKind;
 use nerfx_core::camera::Camera;
 use nerfx_core::image::{write_deep_exr, DeepImage, ExrHeader, Planes};
 use nerfx_core::render::{render_deep, DeepParams, Outputs, Quality, RenderSettings};
 use nerfx_core::scene::Scene;
+use nerfx_testkit::bench::scenes::build;
+use nerfx_testkit::bench::SceneKind;
 
 /// What OpenEXR read from a deep file.
 struct ReadBack {

@@ -34,10 +34,10 @@ use common_fuzz::{mutate, Kind};
 use glam::{DMat4, DVec3};
 use nerfx_core::camera::{Camera, Perspective, Projection};
 use nerfx_core::demo::look_at;
-use nerfx_graph::{evaluate, purge_caches, render_direct, Graph};
 use nerfx_core::image::{Planes, Window};
 use nerfx_core::render::{render, Outputs, Quality, RenderSettings};
 use nerfx_core::scene::{LoadedScene, Scene, SceneDesc};
+use nerfx_graph::{evaluate, purge_caches, render_direct, Graph};
 
 /// The longest a case may take.
 const CASE_TIME: Duration = Duration::from_secs(10);

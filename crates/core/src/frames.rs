@@ -191,6 +191,84 @@ pub fn render_frame(
     render_frame_window(scene, shot, frame, window, settings, on_tile)
 }
 
+/// The views a frame at shot time `time` is the mean of, grouped by shutter time: with the
+/// shot's motion blur, its `shutter_samples` stratified times over the shutter
+/// ([`MotionBlur::times`](crate::camera::MotionBlur::times); `time` itself with a closed
+/// shutter, one sample or no motion blur); at each time, the camera through
+/// `aperture_samples` stratified points of its aperture where it has depth of field
+/// ([`ShotFrame::through_aperture`]; that frame alone otherwise). `frame_at` gives the shot's
+/// frame at a time. Every group holds as many views. The command line, the NeRF Render node
+/// and graphs all render a frame as the mean over these views ([`mean_over_views`]).
+pub fn frame_views(
+    shot: &Shot,
+    time: f64,
+    shutter_samples: u32,
+    aperture_samples: u32,
+    frame_at: &dyn Fn(f64) -> Result<ShotFrame>,
+) -> Result<Vec<Vec<ShotFrame>>> {
+    let times = shot
+        .motion_blur
+        .map_or_else(|| vec![time], |blur| blur.times(time, shutter_samples));
+    times
+        .into_iter()
+        .map(|t| Ok(frame_at(t)?.through_aperture(aperture_samples)))
+        .collect()
+}
+
+/// The mean of `render` over `views` ([`frame_views`]): each shutter time's views averaged,
+/// then the times ([`shutter_average`]: alpha-weighted depths, so with equal groups this is
+/// the mean over every view, holding one time's renders at once rather than all of them); a
+/// lone render is returned as it is. The statistics are the renders' sum.
+pub fn mean_over_views(
+    views: &[Vec<ShotFrame>],
+    render: &mut dyn FnMut(&ShotFrame) -> Result<(Planes, RenderStats)>,
+) -> Result<(Planes, RenderStats)> {
+    let mean = |mut planes: Vec<Planes>| match planes.len() {
+        1 => Ok(planes.remove(0)),
+        _ => shutter_average(planes),
+    };
+    let mut stats = RenderStats::default();
+    let mut means = Vec::with_capacity(views.len());
+    for group in views {
+        let mut renders = Vec::with_capacity(group.len());
+        for view in group {
+            let (planes, s) = render(view)?;
+            stats = stats + s;
+            renders.push(planes);
+        }
+        means.push(mean(renders)?);
+    }
+    Ok((mean(means)?, stats))
+}
+
+/// The views of `frame` of `shot` at `settings`' shutter and aperture samples, the shutter's
+/// times interpolated between the shot's frames ([`Shot::frame_at`]: the shot must hold the
+/// frames around the shutter interval).
+fn views_of(shot: &Shot, frame: i64, settings: &RenderSettings) -> Result<Vec<Vec<ShotFrame>>> {
+    // Without a shutter to sample, the frame is the shot's own, not one interpolated to it.
+    let still = shot
+        .motion_blur
+        .is_none_or(|blur| blur.times(frame as f64, settings.shutter_samples).len() == 1);
+    let at = |t: f64| {
+        if still {
+            return shot.frame(frame).cloned();
+        }
+        shot.frame_at(t).map_err(|e| {
+            Error::invalid(
+                format!("frame {frame}: motion blur"),
+                format!("the shutter needs the shot at frame {t}: {e}"),
+            )
+        })
+    };
+    frame_views(
+        shot,
+        frame as f64,
+        settings.shutter_samples,
+        settings.aperture_samples,
+        &at,
+    )
+}
+
 /// Renders the pixels of `window` of `frame` as [`render_frame`] renders the whole frame: each
 /// pixel is the whole frame's, bit for bit, so windows rendered apart (on several machines)
 /// join into the whole frame.
@@ -202,63 +280,36 @@ pub fn render_frame_window(
     settings: &RenderSettings,
     on_tile: &(dyn Fn(u64) + Sync),
 ) -> Result<(Planes, RenderStats)> {
-    let render_at = |at: &ShotFrame, settings: &RenderSettings| {
+    let views = views_of(shot, frame, settings)?;
+    let outputs = settings.outputs;
+    // A mean weighs depths by alpha: it is rendered for the mean whether asked for or not.
+    let depths = outputs.depth_z || outputs.depth_ray || outputs.depth_median;
+    let weighed = match &views[..] {
+        [one] if one.len() == 1 => *settings,
+        _ => RenderSettings {
+            outputs: Outputs {
+                alpha: outputs.alpha || depths,
+                ..outputs
+            },
+            ..*settings
+        },
+    };
+    let (mut mean, stats) = mean_over_views(&views, &mut |at| {
         let camera = at.camera(shot)?;
         let placed = scene.place(at.world_from_scene(shot)?, &|name| at.object_matrix(name))?;
-        render_with_progress(&placed, &camera, window, settings, on_tile)
-    };
-    let times = shot.motion_blur.map_or_else(
-        || vec![frame as f64],
-        |blur| blur.times(frame as f64, settings.shutter_samples),
-    );
-    let through_aperture = |at: &ShotFrame| at.through_aperture(settings.aperture_samples);
-    if let [_] = times[..] {
-        if let [at] = &through_aperture(shot.frame(frame)?)[..] {
-            return render_at(at, settings);
-        }
-    }
-    let outputs = settings.outputs;
-    let depths = outputs.depth_z || outputs.depth_ray || outputs.depth_median;
-    let weighed = RenderSettings {
-        outputs: Outputs {
-            alpha: outputs.alpha || depths,
-            ..outputs
-        },
-        ..*settings
-    };
-    // The mean over each time's aperture points, then over the times: with alpha-weighted
-    // depths it is the mean over every (time, lens point) pair, and holds one time's renders
-    // at once rather than all of them.
-    let mut samples = Vec::with_capacity(times.len());
-    let mut stats = RenderStats::default();
-    for t in times {
-        let at = shot.frame_at(t).map_err(|e| {
-            Error::invalid(
-                format!("frame {frame}: motion blur"),
-                format!("the shutter needs the shot at frame {t}: {e}"),
-            )
-        })?;
-        let lenses = through_aperture(&at);
-        let mut through = Vec::with_capacity(lenses.len());
-        for lens in &lenses {
-            let (planes, s) = render_at(lens, &weighed)?;
-            stats = stats + s;
-            through.push(planes);
-        }
-        samples.push(shutter_average(through)?);
-    }
-    let mut average = shutter_average(samples)?;
+        render_with_progress(&placed, &camera, window, &weighed, on_tile)
+    })?;
     if !outputs.alpha {
-        average.alpha = None;
+        mean.alpha = None;
     }
-    Ok((average, stats))
+    Ok((mean, stats))
 }
 
 /// Renders the pixels of `window` of `frame` as [`render_frame_window`] does, and their deep
-/// image ([`render_deep`]): with motion blur, the deep pixels of the shutter samples averaged
-/// ([`average_images`]: cut at every depth where one of them has a sample boundary, the
-/// opacity and colour each adds in a slot averaged), which flattens to the averaged flat
-/// frame exactly. The settings must ask for colour and alpha.
+/// image ([`render_deep`]): over several views (motion blur, depth of field), the deep pixels
+/// of every view averaged ([`average_images`]: cut at every depth where one of them has a
+/// sample boundary, the opacity and colour each adds in a slot averaged), which flattens to
+/// the averaged flat frame exactly. The settings must ask for colour and alpha.
 pub fn render_frame_window_deep(
     scene: &LoadedScene,
     shot: &Shot,
@@ -268,35 +319,21 @@ pub fn render_frame_window_deep(
     deep: &DeepParams,
     on_tile: &(dyn Fn(u64) + Sync),
 ) -> Result<(Planes, DeepImage, RenderStats)> {
-    let render_at = |at: &ShotFrame| {
+    let views = views_of(shot, frame, settings)?;
+    let mut deeps = Vec::new();
+    let (planes, stats) = mean_over_views(&views, &mut |at| {
         let camera = at.camera(shot)?;
         let placed = scene.place(at.world_from_scene(shot)?, &|name| at.object_matrix(name))?;
-        render_deep(&placed, &camera, window, settings, deep, on_tile)
-    };
-    let times = shot.motion_blur.map_or_else(
-        || vec![frame as f64],
-        |blur| blur.times(frame as f64, settings.shutter_samples),
-    );
-    if let [_] = times[..] {
-        return render_at(shot.frame(frame)?);
-    }
-    let mut flats = Vec::with_capacity(times.len());
-    let mut deeps = Vec::with_capacity(times.len());
-    let mut stats = RenderStats::default();
-    for t in times {
-        let at = shot.frame_at(t).map_err(|e| {
-            Error::invalid(
-                format!("frame {frame}: motion blur"),
-                format!("the shutter needs the shot at frame {t}: {e}"),
-            )
-        })?;
-        let (planes, deep_image, s) = render_at(&at)?;
-        stats = stats + s;
-        flats.push(planes);
+        let (planes, deep_image, stats) =
+            render_deep(&placed, &camera, window, settings, deep, on_tile)?;
         deeps.push(deep_image);
-    }
-    let deep_image = average_images(&deeps, deep)?;
-    Ok((shutter_average(flats)?, deep_image, stats))
+        Ok((planes, stats))
+    })?;
+    let deep_image = match deeps.len() {
+        1 => deeps.remove(0),
+        _ => average_images(&deeps, deep)?,
+    };
+    Ok((planes, deep_image, stats))
 }
 
 /// Where an environment map is rendered from.

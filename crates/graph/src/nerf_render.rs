@@ -27,8 +27,9 @@ use nerfx_core::camera::{
     Camera, Eye, Shot, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, DEFAULT_IPD,
     MAX_APERTURE_SAMPLES,
 };
-use nerfx_core::composite::{over, rgba_pixels, rgba_planes, shutter_average};
+use nerfx_core::composite::{over, rgba_pixels, rgba_planes};
 use nerfx_core::error::{number, Error, Result};
+use nerfx_core::frames::{frame_views, mean_over_views};
 use nerfx_core::image::{scaled_size, OutputColorSpace, Plane, Planes, BACKGROUND_DEPTH};
 use nerfx_core::render::{
     render_with_progress, ColorOutput, Outputs, Quality, RenderSettings, RenderStats,
@@ -336,17 +337,27 @@ fn camera(values: &ParamValues, shot: &Shot, time: f64, scale: f64) -> Result<(S
     Ok((at, camera))
 }
 
-/// The shot's frame at `time` as the node sees it: the frame offset applied, the camera
-/// model and eye overridden (a panoramic model has no depth of field).
+/// The shot's frame at host time `time` as the node sees it: the frame offset applied, the
+/// camera model and eye overridden (a panoramic model has no depth of field).
 fn node_frame(values: &ParamValues, shot: &Shot, time: f64) -> Result<ShotFrame> {
+    shot_frame(values, shot, shot_time(values, time)?)
+}
+
+/// The shot's time at host time `time`: the frame offset applied.
+fn shot_time(values: &ParamValues, time: f64) -> Result<f64> {
     if !time.is_finite() {
         return Err(Error::invalid(
             "time",
             format!("expected a frame, got {}", number(time)),
         ));
     }
+    Ok(time + values.int("frameOffset")? as f64)
+}
+
+/// The shot's frame at shot time `time` as the node sees it (see [`node_frame`]).
+fn shot_frame(values: &ParamValues, shot: &Shot, time: f64) -> Result<ShotFrame> {
     // A sub-frame time (motion blur, a field at t + 0.5) falls between two shot frames.
-    let mut at = shot.frame_at(time + values.int("frameOffset")? as f64)?;
+    let mut at = shot.frame_at(time)?;
     let c = &mut at.camera;
     let mode = match values.choice("cameraModel")? {
         "ods" => Some(StereoMode::Ods),
@@ -540,43 +551,22 @@ fn march(values: &ParamValues, shot: &Shot, request: &RenderRequest) -> Result<R
         },
         ..RenderSettings::new(quality.params(), Outputs::all())
     };
-    // With the shot's motion blur, the average of renders over the shutter (as nerfx render).
-    let offset = values.int("frameOffset")? as f64;
-    let samples = match values.int("shutterSamples")? {
+    // The mean over the shutter's times and the aperture's points, as nerfx render's.
+    let shutter = match values.int("shutterSamples")? {
         0 => quality.shutter_samples(),
         n => n.clamp(1, 1024) as u32,
     };
-    let times = match shot.motion_blur {
-        Some(blur) if samples > 1 => blur
-            .times(request.time + offset, samples)
-            .into_iter()
-            .map(|t| t - offset)
-            .collect(),
-        _ => vec![request.time],
-    };
-    // With the camera's depth of field, each time is the mean over the aperture.
-    let lenses = match values.int("apertureSamples")? {
+    let aperture = match values.int("apertureSamples")? {
         0 => quality.aperture_samples(),
         n => n.clamp(1, i64::from(MAX_APERTURE_SAMPLES)) as u32,
     };
-    let mut renders = Vec::with_capacity(times.len());
-    let mut stats = RenderStats::default();
-    for time in times {
-        let mut through = Vec::new();
-        for at in node_frame(values, shot, time)?.through_aperture(lenses) {
-            let (planes, s) = render_through(values, shot, &at, request, &settings)?;
-            through.push(planes);
-            stats = stats + s;
-        }
-        renders.push(match through.len() {
-            1 => through.remove(0),
-            _ => shutter_average(through)?,
-        });
-    }
-    let planes = match renders.len() {
-        1 => renders.remove(0),
-        _ => shutter_average(renders)?,
-    };
+    let time = shot_time(values, request.time)?;
+    let views = frame_views(shot, time, shutter, aperture, &|t| {
+        shot_frame(values, shot, t)
+    })?;
+    let (planes, stats) = mean_over_views(&views, &mut |at| {
+        render_through(values, shot, at, request, &settings)
+    })?;
     Ok(Rendered { planes, stats })
 }
 

@@ -37,7 +37,7 @@ use self::piece::{Integral, Piece, Sums};
 use super::composite::srgb_composite_to_linear;
 use super::composite::Pieces;
 use super::deep::{finish_pixel, DeepScratch, DeepTile, RawPiece};
-use super::march::{cull_instances, may_meet, RayCone, DeepPass, InstancePlan, PixelResult};
+use super::march::{cull_instances, may_meet, DeepPass, InstancePlan, PixelResult, RayCone};
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
 use crate::field::{Anchor, Density, Profile};

@@ -22,7 +22,7 @@ use super::handles::{self, Kind};
 use super::log::{Log, Message};
 use super::options::{AbsentClip, Field, HostOptions, PADDING, ROW_SLACK};
 use super::params::{put, ParamSet};
-use super::props::{self, PropSet};
+use super::props::{self, PropSet, Template};
 use super::source::ClipSource;
 use super::spec::{cstr, SetKind};
 use super::{memory, status};
@@ -61,7 +61,7 @@ pub(crate) struct Effect {
     /// A descriptor's: the properties its instances start from in each context, made at the
     /// first instance and shared by all of them until one is written, and the name their sets
     /// go by.
-    instance_props: Mutex<Vec<(String, Box<PropSet>, Arc<str>)>>,
+    instance_props: Mutex<Vec<(String, Template)>>,
 }
 
 /// A clip. Boxed and registered while alive.
@@ -75,7 +75,7 @@ pub(crate) struct Clip {
     pub(crate) source: Mutex<Option<ClipSource>>,
     /// A descriptor's: the properties its instances start from, made at the first instance
     /// and shared by all of them until one is written, and the name their sets go by.
-    instance_props: OnceLock<Box<(Box<PropSet>, Arc<str>)>>,
+    instance_props: OnceLock<Box<Template>>,
 }
 
 /// Where an image's pixels are: `ptr` is the bottom-left pixel of `bounds`; rows are
@@ -221,12 +221,12 @@ impl Effect {
                     props.set_str(ofx::kOfxImageEffectPropContext, context);
                     props.set_doubles(ofx::kOfxImageEffectPropProjectSize, &[1920.0, 1080.0]);
                     props.set_doubles(ofx::kOfxImageEffectPropProjectExtent, &[1920.0, 1080.0]);
-                    templates.push((context.to_string(), props, format!("{id} instance").into()));
+                    let what = format!("{id} instance").into();
+                    templates.push((context.to_string(), Template { props, what }));
                     templates.len() - 1
                 }
             };
-            let (_, template, what) = &templates[at];
-            template.share(Arc::clone(what), Some(log.clone()))
+            templates[at].1.instance(Some(log.clone()))
         };
         let params = self
             .params
@@ -237,7 +237,7 @@ impl Effect {
             .lock_clips()
             .iter()
             .map(|d| {
-                let (template, what) = &**d.instance_props.get_or_init(|| {
+                let template = d.instance_props.get_or_init(|| {
                     let p = props::new_set(
                         SetKind::ClipInst,
                         &d.name,
@@ -280,9 +280,12 @@ impl Effect {
                         ofx::kOfxImageEffectPropPreMultiplication,
                         cstr(premultiplication(&e.options, output)),
                     );
-                    Box::new((p, format!("{id} clip {}", d.name).into()))
+                    Box::new(Template {
+                        props: p,
+                        what: format!("{id} clip {}", d.name).into(),
+                    })
                 });
-                let p = template.share(Arc::clone(what), Some(log.clone()));
+                let p = template.instance(Some(log.clone()));
                 Clip::boxed(Arc::clone(&d.name), p, addr)
             })
             .collect();

@@ -14,7 +14,7 @@ use openfx_sys::{OfxParamHandle, OfxParamSetHandle, OfxPropertySetHandle, OfxSta
 
 use super::handles::{self, Kind};
 use super::log::Log;
-use super::props::{self, c_string, PropSet, PropValue};
+use super::props::{self, c_string, PropSet, PropValue, Template};
 use super::spec::{cstr, ParamType, PropType, SetKind};
 use super::status;
 
@@ -41,7 +41,7 @@ pub(crate) struct Param {
     log: Arc<Log>,
     /// A descriptor's: the properties its instances start from, made at the first instance
     /// and shared by all of them until one is written, and the name their sets go by.
-    instance_props: OnceLock<Box<(Box<PropSet>, Arc<str>)>>,
+    instance_props: OnceLock<Box<Template>>,
 }
 
 impl Param {
@@ -178,7 +178,7 @@ pub(crate) struct ParamSet {
     log: Arc<Log>,
     /// A descriptor's: the set properties its instances start from, made at the first
     /// instance and shared by all of them until one is written, and their sets' names.
-    instance_props: OnceLock<Box<(Box<PropSet>, Arc<str>, Arc<str>)>>,
+    instance_props: OnceLock<Box<(Template, Arc<str>)>>,
 }
 
 impl ParamSet {
@@ -210,16 +210,23 @@ impl ParamSet {
     /// An instance's set (`what`: the instance, the same for every instance of this
     /// descriptor): every descriptor parameter, at its default.
     pub(crate) fn instantiate(&self, what: &str, log: Arc<Log>) -> Box<ParamSet> {
-        let (template, set_what, instance_what) = &**self.instance_props.get_or_init(|| {
+        let (template, instance_what) = &**self.instance_props.get_or_init(|| {
             let props = props::new_set(
                 SetKind::ParamSet,
                 "",
                 format!("{what} parameter set"),
                 Some(log.clone()),
             );
-            Box::new((props, format!("{what} parameter set").into(), what.into()))
+            let what_set = format!("{what} parameter set").into();
+            Box::new((
+                Template {
+                    props,
+                    what: what_set,
+                },
+                what.into(),
+            ))
         });
-        let props = template.share(Arc::clone(set_what), Some(log.clone()));
+        let props = template.instance(Some(log.clone()));
         let set = ParamSet::boxed(props, Arc::clone(instance_what), true, log.clone());
         let mut params = Vec::new();
         for d in self
@@ -228,7 +235,7 @@ impl ParamSet {
             .unwrap_or_else(PoisonError::into_inner)
             .iter()
         {
-            let (template, param_what) = &**d.instance_props.get_or_init(|| {
+            let template = d.instance_props.get_or_init(|| {
                 let props = props::new_set(
                     SetKind::ParamInst(d.ty),
                     &d.name,
@@ -237,9 +244,12 @@ impl ParamSet {
                 );
                 props.copy_values_from(&d.props);
                 props.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeParameterInstance));
-                Box::new((props, format!("{what} parameter {}", d.name).into()))
+                Box::new(Template {
+                    props,
+                    what: format!("{what} parameter {}", d.name).into(),
+                })
             });
-            let props = template.share(Arc::clone(param_what), Some(log.clone()));
+            let props = template.instance(Some(log.clone()));
             params.push(Param::boxed(
                 Arc::clone(&d.name),
                 d.ty,

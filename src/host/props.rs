@@ -171,6 +171,23 @@ impl Entries {
     }
 }
 
+/// What a descriptor's instances start from: the property set theirs share, and the name
+/// their sets go by.
+#[derive(Debug)]
+pub(crate) struct Template {
+    /// The set shared ([`PropSet::share`]).
+    pub(crate) props: Box<PropSet>,
+    /// The instances' sets' name.
+    pub(crate) what: Arc<str>,
+}
+
+impl Template {
+    /// A set for an instance, sharing the template's entries.
+    pub(crate) fn instance(&self, log: Option<Arc<Log>>) -> Box<PropSet> {
+        self.props.share(Arc::clone(&self.what), log)
+    }
+}
+
 /// A property set: the host's, an effect's, a clip's, an image's, a parameter's, or an
 /// action's arguments. Boxed and registered as a handle while alive.
 #[derive(Debug)]

@@ -12,15 +12,17 @@ use crate::image::{Planes, Window};
 use crate::render::{render_with_progress, Outputs, RenderSettings, RenderStats};
 use crate::scene::LoadedScene;
 
-/// Each instance's coverage of frame `frame` (one plane per instance of `scene`, in its
-/// order): the share of every pixel's opacity its samples and fragments hold, summing to the
-/// pixel's alpha, integrated over the shutter as the frame's colour is. Rendered with the
-/// instances in indicator colours, three at a time
-/// ([`LoadedScene::with_indicator_colours`]), at `settings`' quality.
+/// Each instance's coverage of the pixels `window` of frame `frame` (one plane per instance
+/// of `scene`, in its order): the share of every pixel's opacity its samples and fragments
+/// hold, summing to the pixel's alpha, integrated over the shutter as the frame's colour is.
+/// Rendered with the instances in indicator colours, three at a time
+/// ([`LoadedScene::with_indicator_colours`]), at `settings`' quality, as
+/// [`render_frame_window`] renders: a window's coverage is the whole frame's, bit for bit.
 pub fn render_coverage(
     scene: &LoadedScene,
     shot: &Shot,
     frame: i64,
+    window: Window,
     settings: &RenderSettings,
 ) -> Result<Vec<crate::image::Plane>> {
     let count = scene.desc().instances.len();
@@ -44,7 +46,7 @@ pub fn render_coverage(
             })
             .collect();
         let lit = scene.with_indicator_colours(&colours)?;
-        let (planes, _) = render_frame(&lit, shot, frame, &settings, &|_| {})?;
+        let (planes, _) = render_frame_window(&lit, shot, frame, window, &settings, &|_| {})?;
         let Some(rgb) = planes.rgb else {
             return Err(Error::invalid("coverage", "the render has no colour"));
         };

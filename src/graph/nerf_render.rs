@@ -32,7 +32,7 @@ use crate::image::{scaled_size, OutputColorSpace, Plane, Planes, BACKGROUND_DEPT
 use crate::render::{
     render_with_progress, ColorOutput, Outputs, Quality, RenderSettings, RenderStats,
 };
-use crate::scene::{CropBox, Instance, Scene};
+use crate::scene::{CropBox, Instance, LoadedScene, Scene};
 
 /// The Output Colour Space parameter's options: the scene file's, then every
 /// [`OutputColorSpace`] by its name.
@@ -382,9 +382,14 @@ fn camera(values: &ParamValues, shot: &Shot, time: f64, scale: f64) -> Result<(S
     Ok((at, camera))
 }
 
-/// The scene placed at `at`, with the transform override and crop box applied.
-fn placed_scene(values: &ParamValues, shot: &Shot, at: &ShotFrame) -> Result<Scene> {
-    let loaded = cached_scene(file(values, "file")?)?;
+/// The scene `loaded` (the node's file, perhaps recoloured) placed at `at`, with the
+/// transform override and crop box applied.
+fn placed_scene(
+    values: &ParamValues,
+    shot: &Shot,
+    at: &ShotFrame,
+    loaded: &LoadedScene,
+) -> Result<Scene> {
     let over_ride = if values.bool("overrideTransform")? {
         let m = values.doubles("objectTransform")?;
         let mut rows = [0.0; 16];
@@ -444,6 +449,12 @@ fn placed_scene(values: &ParamValues, shot: &Shot, at: &ShotFrame) -> Result<Sce
 /// render.
 const LOOK: &[&str] = &["output", "background", "exposure", "outputColourSpace"];
 
+/// The values that decide what a node with `values` renders: two nodes with the same ones
+/// march the same scene the same way (they may show different outputs of it).
+pub(crate) fn render_values(values: &ParamValues) -> ParamValues {
+    values.with_defaults(LOOK)
+}
+
 /// The registry identifier of the NeRF Render node.
 pub(crate) const NODE_ID: &str = "org.nerfx.NeRFRender";
 
@@ -500,6 +511,74 @@ fn render_node(values: &ParamValues, request: &RenderRequest) -> Result<Rendered
 /// Every pass of the node's scene for `request`, from one march per shutter time, and the
 /// marches' statistics summed.
 fn march(values: &ParamValues, shot: &Shot, request: &RenderRequest) -> Result<Rendered> {
+    let loaded = cached_scene(file(values, "file")?)?;
+    let color = match values.choice("colour")? {
+        "asTrained" => ColorOutput::AsTrained,
+        _ => ColorOutput::Linear,
+    };
+    march_scene(values, shot, request, &loaded, color, Outputs::all())
+}
+
+/// Each instance of the node's scene and its coverage of `request`'s window: the share of
+/// every pixel's opacity in the node's own render (before its background and Source) that
+/// the instance's samples and fragments hold, so that a pixel's coverages add up to that
+/// render's alpha. The render is the node's own (camera, transform, crop, quality, shutter),
+/// made with the instances in indicator colours three at a time.
+pub(crate) fn node_coverage(
+    values: &ParamValues,
+    request: &RenderRequest,
+) -> Result<Vec<(String, Plane)>> {
+    let shot = node_shot(values)?;
+    let loaded = cached_scene(file(values, "file")?)?;
+    let names: Vec<String> = loaded
+        .desc()
+        .instances
+        .iter()
+        .map(|i| i.name.clone())
+        .collect();
+    let count = names.len();
+    let mut coverage = Vec::with_capacity(count);
+    for first in (0..count).step_by(3) {
+        let colours: Vec<glam::Vec3> = (0..count)
+            .map(|i| match i.checked_sub(first) {
+                Some(k @ 0..=2) => glam::Vec3::AXES[k],
+                _ => glam::Vec3::ZERO,
+            })
+            .collect();
+        let lit = loaded.with_indicator_colours(&colours)?;
+        let outputs = Outputs {
+            rgb: true,
+            alpha: true,
+            depth_z: false,
+            depth_ray: false,
+            depth_median: false,
+        };
+        let rendered = march_scene(
+            values,
+            &shot,
+            request,
+            &lit,
+            ColorOutput::AsTrained,
+            outputs,
+        )?;
+        let Some(rgb) = rendered.planes.rgb else {
+            return Err(Error::invalid("coverage", "the render has no colour"));
+        };
+        coverage.extend(rgb.into_iter().take(count - first));
+    }
+    Ok(names.into_iter().zip(coverage).collect())
+}
+
+/// The passes `outputs` of the scene `loaded` for `request` as the node renders it, from one
+/// march per shutter time, and the marches' statistics summed.
+fn march_scene(
+    values: &ParamValues,
+    shot: &Shot,
+    request: &RenderRequest,
+    loaded: &LoadedScene,
+    color: ColorOutput,
+    outputs: Outputs,
+) -> Result<Rendered> {
     let window = request.window;
     let quality = match values.choice("quality")? {
         _ if request.draft => Quality::Draft,
@@ -508,11 +587,8 @@ fn march(values: &ParamValues, shot: &Shot, request: &RenderRequest) -> Result<R
         _ => Quality::Preview,
     };
     let settings = RenderSettings {
-        color: match values.choice("colour")? {
-            "asTrained" => ColorOutput::AsTrained,
-            _ => ColorOutput::Linear,
-        },
-        ..RenderSettings::new(quality.params(), Outputs::all())
+        color,
+        ..RenderSettings::new(quality.params(), outputs)
     };
     // With the shot's motion blur, the average of renders over the shutter (as nerfx render).
     let offset = values.int("frameOffset")? as f64;
@@ -542,7 +618,7 @@ fn march(values: &ParamValues, shot: &Shot, request: &RenderRequest) -> Result<R
                 ),
             ));
         }
-        let scene = placed_scene(values, shot, &at)?;
+        let scene = placed_scene(values, shot, &at, loaded)?;
         let (planes, s) = render_with_progress(&scene, &camera, window, &settings, &|_| {})?;
         renders.push(planes);
         stats = stats + s;

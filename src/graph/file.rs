@@ -667,6 +667,42 @@ mod tests {
          "params": {"file": "obj.json", "shot": "s.json"}}],
       "output": "comp", "layers": {"env": "env"}}"#;
 
+    /// `cryptomatte` names NeRF Render nodes the output needs; a node rendering what an
+    /// earlier one does is matted once; `--cryptomatte` without the key takes every needed
+    /// NeRF Render.
+    #[test]
+    fn cryptomatte_names_needed_renders_and_counts_each_render_once() {
+        let with = |list: &str| {
+            let key = format!(r#""layers": {{"env": "env"}}, "cryptomatte": {list}"#);
+            parse(&GOOD.replace(r#""layers": {"env": "env"}"#, &key))
+        };
+        let g = with(r#"["obj", "env", "objZ"]"#).unwrap();
+        assert_eq!(g.cryptomatte, ["obj", "env", "objZ"]);
+        // objZ renders what obj does (they differ only in the background).
+        assert_eq!(g.cryptomatte_nodes(false), ["obj", "env"]);
+        assert_eq!(g.cryptomatte_nodes(true), ["obj", "env"]);
+        let plain = parse(GOOD).unwrap();
+        assert!(plain.cryptomatte_nodes(false).is_empty());
+        let mut all = plain.cryptomatte_nodes(true);
+        all.sort();
+        assert_eq!(all, ["env", "envZ", "obj"]);
+        for (list, said) in [
+            (
+                r#"["comp"]"#,
+                "cryptomatte[0]: node \"comp\" is a org.nerfx.DepthMerge",
+            ),
+            (r#"["env", "nobody"]"#, "cryptomatte[1]: no node is named"),
+            (
+                r#"["env", "env"]"#,
+                "cryptomatte[1]: \"env\" is named twice",
+            ),
+            (r#""env""#, "cryptomatte: expected a list"),
+        ] {
+            let e = with(list).unwrap_err().to_string();
+            assert!(e.contains(said), "{list}: {e}");
+        }
+    }
+
     #[test]
     fn the_graph_colour_space_reaches_every_render_and_is_not_contradicted() {
         let with_b = |colorspace: &str, node_space: &str, b_space: &str| {

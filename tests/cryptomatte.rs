@@ -10,11 +10,52 @@
 mod common_fields;
 #[allow(dead_code)] // the writers of bytes and folders this test does not use
 mod common_ingp;
+mod common_ofx;
 
 use std::path::Path;
 use std::process::Command;
 
 use nerfx_core::image::read_exr_channels;
+
+/// The decoder's reading of the layer `CryptoObject` of `exr`, checked error-free: the names
+/// of its manifest and each name's coverage per pixel.
+fn decode(exr: &Path) -> (Vec<String>, std::collections::BTreeMap<String, Vec<f64>>) {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/cryptomatte/decode.py");
+    let read = Command::new("python3")
+        .arg(&script)
+        .arg(exr)
+        .arg("CryptoObject")
+        .output()
+        .unwrap_or_else(|e| panic!("this check needs python3 with OpenEXR and mmh3 ({e})"));
+    assert!(
+        read.status.success(),
+        "the decoder failed (it needs python3 with numpy, OpenEXR and mmh3):\n{}",
+        String::from_utf8_lossy(&read.stderr)
+    );
+    let decoded: serde_json::Value = serde_json::from_slice(&read.stdout).unwrap();
+    assert_eq!(
+        decoded["errors"],
+        serde_json::json!([]),
+        "{}",
+        decoded["errors"]
+    );
+    let names = decoded["names"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n.as_str().unwrap().to_string())
+        .collect();
+    let coverage = decoded["coverage"]
+        .as_object()
+        .unwrap()
+        .iter()
+        .map(|(n, c)| {
+            let c = c.as_array().unwrap().iter().map(|v| v.as_f64().unwrap());
+            (n.clone(), c.collect())
+        })
+        .collect();
+    (names, coverage)
+}
 
 #[test]
 fn mattes_decode_per_the_specification_and_add_up_to_alpha() {
@@ -187,4 +228,130 @@ fn coverage_of_a_trained_field_splats_and_a_ball_adds_up_to_alpha() {
             "{sampler}"
         );
     }
+}
+
+/// A graph comp of two NeRF Render nodes, each of its own scene, with mattes for both: one
+/// manifest of every instance, an instance named in both scenes one object, and each
+/// pixel's coverages adding up to the two renders' own alphas (written as layers, so read
+/// back from the same file), whatever the comp did with them. A graph naming a node that
+/// is not a NeRF Render for its mattes is refused, naming the key.
+#[test]
+fn a_graph_mattes_the_instances_of_the_renders_it_names() {
+    let (w, h) = (48u32, 32u32);
+    let dir = tempfile::tempdir().unwrap();
+    let mut shot = nerfx_core::demo::shot(w, h);
+    shot.frames.truncate(1);
+    let frame = shot.frames[0].frame;
+    let camera = shot.frames[0].camera(&shot).unwrap();
+    let at = |x: f64, y: f64, depth: f64| {
+        let ray = camera.ray(x, y).unwrap();
+        let p = ray.origin + ray.dir * (depth / ray.z_per_t);
+        [p.x, p.y, p.z]
+    };
+    let ball = |name: &str, x: f64, y: f64, depth: f64, radius: f64, density: f64| {
+        serde_json::json!({"name": name, "field": {"analytic": {"primitives": [
+            {"shape": {"sphere": {"center": at(x, y, depth), "radius": radius}},
+             "density": density, "color": {"rgb": [0.8, 0.5, 0.2]}}]}}})
+    };
+    let front = serde_json::json!({"instances": [
+        ball("solo", 8.0, 8.0, 5.0, 0.4, 40.0),
+        ball("haze", 26.0, 18.0, 6.0, 0.5, 2.0),
+    ]});
+    let back = serde_json::json!({"instances": [
+        ball("wall", 30.0, 18.0, 9.0, 0.9, 3.0),
+        ball("haze", 38.0, 24.0, 8.0, 0.5, 2.0),
+    ]});
+    std::fs::write(dir.path().join("front.json"), front.to_string()).unwrap();
+    std::fs::write(dir.path().join("back.json"), back.to_string()).unwrap();
+    shot.write(dir.path().join("shot.json")).unwrap();
+    let render = |name: &str, file: &str| {
+        serde_json::json!({"name": name, "node": "org.nerfx.NeRFRender",
+            "params": {"file": file, "shot": "shot.json", "quality": "preview"}})
+    };
+    let graph = |mattes: serde_json::Value| {
+        serde_json::json!({"nodes": [
+            render("front", "front.json"),
+            render("back", "back.json"),
+            {"name": "comp", "node": "org.nerfx.ShadowCatcherMerge",
+             "inputs": {"A": "front", "B": "back"}}],
+         "output": "comp",
+         "layers": {"front": "front", "back": "back"},
+         "cryptomatte": mattes})
+    };
+    let path = dir.path().join("comp.json");
+    std::fs::write(
+        &path,
+        graph(serde_json::json!(["front", "back"])).to_string(),
+    )
+    .unwrap();
+    let exr = dir.path().join("comp.exr");
+    let run = |graph: &Path| {
+        Command::new(env!("CARGO_BIN_EXE_nerfx"))
+            .arg("render")
+            .arg(graph)
+            .args(["--frames", &frame.to_string(), "--bundle"])
+            .arg(common_ofx::bundle())
+            .arg("-o")
+            .arg(&exr)
+            .output()
+            .unwrap()
+    };
+    let out = run(&path);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    let (names, coverage) = decode(&exr);
+    assert_eq!(names, ["haze", "solo", "wall"]);
+    let channels = read_exr_channels(&exr).unwrap();
+    let plane = |name: &str| {
+        let found = channels.iter().find(|(n, _)| n == name);
+        found
+            .unwrap_or_else(|| panic!("no channel {name}"))
+            .1
+            .data
+            .clone()
+    };
+    let (front_alpha, back_alpha, comp_alpha) = (plane("front.A"), plane("back.A"), plane("A"));
+    let (mut worst, mut both, mut solo) = (0.0f64, 0, 0);
+    for p in 0..front_alpha.len() {
+        let sum: f64 = names.iter().map(|n| coverage[n][p]).sum();
+        let want = f64::from(front_alpha[p]) + f64::from(back_alpha[p]);
+        worst = worst.max((sum - want).abs());
+        if front_alpha[p] > 0.05 && back_alpha[p] > 0.05 {
+            both += 1;
+        }
+        // Where the front sphere alone is seen, its coverage is the front render's alpha.
+        if coverage["solo"][p] > 0.0 && back_alpha[p] == 0.0 && coverage["haze"][p] == 0.0 {
+            solo += 1;
+            assert!((coverage["solo"][p] - f64::from(front_alpha[p])).abs() < 1e-5);
+        }
+    }
+    eprintln!("coverage sums to the renders' alphas within {worst:.2e}; {both} pixels hold both");
+    assert!(
+        worst < 1e-4,
+        "coverage sums differ from the renders' alphas by {worst}"
+    );
+    assert!(both > 20, "the renders overlap: {both} pixels");
+    assert!(solo > 5, "the sphere is seen alone: {solo} pixels");
+    // The comp's alpha (A over B) is not the sum where both are seen: the layers hold the
+    // renders' own shares, not the comp's.
+    let differs = (0..comp_alpha.len())
+        .filter(|&p| {
+            (f64::from(comp_alpha[p]) - f64::from(front_alpha[p] + back_alpha[p])).abs() > 1e-3
+        })
+        .count();
+    assert!(differs > 0);
+
+    let bad = dir.path().join("bad.json");
+    std::fs::write(&bad, graph(serde_json::json!(["comp"])).to_string()).unwrap();
+    let out = run(&bad);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        said.contains("cryptomatte[0]") && said.contains("NeRF Render"),
+        "{said}"
+    );
 }

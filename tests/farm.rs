@@ -674,19 +674,28 @@ fn a_bad_scene_exits_with_the_no_retry_status_and_a_split_frame_is_the_whole_fra
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("bad.json"));
-    // Every pass, stripes of uneven height included: 36 rows of 16-pixel tiles in 3 stripes.
+    // Every pass and the Cryptomatte layers and manifest, stripes of uneven height
+    // included: 36 rows of 16-pixel tiles in 3 stripes.
     let whole = work.path().join("whole/f.####.exr");
     run(nerfx()
         .arg("render")
         .args([&scene, &shot])
-        .args(["--frames", "1005", "--quality", "draft", "-o"])
+        .args([
+            "--frames",
+            "1005",
+            "--quality",
+            "draft",
+            "--cryptomatte",
+            "-o",
+        ])
         .arg(&whole));
     let split = work.path().join("split/f.####.exr");
     for k in 1..=3 {
         run(nerfx()
             .arg("render")
             .args([&scene, &shot])
-            .args(["--frames", "1005", "--quality", "draft", "--stripe"])
+            .args(["--frames", "1005", "--quality", "draft", "--cryptomatte"])
+            .arg("--stripe")
             .arg(format!("{k}/3"))
             .arg("-o")
             .arg(&split));
@@ -699,7 +708,22 @@ fn a_bad_scene_exits_with_the_no_retry_status_and_a_split_frame_is_the_whole_fra
         &frame(&whole, 1005),
         "the assembled file is the whole-frame render's",
     );
-    assert_eq!(channels(&frame(&split, 1005)).len(), 7);
+    // Seven passes and three layers of two ranks each.
+    let names: Vec<String> = channels(&frame(&split, 1005))
+        .into_iter()
+        .map(|(n, _)| n)
+        .collect();
+    assert_eq!(names.len(), 7 + 3 * 4, "{names:?}");
+    assert!(names.contains(&"CryptoObject02.A".to_string()), "{names:?}");
+    let (_, header) = read_exr_image(&frame(&split, 1005)).unwrap();
+    assert!(
+        header
+            .entries
+            .iter()
+            .any(|(k, v)| k.ends_with("/manifest") && v.starts_with('{')),
+        "{:?}",
+        header.entries
+    );
 }
 
 #[test]
@@ -711,7 +735,7 @@ fn a_graph_in_stripes_assembles_to_the_whole_frame_every_layer() {
         let mut c = nerfx();
         c.arg("render")
             .arg(&graph)
-            .args(["--frames", "1003", "--bundle"])
+            .args(["--frames", "1003", "--cryptomatte", "--bundle"])
             .arg(&bundle)
             .arg("-o")
             .arg(pattern);
@@ -740,4 +764,6 @@ fn a_graph_in_stripes_assembles_to_the_whole_frame_every_layer() {
         .collect();
     assert!(names.iter().any(|n| n.starts_with("object.")), "{names:?}");
     assert!(names.iter().any(|n| n.starts_with("shadow.")), "{names:?}");
+    // --cryptomatte: every NeRF Render the output needs.
+    assert!(names.iter().any(|n| n == "CryptoObject00.R"), "{names:?}");
 }

@@ -90,11 +90,12 @@ enum Command {
         /// (graphs: the graph's `colorspace` and each NeRF Render node's Output Colour Space).
         #[arg(long, value_enum)]
         colorspace: Option<OutputColorSpace>,
-        /// Scenes: also write Cryptomatte object mattes (layers CryptoObject00, … with an ID
-        /// per scene instance name, and the manifest in the header).
+        /// Also write Cryptomatte object mattes (layers CryptoObject00, … with an ID per scene
+        /// instance name, and the manifest in the header); graphs: of every NeRF Render node
+        /// the output needs, unless the graph file's `cryptomatte` names the nodes itself.
         #[arg(long)]
         cryptomatte: bool,
-        /// Scenes with --cryptomatte: ID–coverage pairs kept per pixel (two per layer).
+        /// With Cryptomatte: ID–coverage pairs kept per pixel (two per layer).
         #[arg(long, default_value_t = nerfx_core::image::cryptomatte::DEFAULT_RANKS)]
         cryptomatte_ranks: usize,
         /// Scenes whose shot has motion blur: renders per frame over the shutter (default: the
@@ -532,12 +533,7 @@ fn run(cli: Cli) -> Result<()> {
                         "a preview is of a whole frame: render it after `nerfx assemble`",
                     ));
                 }
-                if cryptomatte {
-                    return Err(Error::invalid(
-                        "--cryptomatte",
-                        "graphs do not write Cryptomatte yet; render the scene with its shot",
-                    ));
-                }
+                check_ranks(cryptomatte, cryptomatte_ranks)?;
                 if deep.is_some() {
                     return Err(Error::invalid(
                         "--deep",
@@ -551,7 +547,11 @@ fn run(cli: Cli) -> Result<()> {
                          NeRF Render nodes' Output Colour Space",
                     ));
                 }
-                return graph::render(&scene, frames, &output, png, bundle, scale, &task);
+                let mattes = Mattes {
+                    all_renders: cryptomatte,
+                    ranks: cryptomatte_ranks,
+                };
+                return graph::render(&scene, frames, &output, png, bundle, scale, mattes, &task);
             };
             let outputs = passes.as_deref().map_or_else(Outputs::all, Pass::outputs);
             if deep.is_some() && !(outputs.rgb && outputs.alpha) {
@@ -572,23 +572,7 @@ fn run(cli: Cli) -> Result<()> {
                     "a preview is of a whole frame: render it after `nerfx assemble`",
                 ));
             }
-            if cryptomatte && stripe.is_some() {
-                return Err(Error::invalid(
-                    "--cryptomatte",
-                    "Cryptomatte is written with whole frames: render without --stripe",
-                ));
-            }
-            if cryptomatte
-                && !(1..=nerfx_core::image::cryptomatte::MAX_RANKS).contains(&cryptomatte_ranks)
-            {
-                return Err(Error::invalid(
-                    "--cryptomatte-ranks",
-                    format!(
-                        "{cryptomatte_ranks}; expected 1 to {}",
-                        nerfx_core::image::cryptomatte::MAX_RANKS
-                    ),
-                ));
-            }
+            check_ranks(cryptomatte, cryptomatte_ranks)?;
             let scene = SceneDesc::for_path(&scene)?;
             // A frame older than a field file is rendered again on resume (a run folder's
             // time says nothing about its checkpoints: only files count).
@@ -704,7 +688,7 @@ fn run(cli: Cli) -> Result<()> {
                     write_deep_exr(deep_path, image, &header)?;
                 }
                 let mattes = if cryptomatte {
-                    let coverage = render_coverage(&scene, &shot, frame, &settings)?;
+                    let coverage = render_coverage(&scene, &shot, frame, window, &settings)?;
                     let names: Vec<&str> = scene
                         .desc()
                         .instances
@@ -1153,6 +1137,28 @@ fn sbatch(args: &[String]) -> Result<String> {
     Ok(id)
 }
 
+/// The Cryptomatte a graph's frames carry: layers for the NeRF Render nodes its file names
+/// (`cryptomatte`), or with `--cryptomatte` for every one the output needs when it names
+/// none; `ranks` ID–coverage pairs per pixel.
+#[derive(Clone, Copy, Debug)]
+#[cfg_attr(not(feature = "host"), allow(dead_code))]
+struct Mattes {
+    all_renders: bool,
+    ranks: usize,
+}
+
+/// Refuses `--cryptomatte-ranks` outside 1 to the most ranks where mattes are written.
+fn check_ranks(cryptomatte: bool, ranks: usize) -> Result<()> {
+    let max = nerfx_core::image::cryptomatte::MAX_RANKS;
+    if cryptomatte && !(1..=max).contains(&ranks) {
+        return Err(Error::invalid(
+            "--cryptomatte-ranks",
+            format!("{ranks}; expected 1 to {max}"),
+        ));
+    }
+    Ok(())
+}
+
 /// Graph rendering through the OpenFX host and bundle (`host` feature).
 #[cfg(feature = "host")]
 mod graph {
@@ -1205,6 +1211,7 @@ mod graph {
 
     /// Renders `frames` of the graph at `path`: the output node as `R G B A`, each layer as
     /// `layer.R …`, through the bundle's plugins.
+    #[allow(clippy::too_many_arguments)]
     pub fn render(
         path: &Path,
         frames: Option<Vec<i64>>,
@@ -1212,9 +1219,12 @@ mod graph {
         png: bool,
         bundle: Option<PathBuf>,
         scale: f64,
+        mattes: Mattes,
         task: &Task,
     ) -> Result<()> {
         let graph = Graph::read(path)?;
+        check_ranks(!graph.cryptomatte.is_empty(), mattes.ranks)?;
+        let matted = graph.cryptomatte_nodes(mattes.all_renders);
         let stripe = task.stripe;
         let nodes = graph.needed().iter().filter(|&&n| n).count();
         let mut graph = OfxGraph::new(graph, &load_bundle(bundle)?)?;
@@ -1249,7 +1259,15 @@ mod graph {
                 format!("frame {frame}: {} is already whole", path.display())
             } else {
                 task.clear(&path)?;
-                render_frame(&mut graph, frame, &path, png, scale, stripe, &bar)?;
+                let to = Target {
+                    path: &path,
+                    png,
+                    scale,
+                    stripe,
+                    matted: &matted,
+                    ranks: mattes.ranks,
+                };
+                render_frame(&mut graph, frame, &to, &bar)?;
                 format!("frame {frame} → {}", path.display())
             };
             bar.suspend(|| task.report(done + 1, frames.len(), &what));
@@ -1260,16 +1278,25 @@ mod graph {
         rendered.and(ended)
     }
 
-    /// One frame of the graph written to `target`.
-    fn render_frame(
-        graph: &mut OfxGraph,
-        frame: i64,
-        target: &Path,
+    /// Where and how a graph's frame is written.
+    struct Target<'a> {
+        path: &'a Path,
         png: bool,
         scale: f64,
         stripe: Option<Stripe>,
+        /// The NeRF Render nodes whose instances get Cryptomatte layers.
+        matted: &'a [String],
+        ranks: usize,
+    }
+
+    /// One frame of the graph written to `to`.
+    fn render_frame(
+        graph: &mut OfxGraph,
+        frame: i64,
+        to: &Target,
         bar: &ProgressBar,
     ) -> Result<()> {
+        let (target, png, scale, stripe) = (to.path, to.png, to.scale, to.stripe);
         if let Some(dir) = target.parent() {
             create_dir(dir)?;
         }
@@ -1291,18 +1318,62 @@ mod graph {
                 .ok_or_else(|| Error::invalid(format!("graph node {name}"), "was not rendered"))
         };
         let main = image(&graph.graph().output)?;
-        let layers = graph
+        let mut layers = graph
             .graph()
             .layers
             .iter()
             .map(|(layer, node)| Ok((layer.as_str(), image(node)?)))
             .collect::<Result<Vec<_>>>()?;
-        let header = graph_header(graph, frame as f64)?;
+        let mut header = graph_header(graph, frame as f64)?;
+        let mattes = if to.matted.is_empty() {
+            Vec::new()
+        } else {
+            bar.set_message(format!("frame {frame} cryptomatte"));
+            let (names, coverage) = graph_coverage(graph.graph(), frame, to, &window_of, main)?;
+            let names: Vec<&str> = names.iter().map(String::as_str).collect();
+            let layer = nerfx_core::image::cryptomatte::OBJECT_LAYER;
+            header
+                .entries
+                .extend(nerfx_core::image::cryptomatte::header_entries(
+                    layer, &names,
+                ));
+            nerfx_core::image::cryptomatte::layers(layer, &names, &coverage, to.ranks)?
+        };
+        layers.extend(mattes.iter().map(|(n, p)| (n.as_str(), p)));
         write_exr_layers(target, main, &layers, &header)?;
         if png {
             write_png_preview(&target.with_extension("png"), main)?;
         }
         Ok(())
+    }
+
+    /// Every instance of the NeRF Render nodes `to.matted` and its coverage of the frame's
+    /// window, each from its own node's render; every plane the size of the `main` image.
+    fn graph_coverage(
+        graph: &Graph,
+        frame: i64,
+        to: &Target,
+        window_of: &dyn Fn(u32, u32) -> Result<nerfx_core::image::Window>,
+        main: &nerfx_core::image::Planes,
+    ) -> Result<(Vec<String>, Vec<nerfx_core::image::Plane>)> {
+        let (mut names, mut planes) = (Vec::new(), Vec::new());
+        for node in to.matted {
+            for (name, plane) in graph.coverage(node, frame as f64, to.scale, window_of)? {
+                if (plane.width, plane.height) != (main.width, main.height) {
+                    return Err(Error::invalid(
+                        format!("graph node {node}: cryptomatte"),
+                        format!(
+                            "its image is {}×{}, the output's {}×{}: Cryptomatte comes from \
+                             NeRF Render nodes of the output's size",
+                            plane.width, plane.height, main.width, main.height
+                        ),
+                    ));
+                }
+                names.push(name);
+                planes.push(plane);
+            }
+        }
+        Ok((names, planes))
     }
 
     /// The EXR header of a graph's frame: its colour space, the camera of the NeRF Render
@@ -1366,6 +1437,7 @@ mod graph {
 mod graph {
     use super::*;
 
+    #[allow(clippy::too_many_arguments)]
     pub fn render(
         path: &Path,
         _: Option<Vec<i64>>,
@@ -1373,6 +1445,7 @@ mod graph {
         _: bool,
         _: Option<PathBuf>,
         _: f64,
+        _: Mattes,
         _: &Task,
     ) -> Result<()> {
         Err(Error::Unsupported(format!(

@@ -15,18 +15,19 @@ use crate::render::{
 };
 use crate::scene::LoadedScene;
 
-/// Each instance's coverage of frame `frame` (one plane per instance of `scene`, in its
-/// order): the share of every pixel's opacity its samples and fragments hold, summing to the
-/// pixel's alpha, integrated over the shutter and the aperture as the frame's colour is.
-/// Rendered with the instances in indicator colours, three at a time
-/// ([`LoadedScene::with_indicator_colours`]), at `settings`' quality.
+/// Each instance's coverage of the pixels `window` of frame `frame` (one plane per instance
+/// of `scene`, in its order): the share of every pixel's opacity its samples and fragments
+/// hold, summing to the pixel's alpha, integrated over the shutter and the aperture as the
+/// frame's colour is. Rendered with the instances in indicator colours, three at a time
+/// ([`LoadedScene::with_indicator_colours`]), at `settings`' quality, as
+/// [`render_frame_window`] renders: a window's coverage is the whole frame's, bit for bit.
 pub fn render_coverage(
     scene: &LoadedScene,
     shot: &Shot,
     frame: i64,
+    window: Window,
     settings: &RenderSettings,
 ) -> Result<Vec<crate::image::Plane>> {
-    let count = scene.desc().instances.len();
     let settings = RenderSettings {
         outputs: Outputs {
             rgb: true,
@@ -38,6 +39,21 @@ pub fn render_coverage(
         color: crate::render::ColorOutput::AsTrained,
         ..*settings
     };
+    coverage_by_indicators(scene, &mut |lit| {
+        Ok(render_frame_window(lit, shot, frame, window, &settings, &|_| {})?.0)
+    })
+}
+
+/// Each instance's coverage from renders of `scene` recoloured to indicator colours, three
+/// instances a render (red, green, blue; the rest black), by `render`, which must render
+/// colour as trained (no conversion) and alpha: an instance's colour channel is then the
+/// share of the pixel's opacity its samples and fragments hold. One plane per instance, in
+/// the scene's order.
+pub fn coverage_by_indicators(
+    scene: &LoadedScene,
+    render: &mut dyn FnMut(&LoadedScene) -> Result<Planes>,
+) -> Result<Vec<crate::image::Plane>> {
+    let count = scene.desc().instances.len();
     let mut coverage = Vec::with_capacity(count);
     for first in (0..count).step_by(3) {
         let colours: Vec<glam::Vec3> = (0..count)
@@ -46,9 +62,7 @@ pub fn render_coverage(
                 _ => glam::Vec3::ZERO,
             })
             .collect();
-        let lit = scene.with_indicator_colours(&colours)?;
-        let (planes, _) = render_frame(&lit, shot, frame, &settings, &|_| {})?;
-        let Some(rgb) = planes.rgb else {
+        let Some(rgb) = render(&scene.with_indicator_colours(&colours)?)?.rgb else {
             return Err(Error::invalid("coverage", "the render has no colour"));
         };
         coverage.extend(rgb.into_iter().take(count - first));
@@ -491,7 +505,8 @@ mod tests {
             .unwrap()
             .0;
         assert_ne!(pinhole, defocused);
-        let coverage = render_coverage(&scene, &shot, frame, &settings).unwrap();
+        let window = Window::new(0, 0, pinhole.width, pinhole.height);
+        let coverage = render_coverage(&scene, &shot, frame, window, &settings).unwrap();
         let alpha = defocused.alpha.as_ref().unwrap();
         for (i, a) in alpha.data.iter().enumerate() {
             let sum: f32 = coverage.iter().map(|p| p.data[i]).sum();

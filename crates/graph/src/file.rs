@@ -11,8 +11,15 @@
 //!     "inputs": {"A": "obj", "B": "env"}, "params": {"tint": [0.1, 0.1, 0.2]}}],
 //!  "output": "comp",
 //!  "layers": {"env": "env"},
+//!  "cryptomatte": ["obj", "env"],
 //!  "colorspace": "acescg"}
 //! ```
+//!
+//! `cryptomatte` (optional) names NeRF Render nodes the output needs whose scene instances
+//! get Cryptomatte layers (`CryptoObject00`, …) in the written EXR: each instance's coverage
+//! in its node's own render, all the nodes' instances ranked together per pixel, one ID per
+//! instance name (two nodes' instances of one name are one object). See
+//! [`Graph::coverage`].
 //!
 //! `colorspace` (optional) is the colour space of the graph's images: every NeRF Render node
 //! outputs it (one that names another is refused), and the EXR says so. Without it the NeRF
@@ -64,6 +71,8 @@ pub struct Graph {
     pub layers: Vec<(String, String)>,
     /// The colour space of the graph's images, written into the EXR's header.
     pub colorspace: OutputColorSpace,
+    /// The NeRF Render nodes whose instances get Cryptomatte layers, in the file's order.
+    pub cryptomatte: Vec<String>,
 }
 
 impl Graph {
@@ -83,13 +92,12 @@ impl Graph {
         let bad = |location: &str, message: String| Error::format(path, location, message);
         let json: Json = nerfx_core::json::parse_json(text, path, "a node graph")?;
         if let Some(map) = json.as_object() {
-            if let Some(key) = map
-                .keys()
-                .find(|k| !["nodes", "output", "layers", "colorspace"].contains(&k.as_str()))
-            {
+            if let Some(key) = map.keys().find(|k| {
+                !["nodes", "output", "layers", "colorspace", "cryptomatte"].contains(&k.as_str())
+            }) {
                 return Err(bad(
                     key,
-                    "unknown key (keys: nodes, output, layers, colorspace)".into(),
+                    "unknown key (keys: nodes, output, layers, colorspace, cryptomatte)".into(),
                 ));
             }
         }
@@ -162,13 +170,49 @@ impl Graph {
                 )
             }
         };
+        let mut cryptomatte = Vec::new();
+        if let Some(list) = json.get("cryptomatte") {
+            let list = list
+                .as_array()
+                .ok_or_else(|| bad("cryptomatte", "expected a list of node names".into()))?;
+            for (i, v) in list.iter().enumerate() {
+                let key = format!("cryptomatte[{i}]");
+                let name = named(&key, v)?;
+                if cryptomatte.contains(&name) {
+                    return Err(bad(&key, format!("{name:?} is named twice")));
+                }
+                cryptomatte.push(name);
+            }
+        }
         let nodes = upstream_first(nodes).map_err(|m| bad("nodes", m))?;
         let mut graph = Graph {
             nodes,
             output,
             layers,
             colorspace: OutputColorSpace::default(),
+            cryptomatte,
         };
+        let need = graph.needed();
+        for (i, name) in graph.cryptomatte.iter().enumerate() {
+            let at = graph.nodes.iter().position(|n| n.name == *name);
+            let Some(at) = at else { continue };
+            let key = format!("cryptomatte[{i}]");
+            if graph.nodes[at].node.desc.id != super::nerf_render::NODE_ID {
+                return Err(bad(
+                    &key,
+                    format!(
+                        "node {name:?} is a {}; Cryptomatte comes from NeRF Render nodes",
+                        graph.nodes[at].node.desc.id
+                    ),
+                ));
+            }
+            if !need[at] {
+                return Err(bad(
+                    &key,
+                    format!("node {name:?} is not upstream of the output or a layer"),
+                ));
+            }
+        }
         graph.colorspace = graph
             .settle_color_space(declared)
             .map_err(|m| bad("colorspace", m))?;
@@ -284,6 +328,77 @@ impl Graph {
     /// The node named `name`.
     pub fn node(&self, name: &str) -> Option<&GraphNode> {
         self.nodes.iter().find(|n| n.name == name)
+    }
+
+    /// The NeRF Render nodes whose instances get Cryptomatte layers: those the file's
+    /// `cryptomatte` names, or, when it names none and `all` is set, every one the output
+    /// needs; in that order, leaving out a node that renders what an earlier one does (the
+    /// same scene, shot and settings, another output or look of it), so that its instances'
+    /// coverage is counted once.
+    pub fn cryptomatte_nodes(&self, all: bool) -> Vec<String> {
+        let listed: Vec<&GraphNode> = if !self.cryptomatte.is_empty() {
+            self.cryptomatte
+                .iter()
+                .filter_map(|name| self.node(name))
+                .collect()
+        } else if all {
+            self.nodes
+                .iter()
+                .zip(self.needed())
+                .filter(|(n, needed)| *needed && n.node.desc.id == super::nerf_render::NODE_ID)
+                .map(|(n, _)| n)
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let mut renders = Vec::new();
+        let mut names = Vec::new();
+        for node in listed {
+            let render = super::nerf_render::render_values(&node.values);
+            if !renders.contains(&render) {
+                renders.push(render);
+                names.push(node.name.clone());
+            }
+        }
+        names
+    }
+
+    /// Each scene instance of the NeRF Render node `name` and its coverage of the window
+    /// `window_of(width, height)` of the node's image at `time` and `render_scale` (as
+    /// [`super::evaluate_window`] renders it): the instance's share of every pixel's
+    /// opacity in the node's own render (its background and Source clip left out), so that
+    /// a pixel's coverages add up to that render's alpha. Rendered by the node's own camera,
+    /// transform, crop, quality and shutter, apart from its graph render (the same pixels
+    /// as a separate march, with the instances in indicator colours).
+    pub fn coverage(
+        &self,
+        name: &str,
+        time: f64,
+        render_scale: f64,
+        window_of: &dyn Fn(u32, u32) -> Result<nerfx_core::image::Window>,
+    ) -> Result<Vec<(String, nerfx_core::image::Plane)>> {
+        let node = self
+            .node(name)
+            .filter(|n| n.node.desc.id == super::nerf_render::NODE_ID)
+            .ok_or_else(|| {
+                Error::invalid(format!("graph node {name}"), "is not a NeRF Render node")
+            })?;
+        let scaled = nerfx_core::image::scaled_size;
+        let covered = || {
+            let (w, h) = node
+                .node
+                .region_of_definition(&node.values, time)?
+                .unwrap_or((1, 1));
+            let window = window_of(scaled(w, render_scale), scaled(h, render_scale))?;
+            let request = super::node::RenderRequest::new(time, window, render_scale);
+            super::nerf_render::node_coverage(&node.values, &request)
+        };
+        covered().map_err(|e| match e {
+            Error::Invalid { what, message } => {
+                Error::invalid(format!("graph node {name}: cryptomatte: {what}"), message)
+            }
+            other => other,
+        })
     }
 }
 
@@ -551,6 +666,42 @@ mod tests {
         {"name": "objZ", "node": "org.nerfx.NeRFRender",
          "params": {"file": "obj.json", "shot": "s.json"}}],
       "output": "comp", "layers": {"env": "env"}}"#;
+
+    /// `cryptomatte` names NeRF Render nodes the output needs; a node rendering what an
+    /// earlier one does is matted once; `--cryptomatte` without the key takes every needed
+    /// NeRF Render.
+    #[test]
+    fn cryptomatte_names_needed_renders_and_counts_each_render_once() {
+        let with = |list: &str| {
+            let key = format!(r#""layers": {{"env": "env"}}, "cryptomatte": {list}"#);
+            parse(&GOOD.replace(r#""layers": {"env": "env"}"#, &key))
+        };
+        let g = with(r#"["obj", "env", "objZ"]"#).unwrap();
+        assert_eq!(g.cryptomatte, ["obj", "env", "objZ"]);
+        // objZ renders what obj does (they differ only in the background).
+        assert_eq!(g.cryptomatte_nodes(false), ["obj", "env"]);
+        assert_eq!(g.cryptomatte_nodes(true), ["obj", "env"]);
+        let plain = parse(GOOD).unwrap();
+        assert!(plain.cryptomatte_nodes(false).is_empty());
+        let mut all = plain.cryptomatte_nodes(true);
+        all.sort();
+        assert_eq!(all, ["env", "envZ", "obj"]);
+        for (list, said) in [
+            (
+                r#"["comp"]"#,
+                "cryptomatte[0]: node \"comp\" is a org.nerfx.DepthMerge",
+            ),
+            (r#"["env", "nobody"]"#, "cryptomatte[1]: no node is named"),
+            (
+                r#"["env", "env"]"#,
+                "cryptomatte[1]: \"env\" is named twice",
+            ),
+            (r#""env""#, "cryptomatte: expected a list"),
+        ] {
+            let e = with(list).unwrap_err().to_string();
+            assert!(e.contains(said), "{list}: {e}");
+        }
+    }
 
     #[test]
     fn the_graph_colour_space_reaches_every_render_and_is_not_contradicted() {

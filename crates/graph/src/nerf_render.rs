@@ -29,12 +29,12 @@ use nerfx_core::camera::{
 };
 use nerfx_core::composite::{over, rgba_pixels, rgba_planes};
 use nerfx_core::error::{number, Error, Result};
-use nerfx_core::frames::{frame_views, mean_over_views};
+use nerfx_core::frames::{coverage_by_indicators, frame_views, mean_over_views};
 use nerfx_core::image::{scaled_size, OutputColorSpace, Plane, Planes, BACKGROUND_DEPTH};
 use nerfx_core::render::{
     render_with_progress, ColorOutput, Outputs, Quality, RenderSettings, RenderStats,
 };
-use nerfx_core::scene::{CropBox, Instance, Scene};
+use nerfx_core::scene::{CropBox, Instance, LoadedScene, Scene};
 
 /// The Output Colour Space parameter's options: the scene file's, then every
 /// [`OutputColorSpace`] by its name.
@@ -418,9 +418,14 @@ fn scaled_camera(shot: &Shot, at: &ShotFrame, scale: f64) -> Result<Camera> {
     at.camera(&one)
 }
 
-/// The scene placed at `at`, with the transform override and crop box applied.
-fn placed_scene(values: &ParamValues, shot: &Shot, at: &ShotFrame) -> Result<Scene> {
-    let loaded = cached_scene(file(values, "file")?)?;
+/// The scene `loaded` (the node's file, perhaps recoloured) placed at `at`, with the
+/// transform override and crop box applied.
+fn placed_scene(
+    values: &ParamValues,
+    shot: &Shot,
+    at: &ShotFrame,
+    loaded: &LoadedScene,
+) -> Result<Scene> {
     let over_ride = if values.bool("overrideTransform")? {
         let m = values.doubles("objectTransform")?;
         let mut rows = [0.0; 16];
@@ -480,6 +485,12 @@ fn placed_scene(values: &ParamValues, shot: &Shot, at: &ShotFrame) -> Result<Sce
 /// render.
 const LOOK: &[&str] = &["output", "background", "exposure", "outputColourSpace"];
 
+/// The values that decide what a node with `values` renders: two nodes with the same ones
+/// march the same scene the same way (they may show different outputs of it).
+pub(crate) fn render_values(values: &ParamValues) -> ParamValues {
+    values.with_defaults(LOOK)
+}
+
 /// The registry identifier of the NeRF Render node.
 pub(crate) const NODE_ID: &str = "org.nerfx.NeRFRender";
 
@@ -538,6 +549,55 @@ fn render_node(values: &ParamValues, request: &RenderRequest) -> Result<Rendered
 /// Every pass of the node's scene for `request`, from one march per shutter time, and the
 /// marches' statistics summed.
 fn march(values: &ParamValues, shot: &Shot, request: &RenderRequest) -> Result<Rendered> {
+    let loaded = cached_scene(file(values, "file")?)?;
+    let color = match values.choice("colour")? {
+        "asTrained" => ColorOutput::AsTrained,
+        _ => ColorOutput::Linear,
+    };
+    march_scene(values, shot, request, &loaded, color, Outputs::all())
+}
+
+/// Each instance of the node's scene and its coverage of `request`'s window: the share of
+/// every pixel's opacity in the node's own render (before its background and Source) that
+/// the instance's samples and fragments hold, so that a pixel's coverages add up to that
+/// render's alpha. The render is the node's own (camera, transform, crop, quality, shutter),
+/// made with the instances in indicator colours three at a time.
+pub(crate) fn node_coverage(
+    values: &ParamValues,
+    request: &RenderRequest,
+) -> Result<Vec<(String, Plane)>> {
+    let shot = node_shot(values)?;
+    let loaded = cached_scene(file(values, "file")?)?;
+    let names: Vec<String> = loaded
+        .desc()
+        .instances
+        .iter()
+        .map(|i| i.name.clone())
+        .collect();
+    let outputs = Outputs {
+        rgb: true,
+        alpha: true,
+        depth_z: false,
+        depth_ray: false,
+        depth_median: false,
+    };
+    let coverage = coverage_by_indicators(&loaded, &mut |lit| {
+        let rendered = march_scene(values, &shot, request, lit, ColorOutput::AsTrained, outputs)?;
+        Ok(rendered.planes)
+    })?;
+    Ok(names.into_iter().zip(coverage).collect())
+}
+
+/// The passes `outputs` of the scene `loaded` for `request` as the node renders it, from one
+/// march per shutter time, and the marches' statistics summed.
+fn march_scene(
+    values: &ParamValues,
+    shot: &Shot,
+    request: &RenderRequest,
+    loaded: &LoadedScene,
+    color: ColorOutput,
+    outputs: Outputs,
+) -> Result<Rendered> {
     let quality = match values.choice("quality")? {
         _ if request.draft => Quality::Draft,
         "draft" => Quality::Draft,
@@ -545,11 +605,8 @@ fn march(values: &ParamValues, shot: &Shot, request: &RenderRequest) -> Result<R
         _ => Quality::Preview,
     };
     let settings = RenderSettings {
-        color: match values.choice("colour")? {
-            "asTrained" => ColorOutput::AsTrained,
-            _ => ColorOutput::Linear,
-        },
-        ..RenderSettings::new(quality.params(), Outputs::all())
+        color,
+        ..RenderSettings::new(quality.params(), outputs)
     };
     // The mean over the shutter's times and the aperture's points, as nerfx render's.
     let shutter = match values.int("shutterSamples")? {
@@ -565,7 +622,7 @@ fn march(values: &ParamValues, shot: &Shot, request: &RenderRequest) -> Result<R
         shot_frame(values, shot, t)
     })?;
     let (planes, stats) = mean_over_views(&views, &mut |at| {
-        render_through(values, shot, at, request, &settings)
+        render_through(values, shot, at, request, &settings, loaded)
     })?;
     Ok(Rendered { planes, stats })
 }
@@ -577,6 +634,7 @@ fn render_through(
     at: &ShotFrame,
     request: &RenderRequest,
     settings: &RenderSettings,
+    loaded: &LoadedScene,
 ) -> Result<(Planes, RenderStats)> {
     let window = request.window;
     let camera = scaled_camera(shot, at, request.render_scale)?;
@@ -590,7 +648,7 @@ fn render_through(
             ),
         ));
     }
-    let scene = placed_scene(values, shot, at)?;
+    let scene = placed_scene(values, shot, at, loaded)?;
     render_with_progress(&scene, &camera, window, settings, &|_| {})
 }
 

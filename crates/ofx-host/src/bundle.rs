@@ -556,10 +556,10 @@ impl Bundle {
             v("no supported pixel depths declared".into());
         }
         let clips = d.lock_clips();
-        if !clips.iter().any(|c| c.name == "Output") {
+        if !clips.iter().any(|c| &*c.name == "Output") {
             v("no Output clip defined".into());
         }
-        if context == Context::Filter && !clips.iter().any(|c| c.name == "Source") {
+        if context == Context::Filter && !clips.iter().any(|c| &*c.name == "Source") {
             v("the Filter context needs a Source clip".into());
         }
         for c in clips.iter() {
@@ -580,7 +580,7 @@ impl Bundle {
             .lock_clips()
             .iter()
             .map(|c| ClipDescription {
-                name: c.name.clone(),
+                name: c.name.to_string(),
                 label: c.props.string(ofx::kOfxPropLabel),
                 optional: c.props.int(ofx::kOfxImageClipPropOptional) != 0,
                 is_mask: c.props.int(ofx::kOfxImageClipPropIsMask) != 0,
@@ -596,7 +596,7 @@ impl Bundle {
             };
             let valued = q.ty.value_shape().is_some();
             ParamDescription {
-                name: q.name.clone(),
+                name: q.name.to_string(),
                 param_type: q.ty.name().to_string(),
                 label: q.props.string(ofx::kOfxPropLabel),
                 hint: q.props.string(ofx::kOfxParamPropHint),

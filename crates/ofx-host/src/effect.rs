@@ -22,7 +22,7 @@ use super::handles::{self, Kind};
 use super::log::{Log, Message};
 use super::options::{AbsentClip, HostOptions, InterlacedField, PADDING, ROW_SLACK};
 use super::params::{put, ParamSet};
-use super::props::{self, PropSet};
+use super::props::{self, PropSet, Template};
 use super::source::ClipSource;
 use super::spec::{cstr, SetKind};
 use super::{memory, status};
@@ -59,22 +59,23 @@ pub(crate) struct Effect {
     /// The persistent message set on the instance and not cleared since.
     pub(crate) persistent: Mutex<Option<Message>>,
     /// A descriptor's: the properties its instances start from in each context, made at the
-    /// first instance and shared by all of them until one is written.
-    instance_props: Mutex<Vec<(String, Box<PropSet>)>>,
+    /// first instance and shared by all of them until one is written, and the name their sets
+    /// go by.
+    instance_props: Mutex<Vec<(String, Template)>>,
 }
 
 /// A clip. Boxed and registered while alive.
 pub(crate) struct Clip {
-    /// Its name.
-    pub(crate) name: String,
+    /// Its name (an instance's is its descriptor's).
+    pub(crate) name: Arc<str>,
     /// Its properties.
     pub(crate) props: Box<PropSet>,
     effect: usize,
     /// What feeds it (inputs of an instance).
     pub(crate) source: Mutex<Option<ClipSource>>,
     /// A descriptor's: the properties its instances start from, made at the first instance
-    /// and shared by all of them until one is written.
-    instance_props: OnceLock<Box<PropSet>>,
+    /// and shared by all of them until one is written, and the name their sets go by.
+    instance_props: OnceLock<Box<Template>>,
 }
 
 /// Where an image's pixels are: `ptr` is the bottom-left pixel of `bounds`; rows are
@@ -206,7 +207,7 @@ impl Effect {
                 .instance_props
                 .lock()
                 .unwrap_or_else(PoisonError::into_inner);
-            let at = match templates.iter().position(|(c, _)| c == context) {
+            let at = match templates.iter().position(|(c, ..)| c == context) {
                 Some(at) => at,
                 None => {
                     let props = props::new_set(
@@ -220,13 +221,12 @@ impl Effect {
                     props.set_str(ofx::kOfxImageEffectPropContext, context);
                     props.set_doubles(ofx::kOfxImageEffectPropProjectSize, &[1920.0, 1080.0]);
                     props.set_doubles(ofx::kOfxImageEffectPropProjectExtent, &[1920.0, 1080.0]);
-                    templates.push((context.to_string(), props));
+                    let what = format!("{id} instance").into();
+                    templates.push((context.to_string(), Template { props, what }));
                     templates.len() - 1
                 }
             };
-            templates[at]
-                .1
-                .share(format!("{id} instance"), Some(log.clone()))
+            templates[at].1.instance(Some(log.clone()))
         };
         let params = self
             .params
@@ -259,7 +259,7 @@ impl Effect {
                     ] {
                         p.set_str(name, &components);
                     }
-                    let output = d.name == "Output";
+                    let output = &*d.name == "Output";
                     let depth = cstr(if output {
                         ofx::kOfxBitDepthFloat
                     } else {
@@ -280,10 +280,13 @@ impl Effect {
                         ofx::kOfxImageEffectPropPreMultiplication,
                         cstr(premultiplication(&e.options, output)),
                     );
-                    p
+                    Box::new(Template {
+                        props: p,
+                        what: format!("{id} clip {}", d.name).into(),
+                    })
                 });
-                let p = template.share(format!("{id} clip {}", d.name), Some(log.clone()));
-                Clip::boxed(&d.name, p, addr)
+                let p = template.instance(Some(log.clone()));
+                Clip::boxed(Arc::clone(&d.name), p, addr)
             })
             .collect();
         *e.lock_clips() = clips;
@@ -307,7 +310,7 @@ impl Effect {
     pub(crate) fn with_clip<R>(&self, name: &str, f: impl FnOnce(&Clip) -> R) -> Option<R> {
         self.lock_clips()
             .iter()
-            .find(|c| c.name == name)
+            .find(|c| &*c.name == name)
             .map(|c| f(c))
     }
 
@@ -390,9 +393,9 @@ impl Drop for Effect {
 }
 
 impl Clip {
-    fn boxed(name: &str, props: Box<PropSet>, effect: usize) -> Box<Clip> {
+    fn boxed(name: Arc<str>, props: Box<PropSet>, effect: usize) -> Box<Clip> {
         let c = Box::new(Clip {
-            name: name.to_string(),
+            name,
             props,
             effect,
             source: Mutex::new(None),
@@ -508,7 +511,7 @@ unsafe extern "C" fn clip_define(
             return Err(status::ERR_BAD_HANDLE);
         }
         let mut clips = e.lock_clips();
-        if clips.iter().any(|c| c.name == n) {
+        if clips.iter().any(|c| &*c.name == n) {
             e.log.violation(format!("{f}(\"{n}\"): defined twice"));
             return Err(status::ERR_EXISTS);
         }
@@ -521,7 +524,7 @@ unsafe extern "C" fn clip_define(
         p.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeClip));
         p.set_str(ofx::kOfxPropName, n);
         put(out, p.handle());
-        clips.push(Clip::boxed(n, p, e as *const Effect as usize));
+        clips.push(Clip::boxed(n.into(), p, e as *const Effect as usize));
         Ok(())
     })())
 }
@@ -639,7 +642,7 @@ unsafe extern "C" fn clip_get_image(
             return status::FAILED;
         }
     };
-    let made = if c.name == "Output" {
+    let made = if &*c.name == "Output" {
         output_image(e, c, ctx.as_ref(), time)
     } else {
         input_image(e, c, ctx.as_ref(), time, region)
@@ -791,7 +794,7 @@ fn input_image(
         f64::from(source.rod.0) * par,
         f64::from(source.rod.1),
     ];
-    let roi = ctx.map(|r| r.rois.get(&c.name).copied().unwrap_or(full));
+    let roi = ctx.map(|r| r.rois.get(&*c.name).copied().unwrap_or(full));
     let wanted = region.or(roi).unwrap_or(full);
     if wanted.iter().any(|v| !v.is_finite()) {
         return Err((
@@ -1001,7 +1004,7 @@ unsafe extern "C" fn clip_get_rod(
         Ok(x) => x,
         Err(s) => return s,
     };
-    let rod = if c.name == "Output" {
+    let rod = if &*c.name == "Output" {
         *e.output_rod.lock().unwrap_or_else(PoisonError::into_inner)
     } else {
         c.source

@@ -139,8 +139,8 @@ impl Instance {
         self.effect
             .lock_clips()
             .iter()
-            .filter(|c| c.name != "Output")
-            .map(|c| c.name.clone())
+            .filter(|c| &*c.name != "Output")
+            .map(|c| c.name.to_string())
             .collect()
     }
 
@@ -195,7 +195,7 @@ impl Instance {
     pub fn connect(&mut self, clip: &str, source: ClipSource) -> Result<()> {
         let id = self.effect.id.clone();
         let found = self.effect.with_clip(clip, |c| {
-            if c.name == "Output" {
+            if &*c.name == "Output" {
                 return false;
             }
             let float = cstr(ofx::kOfxBitDepthFloat);
@@ -227,7 +227,7 @@ impl Instance {
             .iter()
             .map(|c| {
                 (
-                    c.name.clone(),
+                    c.name.to_string(),
                     c.props.string(ofx::kOfxImageEffectPropComponents),
                     effect::clip_par(c),
                 )
@@ -314,7 +314,7 @@ impl Instance {
                     self.effect.id, c.name
                 )),
             }
-            if c.name == "Output" {
+            if &*c.name == "Output" {
                 let premult = out.string(ofx::kOfxImageEffectPropPreMultiplication);
                 c.props
                     .set_str(ofx::kOfxImageEffectPropPreMultiplication, &premult);

@@ -14,7 +14,7 @@ use openfx_sys::{OfxParamHandle, OfxParamSetHandle, OfxPropertySetHandle, OfxSta
 
 use super::handles::{self, Kind};
 use super::log::Log;
-use super::props::{self, c_string, PropSet, PropValue};
+use super::props::{self, c_string, PropSet, PropValue, Template};
 use super::spec::{cstr, ParamType, PropType, SetKind};
 use super::status;
 
@@ -30,8 +30,8 @@ enum Val {
 /// A parameter, descriptor or instance. Boxed and registered while alive.
 #[derive(Debug)]
 pub(crate) struct Param {
-    /// Its name.
-    pub(crate) name: String,
+    /// Its name (an instance's is its descriptor's).
+    pub(crate) name: Arc<str>,
     /// Its type.
     pub(crate) ty: ParamType,
     /// Its properties.
@@ -40,13 +40,13 @@ pub(crate) struct Param {
     instance: bool,
     log: Arc<Log>,
     /// A descriptor's: the properties its instances start from, made at the first instance
-    /// and shared by all of them until one is written.
-    instance_props: OnceLock<Box<PropSet>>,
+    /// and shared by all of them until one is written, and the name their sets go by.
+    instance_props: OnceLock<Box<Template>>,
 }
 
 impl Param {
     fn boxed(
-        name: &str,
+        name: Arc<str>,
         ty: ParamType,
         props: Box<PropSet>,
         instance: bool,
@@ -54,7 +54,7 @@ impl Param {
     ) -> Box<Param> {
         let value = Mutex::new(default_value(ty, &props));
         let p = Box::new(Param {
-            name: name.to_string(),
+            name,
             ty,
             props,
             value,
@@ -174,8 +174,11 @@ pub(crate) struct ParamSet {
     params: Mutex<Vec<Box<Param>>>,
     edits: Mutex<i32>,
     instance: bool,
-    what: String,
+    what: Arc<str>,
     log: Arc<Log>,
+    /// A descriptor's: the set properties its instances start from, made at the first
+    /// instance and shared by all of them until one is written, and their sets' names.
+    instance_props: OnceLock<Box<(Template, Arc<str>)>>,
 }
 
 impl ParamSet {
@@ -187,21 +190,44 @@ impl ParamSet {
             format!("{what} parameter set"),
             Some(log.clone()),
         );
+        ParamSet::boxed(props, what.into(), instance, log)
+    }
+
+    fn boxed(props: Box<PropSet>, what: Arc<str>, instance: bool, log: Arc<Log>) -> Box<ParamSet> {
         let set = Box::new(ParamSet {
             props,
             params: Mutex::new(Vec::new()),
             edits: Mutex::new(0),
             instance,
-            what: what.to_string(),
+            what,
             log,
+            instance_props: OnceLock::new(),
         });
         handles::register(&*set as *const ParamSet, Kind::ParamSet);
         set
     }
 
-    /// An instance's set: every descriptor parameter, at its default.
+    /// An instance's set (`what`: the instance, the same for every instance of this
+    /// descriptor): every descriptor parameter, at its default.
     pub(crate) fn instantiate(&self, what: &str, log: Arc<Log>) -> Box<ParamSet> {
-        let set = ParamSet::new(what, true, log.clone());
+        let (template, instance_what) = &**self.instance_props.get_or_init(|| {
+            let props = props::new_set(
+                SetKind::ParamSet,
+                "",
+                format!("{what} parameter set"),
+                Some(log.clone()),
+            );
+            let what_set = format!("{what} parameter set").into();
+            Box::new((
+                Template {
+                    props,
+                    what: what_set,
+                },
+                what.into(),
+            ))
+        });
+        let props = template.instance(Some(log.clone()));
+        let set = ParamSet::boxed(props, Arc::clone(instance_what), true, log.clone());
         let mut params = Vec::new();
         for d in self
             .params
@@ -218,10 +244,19 @@ impl ParamSet {
                 );
                 props.copy_values_from(&d.props);
                 props.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeParameterInstance));
-                props
+                Box::new(Template {
+                    props,
+                    what: format!("{what} parameter {}", d.name).into(),
+                })
             });
-            let props = template.share(format!("{what} parameter {}", d.name), Some(log.clone()));
-            params.push(Param::boxed(&d.name, d.ty, props, true, log.clone()));
+            let props = template.instance(Some(log.clone()));
+            params.push(Param::boxed(
+                Arc::clone(&d.name),
+                d.ty,
+                props,
+                true,
+                log.clone(),
+            ));
         }
         *set.params.lock().unwrap_or_else(PoisonError::into_inner) = params;
         set
@@ -248,7 +283,7 @@ impl ParamSet {
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
             .iter()
-            .find(|p| p.name == name)
+            .find(|p| &*p.name == name)
             .map(|p| f(p))
     }
 
@@ -384,7 +419,7 @@ unsafe extern "C" fn define(
         props.set_str(ofx::kOfxPropType, cstr(ofx::kOfxTypeParameter));
         props.set_str(ofx::kOfxParamPropType, t.name());
         put(props_out, props.handle());
-        let p = Param::boxed(name, t, props, false, set.log.clone());
+        let p = Param::boxed(name.into(), t, props, false, set.log.clone());
         set.params
             .lock()
             .unwrap_or_else(PoisonError::into_inner)

@@ -114,16 +114,90 @@ struct Entry {
     writable: bool,
 }
 
+/// A set's entries: those it shares with the sets made from the same template, and the
+/// ones it has changed since, each in place of the shared entry of its name.
+#[derive(Debug)]
+struct Entries {
+    /// Written in place while no other set holds them.
+    shared: Arc<BTreeMap<Arc<str>, Entry>>,
+    /// This set's changed entries (few: an instance writes one or two of its properties).
+    own: Vec<(Arc<str>, Entry)>,
+}
+
+impl Entries {
+    fn new(entries: BTreeMap<Arc<str>, Entry>) -> Entries {
+        Entries {
+            shared: Arc::new(entries),
+            own: Vec::new(),
+        }
+    }
+
+    fn get(&self, name: &str) -> Option<&Entry> {
+        match self.own.iter().find(|(n, _)| &**n == name) {
+            Some((_, e)) => Some(e),
+            None => self.shared.get(name),
+        }
+    }
+
+    /// The entry `name`, to change: this set's own, the shared one where no other set holds
+    /// the shared entries, else a copy of the shared one made this set's own (the shared
+    /// entry, and the string pointers handed out from it, stay as they are).
+    fn get_mut(&mut self, name: &str) -> Option<&mut Entry> {
+        if let Some(at) = self.own.iter().position(|(n, _)| &**n == name) {
+            return Some(&mut self.own[at].1);
+        }
+        if Arc::get_mut(&mut self.shared).is_some() {
+            return Arc::get_mut(&mut self.shared).and_then(|m| m.get_mut(name));
+        }
+        let (key, entry) = self.shared.get_key_value(name)?;
+        self.own.reserve_exact(1);
+        self.own.push((Arc::clone(key), entry.clone()));
+        self.own.last_mut().map(|(_, e)| e)
+    }
+
+    /// Every entry, this set's own in place of the shared ones.
+    fn each(&self) -> impl Iterator<Item = (&Arc<str>, &Entry)> {
+        self.shared.iter().map(|(n, e)| {
+            (
+                n,
+                self.own.iter().find(|(o, _)| o == n).map_or(e, |(_, o)| o),
+            )
+        })
+    }
+
+    /// The names of the entries.
+    fn names(&self) -> Vec<Arc<str>> {
+        self.shared.keys().cloned().collect()
+    }
+}
+
+/// What a descriptor's instances start from: the property set theirs share, and the name
+/// their sets go by.
+#[derive(Debug)]
+pub(crate) struct Template {
+    /// The set shared ([`PropSet::share`]).
+    pub(crate) props: Box<PropSet>,
+    /// The instances' sets' name.
+    pub(crate) what: Arc<str>,
+}
+
+impl Template {
+    /// A set for an instance, sharing the template's entries.
+    pub(crate) fn instance(&self, log: Option<Arc<Log>>) -> Box<PropSet> {
+        self.props.share(Arc::clone(&self.what), log)
+    }
+}
+
 /// A property set: the host's, an effect's, a clip's, an image's, a parameter's, or an
 /// action's arguments. Boxed and registered as a handle while alive.
 #[derive(Debug)]
 pub(crate) struct PropSet {
     kind: SetKind,
-    /// Names the set in violations (`org.nerfx.DepthMerge clip A`).
-    what: String,
-    /// Shared (copy on write) with the template a parameter instance's set starts from, until
-    /// the first write.
-    entries: Mutex<Arc<BTreeMap<String, Entry>>>,
+    /// Names the set in violations (`org.nerfx.DepthMerge clip A`); shared by a graph's
+    /// instances of one parameter or clip.
+    what: Arc<str>,
+    /// Shared with the template an instance's set starts from, except those it wrote.
+    entries: Mutex<Entries>,
     /// Where violations go; `None`: the log of the action running on the calling thread
     /// (the host's own set, shared by every bundle).
     log: Option<Arc<Log>>,
@@ -175,7 +249,7 @@ fn default_values(def: Def, ty: PropType, n: usize, name: &str, kind: SetKind) -
 pub(crate) fn new_set(
     kind: SetKind,
     name: &str,
-    what: String,
+    what: impl Into<Arc<str>>,
     log: Option<Arc<Log>>,
 ) -> Box<PropSet> {
     let mut entries = BTreeMap::new();
@@ -187,7 +261,7 @@ pub(crate) fn new_set(
             };
             let value = default_values(p.default, r.ty, n, name, kind);
             entries.insert(
-                p.name.to_string(),
+                Arc::from(p.name),
                 Entry {
                     default: value.clone(),
                     value,
@@ -212,7 +286,7 @@ pub(crate) fn args(
         .map(|(name, v)| {
             let value = Stored::from_value(v);
             (
-                name.to_string(),
+                Arc::from(*name),
                 Entry {
                     default: value.clone(),
                     dim: Dim::Fixed(value.len()),
@@ -228,14 +302,14 @@ pub(crate) fn args(
 impl PropSet {
     fn boxed(
         kind: SetKind,
-        what: String,
-        entries: BTreeMap<String, Entry>,
+        what: impl Into<Arc<str>>,
+        entries: BTreeMap<Arc<str>, Entry>,
         log: Option<Arc<Log>>,
     ) -> Box<PropSet> {
         let set = Box::new(PropSet {
             kind,
-            what,
-            entries: Mutex::new(Arc::new(entries)),
+            what: what.into(),
+            entries: Mutex::new(Entries::new(entries)),
             log,
         });
         handles::register(&*set as *const PropSet, Kind::PropSet);
@@ -252,16 +326,30 @@ impl PropSet {
         self.log.clone().unwrap_or_else(super::log::current)
     }
 
-    fn lock(&self) -> MutexGuard<'_, Arc<BTreeMap<String, Entry>>> {
+    fn lock(&self) -> MutexGuard<'_, Entries> {
         self.entries.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
-    /// A set of this one's kind holding its entries as they are now, shared until either set
-    /// is written (so a graph's instances of one parameter hold one copy of its properties
-    /// until a plugin or the host changes one of them). String pointers handed out by either
-    /// stay valid: a write copies the entries and leaves the shared ones as they were.
-    pub(crate) fn share(&self, what: String, log: Option<Arc<Log>>) -> Box<PropSet> {
-        let entries = Arc::clone(&self.lock());
+    /// A set of this one's kind holding its entries as they are now, shared with it (so a
+    /// graph's instances of one parameter hold one copy of its properties). A write to
+    /// either copies just the entry written, leaving the shared one, and the string pointers
+    /// handed out from it, as they were. Entries this set changed itself are copied.
+    pub(crate) fn share(&self, what: Arc<str>, log: Option<Arc<Log>>) -> Box<PropSet> {
+        let entries = {
+            let mine = self.lock();
+            if mine.own.is_empty() {
+                Entries {
+                    shared: Arc::clone(&mine.shared),
+                    own: Vec::new(),
+                }
+            } else {
+                let all = mine
+                    .each()
+                    .map(|(n, e)| (Arc::clone(n), e.clone()))
+                    .collect();
+                Entries::new(all)
+            }
+        };
         let set = Box::new(PropSet {
             kind: self.kind,
             what,
@@ -313,12 +401,9 @@ impl PropSet {
         f: impl FnOnce(&mut Entry) -> Result<R, (Status, String)>,
     ) -> Result<R, Status> {
         let mut entries = self.lock();
-        if !entries.contains_key(name) {
+        let Some(entry) = entries.get_mut(name) else {
             drop(entries);
             return Err(self.unknown(function, name));
-        }
-        let Some(entry) = Arc::make_mut(&mut entries).get_mut(name) else {
-            return Err(status::ERR_UNKNOWN);
         };
         f(entry).map_err(|(s, why)| {
             self.violate(function, name, why);
@@ -482,7 +567,7 @@ impl PropSet {
         if entry.value == stored {
             return Ok(());
         }
-        if let Some(entry) = Arc::make_mut(&mut entries).get_mut(name) {
+        if let Some(entry) = entries.get_mut(name) {
             entry.value = stored;
         }
         Ok(())
@@ -556,20 +641,22 @@ impl PropSet {
     /// Every property and its value.
     pub(crate) fn all(&self) -> BTreeMap<String, PropValue> {
         self.lock()
-            .iter()
-            .map(|(k, e)| (k.clone(), e.value.to_value()))
+            .each()
+            .map(|(k, e)| (k.to_string(), e.value.to_value()))
             .collect()
     }
 
     /// A copy of every value into a new set of `kind` (a descriptor's values into an
     /// instance), keeping the new set's own writability.
     pub(crate) fn copy_values_from(&self, other: &PropSet) {
-        let source = Arc::clone(&other.lock());
-        let mut entries = self.lock();
-        for (name, e) in Arc::make_mut(&mut entries).iter_mut() {
-            if let Some(s) = source.get(name) {
-                if s.value.ty() == e.value.ty() {
-                    e.value = s.value.clone();
+        let names = self.lock().names();
+        for name in names {
+            let Some(value) = other.lock().get(&name).map(|s| s.value.clone()) else {
+                continue;
+            };
+            if let Some(e) = self.lock().get_mut(&name) {
+                if value.ty() == e.value.ty() {
+                    e.value = value;
                 }
             }
         }
@@ -655,5 +742,60 @@ fn put(stored: &mut Stored, i: usize, value: Owned) {
         (Stored::String(v), Owned::String(x)) => at(v, i, x),
         (Stored::Pointer(v), Owned::Pointer(x)) => at(v, i, x),
         _ => {}
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two instances' sets made from one template: a write, by the plugin or the host, is
+    /// seen by the set written alone, the template and the other keep their values, and a
+    /// string pointer handed out before the write still reads what it read.
+    #[test]
+    fn a_write_to_a_shared_set_is_its_own() {
+        let log: Arc<Log> = Arc::default();
+        let template = new_set(SetKind::EffectInst, "fx", "template", Some(log.clone()));
+        let context = "OfxImageEffectPropContext";
+        let data = "OfxPropInstanceData";
+        template.set_str(
+            b"OfxImageEffectPropContext\0",
+            "OfxImageEffectContextFilter",
+        );
+        let (a, b) = (
+            template.share("a".into(), Some(log.clone())),
+            template.share("b".into(), Some(log.clone())),
+        );
+        let got = b.plugin_get("propGetString", context, PropType::String, 0);
+        let Ok(One::String(before)) = got else {
+            panic!("a string property: {got:?}");
+        };
+        a.set_str(
+            b"OfxImageEffectPropContext\0",
+            "OfxImageEffectContextGeneral",
+        );
+        // SAFETY: a pointer value, no string to read.
+        unsafe { a.plugin_set("propSetPointer", data, 0, One::Pointer(0x1234)) }.unwrap();
+        let string = |s: &PropSet| s.string(b"OfxImageEffectPropContext\0");
+        assert_eq!(string(&a), "OfxImageEffectContextGeneral");
+        assert_eq!(string(&b), "OfxImageEffectContextFilter");
+        assert_eq!(string(&template), "OfxImageEffectContextFilter");
+        let pointer = |s: &PropSet| s.get(data);
+        assert_eq!(pointer(&a), Some(PropValue::Pointer(vec![0x1234])));
+        assert_eq!(pointer(&b), Some(PropValue::Pointer(vec![0])));
+        assert_eq!(
+            a.all().get(context),
+            Some(&PropValue::String(vec![
+                "OfxImageEffectContextGeneral".into()
+            ]))
+        );
+        assert_eq!(a.all().len(), b.all().len());
+        // SAFETY: the pointer came from the shared entry, which the writes left in place.
+        let still = unsafe { CStr::from_ptr(before) };
+        assert_eq!(still.to_str(), Ok("OfxImageEffectContextFilter"));
+        // A set made from a written one starts from its values.
+        let c = a.share("c".into(), Some(log.clone()));
+        assert_eq!(string(&c), "OfxImageEffectContextGeneral");
+        assert!(log.violations().is_empty(), "{:?}", log.violations());
     }
 }

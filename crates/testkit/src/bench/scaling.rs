@@ -37,18 +37,28 @@ pub struct Point {
     /// CPU time of the frame (all threads), seconds; wall time where the system does not
     /// say.
     pub cpu_s: f64,
+    /// For a set-up point, the most heap bytes live at once while it was set up, where the
+    /// program counts them ([`super::memory`]).
+    pub peak_heap: Option<usize>,
 }
 
 impl Point {
     /// A point of a per-item series: `items` items (in `samples`) cost `cpu_s`.
-    pub fn per_item(label: String, items: u64, cpu_s: f64) -> Point {
+    pub fn per_item(label: String, items: u64, cpu_s: f64, peak_heap: Option<usize>) -> Point {
         Point {
             label,
             pixels: 0,
             samples: items,
             ms: cpu_s * 1e3,
             cpu_s,
+            peak_heap,
         }
+    }
+
+    /// Peak heap bytes per item (of a set-up point), where counted.
+    pub fn heap_per_item(&self) -> Option<f64> {
+        self.peak_heap
+            .map(|b| b as f64 / self.samples.max(1) as f64)
     }
 
     /// CPU nanoseconds per density sample.
@@ -200,6 +210,7 @@ fn measure(scene: &Scene, camera: &Camera, label: String) -> Result<Point> {
         samples: stats.density_samples,
         ms: wall * 1e3 / n,
         cpu_s: cpu_s / n,
+        peak_heap: None,
     })
 }
 
@@ -251,7 +262,13 @@ fn line(g: &Growth) -> String {
         .points
         .iter()
         .map(|p| match g.item {
-            Some(item) => format!("{}: {:.2} µs/{item}", p.label, p.ns_per_sample() / 1e3),
+            Some(item) => format!(
+                "{}: {:.2} µs/{item}{}",
+                p.label,
+                p.ns_per_sample() / 1e3,
+                p.heap_per_item()
+                    .map_or_else(String::new, |b| format!(", {b:.0} B heap/{item}"))
+            ),
             None => format!("{}: {:.0} ns/sample", p.label, p.ns_per_sample()),
         })
         .collect();
@@ -270,16 +287,20 @@ pub fn markdown(growths: &[Growth]) -> String {
         if let Some(item) = g.item {
             s += &format!(
                 "\n{} (set-up: CPU time per {item} flat means set-up grows no faster than the \
-                 content):\n\n| content | {item}s | CPU s | CPU µs per {item} |\n|---|---:|---:|---:|\n",
+                 content; peak heap per {item}, where counted, flat means its memory does too):\n\n\
+                 | content | {item}s | CPU s | CPU µs per {item} | peak heap B per {item} |\n\
+                 |---|---:|---:|---:|---:|\n",
                 g.title
             );
             for p in &g.points {
                 s += &format!(
-                    "| {} | {} | {:.3} | {:.2} |\n",
+                    "| {} | {} | {:.3} | {:.2} | {} |\n",
                     p.label,
                     p.samples,
                     p.cpu_s,
-                    p.ns_per_sample() / 1e3
+                    p.ns_per_sample() / 1e3,
+                    p.heap_per_item()
+                        .map_or_else(|| "–".to_string(), |b| format!("{b:.0}"))
                 );
             }
             continue;

@@ -9,6 +9,7 @@ use std::time::Instant;
 use glam::{DMat4, DVec3, Vec3};
 
 use super::field::process_cpu_seconds;
+use super::memory::peak_during;
 use super::scaling::{Growth, Point, PRESET};
 use nerfx_core::camera::{Camera, Perspective, Projection};
 use nerfx_core::demo::look_at;
@@ -18,12 +19,15 @@ use nerfx_core::render::{render_with_progress, Outputs, RenderSettings};
 use nerfx_core::scene::{FieldHandle, Instance, Scene};
 use nerfx_graph::{evaluate, render_direct, Graph};
 
-/// The CPU time (wall where the system does not say) of `work`, in seconds.
-fn cpu_seconds(work: impl FnOnce() -> Result<()>) -> Result<f64> {
+/// The CPU time (wall where the system does not say) of `work`, in seconds, and the most
+/// heap it held at once, where the program counts it.
+fn cpu_seconds(work: impl FnOnce() -> Result<()>) -> Result<(f64, Option<usize>)> {
     let (t, cpu) = (Instant::now(), process_cpu_seconds());
-    work()?;
+    let (done, heap) = peak_during(work);
+    done?;
     let wall = t.elapsed().as_secs_f64();
-    Ok(cpu.zip(process_cpu_seconds()).map_or(wall, |(a, b)| b - a))
+    let cpu_s = cpu.zip(process_cpu_seconds()).map_or(wall, |(a, b)| b - a);
+    Ok((cpu_s, heap.map(|h| h.peak)))
 }
 
 /// `n` small spheres on a cubic lattice filling `[−1, 1]³`, one analytic field.
@@ -59,7 +63,7 @@ pub fn primitives(counts: &[usize]) -> Result<Growth> {
     let mut points = Vec::new();
     for &n in counts {
         let field = lattice(n);
-        let cpu_s = cpu_seconds(|| {
+        let (cpu_s, heap) = cpu_seconds(|| {
             let handle = FieldHandle::analytic(field);
             let scene = Scene::new(vec![Instance::new(
                 "spheres",
@@ -70,7 +74,12 @@ pub fn primitives(counts: &[usize]) -> Result<Growth> {
             render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {})?;
             Ok(())
         })?;
-        points.push(Point::per_item(format!("{n} spheres"), n as u64, cpu_s));
+        points.push(Point::per_item(
+            format!("{n} spheres"),
+            n as u64,
+            cpu_s,
+            heap,
+        ));
     }
     Ok(Growth::per_item(
         "analytic primitives (spheres set up and a 16×16 frame rendered)",
@@ -105,8 +114,8 @@ pub fn graph_nodes(counts: &[usize], dir: &Path) -> Result<Growth> {
     run(&chain(1)?)?;
     let mut points = Vec::new();
     for &n in counts {
-        let cpu_s = cpu_seconds(|| run(&chain(n)?))?;
-        points.push(Point::per_item(format!("{n} nodes"), n as u64, cpu_s));
+        let (cpu_s, heap) = cpu_seconds(|| run(&chain(n)?))?;
+        points.push(Point::per_item(format!("{n} nodes"), n as u64, cpu_s, heap));
     }
     Ok(Growth::per_item(
         "graph nodes (a chain of Accumulation Mattes read and evaluated, 16×16)",

@@ -507,3 +507,121 @@ fn the_cli_refuses_what_deep_output_cannot_do_and_keeps_what_stands() {
     let run = nerfx(&["render", &scene, "--deep", &deep_arg]);
     assert!(String::from_utf8_lossy(&run.stderr).contains("graphs do not write deep files"));
 }
+
+/// The demo's node graph with its object's NeRF Render node writing deep files.
+fn demo_graph_with_deep(dir: &Path) -> PathBuf {
+    let graph = nerfx_graph::demo::write_graph(dir, 32, 18).unwrap();
+    let mut json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&graph).unwrap()).unwrap();
+    json["deep"] = serde_json::json!({"obj": "deep/obj.####.exr"});
+    std::fs::write(&graph, serde_json::to_vec_pretty(&json).unwrap()).unwrap();
+    graph
+}
+
+#[test]
+fn a_graph_writes_its_nerf_renders_deep_files_flattening_to_their_layers() {
+    let dir = tempfile::tempdir().unwrap();
+    let graph = demo_graph_with_deep(dir.path());
+    let frame = nerfx_core::demo::FIRST_FRAME + 1;
+    let out = dir.path().join("comp.####.exr");
+    let frames = format!("{frame}-{}", frame + 1);
+    let run = nerfx(&[
+        "render",
+        &graph.to_string_lossy(),
+        "--frames",
+        &frames,
+        "-o",
+        &out.to_string_lossy(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    for f in [frame, frame + 1] {
+        // The object's node is also the graph's `object` layer: its RGBA as the bundle
+        // rendered it.
+        let flat = dir.path().join(format!("comp.{f:04}.exr"));
+        let channels = nerfx_core::image::read_exr_channels(&flat).unwrap();
+        let find = |name: &str| {
+            channels
+                .iter()
+                .find(|(n, _)| n == name)
+                .map(|(_, p)| p.clone())
+                .unwrap_or_else(|| panic!("{name} in {}", flat.display()))
+        };
+        let r = find("object.R");
+        let layer = Planes {
+            width: r.width,
+            height: r.height,
+            rgb: Some([r, find("object.G"), find("object.B")]),
+            alpha: Some(find("object.A")),
+            depth_z: None,
+            depth_ray: None,
+            depth_median: None,
+        };
+        let deep = dir.path().join(format!("deep/obj.{f:04}.exr"));
+        let back = check(
+            &format!("graph node obj, frame {f}"),
+            &deep,
+            &layer,
+            Quality::Preview.deep_samples(),
+        );
+        let entries = back.header["entries"].as_object().unwrap();
+        let flat_header = header_of(&flat);
+        for key in ["chromaticities", "worldToCamera", "worldToNDC", "nerfx/colorspace"] {
+            assert!(entries.contains_key(key), "{key}");
+            assert_eq!(entries.get(key), flat_header.get(key), "{key}");
+        }
+        assert!(!entries.keys().any(|k| k.starts_with("cryptomatte/")));
+    }
+}
+
+#[test]
+fn a_graph_refuses_deep_output_it_cannot_write() {
+    let dir = tempfile::tempdir().unwrap();
+    let graph = demo_graph_with_deep(dir.path());
+    let graph = graph.to_string_lossy();
+    let out = dir.path().join("comp.exr");
+    let out = out.to_string_lossy();
+    let frame = nerfx_core::demo::FIRST_FRAME.to_string();
+    let refused = |args: &[&str], says: &str| {
+        let run = nerfx(args);
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success(), "{args:?} succeeded");
+        assert!(err.contains(says), "{args:?}: {err}");
+    };
+    refused(
+        &["render", &graph, "--frames", &frame, "-o", &out, "--stripe", "1/2"],
+        "deep files are written with whole frames",
+    );
+    refused(
+        &["render", &graph, "--frames", &frame, "-o", &out, "--deep", "x.exr"],
+        "its `deep` key",
+    );
+    std::fs::create_dir_all(dir.path().join("plain")).unwrap();
+    let plain = nerfx_graph::demo::write_graph(&dir.path().join("plain"), 8, 8).unwrap();
+    refused(
+        &[
+            "render",
+            &plain.to_string_lossy(),
+            "--frames",
+            &frame,
+            "-o",
+            &out,
+            "--deep-samples",
+            "4",
+        ],
+        "is for a graph whose file names deep outputs",
+    );
+    // A deep output must come from a NeRF Render node.
+    let mut json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(graph.as_ref()).unwrap()).unwrap();
+    json["deep"] = serde_json::json!({"comp": "d.exr"});
+    std::fs::write(graph.as_ref(), serde_json::to_vec(&json).unwrap()).unwrap();
+    refused(
+        &["render", &graph, "--frames", &frame, "-o", &out],
+        "deep images come from NeRF Render nodes",
+    );
+    assert!(!dir.path().join("comp.exr").exists());
+}

@@ -509,8 +509,6 @@ fn run(cli: Cli) -> Result<()> {
             deep,
             deep_samples,
         } => {
-            let deep_params =
-                deep_settings(deep.as_deref(), deep_samples, quality, stripe.is_some())?;
             let frames = frames.as_deref().map(parse_frames).transpose()?;
             let stripe = stripe.as_deref().map(Stripe::parse).transpose()?;
             let inputs: Vec<PathBuf> = std::iter::once(scene.clone()).chain(shot.clone()).collect();
@@ -537,7 +535,8 @@ fn run(cli: Cli) -> Result<()> {
                 if deep.is_some() {
                     return Err(Error::invalid(
                         "--deep",
-                        "graphs do not write deep files yet; render the scene with its shot",
+                        "a graph names the NeRF Render nodes it writes deep files of, and \
+                         where: its `deep` key",
                     ));
                 }
                 if colorspace.is_some() {
@@ -550,9 +549,12 @@ fn run(cli: Cli) -> Result<()> {
                 let mattes = Mattes {
                     all_renders: cryptomatte,
                     ranks: cryptomatte_ranks,
+                    deep_samples,
                 };
                 return graph::render(&scene, frames, &output, png, bundle, scale, mattes, &task);
             };
+            let deep_params =
+                deep_settings(deep.as_deref(), deep_samples, quality, stripe.is_some())?;
             let outputs = passes.as_deref().map_or_else(Outputs::all, Pass::outputs);
             if deep.is_some() && !(outputs.rgb && outputs.alpha) {
                 return Err(Error::invalid(
@@ -1145,6 +1147,8 @@ fn sbatch(args: &[String]) -> Result<String> {
 struct Mattes {
     all_renders: bool,
     ranks: usize,
+    /// `--deep-samples`: the cap of the graph's deep files (their nodes' presets' without).
+    deep_samples: Option<u32>,
 }
 
 /// Refuses `--cryptomatte-ranks` outside 1 to the most ranks where mattes are written.
@@ -1224,6 +1228,7 @@ mod graph {
     ) -> Result<()> {
         let graph = Graph::read(path)?;
         check_ranks(!graph.cryptomatte.is_empty(), mattes.ranks)?;
+        check_graph_deep(&graph, mattes.deep_samples, task.stripe.is_some())?;
         let matted = graph.cryptomatte_nodes(mattes.all_renders);
         let stripe = task.stripe;
         let nodes = graph.needed().iter().filter(|&&n| n).count();
@@ -1266,6 +1271,8 @@ mod graph {
                     stripe,
                     matted: &matted,
                     ranks: mattes.ranks,
+                    deep_samples: mattes.deep_samples,
+                    several: frames.len() > 1,
                 };
                 render_frame(&mut graph, frame, &to, &bar)?;
                 format!("frame {frame} → {}", path.display())
@@ -1287,6 +1294,67 @@ mod graph {
         /// The NeRF Render nodes whose instances get Cryptomatte layers.
         matted: &'a [String],
         ranks: usize,
+        /// The cap of the graph's deep files.
+        deep_samples: Option<u32>,
+        /// Whether the frames are several (their file names carry the frame).
+        several: bool,
+    }
+
+    /// Refuses a graph's deep files where they cannot be written: in stripes, by a build
+    /// without OpenEXR; and `--deep-samples` for a graph that writes none.
+    fn check_graph_deep(graph: &Graph, samples: Option<u32>, striped: bool) -> Result<()> {
+        if graph.deep.is_empty() {
+            return match samples {
+                Some(_) => Err(Error::invalid(
+                    "--deep-samples",
+                    "is for a graph whose file names deep outputs (its `deep` key)",
+                )),
+                None => Ok(()),
+            };
+        }
+        if striped {
+            return Err(Error::invalid(
+                "deep",
+                "deep files are written with whole frames: render the graph without --stripe",
+            ));
+        }
+        if !nerfx_core::image::deep_exr_available() {
+            return Err(Error::invalid(
+                "deep",
+                "this build of nerfx has no OpenEXR library, which writes deep files: install \
+                 OpenEXR's development files (Debian: apt-get install libopenexr-dev) and build \
+                 nerfx again",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The deep files of the graph's `deep` nodes at `frame`, each its node's render of the
+    /// frame's window, with the graph's header and the node's own camera.
+    fn write_graph_deep(
+        graph: &OfxGraph,
+        frame: i64,
+        to: &Target,
+        window_of: &dyn Fn(u32, u32) -> Result<nerfx_core::image::Window>,
+        header: &ExrHeader,
+    ) -> Result<()> {
+        let g = graph.graph();
+        for (node, pattern) in &g.deep {
+            let path = frame_path(pattern, frame, to.several);
+            if let Some(dir) = path.parent() {
+                create_dir(dir)?;
+            }
+            let time = frame as f64;
+            let (_, image) = g.deep(node, time, to.scale, window_of, to.deep_samples)?;
+            let (camera, _) = g.node_camera(node, time)?;
+            let header = ExrHeader {
+                pixel_aspect: graph.pixel_aspect(node),
+                camera: Some(CameraMatrices::of(&camera)),
+                ..header.clone()
+            };
+            write_deep_exr(&path, &image, &header)?;
+        }
+        Ok(())
     }
 
     /// One frame of the graph written to `to`.
@@ -1325,6 +1393,12 @@ mod graph {
             .map(|(layer, node)| Ok((layer.as_str(), image(node)?)))
             .collect::<Result<Vec<_>>>()?;
         let mut header = graph_header(graph, frame as f64)?;
+        // The deep files first (their header without the mattes' manifest): a flat file that
+        // reads back whole says they were written too.
+        if !graph.graph().deep.is_empty() {
+            bar.set_message(format!("frame {frame} deep"));
+            write_graph_deep(graph, frame, to, &window_of, &header)?;
+        }
         let mattes = if to.matted.is_empty() {
             Vec::new()
         } else {

@@ -12,8 +12,13 @@
 //!  "output": "comp",
 //!  "layers": {"env": "env"},
 //!  "cryptomatte": ["obj", "env"],
+//!  "deep": {"obj": "deep/obj.####.exr"},
 //!  "colorspace": "acescg"}
 //! ```
+//!
+//! `deep` (optional) maps NeRF Render nodes to the patterns of their deep scanline EXRs
+//! (`####`: the frame; relative to the graph file): each node's render, its samples at their
+//! depths, written per frame beside the graph's image (see [`Graph::deep`]).
 //!
 //! `cryptomatte` (optional) names NeRF Render nodes the output needs whose scene instances
 //! get Cryptomatte layers (`CryptoObject00`, …) in the written EXR: each instance's coverage
@@ -73,6 +78,8 @@ pub struct Graph {
     pub colorspace: OutputColorSpace,
     /// The NeRF Render nodes whose instances get Cryptomatte layers, in the file's order.
     pub cryptomatte: Vec<String>,
+    /// NeRF Render nodes and the patterns of their deep EXRs (absolute), in the file's order.
+    pub deep: Vec<(String, PathBuf)>,
 }
 
 impl Graph {
@@ -93,11 +100,11 @@ impl Graph {
         let json: Json = nerfx_core::json::parse_json(text, path, "a node graph")?;
         if let Some(map) = json.as_object() {
             if let Some(key) = map.keys().find(|k| {
-                !["nodes", "output", "layers", "colorspace", "cryptomatte"].contains(&k.as_str())
+                !["nodes", "output", "layers", "colorspace", "cryptomatte", "deep"].contains(&k.as_str())
             }) {
                 return Err(bad(
                     key,
-                    "unknown key (keys: nodes, output, layers, colorspace, cryptomatte)".into(),
+                    "unknown key (keys: nodes, output, layers, colorspace, cryptomatte, deep)".into(),
                 ));
             }
         }
@@ -184,6 +191,33 @@ impl Graph {
                 cryptomatte.push(name);
             }
         }
+        let mut deep = Vec::new();
+        if let Some(map) = json.get("deep") {
+            let map = map.as_object().ok_or_else(|| {
+                bad("deep", "expected an object: NeRF Render node → file pattern".into())
+            })?;
+            for (node, pattern) in map {
+                let key = format!("deep.{node}");
+                let pattern = pattern
+                    .as_str()
+                    .filter(|p| !p.is_empty())
+                    .ok_or_else(|| bad(&key, "expected a file pattern (text)".into()))?;
+                let render = nodes.iter().find(|n| n.name == *node);
+                match render {
+                    None => return Err(bad(&key, format!("no node is named {node:?}"))),
+                    Some(n) if n.node.desc.id != super::nerf_render::NODE_ID => {
+                        return Err(bad(
+                            &key,
+                            format!(
+                                "node {node:?} is a {}; deep images come from NeRF Render nodes",
+                                n.node.desc.id
+                            ),
+                        ))
+                    }
+                    Some(_) => deep.push((node.clone(), base.join(pattern))),
+                }
+            }
+        }
         let nodes = upstream_first(nodes).map_err(|m| bad("nodes", m))?;
         let mut graph = Graph {
             nodes,
@@ -191,6 +225,7 @@ impl Graph {
             layers,
             colorspace: OutputColorSpace::default(),
             cryptomatte,
+            deep,
         };
         let need = graph.needed();
         for (i, name) in graph.cryptomatte.iter().enumerate() {
@@ -377,12 +412,7 @@ impl Graph {
         render_scale: f64,
         window_of: &dyn Fn(u32, u32) -> Result<nerfx_core::image::Window>,
     ) -> Result<Vec<(String, nerfx_core::image::Plane)>> {
-        let node = self
-            .node(name)
-            .filter(|n| n.node.desc.id == super::nerf_render::NODE_ID)
-            .ok_or_else(|| {
-                Error::invalid(format!("graph node {name}"), "is not a NeRF Render node")
-            })?;
+        let node = self.nerf_render(name)?;
         let scaled = nerfx_core::image::scaled_size;
         let covered = || {
             let (w, h) = node
@@ -399,6 +429,51 @@ impl Graph {
             }
             other => other,
         })
+    }
+
+    /// The NeRF Render node `name`'s render of the window `window_of` gives for its image at
+    /// `time` and `render_scale` (its RGBA, exposed and in its Output Colour Space, without
+    /// its background and Source clip) and the deep image of it: its samples and fragments
+    /// at their depths, merged within its quality preset's error target and at most
+    /// `deep_samples` a pixel (the preset's cap without it), flattening to that RGBA.
+    /// Rendered in process from the node's parameters, as its Cryptomatte coverage is.
+    pub fn deep(
+        &self,
+        name: &str,
+        time: f64,
+        render_scale: f64,
+        window_of: &dyn Fn(u32, u32) -> Result<nerfx_core::image::Window>,
+        deep_samples: Option<u32>,
+    ) -> Result<(nerfx_core::image::Planes, nerfx_core::image::DeepImage)> {
+        let node = self.nerf_render(name)?;
+        let rendered = || {
+            let (w, h) = node
+                .node
+                .region_of_definition(&node.values, time)?
+                .unwrap_or((1, 1));
+            let scaled = nerfx_core::image::scaled_size;
+            let window = window_of(scaled(w, render_scale), scaled(h, render_scale))?;
+            let request = super::node::RenderRequest::new(time, window, render_scale);
+            super::nerf_render::node_deep(&node.values, &request, deep_samples)
+        };
+        rendered().map_err(|e| match e {
+            Error::Invalid { what, message } => {
+                Error::invalid(format!("graph node {name}: deep: {what}"), message)
+            }
+            other => other,
+        })
+    }
+
+    /// The camera of the NeRF Render node `name` at `time` (render scale 1), and its shot.
+    pub fn node_camera(&self, name: &str, time: f64) -> Result<(Camera, Arc<Shot>)> {
+        super::nerf_render::node_camera(&self.nerf_render(name)?.values, time)
+    }
+
+    /// The node `name`, which must be a NeRF Render node.
+    fn nerf_render(&self, name: &str) -> Result<&GraphNode> {
+        self.node(name)
+            .filter(|n| n.node.desc.id == super::nerf_render::NODE_ID)
+            .ok_or_else(|| Error::invalid(format!("graph node {name}"), "is not a NeRF Render node"))
     }
 }
 

@@ -30,9 +30,12 @@ use nerfx_core::camera::{
 use nerfx_core::composite::{over, rgba_pixels, rgba_planes};
 use nerfx_core::error::{number, Error, Result};
 use nerfx_core::frames::{coverage_by_indicators, frame_views, mean_over_views};
-use nerfx_core::image::{scaled_size, OutputColorSpace, Plane, Planes, BACKGROUND_DEPTH};
+use nerfx_core::image::{
+    scaled_size, DeepImage, OutputColorSpace, Plane, Planes, BACKGROUND_DEPTH,
+};
 use nerfx_core::render::{
-    render_with_progress, ColorOutput, Outputs, Quality, RenderSettings, RenderStats,
+    average_images, conform_to, render_deep, render_with_progress, ColorOutput, DeepParams,
+    Outputs, Quality, RenderSettings,
 };
 use nerfx_core::scene::{CropBox, Instance, LoadedScene, Scene};
 
@@ -598,17 +601,91 @@ fn march_scene(
     color: ColorOutput,
     outputs: Outputs,
 ) -> Result<Rendered> {
-    let quality = match values.choice("quality")? {
+    let (settings, views) = node_views(values, shot, request, color, outputs)?;
+    let (planes, stats) = mean_over_views(&views, &mut |at| {
+        let (scene, camera) = view_scene(values, shot, at, request, loaded)?;
+        render_with_progress(&scene, &camera, request.window, &settings, &|_| {})
+    })?;
+    Ok(Rendered { planes, stats })
+}
+
+/// The node's render of `request`'s window (its RGBA, exposed and in its Output Colour Space,
+/// without its background and Source) and the deep image of it ([`render_deep`]; at most
+/// `deep_samples` a pixel, the quality preset's cap without it): over
+/// several views (motion blur, depth of field) the views' deep pixels averaged as
+/// [`average_images`] does, which flattens to the averaged render.
+pub(crate) fn node_deep(
+    values: &ParamValues,
+    request: &RenderRequest,
+    deep_samples: Option<u32>,
+) -> Result<(Planes, DeepImage)> {
+    let quality = node_quality(values, request)?;
+    let deep = &DeepParams {
+        max_samples: deep_samples.unwrap_or_else(|| quality.deep_samples()),
+        error_target: quality.params().error_target,
+    };
+    deep.validate()?;
+    let shot = node_shot(values)?;
+    let loaded = cached_scene(file(values, "file")?)?;
+    let color = match values.choice("colour")? {
+        "asTrained" => ColorOutput::AsTrained,
+        _ => ColorOutput::Linear,
+    };
+    let (settings, views) = node_views(values, &shot, request, color, Outputs::rgba())?;
+    let mut deeps = Vec::new();
+    let (mut planes, _) = mean_over_views(&views, &mut |at| {
+        let (scene, camera) = view_scene(values, &shot, at, request, &loaded)?;
+        let (planes, image, stats) =
+            render_deep(&scene, &camera, request.window, &settings, deep, &|_| {})?;
+        deeps.push(image);
+        Ok((planes, stats))
+    })?;
+    let mut image = match deeps.len() {
+        1 => deeps.remove(0),
+        _ => average_images(&deeps, deep)?,
+    };
+    // Exposed in linear light, then converted, as the node's RGBA output is.
+    let gain = values.double("exposure")?.exp2() as f32;
+    if gain != 1.0 {
+        for plane in planes.rgb.iter_mut().flatten() {
+            plane.data.iter_mut().for_each(|v| *v *= gain);
+        }
+        for sample in &mut image.samples {
+            sample.rgb = sample.rgb.map(|v| v * gain);
+        }
+    }
+    let space = output_color_space(values)?;
+    space.convert_planes(&mut planes);
+    space.convert_deep(&mut image);
+    conform_to(&mut image, &planes);
+    Ok((planes, image))
+}
+
+/// The quality preset the node renders `request` at (Draft for a host's draft render).
+fn node_quality(values: &ParamValues, request: &RenderRequest) -> Result<Quality> {
+    Ok(match values.choice("quality")? {
         _ if request.draft => Quality::Draft,
         "draft" => Quality::Draft,
         "final" => Quality::Final,
         _ => Quality::Preview,
-    };
+    })
+}
+
+/// The settings the node renders `request` at (its quality, the colour and passes asked for)
+/// and the views its frame is the mean of ([`frame_views`]: its shutter and aperture samples,
+/// the preset's where they are 0).
+fn node_views(
+    values: &ParamValues,
+    shot: &Shot,
+    request: &RenderRequest,
+    color: ColorOutput,
+    outputs: Outputs,
+) -> Result<(RenderSettings, Vec<Vec<ShotFrame>>)> {
+    let quality = node_quality(values, request)?;
     let settings = RenderSettings {
         color,
         ..RenderSettings::new(quality.params(), outputs)
     };
-    // The mean over the shutter's times and the aperture's points, as nerfx render's.
     let shutter = match values.int("shutterSamples")? {
         0 => quality.shutter_samples(),
         n => n.clamp(1, 1024) as u32,
@@ -621,21 +698,18 @@ fn march_scene(
     let views = frame_views(shot, time, shutter, aperture, &|t| {
         shot_frame(values, shot, t)
     })?;
-    let (planes, stats) = mean_over_views(&views, &mut |at| {
-        render_through(values, shot, at, request, &settings, loaded)
-    })?;
-    Ok(Rendered { planes, stats })
+    Ok((settings, views))
 }
 
-/// One pinhole render of the node's window from the camera of `at`.
-fn render_through(
+/// The scene placed for the view `at` and its pinhole camera at `request`'s render scale,
+/// which must hold `request`'s window.
+fn view_scene(
     values: &ParamValues,
     shot: &Shot,
     at: &ShotFrame,
     request: &RenderRequest,
-    settings: &RenderSettings,
     loaded: &LoadedScene,
-) -> Result<(Planes, RenderStats)> {
+) -> Result<(Scene, Camera)> {
     let window = request.window;
     let camera = scaled_camera(shot, at, request.render_scale)?;
     if camera.clamp_window(window)? != window {
@@ -648,8 +722,7 @@ fn render_through(
             ),
         ));
     }
-    let scene = placed_scene(values, shot, at, loaded)?;
-    render_with_progress(&scene, &camera, window, settings, &|_| {})
+    Ok((placed_scene(values, shot, at, loaded)?, camera))
 }
 
 /// The output the node shows of `planes`: one pass, exposed and over the background.

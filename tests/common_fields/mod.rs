@@ -123,17 +123,6 @@ fn run_script(
     Some(std::fs::read(&output).unwrap())
 }
 
-/// The benchmarks' frame size: `NERFX_BENCH_SIZE=WxH`, or `default`.
-pub fn bench_size(default: (u32, u32)) -> (u32, u32) {
-    std::env::var("NERFX_BENCH_SIZE")
-        .ok()
-        .and_then(|s| {
-            let (w, h) = s.split_once('x')?;
-            Some((w.parse().ok()?, h.parse().ok()?))
-        })
-        .unwrap_or(default)
-}
-
 /// `|a − b| / |b|`, with equal values (zero included) giving exactly 0.
 pub fn rel_err(a: f32, b: f32) -> f32 {
     if a == b {

@@ -10,8 +10,8 @@
 //!   of Blender's silhouette edge;
 //! - depth (nerfx Z vs Blender's Z pass) within 1e-3 relative away from the edge.
 //!
-//! Blender is found on `PATH`. Without it the test fails (CI installs it: `apt-get install
-//! blender`), unless `NERFX_SKIP_BLENDER=1`, which skips with a message.
+//! A cross-check (the `cross-checks` feature, `scripts/test.sh`): Blender is found on `PATH`.
+//! Without it the test fails (CI installs it: `apt-get install blender`).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -24,24 +24,18 @@ use nerfx_core::render::{render, Outputs, Quality, RenderSettings};
 use nerfx_core::scene::{FieldHandle, Instance, Scene};
 use serde_json::Value;
 
-/// Where Blender is, or `None` after printing a skip line when `NERFX_SKIP_BLENDER=1`.
-fn blender() -> Option<PathBuf> {
-    if std::env::var("NERFX_SKIP_BLENDER").as_deref() == Ok("1") {
-        eprintln!(
-            "SKIPPED blender_alignment: NERFX_SKIP_BLENDER=1 (Blender alignment not checked)"
-        );
-        return None;
-    }
+/// Where Blender is on `PATH`; fails the test, saying so, where it is not.
+fn blender() -> PathBuf {
     let found = std::env::var_os("PATH").and_then(|paths| {
         std::env::split_paths(&paths)
             .map(|dir| dir.join("blender"))
             .find(|p| p.is_file())
     });
     match found {
-        Some(p) => Some(p),
+        Some(p) => p,
         None => panic!(
             "`blender` is not on PATH: the alignment test needs Blender 3.4+ \
-             (CI: apt-get install -y blender). Set NERFX_SKIP_BLENDER=1 to skip it knowingly."
+             (CI: apt-get install -y blender)"
         ),
     }
 }
@@ -222,8 +216,12 @@ fn check_render(case: &Value, sphere: &Value) -> (f64, u32, f64, u32) {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn nerfx_agrees_with_blender_projections_silhouettes_and_depth() {
-    let Some(exe) = blender() else { return };
+    let exe = blender();
     let (reference, out) = run_blender(&exe);
     eprintln!("Blender {}", reference["blender"]);
     let (mut worst_px, mut n_points, mut renders) = (0f64, 0usize, 0);

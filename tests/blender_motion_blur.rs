@@ -6,7 +6,8 @@
 //! of how two Cycles renders with different seeds differ, sharp frames must agree exactly, and
 //! the blur must be real (far from the sharp render).
 //!
-//! Blender is found on `PATH`; without it the test fails, unless `NERFX_SKIP_BLENDER=1`.
+//! A cross-check (the `cross-checks` feature, `scripts/test.sh`): Blender is found on `PATH`;
+//! without it the test fails.
 
 use std::path::PathBuf;
 use std::process::Command;
@@ -16,21 +17,15 @@ use nerfx_core::render::{Outputs, Quality, RenderSettings};
 use nerfx_core::scene::SceneDesc;
 use serde_json::Value;
 
-fn blender() -> Option<PathBuf> {
-    if std::env::var("NERFX_SKIP_BLENDER").as_deref() == Ok("1") {
-        eprintln!("SKIPPED blender_motion_blur: NERFX_SKIP_BLENDER=1");
-        return None;
-    }
-    let found = std::env::var_os("PATH").and_then(|paths| {
-        std::env::split_paths(&paths)
-            .map(|dir| dir.join("blender"))
-            .find(|p| p.is_file())
-    });
-    assert!(
-        found.is_some(),
-        "`blender` is not on PATH (apt-get install -y blender; NERFX_SKIP_BLENDER=1 skips)"
-    );
-    found
+/// Where Blender is on `PATH`; fails the test, saying so, where it is not.
+fn blender() -> PathBuf {
+    std::env::var_os("PATH")
+        .and_then(|paths| {
+            std::env::split_paths(&paths)
+                .map(|dir| dir.join("blender"))
+                .find(|p| p.is_file())
+        })
+        .expect("`blender` is not on PATH (apt-get install -y blender)")
 }
 
 fn rows(v: &Value) -> Vec<f64> {
@@ -53,8 +48,12 @@ fn mean_abs_diff(a: &[f64], b: &[f64]) -> f64 {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn a_moving_sphere_blurs_as_cycles_blurs_it() {
-    let Some(exe) = blender() else { return };
+    let exe = blender();
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let out = tempfile::tempdir().unwrap();
     let run = Command::new(&exe)

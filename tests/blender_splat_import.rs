@@ -4,7 +4,8 @@
 //! becomes the NeRF object. Every other splat format goes through `nerfx export-standin` (the
 //! add-on runs the program): the same holds, colours to 8 bits.
 //!
-//! Blender is found on `PATH`; without it the test fails, unless `NERFX_SKIP_BLENDER=1`.
+//! A cross-check (the `cross-checks` feature, `scripts/test.sh`): Blender is found on `PATH`;
+//! without it the test fails.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -12,11 +13,7 @@ use std::process::Command;
 use nerfx_core::field::Splats;
 
 /// What Blender made of importing `file`: vertex count, NeRF object, points (x y z r g b).
-fn blender_import(file: &Path, executable: Option<&Path>) -> Option<(u64, String, Vec<Vec<f64>>)> {
-    if std::env::var("NERFX_SKIP_BLENDER").as_deref() == Ok("1") {
-        eprintln!("SKIPPED blender_splat_import: NERFX_SKIP_BLENDER=1");
-        return None;
-    }
+fn blender_import(file: &Path, executable: Option<&Path>) -> (u64, String, Vec<Vec<f64>>) {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let out = tempfile::tempdir().unwrap();
     let json_path = out.path().join("import.json");
@@ -31,11 +28,9 @@ fn blender_import(file: &Path, executable: Option<&Path>) -> Option<(u64, String
     if let Some(exe) = executable {
         command.arg(exe);
     }
-    let run = command.output().unwrap_or_else(|e| {
-        panic!(
-            "`blender` did not run ({e}): apt-get install -y blender; NERFX_SKIP_BLENDER=1 skips"
-        )
-    });
+    let run = command
+        .output()
+        .unwrap_or_else(|e| panic!("`blender` did not run ({e}): apt-get install -y blender"));
     let text = std::fs::read_to_string(&json_path).unwrap_or_else(|_| {
         panic!(
             "Blender wrote nothing:\n{}\n{}",
@@ -56,11 +51,11 @@ fn blender_import(file: &Path, executable: Option<&Path>) -> Option<(u64, String
                 .collect()
         })
         .collect();
-    Some((
+    (
         got["vertices"].as_u64().unwrap(),
         got["nerf_object"].as_str().unwrap().to_string(),
         points,
-    ))
+    )
 }
 
 /// The largest position and colour errors of Blender's points against the splats.
@@ -80,11 +75,13 @@ fn errors(splats: &Splats, points: &[Vec<f64>]) -> (f64, f64) {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn blender_imports_splats_as_points_at_their_means() {
     let ply = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/splat_plane_sh3.ply");
-    let Some((vertices, nerf_object, points)) = blender_import(&ply, None) else {
-        return;
-    };
+    let (vertices, nerf_object, points) = blender_import(&ply, None);
     let splats = Splats::load(&ply).unwrap();
     assert_eq!(vertices, splats.len() as u64);
     assert_eq!(nerf_object, "splat_plane_sh3");
@@ -98,6 +95,10 @@ fn blender_imports_splats_as_points_at_their_means() {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn blender_imports_every_other_format_through_nerfx() {
     let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/splats");
     let exe = Path::new(env!("CARGO_BIN_EXE_nerfx"));
@@ -108,9 +109,7 @@ fn blender_imports_every_other_format_through_nerfx() {
         "sjeongab_512.splat",
     ] {
         let file = data.join(name);
-        let Some((vertices, nerf_object, points)) = blender_import(&file, Some(exe)) else {
-            return;
-        };
+        let (vertices, nerf_object, points) = blender_import(&file, Some(exe));
         let splats = Splats::load(&file).unwrap();
         assert_eq!(vertices, splats.len() as u64, "{name}");
         assert_eq!(nerf_object, name.split('.').next().unwrap(), "{name}");

@@ -17,6 +17,10 @@ use std::process::Command;
 use nerfx_core::image::read_exr_channels;
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn mattes_decode_per_the_specification_and_add_up_to_alpha() {
     let (w, h) = (96u32, 64u32);
     let dir = tempfile::tempdir().unwrap();

@@ -2,13 +2,11 @@
 //! graph evaluated in process with the registry: identical pixels for every node, at full and
 //! half render scale, and from the command line for a subset of frames.
 
-mod common_ofx;
-
 use std::path::PathBuf;
 use std::process::{Command, Output};
 
-use common_ofx::images::rgba_of;
-use common_ofx::load;
+use crate::common_ofx::images::rgba_of;
+use crate::common_ofx::load;
 use nerfx_core::demo;
 use nerfx_core::image::read_exr_channels;
 use nerfx_graph::demo::write_graph;
@@ -28,7 +26,7 @@ fn render_cli(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_nerfx"))
         .arg("render")
         .args(args)
-        .args(["--bundle", &common_ofx::bundle().to_string_lossy()])
+        .args(["--bundle", &crate::common_ofx::bundle().to_string_lossy()])
         .output()
         .unwrap()
 }

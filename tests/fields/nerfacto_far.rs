@@ -7,11 +7,8 @@
 //! The NumPy checks need `python3` with `numpy` and are cross-checks: they run with the
 //! `cross-checks` feature (`scripts/test.sh`), and fail without the tools, saying so.
 
-mod common_fields;
-mod common_nerfacto;
-
-use common_fields::numpy_reference;
-use common_nerfacto::{scene_of, scratch, write_run, Spec};
+use crate::common_fields::numpy_reference;
+use crate::common_nerfacto::{scene_of, scratch, write_run, Spec};
 use glam::{DMat4, DVec3, Vec3};
 use nerfx_core::camera::{Camera, Equirect, Perspective, Projection};
 use nerfx_core::field::NerfactoField;

@@ -4,21 +4,17 @@
 //! The NumPy checks need `python3` with `numpy` and `msgpack` and are cross-checks: they run with the
 //! `cross-checks` feature (`scripts/test.sh`), and fail without the tools, saying so.
 
-mod common_fields;
-#[allow(dead_code)] // the blob writer this test does not use
-mod common_ingp;
-
 use std::process::Command;
 
-use common_fields::{check_rgb, check_sigma, numpy_reference};
-use common_ingp::{scratch, write_snapshot, Spec, SplitMix64};
+use crate::common_fields::{check_rgb, check_sigma, numpy_reference};
+use crate::common_ingp::{scratch, write_snapshot, Spec, SplitMix64};
 use glam::Vec3;
 use nerfx_core::field::{Aabb, Field, IngpField, TableStorage};
 
 /// Seeded points inside the field's bounds and unit directions.
 fn samples(field: &IngpField, n: usize, seed: u64) -> (Vec<Vec3>, Vec<Vec3>) {
     let b = field.bounds();
-    common_fields::samples_in_box(b.min, b.max, n, seed)
+    crate::common_fields::samples_in_box(b.min, b.max, n, seed)
 }
 
 fn check_against_numpy(name: &str, spec: &Spec) {
@@ -236,7 +232,7 @@ fn table_storages_agree() {
 fn truncated_and_corrupt_files_give_errors_naming_the_file() {
     let dir = scratch("corrupt");
     for spec in [Spec::small_8x4(), Spec::old_16x2()] {
-        let full = common_ingp::file_bytes(&spec);
+        let full = crate::common_ingp::file_bytes(&spec);
         let path = dir.join(if spec.gzip { "cut.ingp" } else { "cut.msgpack" });
         let mut cuts: Vec<usize> = (0..64).map(|k| k * full.len() / 64).collect();
         cuts.extend([1, 2, 3, 10, 100, full.len() - 1]);
@@ -397,7 +393,8 @@ fn hostile_snapshots_are_refused_early_in_the_users_terms() {
 /// The snapshot of `spec` (raw msgpack) with `edit` applied to the bytes of `snapshot.<key>`.
 fn with_snapshot_bytes(spec: &Spec, key: &str, edit: impl Fn(&mut Vec<u8>)) -> Vec<u8> {
     use rmpv::Value;
-    let mut top = rmpv::decode::read_value(&mut &common_ingp::snapshot_bytes(spec)[..]).unwrap();
+    let mut top =
+        rmpv::decode::read_value(&mut &crate::common_ingp::snapshot_bytes(spec)[..]).unwrap();
     let Value::Map(entries) = &mut top else {
         panic!("top level is not a map")
     };
@@ -431,7 +428,7 @@ fn non_finite_weights_and_density_grid_values_are_refused_naming_the_block() {
         gzip: false,
         ..Spec::small_8x4()
     };
-    let (nd, nr, _) = common_ingp::param_counts(&spec);
+    let (nd, nr, _) = crate::common_ingp::param_counts(&spec);
     let path = dir.path().join("diverged.msgpack");
     let nan = half::f16::NAN.to_le_bytes();
     let inf = half::f16::INFINITY.to_le_bytes();
@@ -477,7 +474,7 @@ fn edited(
     spec: &Spec,
     edit: impl Fn(&mut Vec<(rmpv::Value, rmpv::Value)>),
 ) -> std::path::PathBuf {
-    let bytes = common_ingp::snapshot_bytes(spec);
+    let bytes = crate::common_ingp::snapshot_bytes(spec);
     let mut top = rmpv::decode::read_value(&mut &bytes[..]).unwrap();
     let rmpv::Value::Map(entries) = &mut top else {
         panic!("a map")

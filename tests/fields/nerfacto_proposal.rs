@@ -7,12 +7,9 @@
 //! The NumPy checks need `python3` with `numpy` and are cross-checks: they run with the
 //! `cross-checks` feature (`scripts/test.sh`), and fail without the tools, saying so.
 
-mod common_fields;
-mod common_nerfacto;
-
 use std::path::Path;
 
-use common_nerfacto::{placed, scratch, write_run, Spec};
+use crate::common_nerfacto::{placed, scratch, write_run, Spec};
 use glam::{DMat4, DVec3};
 use nerfx_core::camera::{Camera, Perspective, Projection, Ray};
 use nerfx_core::field::{NerfactoField, Piece, SamplerRay, SamplerScratch};
@@ -31,7 +28,7 @@ fn numpy_render(run: &Path, rays: &[SamplerRay], n_edges: usize) -> Vec<Vec<f64>
             [o.x, o.y, o.z, d.x, d.y, d.z, r.near, r.far]
         })
         .collect();
-    let values = common_fields::numpy_rays(
+    let values = crate::common_fields::numpy_rays(
         "nerfacto_proposal_reference.py",
         &["numpy"],
         run,

@@ -4,12 +4,9 @@
 //! nerfstudio samples it; nerfstudio's `rgb` over black is nerfx's premultiplied as-trained
 //! colour, its `accumulation` nerfx's alpha, its `expected_depth` nerfx's ray depth.
 
-mod common_fields;
-mod common_nerfacto;
-
 use std::path::Path;
 
-use common_nerfacto::{copied_nerfstudio_run, nerfstudio_fixture, scratch};
+use crate::common_nerfacto::{copied_nerfstudio_run, nerfstudio_fixture, scratch};
 use glam::DVec3;
 use nerfx_core::field::{NerfactoField, SamplerRay, SamplerScratch};
 use nerfx_core::frames::{read_shot, render_frame};

@@ -6,13 +6,9 @@
 //! The NumPy checks need `python3` with `numpy` and `msgpack` and are cross-checks: they run with the
 //! `cross-checks` feature (`scripts/test.sh`), and fail without the tools, saying so.
 
-mod common_fields;
-#[allow(dead_code)] // the snapshot writers this test does not use
-mod common_ingp;
-
 use std::path::{Path, PathBuf};
 
-use common_ingp::{
+use crate::common_ingp::{
     camera, placed, scratch, write_blob_snapshot, Ball, Spec, BALLS_IN_THREE_CASCADES,
 };
 use glam::{DMat4, DVec3};
@@ -30,7 +26,7 @@ fn numpy_march(snapshot: &Path, rays: &[NgpRay], max_steps: usize) -> Vec<[f64; 
             [o.x, o.y, o.z, d.x, d.y, d.z, r.near, r.far]
         })
         .collect();
-    let values = common_fields::numpy_rays(
+    let values = crate::common_fields::numpy_rays(
         "ingp_marcher_reference.py",
         &["numpy", "msgpack"],
         snapshot,

@@ -5,14 +5,10 @@
 //! The NumPy checks need `python3` with `numpy` and `msgpack` and are cross-checks: they run with the
 //! `cross-checks` feature (`scripts/test.sh`), and fail without the tools, saying so.
 
-mod common_fields;
-#[allow(dead_code)] // the snapshot writers this test does not use
-mod common_ingp;
-
 use std::sync::Arc;
 
-use common_fields::numpy_reference;
-use common_ingp::{scratch, write_blob_snapshot, Ball, Spec};
+use crate::common_fields::numpy_reference;
+use crate::common_ingp::{scratch, write_blob_snapshot, Ball, Spec};
 use glam::{DMat4, DVec3, Vec3};
 use nerfx_core::camera::{Camera, Perspective, Projection};
 use nerfx_core::field::IngpField;

@@ -117,8 +117,8 @@ if ! command -v mdbook >/dev/null; then
     cargo install --quiet --locked mdbook --no-default-features --features search
 fi
 
-echo "== cargo test --workspace"
-cargo test --workspace "$@"
+echo "== cargo test --workspace --features cross-checks"
+cargo test --workspace --features cross-checks "$@"
 
 echo "== mdbook build docs"
 mdbook build docs

@@ -35,6 +35,10 @@ fn mean(a: &[f64], b: &[f64]) -> Vec<f64> {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn a_defocused_sphere_blurs_as_cycles_blurs_it_in_every_blender() {
     let blenders = common_blender::blenders("blender_depth_of_field");
     if blenders.is_empty() {

@@ -16,6 +16,10 @@ use glam::DVec3;
 use serde_json::{json, Value};
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn blender_sees_each_sphere_where_the_field_has_it_in_every_blender() {
     for blender in common_blender::blenders("blender_environment") {
         check(&blender);

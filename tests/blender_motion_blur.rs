@@ -40,6 +40,10 @@ fn mean_abs_diff(a: &[f64], b: &[f64]) -> f64 {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn a_moving_sphere_blurs_as_cycles_blurs_it_in_every_blender() {
     let blenders = common_blender::blenders("blender_motion_blur");
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));

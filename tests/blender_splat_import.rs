@@ -79,6 +79,10 @@ fn errors(splats: &Splats, points: &[Vec<f64>]) -> (f64, f64) {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn blender_imports_splats_as_points_at_their_means() {
     let ply = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/splat_plane_sh3.ply");
     let splats = Splats::load(&ply).unwrap();
@@ -97,6 +101,10 @@ fn blender_imports_splats_as_points_at_their_means() {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn blender_imports_every_other_format_through_nerfx() {
     let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/splats");
     let exe = Path::new(env!("CARGO_BIN_EXE_nerfx"));

@@ -33,6 +33,10 @@ fn render_rgba() -> Planes {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn every_space_matches_opencolorio_and_names_its_primaries() {
     let linear = render_rgba();
     let dir = tempfile::tempdir().unwrap();

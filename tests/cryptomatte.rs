@@ -58,6 +58,10 @@ fn decode(exr: &Path) -> (Vec<String>, std::collections::BTreeMap<String, Vec<f6
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn mattes_decode_per_the_specification_and_add_up_to_alpha() {
     let (w, h) = (96u32, 64u32);
     let dir = tempfile::tempdir().unwrap();

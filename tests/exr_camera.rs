@@ -20,6 +20,10 @@ fn times(p: DVec3, m: &[f64]) -> [f64; 4] {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn header_matrices_project_world_points_onto_their_pixels() {
     let (w, h) = (96u32, 64u32);
     let dir = tempfile::tempdir().unwrap();

@@ -39,6 +39,10 @@ fn expected<'a>(main: &'a Planes, layers: &[(&str, &'a Planes)]) -> Vec<(String,
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn openexr_reads_every_channel_bit_for_bit() {
     let (scene, camera) = nerfx_core::demo::scene_and_camera(64, 36).unwrap();
     let settings = RenderSettings::new(Quality::Draft.params(), Outputs::all());

@@ -8,134 +8,24 @@
 //!   render like it to ≥ 60 dB.
 //! - Writers in this file encode known values as each format's description says (SPZ 2, 3 and
 //!   4, `.splat`); the reader must give back the description's decoding of the stored bytes.
+//!
+//! Whole real captures, too large to keep here, are checked the same way by
+//! `NERFX_REAL_SPLATS=folder cargo bench --bench splats -- real_captures`.
+
+mod common_splats;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
+use common_splats::{assert_matches, check_against_decoding, differences};
 use glam::{DMat4, Quat, Vec3};
 use nerfx_core::field::{Axes, SplatColor, SplatFormat, Splats};
-use nerfx_core::image::Planes;
-use nerfx_core::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
-use nerfx_core::scene::{Scene, SplatInstance};
-use nerfx_testkit::bench::splats::framing_camera;
+use nerfx_core::scene::SplatInstance;
 
 fn data(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data/splats")
         .join(name)
-}
-
-/// The largest differences between two splat sets of one order: means, relative scales,
-/// rotations (sign-free), opacities, colour coefficients.
-fn differences(a: &Splats, b: &Splats) -> [f32; 5] {
-    assert_eq!(a.len(), b.len());
-    assert_eq!(a.color, b.color);
-    let mut d = [0.0f32; 5];
-    for i in 0..a.len() {
-        d[0] = d[0].max((a.means[i] - b.means[i]).abs().max_element());
-        let rel = (a.scales[i] - b.scales[i]).abs() / b.scales[i].abs().max(Vec3::splat(1e-12));
-        d[1] = d[1].max(rel.max_element());
-        let dot = a.rotations[i].dot(b.rotations[i]).abs();
-        d[2] = d[2].max(1.0 - dot.min(1.0));
-        d[3] = d[3].max((a.opacities[i] - b.opacities[i]).abs());
-    }
-    for (x, y) in a.coefficients.iter().zip(&b.coefficients) {
-        d[4] = d[4].max((x - y).abs());
-    }
-    d
-}
-
-fn settings() -> RenderSettings {
-    let mut s = RenderSettings::new(Quality::Final.params(), Outputs::all());
-    s.color = ColorOutput::AsTrained;
-    s
-}
-
-fn render_splats(splats: &Splats, camera_of: &Splats) -> Planes {
-    let camera = framing_camera(camera_of, 192, 128).unwrap();
-    let scene = Scene::default().with_splats(vec![SplatInstance::new(
-        "splats",
-        Arc::new(splats.clone()),
-        DMat4::IDENTITY,
-        None,
-        false,
-    )
-    .unwrap()]);
-    render(&scene, &camera, camera.full_window(), &settings()).unwrap()
-}
-
-/// PSNR of premultiplied RGB and alpha together (peak 1), dB.
-fn psnr(a: &Planes, b: &Planes) -> f64 {
-    let planes = |p: &Planes| {
-        let rgb = p.rgb.as_ref().unwrap();
-        let alpha = p.alpha.as_ref().unwrap();
-        [&rgb[0], &rgb[1], &rgb[2], alpha]
-            .map(|plane| plane.data.clone())
-            .concat()
-    };
-    let (x, y) = (planes(a), planes(b));
-    let mse = x
-        .iter()
-        .zip(&y)
-        .map(|(p, q)| f64::from(p - q).powi(2))
-        .sum::<f64>()
-        / x.len() as f64;
-    let coverage = y
-        .iter()
-        .skip(3 * y.len() / 4)
-        .filter(|v| **v > 0.05)
-        .count();
-    assert!(coverage > y.len() / 40, "the render shows almost nothing");
-    if mse == 0.0 {
-        f64::INFINITY
-    } else {
-        -10.0 * mse.log10()
-    }
-}
-
-/// `name` read by nerfx against splat-transform's decoding `name.decoded.ply` in `dir`:
-/// the largest differences and the render's PSNR.
-fn check_against_decoding(dir: &Path, name: &str, axes: Axes) -> ([f32; 5], f64) {
-    let file = dir.join(name);
-    let ours = Splats::load(&file).unwrap().into_ply_frame(axes);
-    let mut theirs = Splats::load(&dir.join(format!("{name}.decoded.ply"))).unwrap();
-    assert_eq!(ours.dropped, 0, "{name}");
-    if ours.source.format == SplatFormat::Splat {
-        // splat-transform centres rotation bytes at 127.5; antimatter15's viewer, and the
-        // viewers after it, at 128: `(q − 128)/128`. Take the rotations from the bytes so.
-        let bytes = std::fs::read(&file).unwrap();
-        for (i, r) in bytes.chunks_exact(32).enumerate() {
-            let q = [28, 29, 30, 31].map(|k| (f32::from(r[k]) - 128.0) / 128.0);
-            theirs.rotations[i] = Quat::from_xyzw(q[1], q[2], q[3], q[0]).normalize();
-        }
-    }
-    let d = differences(&ours, &theirs);
-    let db = psnr(
-        &render_splats(&ours, &theirs),
-        &render_splats(&theirs, &theirs),
-    );
-    println!(
-        "{name}: {} splats; means {:.1e}, scales {:.1e} (relative), rotations {:.1e}, \
-         opacities {:.1e}, coefficients {:.1e}; render {db:.1} dB",
-        ours.len(),
-        d[0],
-        d[1],
-        d[2],
-        d[3],
-        d[4]
-    );
-    (d, db)
-}
-
-fn assert_matches(name: &str, (d, db): ([f32; 5], f64)) {
-    // splat-transform computes in f64 and stores f32; the opacity crosses a logit.
-    assert!(d[0] <= 1e-5, "{name}: means differ by {}", d[0]);
-    assert!(d[1] <= 1e-4, "{name}: scales differ by {}", d[1]);
-    assert!(d[2] <= 1e-5, "{name}: rotations differ by {}", d[2]);
-    assert!(d[3] <= 1e-5, "{name}: opacities differ by {}", d[3]);
-    assert!(d[4] <= 1e-4, "{name}: coefficients differ by {}", d[4]);
-    assert!(db >= 60.0, "{name}: {db:.1} dB");
 }
 
 /// Each encoding read by nerfx against splat-transform's decoding of it.
@@ -177,36 +67,6 @@ fn encodings_equal_splat_transforms_decoding_and_render_alike() {
         assert_eq!((ours.len(), ours.dropped), (512, 0), "{name}");
         assert_matches(name, check_against_decoding(&data(""), name, axes));
     }
-}
-
-/// Whole real captures, which are too large to keep here: every file `NAME` in the folder
-/// `NERFX_REAL_SPLATS` names that has a `NAME.decoded.ply` beside it (splat-transform's
-/// decoding). `NERFX_REAL_SPLATS=dir cargo test --test splat_formats -- --ignored`.
-#[test]
-#[ignore]
-fn real_captures_equal_splat_transforms_decoding() {
-    let Some(dir) = std::env::var_os("NERFX_REAL_SPLATS").map(PathBuf::from) else {
-        panic!("NERFX_REAL_SPLATS names no folder");
-    };
-    let mut checked = 0;
-    for entry in std::fs::read_dir(&dir).unwrap() {
-        let name = entry.unwrap().file_name().to_string_lossy().into_owned();
-        if name.ends_with(".decoded.ply") || !dir.join(format!("{name}.decoded.ply")).is_file() {
-            continue;
-        }
-        let axes = if name.ends_with(".spz") {
-            Axes::Rub
-        } else {
-            Axes::Stored
-        };
-        assert_matches(&name, check_against_decoding(&dir, &name, axes));
-        checked += 1;
-    }
-    assert!(
-        checked > 0,
-        "no NAME with a NAME.decoded.ply in {}",
-        dir.display()
-    );
 }
 
 /// splat-transform 2.7.1 writes SPZ in RUB, y and z flipped from the PLY it was given (and

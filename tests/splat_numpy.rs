@@ -4,8 +4,8 @@
 //! with shift, pixel aspect on either axis, a portrait vertical fit, and the splats placed by a
 //! non-uniformly scaled object transform. Requires colour ≥ 50 dB PSNR and alpha within 1e-3.
 //!
-//! Needs `python3` with `numpy`; without it it fails with a message saying so, unless
-//! `NERFX_SKIP_NUMPY=1` (then it prints a skip line).
+//! A cross-check: needs `python3` with `numpy`, and runs with the `cross-checks` feature
+//! (`scripts/test.sh`); without it it fails with a message saying so.
 
 use std::path::Path;
 use std::process::Command;
@@ -93,11 +93,7 @@ fn cases() -> Vec<Case> {
     ]
 }
 
-fn numpy(job: &serde_json::Value, dir: &Path) -> Option<Vec<f32>> {
-    if std::env::var("NERFX_SKIP_NUMPY").as_deref() == Ok("1") {
-        println!("skipped: NumPy cross-check (NERFX_SKIP_NUMPY=1)");
-        return None;
-    }
+fn numpy(job: &serde_json::Value, dir: &Path) -> Vec<f32> {
     let (input, output) = (dir.join("job.json"), dir.join("out.bin"));
     std::fs::write(&input, job.to_string()).unwrap();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/numpy/splat_reference.py");
@@ -106,26 +102,24 @@ fn numpy(job: &serde_json::Value, dir: &Path) -> Option<Vec<f32>> {
         .arg(&input)
         .arg(&output)
         .output()
-        .unwrap_or_else(|e| {
-            panic!(
-                "the NumPy cross-check needs python3 with numpy ({e}); or set NERFX_SKIP_NUMPY=1"
-            )
-        });
+        .unwrap_or_else(|e| panic!("the NumPy cross-check needs python3 with numpy ({e})"));
     assert!(
         run.status.success(),
-        "the NumPy reference failed (it needs numpy; NERFX_SKIP_NUMPY=1 skips it):\n{}",
+        "the NumPy reference failed (it needs numpy):\n{}",
         String::from_utf8_lossy(&run.stderr)
     );
     let bytes = std::fs::read(&output).unwrap();
-    Some(
-        bytes
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect(),
-    )
+    bytes
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect()
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn splats_match_an_independent_numpy_rasteriser() {
     let splats = Arc::new(Splats::load(&ply()).unwrap());
     assert_eq!((splats.len(), splats.dropped), (13_982, 0));
@@ -164,9 +158,7 @@ fn splats_match_an_independent_numpy_rasteriser() {
                 "pixel_aspect_x": b.pixel_aspect_x, "pixel_aspect_y": b.pixel_aspect_y,
             },
         });
-        let Some(want) = numpy(&job, dir.path()) else {
-            return;
-        };
+        let want = numpy(&job, dir.path());
         // With the median depth each pixel composites its list of fragments; without it
         // a tile of splats alone is composited sixteen pixels at once: both are checked.
         let median = [true, false];

@@ -34,69 +34,59 @@ pub fn samples_in_box(min: Vec3, max: Vec3, n: usize, seed: u64) -> (Vec<Vec3>, 
 }
 
 /// Runs `tests/numpy/<script> <target> points.bin numpy_out.bin` (points and directions as
-/// little-endian f32 `px py pz dx dy dz`; answers as `σ r g b`) next to `target`; `None` when
-/// skipped by `NERFX_SKIP_NUMPY=1`. `modules` are the Python modules the script needs, named
-/// in the failure messages so a missing one is a clear failure, never a silent pass.
+/// little-endian f32 `px py pz dx dy dz`; answers as `σ r g b`) next to `target`. `modules`
+/// are the Python modules the script needs, named in the failure messages so a missing one is
+/// a clear failure, never a silent pass. A cross-check: the tests that call it are ignored
+/// unless the `cross-checks` feature is on (`scripts/test.sh`).
 pub fn numpy_reference(
     script: &str,
     modules: &[&str],
     target: &Path,
     pts: &[Vec3],
     dirs: &[Vec3],
-) -> Option<Vec<[f32; 4]>> {
+) -> Vec<[f32; 4]> {
     let bytes: Vec<u8> = pts
         .iter()
         .zip(dirs)
         .flat_map(|(p, d)| [p.x, p.y, p.z, d.x, d.y, d.z])
         .flat_map(f32::to_le_bytes)
         .collect();
-    let out = run_script(script, modules, target, ("points.bin", &bytes), &[])?;
-    Some(
-        out.chunks_exact(16)
-            .map(|c| {
-                [0, 1, 2, 3].map(|k| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().unwrap()))
-            })
-            .collect(),
-    )
+    let out = run_script(script, modules, target, ("points.bin", &bytes), &[]);
+    out.chunks_exact(16)
+        .map(|c| [0, 1, 2, 3].map(|k| f32::from_le_bytes(c[4 * k..4 * k + 4].try_into().unwrap())))
+        .collect()
 }
 
 /// Runs `tests/numpy/<script> <target> rays.bin numpy_out.bin <args…>` next to `target` on
 /// rays given as eight little-endian f64 each (origin, direction, near, far); returns the
-/// script's answer as f64 values, or `None` when skipped by `NERFX_SKIP_NUMPY=1`. `modules`
-/// as for [`numpy_reference`].
+/// script's answer as f64 values. `modules` as for [`numpy_reference`].
 pub fn numpy_rays(
     script: &str,
     modules: &[&str],
     target: &Path,
     rays: &[[f64; 8]],
     args: &[String],
-) -> Option<Vec<f64>> {
+) -> Vec<f64> {
     let bytes: Vec<u8> = rays
         .iter()
         .flatten()
         .flat_map(|v| v.to_le_bytes())
         .collect();
-    let out = run_script(script, modules, target, ("rays.bin", &bytes), args)?;
-    Some(
-        out.chunks_exact(8)
-            .map(|b| f64::from_le_bytes(b.try_into().unwrap()))
-            .collect(),
-    )
+    let out = run_script(script, modules, target, ("rays.bin", &bytes), args);
+    out.chunks_exact(8)
+        .map(|b| f64::from_le_bytes(b.try_into().unwrap()))
+        .collect()
 }
 
 /// Writes `input` (name, bytes) next to `target`, runs the script on them and returns what it
-/// wrote to `numpy_out.bin`; `None` when skipped.
+/// wrote to `numpy_out.bin`.
 fn run_script(
     script: &str,
     modules: &[&str],
     target: &Path,
     (input_name, bytes): (&str, &[u8]),
     args: &[String],
-) -> Option<Vec<u8>> {
-    if std::env::var("NERFX_SKIP_NUMPY").as_deref() == Ok("1") {
-        println!("skipped: NumPy cross-check (NERFX_SKIP_NUMPY=1)");
-        return None;
-    }
+) -> Vec<u8> {
     let (names, pip) = (modules.join(" and "), modules.join(" "));
     let dir = target.parent().unwrap();
     let (input, output) = (dir.join(input_name), dir.join("numpy_out.bin"));
@@ -112,26 +102,14 @@ fn run_script(
         .args(args)
         .output()
         .unwrap_or_else(|e| {
-            panic!("the NumPy cross-check needs python3 ({e}); install it with {names} (pip install {pip}) or set NERFX_SKIP_NUMPY=1")
+            panic!("the NumPy cross-check needs python3 ({e}) with {names} (pip install {pip})")
         });
     assert!(
         run.status.success(),
-        "the NumPy reference failed (it needs {names}: pip install {pip}; NERFX_SKIP_NUMPY=1 \
-         skips it):\n{}",
+        "the NumPy reference failed (it needs {names}: pip install {pip}):\n{}",
         String::from_utf8_lossy(&run.stderr)
     );
-    Some(std::fs::read(&output).unwrap())
-}
-
-/// The benchmarks' frame size: `NERFX_BENCH_SIZE=WxH`, or `default`.
-pub fn bench_size(default: (u32, u32)) -> (u32, u32) {
-    std::env::var("NERFX_BENCH_SIZE")
-        .ok()
-        .and_then(|s| {
-            let (w, h) = s.split_once('x')?;
-            Some((w.parse().ok()?, h.parse().ok()?))
-        })
-        .unwrap_or(default)
+    std::fs::read(&output).unwrap()
 }
 
 /// `|a − b| / |b|`, with equal values (zero included) giving exactly 0.

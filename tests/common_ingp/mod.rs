@@ -6,6 +6,9 @@
 
 use std::path::{Path, PathBuf};
 
+use glam::DVec3;
+use nerfx_core::camera::{Camera, Perspective, Projection};
+
 pub use nerfx_testkit::bench::snapshot::{param_counts, Ball, SnapshotSpec as Spec};
 // The tests' one generator, through the shared harness (which every crate using this
 // writer declares as `mod common_fields`).
@@ -55,4 +58,52 @@ pub fn write_blob_snapshot(
         path,
         nerfx_testkit::bench::snapshot::occupied_fraction(&spec),
     )
+}
+
+/// The snapshot at `snapshot` (in `dir`) as the one instance of a scene, at the identity,
+/// with `"sampler": sampler` when given.
+pub fn placed(
+    dir: &Path,
+    snapshot: &Path,
+    sampler: Option<&str>,
+) -> nerfx_core::Result<nerfx_core::scene::Scene> {
+    let scene_file = dir.join("scene.json");
+    let sampler = sampler.map_or(String::new(), |s| format!(r#", "sampler": "{s}""#));
+    std::fs::write(
+        &scene_file,
+        format!(
+            r#"{{"instances": [{{"name": "blob", "field": {{"ingp": {{"path": "{}"{sampler}}}}}}}]}}"#,
+            snapshot.file_name().unwrap().to_string_lossy()
+        ),
+    )
+    .unwrap();
+    nerfx_core::scene::SceneDesc::read(&scene_file)?
+        .load()?
+        .place(glam::DMat4::IDENTITY, &|_| Ok(glam::DMat4::IDENTITY))
+}
+
+/// One ball in each of three cascades (aabb_scale 4).
+pub const BALLS_IN_THREE_CASCADES: [Ball; 3] = [
+    Ball {
+        centre: [0.5, 0.5, 0.5],
+        radius: 0.3,
+    },
+    Ball {
+        centre: [1.4, 0.6, 0.5],
+        radius: 0.35,
+    },
+    Ball {
+        centre: [0.5, -0.9, 0.4],
+        radius: 0.45,
+    },
+];
+
+/// A perspective camera at `eye` looking at `target`, `fov` degrees vertically.
+pub fn camera(w: u32, h: u32, fov: f64, eye: DVec3, target: DVec3) -> Camera {
+    let p = Perspective::from_vertical_fov(w, h, fov).unwrap();
+    Camera::new(
+        nerfx_core::demo::look_at(eye, target),
+        Projection::Perspective(p),
+    )
+    .unwrap()
 }

@@ -681,47 +681,6 @@ pipeline: !!python/object:nerfstudio.pipelines.base_pipeline.VanillaPipelineConf
     )
 }
 
-/// Samples `rays` (an image's, `pixels` of them) again outside the renderer, in 256-ray
-/// batches on rayon's threads, and says where the sampler's time goes: thread-seconds in the
-/// proposal networks and in the main field, and each one's queries per pixel.
-pub fn sampler_split(
-    field: &nerfx_core::field::NerfactoField,
-    rays: &[nerfx_core::field::SamplerRay],
-    pixels: f64,
-) -> String {
-    use nerfx_core::field::{SamplerScratch, SamplerStats};
-    use rayon::prelude::*;
-    let t = std::time::Instant::now();
-    let split = rays
-        .par_chunks(256)
-        .map_init(
-            || (SamplerScratch::default(), Vec::new()),
-            |(s, pieces), batch| {
-                pieces.clear();
-                field.sample_rays(batch, pieces, s).unwrap()
-            },
-        )
-        .reduce(SamplerStats::default, |mut a, b| {
-            a += b;
-            a
-        });
-    let (prop, main) = (
-        split.proposal_time.as_secs_f64(),
-        split.main_time.as_secs_f64(),
-    );
-    format!(
-        "sampling alone: {:.0} ms wall; thread-seconds: proposal networks {prop:.2} s ({:.0} %, \
-         {:.1} queries/pixel), main field {main:.2} s ({:.0} %, {:.1} density and {:.1} colour \
-         queries/pixel)",
-        t.elapsed().as_secs_f64() * 1e3,
-        100.0 * prop / (prop + main),
-        split.proposal_queries as f64 / pixels,
-        100.0 * main / (prop + main),
-        split.main_queries as f64 / pixels,
-        split.color_queries as f64 / pixels,
-    )
-}
-
 /// A fresh scratch folder for one test.
 pub fn scratch(name: &str) -> PathBuf {
     let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
@@ -750,4 +709,69 @@ pub fn write_run(dir: &Path, s: &Spec) -> PathBuf {
     .unwrap();
     std::fs::write(models.join("step-000000999.ckpt"), b"not a checkpoint").unwrap();
     run
+}
+
+/// The run in `dir/run` placed at the identity, sampled as `sampler` says.
+pub fn placed(dir: &Path, sampler: &str) -> nerfx_core::Result<nerfx_core::scene::Scene> {
+    let scene_file = dir.join("scene.json");
+    std::fs::write(
+        &scene_file,
+        format!(
+            r#"{{"instances": [{{"name": "run", "field": {{"nerfacto": {{"path": "run",
+                "sampler": "{sampler}"}}}}}}]}}"#
+        ),
+    )
+    .unwrap();
+    nerfx_core::scene::SceneDesc::read(&scene_file)?
+        .load()?
+        .place(glam::DMat4::IDENTITY, &|_| Ok(glam::DMat4::IDENTITY))
+}
+
+/// `field` as the one instance of a scene, named "run", at `world_from_field`.
+pub fn scene_of(
+    field: nerfx_core::field::NerfactoField,
+    world_from_field: glam::DMat4,
+) -> nerfx_core::scene::Scene {
+    use nerfx_core::scene::{FieldHandle, Instance, Scene};
+    Scene::new(vec![Instance::new(
+        "run",
+        FieldHandle::new(std::sync::Arc::new(field)),
+        world_from_field,
+        None,
+    )
+    .unwrap()])
+}
+
+/// The real nerfacto run and nerfstudio's own renders of it (`tests/data/nerfstudio/`).
+pub fn nerfstudio_fixture() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/nerfstudio")
+}
+
+/// A copy of the real run in `dir/run` (nerfx caches an occupancy grid beside a run) and a
+/// scene naming it as the path's object, loaded.
+pub fn copied_nerfstudio_run(dir: &Path) -> (PathBuf, nerfx_core::scene::LoadedScene) {
+    let run = dir.join("run");
+    for sub in ["", "nerfstudio_models"] {
+        std::fs::create_dir_all(run.join(sub)).unwrap();
+        for entry in std::fs::read_dir(nerfstudio_fixture().join("run").join(sub)).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_file() {
+                std::fs::copy(&path, run.join(sub).join(path.file_name().unwrap())).unwrap();
+            }
+        }
+    }
+    let scene_file = dir.join("scene.json");
+    std::fs::write(
+        &scene_file,
+        r#"{"instances": [{"name": "run", "object": "NeRF",
+            "field": {"nerfacto": {"path": "run"}}}]}"#,
+    )
+    .unwrap();
+    (
+        run,
+        nerfx_core::scene::SceneDesc::read(&scene_file)
+            .unwrap()
+            .load()
+            .unwrap(),
+    )
 }

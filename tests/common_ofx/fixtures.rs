@@ -1,8 +1,8 @@
 //! What the tests that drive the NeRF Render through the host start from: one bundle shared
 //! by a binary's tests, the demo's input files, file parameters as values.
 
-use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+use std::path::Path;
+use std::sync::{Mutex, OnceLock, PoisonError};
 
 use nerfx_graph::{node, Context, ParamValues, Value};
 use nerfx_ofx_host::{Bundle, HostOptions, Instance};
@@ -16,20 +16,21 @@ pub fn shared() -> &'static Bundle {
 }
 
 /// The demo's inputs (scenes, shot, graph: `nerfx_graph::demo::write_graph`) at `w × h`, written
-/// once per test binary into a directory of its own.
-///
-/// Writing them is the slow part, so a binary keeps one size: a call with another size than
-/// the first fails rather than silently handing back images of the wrong size.
+/// once per test binary and size into a directory of its own (writing them is the slow part).
 pub fn demo_dir(w: u32, h: u32) -> &'static Path {
-    static DIR: OnceLock<(u32, u32, PathBuf)> = OnceLock::new();
-    let (dw, dh, dir) = DIR.get_or_init(|| {
-        let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
-            .join(format!("nerfx-ofx-demo-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        nerfx_graph::demo::write_graph(&dir, w, h).unwrap();
-        (w, h, dir)
-    });
-    assert_eq!((*dw, *dh), (w, h), "one demo size per test binary");
+    static DIRS: Mutex<Vec<(u32, u32, &'static Path)>> = Mutex::new(Vec::new());
+    let mut dirs = DIRS.lock().unwrap_or_else(PoisonError::into_inner);
+    if let Some(&(_, _, dir)) = dirs.iter().find(|d| (d.0, d.1) == (w, h)) {
+        return dir;
+    }
+    let dir: &'static Path = Box::leak(
+        Path::new(env!("CARGO_TARGET_TMPDIR"))
+            .join(format!("nerfx-ofx-demo-{}-{w}x{h}", std::process::id()))
+            .into_boxed_path(),
+    );
+    std::fs::create_dir_all(dir).unwrap();
+    nerfx_graph::demo::write_graph(dir, w, h).unwrap();
+    dirs.push((w, h, dir));
     dir
 }
 

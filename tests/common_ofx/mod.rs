@@ -27,8 +27,8 @@ pub fn load(options: HostOptions) -> Bundle {
     Bundle::load_with(&bundle(), options).expect("the built bundle loads")
 }
 
-/// The bundle as shipped (release profile), for benchmarks; test binaries without one do not
-/// use it.
+/// The bundle as shipped (release profile), for the bench targets (`benches/graph.rs`); the
+/// test binaries do not use it.
 #[allow(dead_code)]
 pub fn release_bundle() -> PathBuf {
     build("release")

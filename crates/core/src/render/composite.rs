@@ -456,14 +456,14 @@ mod tests {
 
     /// Quadrature of the definition in mpmath (`tests/numpy/far_share_reference.py`): a grid
     /// of thicknesses from 0 to 1e9 at either end, seeded random pairs, and density falling
-    /// steeply across an opaque piece. Needs `python3` with `mpmath`; `NERFX_SKIP_NUMPY=1`
-    /// skips it.
+    /// steeply across an opaque piece. A cross-check: needs `python3` with `mpmath`, and runs
+    /// with the `cross-checks` feature (`scripts/test.sh`).
     #[test]
+    #[cfg_attr(
+        not(feature = "cross-checks"),
+        ignore = "a cross-check: scripts/test.sh runs it"
+    )]
     fn far_share_matches_quadrature_of_its_definition() {
-        if std::env::var("NERFX_SKIP_NUMPY").as_deref() == Ok("1") {
-            println!("skipped: mpmath cross-check (NERFX_SKIP_NUMPY=1)");
-            return;
-        }
         let script = concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/../../tests/numpy/far_share_reference.py"
@@ -474,7 +474,7 @@ mod tests {
             .unwrap_or_else(|e| panic!("the mpmath cross-check needs python3 ({e})"));
         assert!(
             run.status.success(),
-            "the mpmath reference failed (it needs mpmath; NERFX_SKIP_NUMPY=1 skips it):\n{}",
+            "the mpmath reference failed (it needs mpmath):\n{}",
             String::from_utf8_lossy(&run.stderr)
         );
         let mut worst = (0.0, String::new());

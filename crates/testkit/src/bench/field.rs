@@ -119,7 +119,7 @@ pub fn throughput<F: Field>(
 
 /// User + system CPU time of this process so far, all threads (Linux `/proc/self/stat`, in
 /// the kernel's fixed 100 Hz `USER_HZ` ticks); `None` where that file is not there.
-pub(crate) fn process_cpu_seconds() -> Option<f64> {
+pub fn process_cpu_seconds() -> Option<f64> {
     let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
     // After the command name (which ends at the last ')'), utime and stime are the 12th
     // and 13th fields (14 and 15 of the whole line).

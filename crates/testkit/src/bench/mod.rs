@@ -10,7 +10,8 @@
 //! and as plots of time against PSNR ([`report`]); [`scaling`] measures how cost grows
 //! with resolution, instances and occupied space. [`snapshot`] generates the trained
 //! fields (and the tests' snapshot fixtures); [`splats`], [`passes`] and [`field`] time
-//! splat rasterisation, extra passes and field throughput; [`deep`] what deep output costs.
+//! splat rasterisation, extra passes and field throughput; [`deep`] what deep output costs;
+//! [`targets`] is the `main` of the measurements under `benches/` (`cargo bench --bench NAME`).
 
 pub mod deep;
 pub mod field;
@@ -24,6 +25,7 @@ pub mod setup;
 pub mod snapshot;
 pub mod splats;
 pub mod suite;
+pub mod targets;
 
 pub use scenes::SceneKind;
 pub use suite::{run, Report, SuiteOptions};

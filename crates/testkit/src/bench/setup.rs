@@ -150,17 +150,4 @@ mod tests {
             "{md}"
         );
     }
-
-    /// The figures of the guide's benchmark chapter: `cargo test --lib bench::setup --
-    /// --ignored --nocapture`.
-    #[test]
-    #[ignore = "a measurement"]
-    fn print_the_set_up_series() {
-        let dir = tempfile::tempdir().unwrap();
-        let growths = vec![
-            primitives(&[2_000, 20_000, 200_000]).unwrap(),
-            graph_nodes(&[100, 1_000, 4_000], dir.path()).unwrap(),
-        ];
-        println!("{}", super::super::scaling::markdown(&growths));
-    }
 }

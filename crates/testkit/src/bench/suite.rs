@@ -656,7 +656,7 @@ fn row_line(r: &Row) -> String {
 }
 
 /// The 1, 5 and 15 minute load averages (Linux `/proc/loadavg`).
-fn load_average() -> Option<[f64; 3]> {
+pub fn load_average() -> Option<[f64; 3]> {
     let text = std::fs::read_to_string("/proc/loadavg").ok()?;
     let mut v = text.split_whitespace().map(|s| s.parse::<f64>().ok());
     Some([v.next()??, v.next()??, v.next()??])

@@ -307,7 +307,7 @@ mod tests {
     }
 
     /// The fused kernel against the separate stages on 4096 seeded points (a tile's round):
-    /// `cargo test --release --lib bench_proposal_density -- --ignored --nocapture`.
+    /// `cargo test --release -p nerfx-core --lib bench_proposal_density -- --ignored --nocapture`.
     #[test]
     #[ignore = "benchmark"]
     fn bench_proposal_density() {

@@ -1280,7 +1280,7 @@ mod tests {
 
     /// The torch colour head on 512 samples in runs of 40 sharing a direction, by runs
     /// against the whole network on the full inputs:
-    /// `cargo test --release --lib bench_colour_by_runs -- --ignored --nocapture`.
+    /// `cargo test --release -p nerfx-core --lib bench_colour_by_runs -- --ignored --nocapture`.
     #[test]
     #[ignore = "benchmark"]
     fn bench_colour_by_runs() {

@@ -996,9 +996,10 @@ mod tests {
     /// kernel does them (the density network 32 → 64 → 16, the colour network's head 16 →
     /// 64 → 64 → 3 once its direction part is split off, four outputs to a tile), timed on an
     /// in-cache batch against the core's peak; the samples per second they alone allow,
-    /// whatever the encoding costs.
+    /// whatever the encoding costs:
+    /// `cargo test --release -p nerfx-core --lib bench_networks -- --ignored --nocapture`.
     #[test]
-    #[ignore]
+    #[ignore = "benchmark"]
     #[cfg(target_arch = "x86_64")]
     fn bench_networks_against_the_fma_peak() {
         if !(is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")) {

@@ -5,18 +5,13 @@
 //! weights are so large that its density network overflows (the loader refuses NaN and
 //! infinite weights, but not huge ones).
 
-mod common_fields;
-#[allow(dead_code)] // the writers of bytes and blobs this test does not use
-mod common_ingp;
-mod common_ofx;
-
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{Mutex, MutexGuard, PoisonError};
 
-use common_ingp::{write_snapshot, Spec};
-use common_ofx::fixtures::{demo_dir, instance_with, text};
-use common_ofx::load;
+use crate::common_ingp::{write_snapshot, Spec};
+use crate::common_ofx::fixtures::{demo_dir, instance_with, text};
+use crate::common_ofx::load;
 use nerfx_core::image::{Planes, Window};
 use nerfx_graph::{node, Context, Graph, ParamValues, RenderRequest};
 use nerfx_ofx_host::OfxGraph;
@@ -32,7 +27,7 @@ struct Scratch(PathBuf);
 
 impl Scratch {
     fn new(name: &str) -> Self {
-        Scratch(common_ingp::scratch(&format!("warnings-{name}")))
+        Scratch(crate::common_ingp::scratch(&format!("warnings-{name}")))
     }
 }
 
@@ -212,7 +207,7 @@ fn a_graph_names_the_node_and_frame_whose_pixels_may_be_off() {
             .arg(graph)
             .args(["--frames", frames, "-o"])
             .arg(&out)
-            .args(["--bundle", &common_ofx::bundle().to_string_lossy()])
+            .args(["--bundle", &crate::common_ofx::bundle().to_string_lossy()])
             .output()
             .unwrap();
         let stderr = String::from_utf8_lossy(&run.stderr).into_owned();

@@ -2,16 +2,14 @@
 //! every context, the strictness of the property suite (called directly through the same
 //! function pointers the plugin gets), parameter values and messages through the C shim,
 //! the multithread suite, and concurrent renders. Pixel equality of each node against the
-//! core is `tests/ofx_nodes.rs`.
-
-mod common_ofx;
+//! core is `tests/ofx/nodes.rs`.
 
 use std::ffi::{c_char, c_int, c_uint, c_void, CStr};
 use std::path::Path;
 use std::ptr;
 use std::sync::atomic::{AtomicU32, Ordering};
 
-use common_ofx::images::tiles;
+use crate::common_ofx::images::tiles;
 use nerfx_core::image::{scaled_size, Plane, Planes, Window};
 use nerfx_graph::{node, nodes, Context, ParamKind, Value};
 use nerfx_ofx_host::{testing, Bundle, ClipSource, HostOptions, Instance, PropValue};
@@ -26,7 +24,7 @@ const ERR_VALUE: c_int = 11;
 const REPLY_NO: c_int = 13;
 
 fn bundle() -> Bundle {
-    common_ofx::load(HostOptions::default())
+    crate::common_ofx::load(HostOptions::default())
 }
 
 fn name(s: &[u8]) -> *const c_char {

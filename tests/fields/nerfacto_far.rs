@@ -4,32 +4,17 @@
 //! (`tests/numpy/nerfacto_render.py`: the field of `nerfacto_reference.py`, its own samples
 //! uniform in nerfstudio's unbounded spacing, its own compositing).
 //!
-//! The NumPy check needs `python3` with `numpy`; without it it fails with a message saying
-//! so, unless `NERFX_SKIP_NUMPY=1` (then it prints a skip line).
+//! The NumPy checks need `python3` with `numpy` and are cross-checks: they run with the
+//! `cross-checks` feature (`scripts/test.sh`), and fail without the tools, saying so.
 
-mod common_fields;
-mod common_nerfacto;
-
-use std::sync::Arc;
-
-use common_fields::numpy_reference;
-use common_nerfacto::{scratch, write_run, Spec};
+use crate::common_fields::numpy_reference;
+use crate::common_nerfacto::{scene_of, scratch, write_run, Spec};
 use glam::{DMat4, DVec3, Vec3};
 use nerfx_core::camera::{Camera, Equirect, Perspective, Projection};
 use nerfx_core::field::NerfactoField;
 use nerfx_core::image::Planes;
 use nerfx_core::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
-use nerfx_core::scene::{FieldHandle, Instance, Scene};
-
-fn scene_of(field: NerfactoField, world_from_field: DMat4) -> Scene {
-    Scene::new(vec![Instance::new(
-        "run",
-        FieldHandle::new(Arc::new(field)),
-        world_from_field,
-        None,
-    )
-    .unwrap()])
-}
+use nerfx_core::scene::Scene;
 
 fn render_at(scene: &Scene, camera: &Camera, quality: Quality) -> Planes {
     let settings = RenderSettings {
@@ -115,6 +100,10 @@ fn faint_density_everywhere_matches_the_closed_form() {
 /// A distant shell (faint inside field radius ~30, opaque by ~100) from a camera off the
 /// centre, at Final, against the NumPy march: alpha, colour (as trained) and depth.
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn a_distant_shell_agrees_with_a_numpy_march() {
     let dir = scratch("shell");
     let run = write_run(&dir, &Spec::shell());
@@ -137,10 +126,7 @@ fn a_distant_shell_agrees_with_a_numpy_march() {
             dirs.extend([ray.dir.normalize().as_vec3(), Vec3::ZERO]);
         }
     }
-    let Some(want) = numpy_reference("nerfacto_render.py", &["numpy"], &run, &origins, &dirs)
-    else {
-        return;
-    };
+    let want = numpy_reference("nerfacto_render.py", &["numpy"], &run, &origins, &dirs);
     assert_eq!(want.len(), 2 * (w * h) as usize);
     let (mut sq, mut n, mut max_alpha, mut max_depth) = (0.0f64, 0, 0.0f32, 0.0f32);
     let mut depths = Vec::new();
@@ -174,105 +160,4 @@ fn a_distant_shell_agrees_with_a_numpy_march() {
     assert!(max_alpha < 2e-3, "alpha error {max_alpha}");
     assert!(max_depth < 1e-2, "depth error {max_depth}");
     let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// What the far field costs: a 480×270 frame of the distant shell (seen from inside), of
-/// faint density everywhere (Draft only: Final marches it to the far plane) and of a
-/// near-only run (a dense core seen from outside; its misses now walk the empty shell), at
-/// Draft and Final: milliseconds and density samples per pixel. A benchmark, not a test:
-/// `cargo test --release --test nerfacto_far -- --ignored --nocapture`. With
-/// `NERFX_FAR_FIXTURES=<dir>` the runs and a `camera_path.json` per run are left there, for
-/// timing `nerfx render <dir>/<name>/run <dir>/<name>/camera_path.json` against another
-/// build; `NERFX_FAR_CASES=shell,core` picks cases.
-#[test]
-#[ignore]
-fn far_field_cost() {
-    let keep = std::env::var_os("NERFX_FAR_FIXTURES").map(std::path::PathBuf::from);
-    let cases = [
-        (
-            "shell",
-            Spec::shell(),
-            DVec3::new(0.2, -0.1, 0.3),
-            DVec3::new(1.0, 0.3, -0.5),
-        ),
-        (
-            "constant",
-            Spec::constant(0.01),
-            DVec3::ZERO,
-            DVec3::new(1.0, 0.3, -0.5),
-        ),
-        (
-            "core",
-            Spec::core(),
-            DVec3::new(0.4, -3.0, 0.8),
-            DVec3::new(-0.4, 3.0, -0.8),
-        ),
-    ];
-    let only = std::env::var("NERFX_FAR_CASES").ok();
-    for (name, spec, eye, look) in cases {
-        if only
-            .as_ref()
-            .is_some_and(|o| !o.split(',').any(|c| c == name))
-        {
-            continue;
-        }
-        let dir = match &keep {
-            Some(k) => k.join(name),
-            None => scratch(&format!("cost-{name}")),
-        };
-        let run = write_run(&dir, &spec);
-        let field = NerfactoField::load(&run).unwrap();
-        let scene = scene_of(field, DMat4::IDENTITY);
-        let (w, h) = (480u32, 270u32);
-        let world_from_camera = nerfx_core::demo::look_at(eye, eye + look);
-        let camera = Camera::new(
-            world_from_camera,
-            Projection::Perspective(Perspective::from_vertical_fov(w, h, 60.0).unwrap()),
-        )
-        .unwrap();
-        let rows: Vec<String> = (0..4)
-            .map(|r| {
-                let row = world_from_camera.row(r);
-                format!("{}, {}, {}, {}", row.x, row.y, row.z, row.w)
-            })
-            .collect();
-        std::fs::write(
-            dir.join("camera_path.json"),
-            format!(
-                "{{\"camera_type\": \"perspective\", \"render_height\": {h}, \"render_width\": \
-                 {w}, \"seconds\": 1, \"camera_path\": [{{\"camera_to_world\": [{}], \"fov\": \
-                 60, \"aspect\": 1}}]}}",
-                rows.join(", ")
-            ),
-        )
-        .unwrap();
-        for quality in [Quality::Draft, Quality::Final] {
-            if name == "constant" && quality == Quality::Final {
-                continue;
-            }
-            let settings = RenderSettings::new(quality.params(), Outputs::rgba());
-            let started = std::time::Instant::now();
-            let (planes, stats) = nerfx_core::render::render_with_progress(
-                &scene,
-                &camera,
-                camera.full_window(),
-                &settings,
-                &|_| {},
-            )
-            .unwrap();
-            let ms = started.elapsed().as_secs_f64() * 1e3;
-            let alpha = planes.alpha.unwrap();
-            let mean =
-                alpha.data.iter().map(|&a| f64::from(a)).sum::<f64>() / alpha.data.len() as f64;
-            println!(
-                "{name} {w}x{h} {quality:?}: {ms:.0} ms, {:.1} density samples per pixel, \
-                 {:.1} colour samples per pixel, mean alpha {mean:.4}",
-                stats.density_samples as f64 / stats.pixels as f64,
-                stats.color_samples as f64 / stats.pixels as f64,
-            );
-        }
-        if keep.is_none() {
-            let _ = std::fs::remove_dir_all(&dir);
-        }
-    }
 }

@@ -2,20 +2,17 @@
 //! run (`tests/numpy/nerfacto_reference.py`) in both checkpoint layouts, the occupancy it
 //! computes, and corrupt input.
 //!
-//! The NumPy check needs `python3` with `numpy`; without it it fails with a message saying
-//! so, unless `NERFX_SKIP_NUMPY=1` (then it prints a skip line).
+//! The NumPy checks need `python3` with `numpy` and are cross-checks: they run with the
+//! `cross-checks` feature (`scripts/test.sh`), and fail without the tools, saying so.
 
-mod common_fields;
-mod common_nerfacto;
-
-use common_fields::{check_rgb, check_sigma, numpy_reference, rel_err};
-use common_nerfacto::{scratch, write_run, Spec, STEP};
+use crate::common_fields::{check_rgb, check_sigma, numpy_reference, rel_err};
+use crate::common_nerfacto::{scratch, write_run, Spec, STEP};
 use glam::Vec3;
 use nerfx_core::field::{Aabb, Field, NerfactoField};
 
 /// Seeded points (inside the unit cube and out in the contracted shell) and directions.
 fn samples(n: usize, seed: u64) -> (Vec<Vec3>, Vec<Vec3>) {
-    common_fields::samples(n, seed, |rng, i| {
+    crate::common_fields::samples(n, seed, |rng, i| {
         let r = if i % 2 == 0 { 1.0 } else { 2.0 };
         rng.vec(-r, r)
     })
@@ -31,9 +28,7 @@ fn check_against_numpy(name: &str, spec: &Spec) {
     let mut rgb = vec![Vec3::ZERO; pts.len()];
     field.density(&pts, &mut sigma);
     field.radiance(&pts, &dirs, &mut rgb);
-    let Some(want) = numpy_reference("nerfacto_reference.py", &["numpy"], &run, &pts, &dirs) else {
-        return;
-    };
+    let want = numpy_reference("nerfacto_reference.py", &["numpy"], &run, &pts, &dirs);
     assert_eq!(want.len(), pts.len());
     let (mut max_sigma, mut max_rgb, mut masked) = (0.0f32, 0.0f32, 0);
     for (i, w) in want.iter().enumerate() {
@@ -72,11 +67,19 @@ fn check_against_numpy(name: &str, spec: &Spec) {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn tcnn_layout_agrees_with_numpy() {
     check_against_numpy("tcnn", &Spec::tcnn());
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn torch_fallback_layout_agrees_with_numpy() {
     check_against_numpy("torch", &Spec::torch());
 }
@@ -112,7 +115,7 @@ fn occupancy_is_conservative_at_sampled_points() {
     // Wherever the density is non-zero, the point's region is occupied (in the unit cube, the
     // near shell and out to the far plane); outside the bounds the density is zero.
     let (mut pts, _) = samples(4000, 5);
-    let (far, _) = common_fields::samples(4000, 6, |rng, i| {
+    let (far, _) = crate::common_fields::samples(4000, 6, |rng, i| {
         let r = [5.0, 40.0, 999.0][i % 3];
         rng.vec(-r, r)
     });
@@ -346,7 +349,7 @@ fn the_occupancy_grid_is_cached_next_to_the_run() {
     assert_eq!(occupancy_pattern(&fifth), want);
     assert!(occupancy_line(&NerfactoField::load(&run).unwrap()).contains("read from"));
     // Garbage of any length (random bytes, then bytes starting like a cache) is ignored.
-    let mut rng = common_nerfacto::SplitMix64::new(3);
+    let mut rng = crate::common_nerfacto::SplitMix64::new(3);
     let noise: Vec<u8> = (0..5000).map(|_| (rng.next_u64() >> 56) as u8).collect();
     for garbage in [
         noise.as_slice(),

@@ -1,24 +1,20 @@
 //! instant-ngp snapshots: the loader against an independent NumPy evaluation of the same
 //! files (`tests/numpy/ingp_reference.py`), the occupancy it gives, and corrupt input.
 //!
-//! The NumPy check needs `python3` with `numpy` and `msgpack`; without them it fails with a
-//! message saying so, unless `NERFX_SKIP_NUMPY=1` (then it prints a skip line).
-
-mod common_fields;
-#[allow(dead_code)] // the blob writer this test does not use
-mod common_ingp;
+//! The NumPy checks need `python3` with `numpy` and `msgpack` and are cross-checks: they run with the
+//! `cross-checks` feature (`scripts/test.sh`), and fail without the tools, saying so.
 
 use std::process::Command;
 
-use common_fields::{check_rgb, check_sigma, numpy_reference};
-use common_ingp::{scratch, write_snapshot, Spec, SplitMix64};
+use crate::common_fields::{check_rgb, check_sigma, numpy_reference};
+use crate::common_ingp::{scratch, write_snapshot, Spec, SplitMix64};
 use glam::Vec3;
 use nerfx_core::field::{Aabb, Field, IngpField, TableStorage};
 
 /// Seeded points inside the field's bounds and unit directions.
 fn samples(field: &IngpField, n: usize, seed: u64) -> (Vec<Vec3>, Vec<Vec3>) {
     let b = field.bounds();
-    common_fields::samples_in_box(b.min, b.max, n, seed)
+    crate::common_fields::samples_in_box(b.min, b.max, n, seed)
 }
 
 fn check_against_numpy(name: &str, spec: &Spec) {
@@ -35,15 +31,13 @@ fn check_against_numpy(name: &str, spec: &Spec) {
         occupied > 300 && occupied < 2700,
         "{name}: {occupied} occupied samples"
     );
-    let Some(want) = numpy_reference(
+    let want = numpy_reference(
         "ingp_reference.py",
         &["numpy", "msgpack"],
         &path,
         &pts,
         &dirs,
-    ) else {
-        return;
-    };
+    );
     assert_eq!(want.len(), pts.len());
     let (mut max_sigma, mut max_rgb) = (0.0f32, 0.0f32);
     for (i, w) in want.iter().enumerate() {
@@ -55,11 +49,19 @@ fn check_against_numpy(name: &str, spec: &Spec) {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn current_8x4_fp16_gzip_agrees_with_numpy() {
     check_against_numpy("8x4", &Spec::small_8x4());
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn old_16x2_float_cutlass_hdr_agrees_with_numpy() {
     check_against_numpy("16x2", &Spec::old_16x2());
 }
@@ -230,7 +232,7 @@ fn table_storages_agree() {
 fn truncated_and_corrupt_files_give_errors_naming_the_file() {
     let dir = scratch("corrupt");
     for spec in [Spec::small_8x4(), Spec::old_16x2()] {
-        let full = common_ingp::file_bytes(&spec);
+        let full = crate::common_ingp::file_bytes(&spec);
         let path = dir.join(if spec.gzip { "cut.ingp" } else { "cut.msgpack" });
         let mut cuts: Vec<usize> = (0..64).map(|k| k * full.len() / 64).collect();
         cuts.extend([1, 2, 3, 10, 100, full.len() - 1]);
@@ -256,63 +258,6 @@ fn truncated_and_corrupt_files_give_errors_naming_the_file() {
     }
     let missing = IngpField::load(&dir.join("missing.ingp")).err().unwrap();
     assert!(missing.to_string().contains("missing.ingp"));
-    let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// Samples along `n_rays` random chords of the bounds, 1024 per ray (as the marcher batches
-/// them), each with its ray's direction.
-fn along_rays(field: &IngpField, n_rays: usize, seed: u64) -> (Vec<Vec3>, Vec<Vec3>) {
-    let (ends, _) = samples(field, 2 * n_rays, seed);
-    ends.chunks_exact(2)
-        .flat_map(|e| {
-            let d = (e[1] - e[0]).normalize_or(Vec3::X);
-            (0..1024).map(move |k| (e[0].lerp(e[1], k as f32 / 1023.0), d))
-        })
-        .unzip()
-}
-
-/// Field throughput (2^19-entry tables, 8×4 and 16×2 levels, tables in f16 and in f32, one
-/// and two threads, samples scattered or along rays; per CPU second where it can be read):
-/// `cargo test --release --test ingp_snapshot -- --ignored --nocapture bench_field`.
-#[test]
-#[ignore]
-fn bench_field_throughput() {
-    let dir = scratch("bench");
-    for (name, base) in [("8x4", Spec::small_8x4()), ("16x2", Spec::old_16x2())] {
-        let spec = Spec {
-            log2_table_size: 19,
-            aabb_scale: 16,
-            n_cascades: 5,
-            ..base
-        };
-        let path = write_snapshot(&dir, name, &spec);
-        for storage in [TableStorage::F16, TableStorage::F32] {
-            let f = IngpField::load_with(&path, Some(storage)).unwrap();
-            let scattered = samples(&f, 1 << 16, 3);
-            let rays = along_rays(&f, 64, 8);
-            for (what, (pts, dirs)) in [("scattered", &scattered), ("along rays", &rays)] {
-                let mut sigma = vec![0.0; pts.len()];
-                f.density(pts, &mut sigma);
-                let occupied = sigma.iter().filter(|&&s| s > 0.0).count() as f64;
-                for threads in [1, 2] {
-                    let t = nerfx_testkit::bench::field::throughput(&f, pts, dirs, threads, 1.0)
-                        .unwrap();
-                    println!(
-                        "{name} {storage:?} {what:10} ({:2.0}% occupied), {threads} thread(s): \
-                         density {:5.2}, density + radiance as renders (features) {:5.2}, \
-                         standalone density then radiance {:5.2} M samples per {} second; \
-                         as renders {:5.2} M samples per wall second",
-                        100.0 * occupied / pts.len() as f64,
-                        t.density / 1e6,
-                        t.shaded / 1e6,
-                        t.density_radiance / 1e6,
-                        if t.per_cpu_second { "CPU" } else { "wall" },
-                        t.shaded_wall / 1e6
-                    );
-                }
-            }
-        }
-    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -405,207 +350,6 @@ fn nerfx_info_describes_a_snapshot_and_names_a_corrupt_one() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// The synthetic benchmark scene: a 8×4 fp16 2^19 snapshot whose occupied cells are three
-/// overlapping balls and whose σ row is scaled so rays terminate inside them (instant-ngp
-/// coordinates: the unit cube is cascade 0; s = 0.33, o = 0.5). Prints what it is.
-fn blob_bench_scene(dir: &std::path::Path) -> nerfx_core::scene::Scene {
-    use glam::DMat4;
-    use nerfx_core::render::Quality;
-    use nerfx_core::scene::{FieldHandle, Instance, Scene};
-    use nerfx_testkit::bench::snapshot::occupied_fraction;
-    use std::sync::Arc;
-
-    // The benchmark suite's blob scene (`nerfx bench --scene blob`).
-    let spec = Spec::dense_blob();
-    let gain = spec.sigma_gain.unwrap_or(1.0);
-    let path = write_snapshot(dir, "blob", &spec);
-    let cascade0 = occupied_fraction(&spec);
-    let field = IngpField::load(&path).unwrap();
-    let fill = field
-        .describe()
-        .lines()
-        .find(|l| l.contains("fill ratio"))
-        .unwrap_or_default()
-        .to_string();
-    // σ (field units) at seeded points of the main ball; field p = ((q.z − o)/s, (q.x − o)/s,
-    // (q.y − o)/s).
-    let mut rng = SplitMix64::new(21);
-    let inside: Vec<Vec3> = (0..4000)
-        .filter_map(|_| {
-            let u = rng.vec(-1.0, 1.0);
-            (u.length() < 0.9).then(|| u * 0.25 / 0.33)
-        })
-        .collect();
-    let mut sigma = vec![0.0; inside.len()];
-    field.density(&inside, &mut sigma);
-    sigma.sort_by(f32::total_cmp);
-    let pct = |p: f64| sigma[((sigma.len() - 1) as f64 * p) as usize];
-    let step = field.feature_size() / Quality::Final.params().steps_per_feature;
-    println!(
-        "snapshot: 8x4 fp16 2^19, density gain {gain}, cascade 0 occupied {:.2} %, {fill}",
-        100.0 * cascade0
-    );
-    println!(
-        "sigma inside (field units): p5 {:.3e}, p50 {:.3e}, p95 {:.3e}; Final base step {step:.3e} \
-         (optical depth per step at p50 {:.3})",
-        pct(0.05),
-        pct(0.5),
-        pct(0.95),
-        pct(0.5) * step
-    );
-    assert!(pct(0.05) > 0.0, "the blob's interior must be occupied");
-
-    let handle = FieldHandle::new(Arc::new(field));
-    Scene::new(vec![
-        Instance::new("blob", handle, DMat4::IDENTITY, None).unwrap()
-    ])
-}
-
-/// The benchmark's camera at `w × h` (40° vertical field of view, looking at the blob).
-fn blob_bench_camera(w: u32, h: u32) -> nerfx_core::camera::Camera {
-    use glam::DVec3;
-    use nerfx_core::camera::{Camera, Perspective, Projection};
-    let p = Perspective::from_vertical_fov(w, h, 40.0).unwrap();
-    let eye = DVec3::new(2.2, -1.6, 0.8);
-    Camera::new(
-        nerfx_core::demo::look_at(eye, DVec3::ZERO),
-        Projection::Perspective(p),
-    )
-    .unwrap()
-}
-
-/// A 1920×1080 `Quality::Final` RGBA render of a surface-like snapshot (8×4 levels, fp16,
-/// 2^19-entry tables; three overlapping balls occupied, σ's output row scaled so rays
-/// terminate inside them): `cargo test --release --test ingp_snapshot -- --ignored
-/// --nocapture bench_render`. Timing is printed, never asserted.
-#[test]
-#[ignore]
-fn bench_render_1080p_final() {
-    use nerfx_core::render::{render_with_progress, Outputs, Quality, RenderSettings};
-    use std::time::Instant;
-
-    let dir = scratch("bench-render");
-    let scene = blob_bench_scene(&dir);
-    let (w, h) = (1920, 1080);
-    let camera = blob_bench_camera(w, h);
-    let settings = RenderSettings::new(Quality::Final.params(), Outputs::rgba());
-    let run = || {
-        let (t, cpu) = (Instant::now(), process_cpu_seconds());
-        let out = render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {})
-            .unwrap();
-        let cpu = cpu.zip(process_cpu_seconds()).map(|(a, b)| b - a);
-        (out, t.elapsed().as_secs_f64() * 1e3, cpu)
-    };
-    let (_, warm_ms, _) = run();
-    let ((planes, stats), ms, cpu) = run();
-    let alpha = planes.alpha.as_ref().unwrap();
-    let rgb = planes.rgb.as_ref().unwrap();
-    let n = (w * h) as usize;
-    assert_eq!(stats.pixels, n as u64);
-    let mut opaque = 0;
-    for i in 0..n {
-        let a = alpha.data[i];
-        assert!((0.0..=1.0 + 1e-5).contains(&a), "alpha {a} at pixel {i}");
-        for c in rgb {
-            let v = c.data[i];
-            // Sigmoid colours are in [0, 1]: premultiplied, at most alpha.
-            assert!(
-                v.is_finite() && v >= 0.0 && v <= a + 1e-4,
-                "rgb {v}, alpha {a} at pixel {i}"
-            );
-        }
-        opaque += usize::from(a > 0.5);
-    }
-    assert!(opaque > n / 20, "only {opaque} pixels opaque");
-    println!(
-        "1920x1080 Final rgba, {} rayon threads: {ms:.0} ms/frame (warm-up {warm_ms:.0} ms); \
-         per pixel: {:.2} density, {:.2} colour samples; alpha > 0.5: {:.2} % of pixels",
-        rayon::current_num_threads(),
-        stats.density_samples as f64 / n as f64,
-        stats.color_samples as f64 / n as f64,
-        100.0 * opaque as f64 / n as f64
-    );
-    if let Some(cpu) = cpu {
-        // On a shared machine the CPU time is the steadier figure.
-        println!("CPU time (user + system, all threads): {cpu:.1} s/frame");
-    }
-    println!(
-        "per opaque pixel: {:.1} density, {:.1} colour samples",
-        stats.density_samples as f64 / opaque as f64,
-        stats.color_samples as f64 / opaque as f64
-    );
-    let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// The accuracy of that render: the same scene and view at 160×90, `Quality::Final` against
-/// `render_naive` at a quarter of Final's base step (no skipping, no early stop, no
-/// refinement): PSNR of the premultiplied RGB (peak 1) and the largest alpha error, with
-/// Final's samples per pixel. `cargo test --release --test ingp_snapshot -- --ignored
-/// --nocapture bench_render_final_accuracy`. Printed, never asserted.
-#[test]
-#[ignore]
-fn bench_render_final_accuracy() {
-    use nerfx_core::render::{
-        render_naive, render_with_progress, Outputs, Quality, RenderSettings,
-    };
-
-    let dir = scratch("bench-accuracy");
-    let scene = blob_bench_scene(&dir);
-    let (w, h) = (160, 90);
-    let camera = blob_bench_camera(w, h);
-    let final_params = Quality::Final.params();
-    let field_step = scene.instances[0].field().feature_size() / final_params.steps_per_feature;
-    let settings = RenderSettings::new(final_params, Outputs::rgba());
-    let (got, stats) =
-        render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {}).unwrap();
-    // The instance's frame is the world's (identity): field units are world units.
-    let (want, _) = render_naive(
-        &scene,
-        &camera,
-        camera.full_window(),
-        field_step as f64 / 4.0,
-        &Outputs::rgba(),
-    )
-    .unwrap();
-    let n = (w * h) as usize;
-    let (ga, wa) = (got.alpha.unwrap(), want.alpha.unwrap());
-    let (gc, wc) = (got.rgb.unwrap(), want.rgb.unwrap());
-    let mut sq = 0.0f64;
-    for c in 0..3 {
-        for i in 0..n {
-            sq += f64::from(gc[c].data[i] - wc[c].data[i]).powi(2);
-        }
-    }
-    let psnr = -10.0 * (sq / (3 * n) as f64).log10();
-    let mut alpha_errs: Vec<f32> = (0..n).map(|i| (ga.data[i] - wa.data[i]).abs()).collect();
-    alpha_errs.sort_by(f32::total_cmp);
-    let alpha_err = alpha_errs[n - 1];
-    let over = |e: f32| alpha_errs.iter().filter(|&&x| x > e).count();
-    let mean_alpha = (0..n).map(|i| f64::from(wa.data[i])).sum::<f64>() / n as f64;
-    println!(
-        "{w}x{h} Final vs naive at step/4 (mean alpha {mean_alpha:.3}): PSNR {psnr:.1} dB, \
-         max |alpha error| {alpha_err:.2e} (pixels over 1e-2: {}, over 1e-3: {}); Final per \
-         pixel: {:.2} density, {:.2} colour samples",
-        over(1e-2),
-        over(1e-3),
-        stats.density_samples as f64 / n as f64,
-        stats.color_samples as f64 / n as f64
-    );
-    let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// User + system CPU time of this process so far (Linux `/proc/self/stat`, in the kernel's
-/// fixed 100 Hz `USER_HZ` ticks); `None` elsewhere.
-fn process_cpu_seconds() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    // Fields after the command name (which ends at the last ')'): utime and stime are
-    // fields 14 and 15 of the line, 12 and 13 of this rest.
-    let rest = &stat[stat.rfind(')')? + 1..];
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    let ticks = fields.get(11)?.parse::<u64>().ok()? + fields.get(12)?.parse::<u64>().ok()?;
-    Some(ticks as f64 / 100.0)
-}
-
 /// Input that is no snapshot is refused early, naming the file and what it holds: a gzip
 /// bomb (512 MiB of zeros in half a megabyte) fails at its first value instead of being
 /// inflated whole, random bytes and a msgpack array say they are not a snapshot.
@@ -649,7 +393,8 @@ fn hostile_snapshots_are_refused_early_in_the_users_terms() {
 /// The snapshot of `spec` (raw msgpack) with `edit` applied to the bytes of `snapshot.<key>`.
 fn with_snapshot_bytes(spec: &Spec, key: &str, edit: impl Fn(&mut Vec<u8>)) -> Vec<u8> {
     use rmpv::Value;
-    let mut top = rmpv::decode::read_value(&mut &common_ingp::snapshot_bytes(spec)[..]).unwrap();
+    let mut top =
+        rmpv::decode::read_value(&mut &crate::common_ingp::snapshot_bytes(spec)[..]).unwrap();
     let Value::Map(entries) = &mut top else {
         panic!("top level is not a map")
     };
@@ -683,7 +428,7 @@ fn non_finite_weights_and_density_grid_values_are_refused_naming_the_block() {
         gzip: false,
         ..Spec::small_8x4()
     };
-    let (nd, nr, _) = common_ingp::param_counts(&spec);
+    let (nd, nr, _) = crate::common_ingp::param_counts(&spec);
     let path = dir.path().join("diverged.msgpack");
     let nan = half::f16::NAN.to_le_bytes();
     let inf = half::f16::INFINITY.to_le_bytes();
@@ -729,7 +474,7 @@ fn edited(
     spec: &Spec,
     edit: impl Fn(&mut Vec<(rmpv::Value, rmpv::Value)>),
 ) -> std::path::PathBuf {
-    let bytes = common_ingp::snapshot_bytes(spec);
+    let bytes = crate::common_ingp::snapshot_bytes(spec);
     let mut top = rmpv::decode::read_value(&mut &bytes[..]).unwrap();
     let rmpv::Value::Map(entries) = &mut top else {
         panic!("a map")

@@ -4,12 +4,9 @@
 //! each run's density is a core well inside its unit cube, nothing beyond, and the runs
 //! stand apart along the view). Tested both ways round, so an order mix-up cannot pass.
 
-mod common_fields;
-mod common_nerfacto;
-
 use std::sync::Arc;
 
-use common_nerfacto::{scratch, write_run, Spec};
+use crate::common_nerfacto::{scratch, write_run, Spec};
 use glam::{DMat4, DVec3};
 use nerfx_core::camera::{Camera, Perspective, Projection};
 use nerfx_core::field::NerfactoField;

@@ -2,19 +2,17 @@
 //! graph evaluated in process with the registry: identical pixels for every node, at full and
 //! half render scale, and from the command line for a subset of frames.
 
-mod common_ofx;
-
 use std::path::PathBuf;
 use std::process::{Command, Output};
 
-use common_ofx::images::rgba_of;
-use common_ofx::load;
+use crate::common_ofx::images::rgba_of;
+use crate::common_ofx::load;
 use nerfx_core::demo;
 use nerfx_core::image::read_exr_channels;
 use nerfx_graph::demo::write_graph;
 use nerfx_graph::{evaluate, render_direct, Graph};
+use nerfx_ofx_host::HostOptions;
 use nerfx_ofx_host::OfxGraph;
-use nerfx_ofx_host::{Bundle, HostOptions};
 
 fn scratch_dir(name: &str) -> PathBuf {
     let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
@@ -28,7 +26,7 @@ fn render_cli(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_nerfx"))
         .arg("render")
         .args(args)
-        .args(["--bundle", &common_ofx::bundle().to_string_lossy()])
+        .args(["--bundle", &crate::common_ofx::bundle().to_string_lossy()])
         .output()
         .unwrap()
 }
@@ -173,41 +171,6 @@ fn an_anamorphic_shot_keeps_its_pixel_aspect_to_the_exr() {
     let chroma = meta.headers[0].shared_attributes.chromaticities.unwrap();
     assert_eq!((chroma.red.0, chroma.white.1), (0.64, 0.329));
     assert_eq!(bundle.violations(), Vec::<String>::new());
-}
-
-/// The host's cost: the demo graph at 1280×720 through the release bundle against the same
-/// graph in process (`cargo test --release --test ofx_graph -- --ignored --nocapture`).
-#[test]
-#[ignore = "benchmark"]
-fn bench_graph_through_the_bundle() {
-    let dir = scratch_dir("bench");
-    let graph = Graph::read(&write_graph(&dir, 1280, 720).unwrap()).unwrap();
-    let bundle = Bundle::load(&common_ofx::release_bundle()).unwrap();
-    let mut ofx = OfxGraph::new(graph.clone(), &bundle).unwrap();
-    let time = |f: &mut dyn FnMut()| {
-        (0..3)
-            .map(|_| {
-                let start = std::time::Instant::now();
-                f();
-                start.elapsed().as_secs_f64()
-            })
-            .fold(f64::INFINITY, f64::min)
-    };
-    // Warm both caches (files are read once per process image: the plugin's and the test's).
-    ofx.render(1001.0, 1.0, false, &|_| {}).unwrap();
-    evaluate(&graph, 1001.0, 1.0, false, &mut render_direct, &|_| {}).unwrap();
-    let through = time(&mut || {
-        ofx.render(1001.0, 1.0, false, &|_| {}).unwrap();
-    });
-    let direct = time(&mut || {
-        evaluate(&graph, 1001.0, 1.0, false, &mut render_direct, &|_| {}).unwrap();
-    });
-    println!(
-        "demo graph 1280×720, 7 nodes, best of 3: through the bundle {:.3} s, in process {:.3} s ({:+.1} %)",
-        through,
-        direct,
-        100.0 * (through / direct - 1.0)
-    );
 }
 
 #[test]

@@ -4,19 +4,17 @@
 //! the region of definition in canonical coordinates, tiles at scales 1 and ½ equal to the
 //! core's render).
 
-mod common_ofx;
-
 use std::path::{Path, PathBuf};
 
-use common_ofx::fixtures::{instance_with, shared as bundle, text};
-use common_ofx::images::{differing, render_tiled};
+use crate::common_ofx::fixtures::{instance_with, shared as bundle, text};
+use crate::common_ofx::images::{differing, render_tiled};
 use nerfx_core::image::{scaled_size, Window};
 use nerfx_graph::{node, Context, RenderRequest, Value};
 use nerfx_ofx_host::Instance;
 
 /// The demo's inputs at 45×27 (frames 1001 to 1024), written once per test binary.
 fn demo_dir() -> &'static Path {
-    common_ofx::fixtures::demo_dir(45, 27)
+    crate::common_ofx::fixtures::demo_dir(45, 27)
 }
 
 /// A NeRF Render instance in `context` over the demo environment and `shot`, draft quality.

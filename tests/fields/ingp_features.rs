@@ -1,13 +1,7 @@
 //! The instant-ngp field's two query routes agree: density and colour asked separately, and
 //! density handing its network outputs to the colour query (as the marcher asks).
 
-// The shared harness and the fixture writer serve several test crates; this one uses part of
-// each.
-mod common_fields;
-#[allow(dead_code)]
-mod common_ingp;
-
-use common_ingp::{scratch, write_snapshot, Spec};
+use crate::common_ingp::{scratch, write_snapshot, Spec};
 use glam::Vec3;
 use nerfx_core::field::{Field, IngpField};
 
@@ -18,7 +12,7 @@ fn the_features_route_gives_the_same_samples() {
         let field = IngpField::load(&write_snapshot(&dir, name, &spec)).unwrap();
         let b = field.bounds();
         let n = 1500;
-        let (pts, dirs) = common_fields::samples_in_box(b.min, b.max, n, 17);
+        let (pts, dirs) = crate::common_fields::samples_in_box(b.min, b.max, n, 17);
         let (mut sigma, mut rgb) = (vec![0.0; n], vec![Vec3::ZERO; n]);
         field.density(&pts, &mut sigma);
         field.radiance(&pts, &dirs, &mut rgb);

@@ -4,13 +4,10 @@
 //! against values computed here from the stored ones; the run loads through a scene file, the
 //! command line's info, and never as a nerfacto field.
 
-mod common_fields;
-mod common_nerfacto;
-
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use common_nerfacto::{checkpoint_of, STEP};
+use crate::common_nerfacto::{checkpoint_of, STEP};
 use glam::Vec3;
 use nerfx_core::field::{NerfactoField, SplatColor, Splats};
 

@@ -4,15 +4,12 @@
 //! layouts: the main field's sample positions, and the rendered pixels; and how such an
 //! instance joins other instances.
 //!
-//! The NumPy check needs `python3` with `numpy`; without it it fails with a message saying
-//! so, unless `NERFX_SKIP_NUMPY=1` (then it prints a skip line).
-
-mod common_fields;
-mod common_nerfacto;
+//! The NumPy checks need `python3` with `numpy` and are cross-checks: they run with the
+//! `cross-checks` feature (`scripts/test.sh`), and fail without the tools, saying so.
 
 use std::path::Path;
 
-use common_nerfacto::{sampler_split, scratch, write_run, Spec};
+use crate::common_nerfacto::{placed, scratch, write_run, Spec};
 use glam::{DMat4, DVec3};
 use nerfx_core::camera::{Camera, Perspective, Projection, Ray};
 use nerfx_core::field::{NerfactoField, Piece, SamplerRay, SamplerScratch};
@@ -23,7 +20,7 @@ const W: u32 = 24;
 const H: u32 = 16;
 
 /// Per ray: the main samples' edges, then r, g, b, accumulation, expected depth.
-fn numpy_render(run: &Path, rays: &[SamplerRay], n_edges: usize) -> Option<Vec<Vec<f64>>> {
+fn numpy_render(run: &Path, rays: &[SamplerRay], n_edges: usize) -> Vec<Vec<f64>> {
     let rays: Vec<[f64; 8]> = rays
         .iter()
         .map(|r| {
@@ -31,19 +28,17 @@ fn numpy_render(run: &Path, rays: &[SamplerRay], n_edges: usize) -> Option<Vec<V
             [o.x, o.y, o.z, d.x, d.y, d.z, r.near, r.far]
         })
         .collect();
-    let values = common_fields::numpy_rays(
+    let values = crate::common_fields::numpy_rays(
         "nerfacto_proposal_reference.py",
         &["numpy"],
         run,
         &rays,
         &[],
-    )?;
-    Some(
-        values
-            .chunks_exact(n_edges + 5)
-            .map(<[f64]>::to_vec)
-            .collect(),
-    )
+    );
+    values
+        .chunks_exact(n_edges + 5)
+        .map(<[f64]>::to_vec)
+        .collect()
 }
 
 fn camera() -> Camera {
@@ -105,10 +100,7 @@ fn check_against_numpy(name: &str, spec: &Spec) {
     settings.color = ColorOutput::AsTrained;
     let planes = render(&scene, &camera, camera.full_window(), &settings).unwrap();
 
-    let Some(want) = numpy_render(&run, &rays, n + 1) else {
-        let _ = std::fs::remove_dir_all(&dir);
-        return;
-    };
+    let want = numpy_render(&run, &rays, n + 1);
     // Sample positions: every edge of every ray.
     let mut worst_edge = 0.0f64;
     for (r, (got, want)) in pieces.chunks_exact(n).zip(&want).enumerate() {
@@ -161,29 +153,21 @@ fn check_against_numpy(name: &str, spec: &Spec) {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn tcnn_layout_samples_and_renders_as_numpy() {
     check_against_numpy("tcnn", &Spec::tcnn());
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn torch_layout_samples_and_renders_as_numpy() {
     check_against_numpy("torch", &Spec::torch());
-}
-
-/// The run of `spec` placed at the identity, sampled as `sampler` says.
-fn placed(dir: &Path, sampler: &str) -> nerfx_core::Result<nerfx_core::scene::Scene> {
-    let scene_file = dir.join("scene.json");
-    std::fs::write(
-        &scene_file,
-        format!(
-            r#"{{"instances": [{{"name": "run", "field": {{"nerfacto": {{"path": "run",
-                "sampler": "{sampler}"}}}}}}]}}"#
-        ),
-    )
-    .unwrap();
-    SceneDesc::read(&scene_file)?
-        .load()?
-        .place(DMat4::IDENTITY, &|_| Ok(DMat4::IDENTITY))
 }
 
 /// An opaque slab `y ∈ [y0, y1]` (|x|, |z| ≤ 3000) as an analytic instance.
@@ -305,65 +289,5 @@ fn the_occupancy_sampler_is_chosen_per_instance_and_runs_without_proposals_are_m
             .unwrap();
         assert_eq!((scene.instances.len(), scene.proposal.len()), (1, 0));
     }
-    let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// A `Quality::Final` RGBA render of a synthetic run of nerfacto's real architecture (16
-/// levels × 2, `2^19` rows, fp16; proposal networks of `2^17` rows, max res 128 and 256;
-/// 256 + 96 proposal and 48 main samples) sampled by its proposal networks, 1920×1080 unless
-/// `NERFX_BENCH_SIZE=WxH`: `cargo test --release --test nerfacto_proposal -- --ignored
-/// --nocapture bench`. Prints the frame time and the split between the proposal networks and
-/// the main field (thread-seconds, from sampling every pixel's ray again in 256-ray
-/// batches); timing is never asserted. Its seeded weights make a fog, not a surface: rays
-/// rarely stop early, the worst case for the sampler.
-#[test]
-#[ignore = "benchmark"]
-fn bench_proposal_render_1080p_final() {
-    use nerfx_core::render::render_with_progress;
-    use std::time::Instant;
-
-    let (w, h) = common_fields::bench_size((1920, 1080));
-    let dir = scratch("proposal-bench");
-    let spec = Spec {
-        log2_table_size: 19,
-        proposal: Some((17, [128, 256])),
-        ..Spec::tcnn()
-    };
-    let t = Instant::now();
-    write_run(&dir, &spec);
-    let scene = placed(&dir, "proposal").unwrap();
-    println!(
-        "run written and loaded in {:.1} s",
-        t.elapsed().as_secs_f64()
-    );
-    let p = Perspective::from_vertical_fov(w, h, 50.0).unwrap();
-    let camera = Camera::new(
-        nerfx_core::demo::look_at(DVec3::new(0.5, -3.0, 1.0), DVec3::ZERO),
-        Projection::Perspective(p),
-    )
-    .unwrap();
-    let settings = RenderSettings::new(Quality::Final.params(), Outputs::rgba());
-    let t = Instant::now();
-    let (planes, stats) =
-        render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {}).unwrap();
-    let ms = t.elapsed().as_secs_f64() * 1e3;
-    let n = f64::from(w * h);
-    let alpha = planes.alpha.as_ref().unwrap();
-    let mean_alpha = alpha.data.iter().map(|&a| f64::from(a)).sum::<f64>() / n;
-    println!(
-        "{w}x{h} Final rgba, proposal sampler, {} rayon threads: {ms:.0} ms/frame; per pixel \
-         {:.1} density and {:.1} colour queries; mean alpha {mean_alpha:.3}",
-        rayon::current_num_threads(),
-        stats.density_samples as f64 / n,
-        stats.color_samples as f64 / n,
-    );
-    // The split, sampling every ray again outside the renderer.
-    let field = scene.proposal[0].field();
-    let rays: Vec<SamplerRay> = (0..h)
-        .flat_map(|y| (0..w).map(move |x| (x, y)))
-        .filter_map(|(x, y)| camera.ray(f64::from(x) + 0.5, f64::from(y) + 0.5))
-        .filter_map(|r| scene.proposal[0].sampler_ray(&r).map(|(s, _)| s))
-        .collect();
-    println!("{}", sampler_split(field, &rays, n));
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -4,21 +4,13 @@
 //! nerfstudio samples it; nerfstudio's `rgb` over black is nerfx's premultiplied as-trained
 //! colour, its `accumulation` nerfx's alpha, its `expected_depth` nerfx's ray depth.
 
-mod common_fields;
-mod common_nerfacto;
+use std::path::Path;
 
-use std::path::{Path, PathBuf};
-
-use common_nerfacto::scratch;
+use crate::common_nerfacto::{copied_nerfstudio_run, nerfstudio_fixture, scratch};
 use glam::DVec3;
 use nerfx_core::field::{NerfactoField, SamplerRay, SamplerScratch};
 use nerfx_core::frames::{read_shot, render_frame};
 use nerfx_core::render::{ColorOutput, Outputs, Quality, RenderSettings};
-use nerfx_core::scene::{LoadedScene, SceneDesc};
-
-fn fixture() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/nerfstudio")
-}
 
 /// A little-endian float32 `.npy` array, flattened (C order).
 fn read_npy(path: &Path) -> Vec<f32> {
@@ -40,39 +32,17 @@ fn read_npy(path: &Path) -> Vec<f32> {
         .collect()
 }
 
-/// A copy of the run in `dir/run` (nerfx caches an occupancy grid beside a run) and a scene
-/// naming it as the path's object, loaded.
-fn copied_run(dir: &Path) -> (PathBuf, LoadedScene) {
-    let run = dir.join("run");
-    for sub in ["", "nerfstudio_models"] {
-        std::fs::create_dir_all(run.join(sub)).unwrap();
-        for entry in std::fs::read_dir(fixture().join("run").join(sub)).unwrap() {
-            let path = entry.unwrap().path();
-            if path.is_file() {
-                std::fs::copy(&path, run.join(sub).join(path.file_name().unwrap())).unwrap();
-            }
-        }
-    }
-    let scene_file = dir.join("scene.json");
-    std::fs::write(
-        &scene_file,
-        r#"{"instances": [{"name": "run", "object": "NeRF",
-            "field": {"nerfacto": {"path": "run"}}}]}"#,
-    )
-    .unwrap();
-    (run, SceneDesc::read(&scene_file).unwrap().load().unwrap())
-}
-
 #[test]
 fn renders_as_nerfstudio_does() {
     let dir = scratch("nerfstudio-renders");
-    let (run, scene) = copied_run(&dir);
-    let shot = read_shot(&fixture().join("camera_path.json"), "NeRF").unwrap();
+    let (run, scene) = copied_nerfstudio_run(&dir);
+    let shot = read_shot(&nerfstudio_fixture().join("camera_path.json"), "NeRF").unwrap();
     let mut settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
     settings.color = ColorOutput::AsTrained;
     for (k, frame) in shot.frames.iter().enumerate() {
         let (planes, _) = render_frame(&scene, &shot, frame.frame, &settings, &|_| {}).unwrap();
-        let ns = |name: &str| read_npy(&fixture().join(format!("render/cam{k}_{name}.npy")));
+        let ns =
+            |name: &str| read_npy(&nerfstudio_fixture().join(format!("render/cam{k}_{name}.npy")));
         let (rgb, acc, depth) = (ns("rgb"), ns("accumulation"), ns("depth_expected"));
         let n = (planes.width * planes.height) as usize;
         assert_eq!((rgb.len(), acc.len(), depth.len()), (3 * n, n, n));
@@ -116,62 +86,12 @@ fn renders_as_nerfstudio_does() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// The run's first camera rendered at Final (as trained), 1920×1080 unless
-/// `NERFX_BENCH_SIZE=WxH` (the camera path at that size, as `nerfx render` of the path does):
-/// `cargo test --release --test nerfstudio_renders -- --ignored --nocapture bench`. Prints the
-/// frame time, the queries per pixel and the split between the proposal networks and the main
-/// field (sampling every pixel's ray again); timing is never asserted.
-#[test]
-#[ignore = "benchmark"]
-fn bench_first_camera_final() {
-    use common_nerfacto::sampler_split;
-    use std::time::Instant;
-
-    let (w, h) = common_fields::bench_size((1920, 1080));
-    let dir = scratch("nerfstudio-bench");
-    let (_, scene) = copied_run(&dir);
-    let text = std::fs::read_to_string(fixture().join("camera_path.json")).unwrap();
-    let mut path: serde_json::Value = serde_json::from_str(&text).unwrap();
-    path["render_width"] = w.into();
-    path["render_height"] = h.into();
-    let path_file = dir.join("camera_path.json");
-    std::fs::write(&path_file, path.to_string()).unwrap();
-    let shot = read_shot(&path_file, "NeRF").unwrap();
-    let mut settings = RenderSettings::new(Quality::Final.params(), Outputs::rgba());
-    settings.color = ColorOutput::AsTrained;
-    let t = Instant::now();
-    let (_, stats) = render_frame(&scene, &shot, 0, &settings, &|_| {}).unwrap();
-    let n = f64::from(w * h);
-    println!(
-        "{w}x{h} Final rgba, first camera, {} rayon threads: {:.0} ms/frame; per pixel {:.1} \
-         density and {:.1} colour queries",
-        rayon::current_num_threads(),
-        t.elapsed().as_secs_f64() * 1e3,
-        stats.density_samples as f64 / n,
-        stats.color_samples as f64 / n,
-    );
-    let at = shot.frame(0).unwrap();
-    let camera = at.camera(&shot).unwrap();
-    let placed = scene
-        .place(at.world_from_scene(&shot).unwrap(), &|name| {
-            at.object_matrix(name)
-        })
-        .unwrap();
-    let instance = &placed.proposal[0];
-    let rays: Vec<SamplerRay> = (0..h)
-        .flat_map(|y| (0..w).map(move |x| (x, y)))
-        .filter_map(|(x, y)| camera.ray(f64::from(x) + 0.5, f64::from(y) + 0.5))
-        .filter_map(|r| instance.sampler_ray(&r).map(|(s, _)| s))
-        .collect();
-    println!("{}", sampler_split(instance.field(), &rays, n));
-    let _ = std::fs::remove_dir_all(&dir);
-}
-
 /// The main field's 48 samples of camera `k`'s centre pixel against nerfstudio's own
 /// (`[start, end, weight]` rows), the ray as nerfstudio generated it.
 fn check_centre_samples(run: &Path, k: usize) {
     let field = NerfactoField::load(run).unwrap();
-    let read = |name: &str| read_npy(&fixture().join(format!("render/cam{k}_{name}.npy")));
+    let read =
+        |name: &str| read_npy(&nerfstudio_fixture().join(format!("render/cam{k}_{name}.npy")));
     let (ray, want) = (read("centre_ray"), read("centre_samples_2"));
     let v = |i: usize| DVec3::new(ray[i].into(), ray[i + 1].into(), ray[i + 2].into());
     let rays = [SamplerRay {

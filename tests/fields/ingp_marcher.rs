@@ -3,42 +3,22 @@
 //! snapshots, with and without cone growth and outer cascades; how such an instance joins
 //! other instances; the scene option; the step count on a fog.
 //!
-//! The NumPy check needs `python3` with `numpy` and `msgpack`; without them it fails with a
-//! message saying so, unless `NERFX_SKIP_NUMPY=1` (then it prints a skip line).
-
-mod common_fields;
-#[allow(dead_code)] // the snapshot writers this test does not use
-mod common_ingp;
+//! The NumPy checks need `python3` with `numpy` and `msgpack` and are cross-checks: they run with the
+//! `cross-checks` feature (`scripts/test.sh`), and fail without the tools, saying so.
 
 use std::path::{Path, PathBuf};
 
-use common_ingp::{scratch, write_blob_snapshot, Ball, Spec};
+use crate::common_ingp::{
+    camera, placed, scratch, write_blob_snapshot, Ball, Spec, BALLS_IN_THREE_CASCADES,
+};
 use glam::{DMat4, DVec3};
-use nerfx_core::camera::{Camera, Perspective, Projection};
+use nerfx_core::camera::Camera;
 use nerfx_core::field::{IngpField, NgpRay, NgpSample, NgpScratch, NGP_MAX_STEPS};
 use nerfx_core::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
 use nerfx_core::scene::{Scene, SceneDesc};
 
-/// The snapshot at `snapshot` (in `dir`) as the one instance of a scene, at the identity,
-/// with `"sampler": sampler` when given.
-fn placed(dir: &Path, snapshot: &Path, sampler: Option<&str>) -> nerfx_core::Result<Scene> {
-    let scene_file = dir.join("scene.json");
-    let sampler = sampler.map_or(String::new(), |s| format!(r#", "sampler": "{s}""#));
-    std::fs::write(
-        &scene_file,
-        format!(
-            r#"{{"instances": [{{"name": "blob", "field": {{"ingp": {{"path": "{}"{sampler}}}}}}}]}}"#,
-            snapshot.file_name().unwrap().to_string_lossy()
-        ),
-    )
-    .unwrap();
-    SceneDesc::read(&scene_file)?
-        .load()?
-        .place(DMat4::IDENTITY, &|_| Ok(DMat4::IDENTITY))
-}
-
 /// Per ray: r, g, b, alpha, expected depth, steps taken, first and last composited sample.
-fn numpy_march(snapshot: &Path, rays: &[NgpRay], max_steps: usize) -> Option<Vec<[f64; 8]>> {
+fn numpy_march(snapshot: &Path, rays: &[NgpRay], max_steps: usize) -> Vec<[f64; 8]> {
     let rays: Vec<[f64; 8]> = rays
         .iter()
         .map(|r| {
@@ -46,44 +26,17 @@ fn numpy_march(snapshot: &Path, rays: &[NgpRay], max_steps: usize) -> Option<Vec
             [o.x, o.y, o.z, d.x, d.y, d.z, r.near, r.far]
         })
         .collect();
-    let values = common_fields::numpy_rays(
+    let values = crate::common_fields::numpy_rays(
         "ingp_marcher_reference.py",
         &["numpy", "msgpack"],
         snapshot,
         &rays,
         &[max_steps.to_string()],
-    )?;
-    Some(
-        values
-            .chunks_exact(8)
-            .map(|c| c.try_into().unwrap())
-            .collect(),
-    )
-}
-
-/// One ball in each of three cascades (aabb_scale 4).
-const BALLS_IN_THREE_CASCADES: [Ball; 3] = [
-    Ball {
-        centre: [0.5, 0.5, 0.5],
-        radius: 0.3,
-    },
-    Ball {
-        centre: [1.4, 0.6, 0.5],
-        radius: 0.35,
-    },
-    Ball {
-        centre: [0.5, -0.9, 0.4],
-        radius: 0.45,
-    },
-];
-
-fn camera(w: u32, h: u32, fov: f64, eye: DVec3, target: DVec3) -> Camera {
-    let p = Perspective::from_vertical_fov(w, h, fov).unwrap();
-    Camera::new(
-        nerfx_core::demo::look_at(eye, target),
-        Projection::Perspective(p),
-    )
-    .unwrap()
+    );
+    values
+        .chunks_exact(8)
+        .map(|c| c.try_into().unwrap())
+        .collect()
 }
 
 /// Every pixel's ray as the instance's marcher sees it (`None` where it misses the box).
@@ -134,9 +87,7 @@ fn check_against_numpy(name: &str, spec: &Spec, snapshot: &Path, camera: &Camera
             all += 1;
         }
     }
-    let Some(want) = numpy_march(snapshot, &hit, NGP_MAX_STEPS) else {
-        return outer as f64 / all.max(1) as f64;
-    };
+    let want = numpy_march(snapshot, &hit, NGP_MAX_STEPS);
     let (rgb, alpha, depth) = (
         planes.rgb.as_ref().unwrap(),
         planes.alpha.as_ref().unwrap(),
@@ -218,6 +169,10 @@ fn snapshot(dir: &Path, spec: &Spec, balls: &[Ball], gain: f32) -> PathBuf {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn aabb_scale_1_renders_as_a_numpy_march() {
     let dir = scratch("ngp-numpy-1");
     let spec = Spec {
@@ -243,6 +198,10 @@ fn aabb_scale_1_renders_as_a_numpy_march() {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn aabb_scale_4_with_cone_growth_and_three_cascades_renders_as_a_numpy_march() {
     let dir = scratch("ngp-numpy-4");
     let spec = Spec {
@@ -267,6 +226,10 @@ fn aabb_scale_4_with_cone_growth_and_three_cascades_renders_as_a_numpy_march() {
 /// The older layout: 16×2 levels, float parameters, CutlassMLP padding, an HDR (linear)
 /// snapshot, a dataset scale 0.5 and offset (0.4, 0.6, 0.45), `aabb_scale` 4.
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn an_hdr_snapshot_with_its_own_dataset_transform_renders_as_a_numpy_march() {
     let dir = scratch("ngp-numpy-hdr");
     let spec = Spec::old_16x2();
@@ -468,6 +431,10 @@ fn an_ngp_marched_snapshot_occludes_and_is_occluded_by_other_instances() {
 /// along the cube's diagonal takes instant-ngp's 1024 finest steps (`NERF_STEPS` per √3) and
 /// never reaches 99 %; a cap below that ends it early, counted, as in NumPy.
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn a_fog_takes_1024_steps_along_the_diagonal_and_a_lower_cap_is_counted() {
     let dir = scratch("ngp-fog");
     let spec = Spec {
@@ -504,120 +471,8 @@ fn a_fog_takes_1024_steps_along_the_diagonal_and_a_lower_cap_is_counted() {
     let (capped, stats) = samples_of(field, &[ray], 1000);
     assert_eq!((stats.samples, stats.capped), (1000, 1));
     assert_eq!(capped[0][..], full[0][..1000]);
-    if let Some(want) = numpy_march(&path, &[ray], 1000) {
-        assert_eq!(want[0][5], 1000.0);
-        assert!((alpha(&capped[0]) - want[0][3]).abs() < 1e-6, "{want:?}");
-    }
-    let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// Process CPU seconds (all threads), from `/proc/self/stat` (Linux; `None` elsewhere).
-fn cpu_seconds() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
-    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
-    Some(ticks / 100.0)
-}
-
-/// instant-ngp's marcher against nerfx's `Final` occupancy march on trained-like snapshots
-/// (the current default architecture, 8 levels × 4 features, `2^19` rows, fp16;
-/// `aabb_scale` 4 with three cascades, one blob in each): dense surfaces (gain 3, rays stop
-/// at 99 %) and soft ones (gain 1.4), 320×180 unless `NERFX_BENCH_SIZE=WxH`:
-/// `cargo test --release --test ingp_marcher -- --ignored --nocapture bench`. Each
-/// sampler renders twice, in alternation; the faster of each is printed with the process
-/// CPU time, the PSNR between the two (linear RGBA) and the queries per pixel. Timing is
-/// never asserted.
-#[test]
-#[ignore = "benchmark"]
-fn bench_ngp_sampler_against_final() {
-    use nerfx_core::render::render_with_progress;
-    use nerfx_testkit::reference::metrics::psnr;
-    use std::time::Instant;
-
-    let (w, h) = common_fields::bench_size((320, 180));
-    let dir = scratch("ngp-bench");
-    let spec = Spec {
-        log2_table_size: 19,
-        aabb_scale: 4,
-        n_cascades: 3,
-        ..Spec::small_8x4()
-    };
-    let balls = BALLS_IN_THREE_CASCADES;
-    let camera = camera(
-        w,
-        h,
-        40.0,
-        DVec3::new(7.0, -5.0, 1.0),
-        DVec3::new(-0.1, 0.9, -1.3),
-    );
-    let settings = RenderSettings::new(Quality::Final.params(), Outputs::rgba());
-    for (name, gain) in [("dense", 3.0), ("soft", 1.4)] {
-        let path = snapshot(&dir, &spec, &balls, gain);
-        let scenes = [
-            ("ngp", placed(&dir, &path, Some("ngp")).unwrap()),
-            ("final", placed(&dir, &path, Some("occupancy")).unwrap()),
-        ];
-        let mut best = [(f64::INFINITY, 0.0); 2];
-        let mut planes = Vec::new();
-        let mut queries = [(0.0, 0.0); 2];
-        for round in 0..2 {
-            for (k, (_, scene)) in scenes.iter().enumerate() {
-                let (t, c) = (Instant::now(), cpu_seconds().unwrap_or(0.0));
-                let (p, stats) =
-                    render_with_progress(scene, &camera, camera.full_window(), &settings, &|_| {})
-                        .unwrap();
-                let wall = t.elapsed().as_secs_f64();
-                let cpu = cpu_seconds().unwrap_or(0.0) - c;
-                if wall < best[k].0 {
-                    best[k] = (wall, cpu);
-                }
-                let n = f64::from(w * h);
-                queries[k] = (
-                    stats.density_samples as f64 / n,
-                    stats.color_samples as f64 / n,
-                );
-                if round == 0 {
-                    planes.push(p);
-                }
-            }
-        }
-        let alpha = |p: &nerfx_core::image::Planes| {
-            p.alpha
-                .as_ref()
-                .unwrap()
-                .data
-                .iter()
-                .map(|&a| f64::from(a))
-                .sum::<f64>()
-                / f64::from(w * h)
-        };
-        let max_alpha = planes[0]
-            .alpha
-            .as_ref()
-            .unwrap()
-            .data
-            .iter()
-            .zip(&planes[1].alpha.as_ref().unwrap().data)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0f32, f32::max);
-        println!(
-            "{name} ({w}x{h}, {} rayon threads): ngp {:.2} s wall / {:.2} s CPU, {:.1} density \
-             + {:.1} colour queries/pixel; Final {:.2} s wall / {:.2} s CPU, {:.1} + {:.1}; \
-             PSNR between them {:.1} dB, max alpha difference {max_alpha:.3}, mean alpha \
-             {:.3} / {:.3}",
-            rayon::current_num_threads(),
-            best[0].0,
-            best[0].1,
-            queries[0].0,
-            queries[0].1,
-            best[1].0,
-            best[1].1,
-            queries[1].0,
-            queries[1].1,
-            psnr(&planes[1], &planes[0]),
-            alpha(&planes[0]),
-            alpha(&planes[1]),
-        );
-    }
+    let want = numpy_march(&path, &[ray], 1000);
+    assert_eq!(want[0][5], 1000.0);
+    assert!((alpha(&capped[0]) - want[0][3]).abs() < 1e-6, "{want:?}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -7,14 +7,12 @@
 //! The tests take turns ([`turn`]): the message suite is a property of the host struct the
 //! binary holds, one at a time, so bundles with different hosts must not act at once.
 
-mod common_ofx;
-
 use std::path::Path;
 use std::sync::{Mutex, MutexGuard, PoisonError};
 
-use common_ofx::fixtures::{instance_with, text};
-use common_ofx::images::{assert_same, at, pattern, rgba, rgba_of, tiled};
-use common_ofx::load;
+use crate::common_ofx::fixtures::{instance_with, text};
+use crate::common_ofx::images::{assert_same, at, pattern, rgba, rgba_of, tiled};
+use crate::common_ofx::load;
 use nerfx_core::image::{scaled_size, Planes, Window};
 use nerfx_graph::{node, Context, ParamValues, RenderRequest, Value};
 use nerfx_ofx_host::{
@@ -34,7 +32,7 @@ fn turn() -> MutexGuard<'static, ()> {
 
 /// The demo's inputs at `W × H`, written once per test binary.
 fn demo_dir() -> &'static Path {
-    common_ofx::fixtures::demo_dir(W, H)
+    crate::common_ofx::fixtures::demo_dir(W, H)
 }
 
 /// A NeRF Render of the demo environment at draft quality, and its values for the core.

@@ -3,19 +3,17 @@
 //! core renders directly (odd tiles, render scales 1, ½ and ¼, many threads at once), and bad
 //! input failing with a status and a message while the host keeps going.
 
-mod common_ofx;
-
 use std::path::Path;
 
-use common_ofx::fixtures::{instance_with, shared as bundle, text};
-use common_ofx::images::{assert_same, paste, pattern, render_tiled, rgba, rgba_of, tiles};
+use crate::common_ofx::fixtures::{instance_with, shared as bundle, text};
+use crate::common_ofx::images::{assert_same, paste, pattern, render_tiled, rgba, rgba_of, tiles};
 use nerfx_core::image::{scaled_size, Planes, Window};
 use nerfx_graph::{node, nodes, Context, ParamKind, Range, RenderRequest, Value};
 use nerfx_ofx_host::{ClipSource, Instance, PropValue};
 
 /// The demo's inputs (scenes, shot, graph) at 45×27, written once per test binary.
 fn demo_dir() -> &'static Path {
-    common_ofx::fixtures::demo_dir(45, 27)
+    crate::common_ofx::fixtures::demo_dir(45, 27)
 }
 
 fn ofx_type(kind: &ParamKind) -> &'static str {

@@ -240,6 +240,10 @@ fn coverage_of_a_trained_field_splats_and_a_ball_adds_up_to_alpha() {
 /// back from the same file), whatever the comp did with them. A graph naming a node that
 /// is not a NeRF Render for its mattes is refused, naming the key.
 #[test]
+#[cfg_attr(
+    not(feature = "cross-checks"),
+    ignore = "a cross-check: scripts/test.sh runs it"
+)]
 fn a_graph_mattes_the_instances_of_the_renders_it_names() {
     let (w, h) = (48u32, 32u32);
     let dir = tempfile::tempdir().unwrap();

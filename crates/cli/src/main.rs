@@ -518,6 +518,13 @@ fn run(cli: Cli) -> Result<()> {
                 inputs,
                 stripe,
             };
+            if png && stripe.is_some() {
+                return Err(Error::invalid(
+                    "--png",
+                    "a preview is of a whole frame: render it after `nerfx assemble`",
+                ));
+            }
+            check_ranks(cryptomatte, cryptomatte_ranks)?;
             let Some(shot) = shot else {
                 if passes.is_some() {
                     return Err(Error::invalid(
@@ -525,13 +532,6 @@ fn run(cli: Cli) -> Result<()> {
                         "a graph's NeRF Render nodes choose their own outputs",
                     ));
                 }
-                if png && stripe.is_some() {
-                    return Err(Error::invalid(
-                        "--png",
-                        "a preview is of a whole frame: render it after `nerfx assemble`",
-                    ));
-                }
-                check_ranks(cryptomatte, cryptomatte_ranks)?;
                 if deep.is_some() {
                     return Err(Error::invalid(
                         "--deep",
@@ -568,13 +568,6 @@ fn run(cli: Cli) -> Result<()> {
                     "the preview is of the colour: add rgba to --passes",
                 ));
             }
-            if png && stripe.is_some() {
-                return Err(Error::invalid(
-                    "--png",
-                    "a preview is of a whole frame: render it after `nerfx assemble`",
-                ));
-            }
-            check_ranks(cryptomatte, cryptomatte_ranks)?;
             let scene = SceneDesc::for_path(&scene)?;
             // A frame older than a field file is rendered again on resume (a run folder's
             // time says nothing about its checkpoints: only files count).

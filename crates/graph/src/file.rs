@@ -100,11 +100,20 @@ impl Graph {
         let json: Json = nerfx_core::json::parse_json(text, path, "a node graph")?;
         if let Some(map) = json.as_object() {
             if let Some(key) = map.keys().find(|k| {
-                !["nodes", "output", "layers", "colorspace", "cryptomatte", "deep"].contains(&k.as_str())
+                ![
+                    "nodes",
+                    "output",
+                    "layers",
+                    "colorspace",
+                    "cryptomatte",
+                    "deep",
+                ]
+                .contains(&k.as_str())
             }) {
                 return Err(bad(
                     key,
-                    "unknown key (keys: nodes, output, layers, colorspace, cryptomatte, deep)".into(),
+                    "unknown key (keys: nodes, output, layers, colorspace, cryptomatte, deep)"
+                        .into(),
                 ));
             }
         }
@@ -194,7 +203,10 @@ impl Graph {
         let mut deep = Vec::new();
         if let Some(map) = json.get("deep") {
             let map = map.as_object().ok_or_else(|| {
-                bad("deep", "expected an object: NeRF Render node → file pattern".into())
+                bad(
+                    "deep",
+                    "expected an object: NeRF Render node → file pattern".into(),
+                )
             })?;
             for (node, pattern) in map {
                 let key = format!("deep.{node}");
@@ -473,7 +485,9 @@ impl Graph {
     fn nerf_render(&self, name: &str) -> Result<&GraphNode> {
         self.node(name)
             .filter(|n| n.node.desc.id == super::nerf_render::NODE_ID)
-            .ok_or_else(|| Error::invalid(format!("graph node {name}"), "is not a NeRF Render node"))
+            .ok_or_else(|| {
+                Error::invalid(format!("graph node {name}"), "is not a NeRF Render node")
+            })
     }
 }
 

@@ -18,10 +18,11 @@ use common_nerfacto::{
     copied_nerfstudio_run, nerfstudio_fixture, placed, scene_of, scratch, write_run, Spec,
 };
 use glam::{DMat4, DVec3};
+use nerfx_core::camera::read_shot;
 use nerfx_core::camera::{Camera, Perspective, Projection};
 use nerfx_core::field::{NerfactoField, SamplerRay, SamplerScratch, SamplerStats};
-use nerfx_core::frames::{read_shot, render_frame};
 use nerfx_core::render::{render_with_progress, ColorOutput, Outputs, Quality, RenderSettings};
+use nerfx_core::shot_render::render_frame;
 use nerfx_testkit::bench::targets::{bench_size, Measurement};
 use rayon::prelude::*;
 

@@ -12,9 +12,10 @@ mod common_blender;
 
 use std::path::PathBuf;
 
-use nerfx_core::frames::{read_shot, render_frame};
+use nerfx_core::camera::read_shot;
 use nerfx_core::render::{ColorOutput, Outputs, Quality, RenderSettings};
 use nerfx_core::scene::SceneDesc;
+use nerfx_core::shot_render::render_frame;
 use serde_json::Value;
 
 fn rows(v: &Value) -> Vec<f64> {

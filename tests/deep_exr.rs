@@ -292,14 +292,14 @@ fn proposal_sampled_nerfacto_flattens() {
         .and_then(|d| d.load())
         .unwrap();
     assert!(!loaded.desc().instances.is_empty());
-    let shot = nerfx_core::frames::read_shot(&data.join("camera_path.json"), "NeRF").unwrap();
+    let shot = nerfx_core::camera::read_shot(&data.join("camera_path.json"), "NeRF").unwrap();
     let settings = RenderSettings::new(Quality::Draft.params(), Outputs::all());
     let deep = DeepParams {
         max_samples: 16,
         error_target: settings.march.error_target,
     };
     let camera = shot.frame(0).unwrap().camera(&shot).unwrap();
-    let (planes, image, _) = nerfx_core::frames::render_frame_window_deep(
+    let (planes, image, _) = nerfx_core::shot_render::render_frame_window_deep(
         &loaded,
         &shot,
         0,

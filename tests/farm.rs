@@ -54,7 +54,7 @@ fn local_render(scene: &Path, shot: &Path, dir: &Path) -> PathBuf {
 }
 
 fn frame(pattern: &Path, frame: i64) -> PathBuf {
-    nerfx_core::frames::frame_path(pattern, frame, true)
+    nerfx::frames::frame_path(pattern, frame, true)
 }
 
 fn channels(path: &Path) -> Vec<(String, Plane)> {

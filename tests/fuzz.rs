@@ -548,7 +548,7 @@ fn write(path: &Path, bytes: &[u8]) {
 fn check_shot(f: &Fixtures, dir: &Path, bytes: &[u8]) -> Result<Verdict, String> {
     let path = dir.join("shot.json");
     write(&path, bytes);
-    let shot = attempt!(nerfx_core::frames::read_shot(&path, "NeRF"));
+    let shot = attempt!(nerfx_core::camera::read_shot(&path, "NeRF"));
     let first = attempt!(shot.frames.first().ok_or("no frames"));
     // Through a point of the aperture: the pinhole itself when the camera has no depth of
     // field.
@@ -584,9 +584,9 @@ fn check_graph(f: &Fixtures, _: &Path, bytes: &[u8]) -> Result<Verdict, String> 
 fn check_frames_and_stripe(_: &Fixtures, _: &Path, bytes: &[u8]) -> Result<Verdict, String> {
     let text = attempt!(std::str::from_utf8(bytes));
     let (frames, stripe) = text.split_once('\n').unwrap_or((text, "1/1"));
-    let frames = attempt!(nerfx_core::frames::parse_frames(frames));
+    let frames = attempt!(nerfx::frames::parse_frames(frames));
     let spec = nerfx::farm::frame_spec(&frames);
-    if nerfx_core::frames::parse_frames(&spec).ok().as_ref() != Some(&frames) {
+    if nerfx::frames::parse_frames(&spec).ok().as_ref() != Some(&frames) {
         return Err(format!(
             "frame spec {spec} does not read back as its frames"
         ));

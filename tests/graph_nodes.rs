@@ -7,15 +7,16 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, SystemTime};
 
+use nerfx_core::camera::read_shot;
 use nerfx_core::camera::Shot;
 use nerfx_core::composite::{
     accumulation_matte, depth_merge, mix, rgba_planes, shadow_catcher_merge, MatteCurve, Rgba,
 };
 use nerfx_core::demo;
-use nerfx_core::frames::{read_shot, render_frame};
 use nerfx_core::image::{Plane, Planes, Window};
 use nerfx_core::render::{Outputs, Quality, RenderSettings};
 use nerfx_core::scene::SceneDesc;
+use nerfx_core::shot_render::render_frame;
 use nerfx_graph::{
     cached_scene, node, nodes, purge_caches, Context, ParamKind, ParamValues, RenderRequest, Value,
 };

@@ -185,7 +185,7 @@ fn a_path_written_for_a_scaled_object_renders_the_bound_field_in_blender_units()
         .to_string(),
     )
     .unwrap();
-    let shot = nerfx_core::frames::read_shot(&path_file, "NeRF").unwrap();
+    let shot = nerfx_core::camera::read_shot(&path_file, "NeRF").unwrap();
     let scene = nerfx_core::scene::SceneDesc::read(&scene_file)
         .unwrap()
         .load()
@@ -193,7 +193,7 @@ fn a_path_written_for_a_scaled_object_renders_the_bound_field_in_blender_units()
     let settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
     let first = shot.frames[0].frame;
     let (planes, _) =
-        nerfx_core::frames::render_frame(&scene, &shot, first, &settings, &|_| {}).unwrap();
+        nerfx_core::shot_render::render_frame(&scene, &shot, first, &settings, &|_| {}).unwrap();
     let (alpha, z) = (planes.alpha.unwrap(), planes.depth_z.unwrap());
     let f = (f64::from(h) / 2.0) / (p.frames[0].fov.to_radians() / 2.0).tan();
     let radius_px = f * (r / d).asin().tan();
@@ -278,10 +278,10 @@ fn an_unbound_instance_composes_with_a_scaled_camera_path() {
             .unwrap()
             .load()
             .unwrap();
-        let shot = nerfx_core::frames::read_shot(&path_file, "NeRF").unwrap();
+        let shot = nerfx_core::camera::read_shot(&path_file, "NeRF").unwrap();
         let settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
         let first = shot.frames[0].frame;
-        nerfx_core::frames::render_frame(&scene, &shot, first, &settings, &|_| {})
+        nerfx_core::shot_render::render_frame(&scene, &shot, first, &settings, &|_| {})
             .unwrap()
             .0
     };

@@ -8,11 +8,12 @@
 use std::path::Path;
 use std::time::{Duration, SystemTime};
 
+use nerfx_core::camera::read_shot;
 use nerfx_core::demo;
-use nerfx_core::frames::{read_shot, render_frame};
 use nerfx_core::image::{Plane, Planes, Window};
 use nerfx_core::render::{Outputs, Quality, RenderSettings};
 use nerfx_core::scene::SceneDesc;
+use nerfx_core::shot_render::render_frame;
 use nerfx_graph::{
     node, purge_caches, shared_render_stats, ParamValues, RenderRequest, SharedRenderStats, Value,
 };

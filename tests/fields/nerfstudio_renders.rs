@@ -8,9 +8,10 @@ use std::path::Path;
 
 use crate::common_nerfacto::{copied_nerfstudio_run, nerfstudio_fixture, scratch};
 use glam::DVec3;
+use nerfx_core::camera::read_shot;
 use nerfx_core::field::{NerfactoField, SamplerRay, SamplerScratch};
-use nerfx_core::frames::{read_shot, render_frame};
 use nerfx_core::render::{ColorOutput, Outputs, Quality, RenderSettings};
+use nerfx_core::shot_render::render_frame;
 
 /// A little-endian float32 `.npy` array, flattened (C order).
 fn read_npy(path: &Path) -> Vec<f32> {

@@ -12,16 +12,18 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use glam::DVec3;
 use nerfx::farm::{is_done, ExitStatus, FarmJob, Progress, Stripe};
-use nerfx_core::frames::{
-    frame_path, parse_frames, read_shot, render_coverage, render_environment, render_frame_window,
-    render_frame_window_deep, EnvironmentOrigin,
-};
+use nerfx::frames::{frame_path, parse_frames};
+use nerfx_core::camera::read_shot;
 use nerfx_core::image::{
     frames_per_second, write_deep_exr, write_exr, write_exr_layers, write_png_preview,
     CameraMatrices, ExrHeader, OutputColorSpace,
 };
 use nerfx_core::render::{ColorOutput, DeepParams, Outputs, Quality, RenderSettings};
 use nerfx_core::scene::SceneDesc;
+use nerfx_core::shot_render::{
+    render_coverage, render_environment, render_frame_window, render_frame_window_deep,
+    EnvironmentOrigin,
+};
 use nerfx_core::{demo, Error, Result};
 use nerfx_testkit::bench;
 

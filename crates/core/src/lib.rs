@@ -19,7 +19,6 @@ pub mod composite;
 pub mod demo;
 pub mod error;
 pub mod field;
-pub mod frames;
 pub mod image;
 pub mod input;
 pub mod json;
@@ -27,6 +26,7 @@ pub mod output;
 pub mod render;
 pub mod rng;
 pub mod scene;
+pub mod shot_render;
 pub mod standin;
 
 pub use error::{Error, Result};

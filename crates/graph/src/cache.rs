@@ -10,9 +10,9 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::SystemTime;
 
+use nerfx_core::camera::read_shot;
 use nerfx_core::camera::Shot;
 use nerfx_core::error::{Error, Result};
-use nerfx_core::frames::read_shot;
 use nerfx_core::scene::{LoadedScene, SceneDesc};
 
 /// Objects of a nerfstudio `camera_path.json` read as a shot are bound to this name (the

@@ -29,7 +29,6 @@ use nerfx_core::camera::{
 };
 use nerfx_core::composite::{over, rgba_pixels, rgba_planes};
 use nerfx_core::error::{number, Error, Result};
-use nerfx_core::frames::{coverage_by_indicators, frame_views, mean_over_views};
 use nerfx_core::image::{
     scaled_size, DeepImage, OutputColorSpace, Plane, Planes, BACKGROUND_DEPTH,
 };
@@ -38,6 +37,7 @@ use nerfx_core::render::{
     Outputs, Quality, RenderSettings,
 };
 use nerfx_core::scene::{CropBox, Instance, LoadedScene, Scene};
+use nerfx_core::shot_render::{coverage_by_indicators, frame_views, mean_over_views};
 
 /// The Output Colour Space parameter's options: the scene file's, then every
 /// [`OutputColorSpace`] by its name.

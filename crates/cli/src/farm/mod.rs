@@ -13,8 +13,8 @@ mod yaml;
 
 use std::path::{Path, PathBuf};
 
+use crate::frames::parse_frames;
 use nerfx_core::error::{Error, Result};
-use nerfx_core::frames::parse_frames;
 use nerfx_core::render::TILE_SIZE;
 
 pub use split::{assemble, Stripe};
@@ -125,7 +125,7 @@ impl FarmJob {
         for source in &self.sources {
             std::fs::metadata(source).map_err(|e| Error::io(source, e))?;
         }
-        let shot = nerfx_core::frames::read_shot(shot_path, nerfx_core::demo::NERF_OBJECT)?;
+        let shot = nerfx_core::camera::read_shot(shot_path, nerfx_core::demo::NERF_OBJECT)?;
         for &frame in &self.frames {
             let camera = shot.frame(frame)?.camera(&shot)?;
             if self.split > 1 {

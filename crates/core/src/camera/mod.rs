@@ -16,6 +16,7 @@ mod interpolate;
 mod nerfstudio;
 mod perspective;
 mod shot;
+mod shot_file;
 mod shutter;
 mod stereo;
 
@@ -27,6 +28,7 @@ pub use perspective::{BlenderIntrinsics, Perspective, SensorFit};
 pub use shot::{
     SceneWorld, Shot, ShotCamera, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, SHOT_VERSION,
 };
+pub use shot_file::read_shot;
 pub use shutter::{MotionBlur, ShutterPosition, MAX_SHUTTER};
 pub use stereo::{Eye, Ods, Vr180, DEFAULT_IPD};
 

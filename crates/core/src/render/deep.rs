@@ -16,7 +16,7 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use super::composite::srgb_composite_to_linear;
+use super::integrator::srgb_composite_to_linear;
 use crate::error::{Error, Result};
 use crate::image::{DeepImage, DeepSample, Planes, Window};
 

@@ -3,13 +3,13 @@
 //! [`render`] splits the window into tiles and marches them in parallel (rayon), each with
 //! per-thread scratch (module `march`), or, for scenes of analytic fields, integrates their
 //! rays in closed form (module `closed_form`, [`MarchParams::closed_form`]); module
-//! `composite` holds the pure compositing formulas;
+//! `integrator` holds the pure compositing formulas along a ray;
 //! [`Quality`] presets set the dials; [`render_naive`] is the uniform-step baseline the
 //! benchmark compares against.
 
 mod closed_form;
-mod composite;
 mod deep;
+mod integrator;
 mod march;
 mod naive;
 mod ngp;
@@ -20,8 +20,8 @@ mod splats;
 
 pub use splats::splat_stage_timings;
 
-pub use composite::{crossing_depth, opacity, srgb_composite_to_linear, Pieces};
 pub use deep::{average_images, conform_to, DeepParams, MAX_DEEP_SAMPLES};
+pub use integrator::{crossing_depth, opacity, srgb_composite_to_linear, Pieces};
 pub use naive::render_naive;
 pub use quality::{MarchParams, Quality};
 

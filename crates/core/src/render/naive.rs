@@ -4,7 +4,7 @@
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
-use super::composite::{crossing_depth, Pieces};
+use super::integrator::{crossing_depth, Pieces};
 use super::march::PixelResult;
 use super::{bands, empty_planes, Outputs, RenderStats};
 use crate::camera::Camera;

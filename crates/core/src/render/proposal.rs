@@ -10,7 +10,7 @@
 //! nerfstudio's `last_sample` background (the last sample's colour filling `1 − acc`) is
 //! not added: nerfx delivers premultiplied colour with alpha = accumulation.
 
-use super::composite::opacity;
+use super::integrator::opacity;
 use super::RenderStats;
 use crate::camera::Ray;
 use crate::field::{Fragment, Piece, SamplerRay, SamplerScratch};

@@ -34,9 +34,9 @@ mod piece;
 use glam::DVec3;
 
 use self::piece::{Integral, Piece, Sums};
-use super::composite::srgb_composite_to_linear;
-use super::composite::Pieces;
 use super::deep::{finish_pixel, DeepScratch, DeepTile, RawPiece};
+use super::integrator::srgb_composite_to_linear;
+use super::integrator::Pieces;
 use super::march::{cull_instances, may_meet, DeepPass, InstancePlan, PixelResult, RayCone};
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};

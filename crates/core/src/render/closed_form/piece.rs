@@ -7,7 +7,7 @@ use glam::DVec3;
 
 use super::Budget;
 use crate::field::{Anchor, Density, Profile};
-use crate::render::composite::opacity;
+use crate::render::integrator::opacity;
 
 /// Gauss–Legendre nodes on `[−1, 1]` and their weights, 3 points (exact for polynomials of
 /// degree 5) and 4 (degree 7).

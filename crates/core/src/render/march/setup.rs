@@ -9,7 +9,7 @@ use super::{InstancePlan, Met, Scratch};
 use crate::camera::Camera;
 use crate::field::Fragment;
 use crate::image::Window;
-use crate::render::composite::Pieces;
+use crate::render::integrator::Pieces;
 use crate::render::ngp;
 use crate::render::proposal;
 use crate::render::runs::{instance_runs, merge};

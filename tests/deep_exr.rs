@@ -359,11 +359,18 @@ fn demo_files(dir: &Path, blur: bool) -> (String, String) {
 
 /// The flat file's planes as nerfx's own reader gives them.
 fn flat_planes(path: &Path) -> Planes {
+    exr_planes(path, "", true)
+}
+
+/// The RGBA planes of the layer `prefix` (`""`: the main layer) of an EXR as nerfx's own
+/// reader gives them, and its `Z` plane with `depth`.
+fn exr_planes(path: &Path, prefix: &str, depth: bool) -> Planes {
     let channels = nerfx_core::image::read_exr_channels(path).unwrap();
     let find = |name: &str| {
+        let name = format!("{prefix}{name}");
         channels
             .iter()
-            .find(|(n, _)| n == name)
+            .find(|(n, _)| *n == name)
             .map(|(_, p)| p.clone())
             .unwrap_or_else(|| panic!("{name} in {}", path.display()))
     };
@@ -373,7 +380,7 @@ fn flat_planes(path: &Path) -> Planes {
         height: r.height,
         rgb: Some([r, find("G"), find("B")]),
         alpha: Some(find("A")),
-        depth_z: Some(find("Z")),
+        depth_z: depth.then(|| find("Z")),
         depth_ray: None,
         depth_median: None,
     }
@@ -570,24 +577,7 @@ fn a_graph_writes_its_nerf_renders_deep_files_flattening_to_their_layers() {
         // The object's node is also the graph's `object` layer: its RGBA as the bundle
         // rendered it.
         let flat = dir.path().join(format!("comp.{f:04}.exr"));
-        let channels = nerfx_core::image::read_exr_channels(&flat).unwrap();
-        let find = |name: &str| {
-            channels
-                .iter()
-                .find(|(n, _)| n == name)
-                .map(|(_, p)| p.clone())
-                .unwrap_or_else(|| panic!("{name} in {}", flat.display()))
-        };
-        let r = find("object.R");
-        let layer = Planes {
-            width: r.width,
-            height: r.height,
-            rgb: Some([r, find("object.G"), find("object.B")]),
-            alpha: Some(find("object.A")),
-            depth_z: None,
-            depth_ray: None,
-            depth_median: None,
-        };
+        let layer = exr_planes(&flat, "object.", false);
         let deep = dir.path().join(format!("deep/obj.{f:04}.exr"));
         let back = check(
             &format!("graph node obj, frame {f}"),

@@ -11,7 +11,7 @@
 //! - depth (nerfx Z vs Blender's Z pass) within 1e-3 relative away from the edge.
 //!
 //! It runs in every Blender tested (Debian's 3.4, bpy 4.5 and 5.0; see `common_blender`,
-//! `NERFX_SKIP_BLENDER=1` and `NERFX_SKIP_BPY=1` skip knowingly), each of which must write the
+//! `NERFX_SKIP_BPY=1` skips the `bpy` runs knowingly), each of which must write the
 //! same shot files.
 
 #[path = "common_blender/mod.rs"]

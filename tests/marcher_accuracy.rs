@@ -12,7 +12,7 @@ use std::sync::Arc;
 use common::*;
 use glam::{DMat4, DVec3, Vec3};
 use nerfx_core::camera::Camera;
-use nerfx_core::field::{Aabb, Analytic, Field, Shape};
+use nerfx_core::field::{Aabb, Analytic, Capabilities, Field, Shape};
 use nerfx_core::image::{Plane, Planes, Window};
 use nerfx_core::render::{
     render, render_naive, render_with_progress, MarchParams, Outputs, Quality, RenderSettings,
@@ -112,7 +112,14 @@ impl Field for Searched {
     fn feature_size(&self) -> f32 {
         self.0.feature_size()
     }
-    fn density_bounds(&self, regions: &[Aabb], bounds: &mut [f32]) -> bool {
+    /// Density bounds, and no spans: the marcher searches the field's edges.
+    fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            density_bounds: true,
+            ..Capabilities::default()
+        }
+    }
+    fn density_bounds(&self, regions: &[Aabb], bounds: &mut [f32]) {
         self.0.density_bounds(regions, bounds)
     }
     fn may_be_occupied(&self, region: &Aabb) -> bool {

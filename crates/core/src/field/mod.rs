@@ -118,6 +118,23 @@ pub struct Span {
     pub varies: bool,
 }
 
+/// What a field can tell the marcher beyond its densities and colours, declared once per
+/// field ([`Field::capabilities`]): the marcher picks how to march an instance from it when
+/// the render starts, and asks only what was declared.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Capabilities {
+    /// It gives the exact intervals of a ray where its density may be non-zero
+    /// ([`Field::spans`]): the marcher runs its samples between their ends instead of
+    /// searching for edges (analytic fields).
+    pub spans: bool,
+    /// It gives the intervals of a ray its occupancy mask is on
+    /// ([`Field::mask_segments`]): a smooth density cut by a mask of cells (instant-ngp).
+    pub mask_segments: bool,
+    /// It bounds its density over a region ([`Field::density_bounds`]): only then can a
+    /// step between two empty samples be known to hold nothing.
+    pub density_bounds: bool,
+}
+
 /// [`Field::may_be_occupied`] asked of regions inside regions (see [`Field::region_query`]).
 pub trait RegionQuery: Sync {
     /// Whether the field may have density in `region`: [`Field::may_be_occupied`]'s answer.
@@ -224,12 +241,20 @@ pub trait Field: Send + Sync {
         0.0
     }
 
-    /// Upper bounds of the density over each region (`bounds.len() == regions.len()`),
-    /// where the field can give them cheaply; `false` (the default) when it cannot. The
+    /// What the field can tell the marcher beyond densities and colours: which of
+    /// [`Field::spans`], [`Field::mask_segments`] and [`Field::density_bounds`] it answers.
+    /// The same for every ray and region. None by default (a trained field's densities
+    /// alone, marched through its occupancy grid).
+    fn capabilities(&self) -> Capabilities {
+        Capabilities::default()
+    }
+
+    /// Upper bounds of the density over each region (`bounds.len() == regions.len()`), for a
+    /// field that declares [`Capabilities::density_bounds`] (asked of no other). The
     /// marcher uses them to find features thinner than a step between two samples (a dense
     /// sheet inside fog); a field without bounds gets no such search.
-    fn density_bounds(&self, _regions: &[Aabb], _bounds: &mut [f32]) -> bool {
-        false
+    fn density_bounds(&self, _regions: &[Aabb], bounds: &mut [f32]) {
+        bounds.fill(f32::INFINITY);
     }
 
     /// The exact intervals of the ray `origin + t·dir`, `t ∈ [t0, t1]` (`dir` a unit
@@ -238,22 +263,19 @@ pub trait Field: Send + Sync {
     /// parts: inside a span the density is continuous and has no bump two samples could
     /// straddle, so the marcher starts and ends its runs of samples at span ends instead of
     /// searching for edges, and searches for no thin sheet or peak between samples. Outside
-    /// every span the density must be exactly zero. `false` (the default, `out` untouched):
-    /// the field cannot say, and the marcher finds its edges by sampling (trained fields).
-    /// The answer must be the same for every ray: the marcher asks once per instance
-    /// whether to march it by spans or by its occupancy grid.
-    fn spans(&self, _origin: Vec3, _dir: Vec3, _t0: f64, _t1: f64, _out: &mut Vec<Span>) -> bool {
-        false
-    }
+    /// every span the density must be exactly zero. Asked only of a field that declares
+    /// [`Capabilities::spans`]; the others' edges the marcher finds by sampling (trained
+    /// fields). By default `out` is left untouched.
+    fn spans(&self, _origin: Vec3, _dir: Vec3, _t0: f64, _t1: f64, _out: &mut Vec<Span>) {}
 
     /// The exact intervals `[enter, exit]` of the ray `origin + t·dir`, `t ∈ [t0, t1]` (`dir`
     /// a unit vector), where the field's occupancy mask is on, appended to `out` sorted and
     /// apart (touching cells joined), for a field whose density is a smooth interpolant (see
     /// [`Field::smooth_length`]) cut to zero by a mask of cells: the density is zero outside
     /// them and has no jump inside them, so the marcher starts and ends its runs at their
-    /// ends instead of searching for the mask's edges between samples. `false` (the
-    /// default, `out` untouched): the field cannot say. The answer must be the same for
-    /// every ray: the marcher asks once per instance whether to march it by these segments.
+    /// ends instead of searching for the mask's edges between samples. Asked only of a
+    /// field that declares [`Capabilities::mask_segments`]; by default `out` is left
+    /// untouched.
     fn mask_segments(
         &self,
         _origin: Vec3,
@@ -261,8 +283,7 @@ pub trait Field: Send + Sync {
         _t0: f64,
         _t1: f64,
         _out: &mut Vec<[f64; 2]>,
-    ) -> bool {
-        false
+    ) {
     }
 
     /// Whether the density may be non-zero anywhere in `region`. Must be *conservative*:

@@ -12,7 +12,7 @@
 //! bisection. Over a ray the instances' intervals are cut at every span end, so that inside
 //! a run each instance's density is continuous or searched, never jumping unseen.
 
-use crate::field::{Aabb, Field, Occupancy, Span, Unbounded};
+use crate::field::{Aabb, Capabilities, Field, Occupancy, Span, Unbounded};
 use crate::scene::LocalRay;
 
 /// What the marcher knows about the density inside a run.
@@ -67,11 +67,12 @@ pub(super) struct RunScratch {
 
 /// Appends one instance's intervals along its local ray to `out` (world distance): its
 /// occupied segments when it has an `occupancy` grid, else its spans or its mask's
-/// segments. Returns the world distance inside a span's (or mask segment's) end at which
+/// segments, as its field's `capabilities` declare. Returns the world distance inside a span's (or mask segment's) end at which
 /// that end's sample is taken for this instance (0 when it gave neither).
 pub(super) fn instance_runs(
     lr: &LocalRay,
     field: &dyn Field,
+    capabilities: Capabilities,
     occupancy: Option<&Occupancy>,
     unbounded: Option<&Unbounded>,
     scratch: &mut RunScratch,
@@ -100,7 +101,8 @@ pub(super) fn instance_runs(
     };
     scratch.spans.clear();
     scratch.mask.clear();
-    if field.spans(lr.origin, lr.dir, 0.0, length, &mut scratch.spans) {
+    if capabilities.spans {
+        field.spans(lr.origin, lr.dir, 0.0, length, &mut scratch.spans);
         out.extend(scratch.spans.iter().filter_map(|s| {
             let kind = if s.varies {
                 RunKind::Smooth
@@ -109,7 +111,8 @@ pub(super) fn instance_runs(
             };
             run(s.enter, s.exit, kind)
         }));
-    } else if field.mask_segments(lr.origin, lr.dir, 0.0, length, &mut scratch.mask) {
+    } else if capabilities.mask_segments {
+        field.mask_segments(lr.origin, lr.dir, 0.0, length, &mut scratch.mask);
         out.extend(
             scratch
                 .mask

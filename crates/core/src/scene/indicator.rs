@@ -13,7 +13,7 @@ use std::sync::Arc;
 
 use glam::Vec3;
 
-use crate::field::{Aabb, ColorSpace, Field, Span, Splats, Unbounded};
+use crate::field::{Aabb, Capabilities, ColorSpace, Field, Span, Splats, Unbounded};
 
 /// A field with its colour replaced by a constant; everything else the field's own.
 pub(crate) struct Indicator {
@@ -55,20 +55,16 @@ impl Field for Indicator {
     fn smooth_length(&self) -> f32 {
         self.field.smooth_length()
     }
-    fn density_bounds(&self, regions: &[Aabb], bounds: &mut [f32]) -> bool {
+    fn capabilities(&self) -> Capabilities {
+        self.field.capabilities()
+    }
+    fn density_bounds(&self, regions: &[Aabb], bounds: &mut [f32]) {
         self.field.density_bounds(regions, bounds)
     }
-    fn spans(&self, origin: Vec3, dir: Vec3, t0: f64, t1: f64, out: &mut Vec<Span>) -> bool {
+    fn spans(&self, origin: Vec3, dir: Vec3, t0: f64, t1: f64, out: &mut Vec<Span>) {
         self.field.spans(origin, dir, t0, t1, out)
     }
-    fn mask_segments(
-        &self,
-        origin: Vec3,
-        dir: Vec3,
-        t0: f64,
-        t1: f64,
-        out: &mut Vec<[f64; 2]>,
-    ) -> bool {
+    fn mask_segments(&self, origin: Vec3, dir: Vec3, t0: f64, t1: f64, out: &mut Vec<[f64; 2]>) {
         self.field.mask_segments(origin, dir, t0, t1, out)
     }
     fn may_be_occupied(&self, region: &Aabb) -> bool {

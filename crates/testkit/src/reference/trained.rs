@@ -107,8 +107,10 @@ impl<'a> TrainedReference<'a> {
         let mut encode = Vec::new();
         for instance in &scene.instances {
             let field = instance.field();
-            let masked = field.mask_segments(Vec3::ZERO, Vec3::X, 0.0, 0.0, &mut Vec::new());
-            if !masked || field.smooth_length() <= 0.0 || !scene.splats.is_empty() {
+            if !field.capabilities().mask_segments
+                || field.smooth_length() <= 0.0
+                || !scene.splats.is_empty()
+            {
                 return Err(Error::Unsupported(format!(
                     "the trained reference of instance '{}': its field is not a smooth \
                      interpolant cut by a mask",
@@ -401,7 +403,7 @@ mod tests {
     use glam::{DMat4, DVec3};
 
     use super::*;
-    use nerfx_core::field::{Aabb, Field};
+    use nerfx_core::field::{Aabb, Capabilities, Field};
     use nerfx_core::scene::{FieldHandle, Instance};
 
     /// A unit cube of constant density and colour, cut by its own mask: the density reads
@@ -436,6 +438,12 @@ mod tests {
         fn smooth_length(&self) -> f32 {
             1e-2
         }
+        fn capabilities(&self) -> Capabilities {
+            Capabilities {
+                mask_segments: true,
+                ..Capabilities::default()
+            }
+        }
         fn mask_segments(
             &self,
             origin: Vec3,
@@ -443,7 +451,7 @@ mod tests {
             t0: f64,
             t1: f64,
             out: &mut Vec<[f64; 2]>,
-        ) -> bool {
+        ) {
             let (o, d) = (origin.as_dvec3(), dir.as_dvec3());
             let (mut a, mut b) = (t0, t1);
             for k in 0..3 {
@@ -454,7 +462,6 @@ mod tests {
             if a < b {
                 out.push([a, b]);
             }
-            true
         }
         fn may_be_occupied(&self, region: &Aabb) -> bool {
             region.intersects(&self.bounds())

@@ -30,7 +30,7 @@ pub(crate) use profile::{Anchor, Density, Profile};
 pub use sh::ShColor;
 pub(crate) use spans::Line;
 
-use super::{Aabb, Field, RegionQuery, Span};
+use super::{Aabb, Capabilities, Field, RegionQuery, Span};
 use crate::error::{number, Error, Result};
 use index::PrimitiveIndex;
 
@@ -388,16 +388,20 @@ impl Field for Analytic {
         }
     }
 
-    /// Each primitive's interval in closed form, cut where any begins or ends; a span is
-    /// constant unless a Gaussian is in it (see `spans.rs`). A field of more than
-    /// `MAX_SPAN_PRIMITIVES` primitives says nothing (the same for every ray), and the
-    /// marcher walks its occupancy grid instead.
-    fn spans(&self, origin: Vec3, dir: Vec3, t0: f64, t1: f64, out: &mut Vec<Span>) -> bool {
-        if self.active().nth(MAX_SPAN_PRIMITIVES).is_some() {
-            return false;
+    /// Spans and density bounds, always; spans only up to `MAX_SPAN_PRIMITIVES` primitives
+    /// (beyond, the marcher walks the field's occupancy grid instead).
+    fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            spans: self.active().nth(MAX_SPAN_PRIMITIVES).is_none(),
+            mask_segments: false,
+            density_bounds: true,
         }
+    }
+
+    /// Each primitive's interval in closed form, cut where any begins or ends; a span is
+    /// constant unless a Gaussian is in it (see `spans.rs`).
+    fn spans(&self, origin: Vec3, dir: Vec3, t0: f64, t1: f64, out: &mut Vec<Span>) {
         spans::spans(self.active(), origin, dir, t0, t1, out);
-        true
     }
 
     fn may_be_occupied(&self, region: &Aabb) -> bool {
@@ -412,7 +416,7 @@ impl Field for Analytic {
     /// [`Field::may_be_occupied`]) of each one's largest density there: its density for
     /// spheres and boxes, for a Gaussian its value at the point of the region nearest its
     /// centre. The shape is chosen once per primitive, outside the loop over regions.
-    fn density_bounds(&self, regions: &[Aabb], bounds: &mut [f32]) -> bool {
+    fn density_bounds(&self, regions: &[Aabb], bounds: &mut [f32]) {
         bounds.fill(0.0);
         for p in self.active() {
             let k = p.density;
@@ -450,7 +454,6 @@ impl Field for Analytic {
                 }
             }
         }
-        true
     }
 }
 
@@ -627,7 +630,8 @@ mod tests {
         let far = Aabb::new(Vec3::splat(5.0), Vec3::splat(6.0));
         let b = Aabb::new(Vec3::new(-0.5, -0.1, -0.1), Vec3::new(0.5, 0.1, 0.1));
         let mut bounds = [f32::NAN; 2];
-        assert!(f.density_bounds(&[far, b], &mut bounds));
+        assert!(f.capabilities().density_bounds);
+        f.density_bounds(&[far, b], &mut bounds);
         assert_eq!(bounds[0], 0.0);
         let expected = 3.0 + 2.0 * (-0.5f32).exp();
         assert!((bounds[1] - expected).abs() < 1e-6);

@@ -34,7 +34,7 @@ use super::network::{
     correctly_rounded, exp_density, non_finite, sh4, HashGrid, HashGridConfig, LastInputs, Mlp,
     MlpConfig, TableStorage,
 };
-use super::{Aabb, ColorSpace, Field};
+use super::{Aabb, Capabilities, ColorSpace, Field};
 use crate::error::{Error, Result};
 use cascades::Cascades;
 pub use marcher::{NgpRay, NgpSample, NgpScratch, NgpStats, NGP_MAX_STEPS};
@@ -806,21 +806,21 @@ impl Field for IngpField {
         self.cascades.may_be_occupied(a.min(b), a.max(b))
     }
 
+    /// Mask segments: the occupancy cascades are the density's own mask.
+    fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            mask_segments: true,
+            ..Capabilities::default()
+        }
+    }
+
     /// The cells of the cascades the ray crosses, walked in instant-ngp coordinates
     /// (`q = ngp_from_field(origin) + t·s·dir`, the axes cycled): the density is zero exactly
     /// outside the occupied ones, and the networks' smooth interpolant inside them.
-    fn mask_segments(
-        &self,
-        origin: Vec3,
-        dir: Vec3,
-        t0: f64,
-        t1: f64,
-        out: &mut Vec<[f64; 2]>,
-    ) -> bool {
+    fn mask_segments(&self, origin: Vec3, dir: Vec3, t0: f64, t1: f64, out: &mut Vec<[f64; 2]>) {
         let v = Vec3::new(dir.y, dir.z, dir.x) * self.scale;
         self.cascades
             .segments(self.ngp_from_field(origin), v, t0, t1, out);
-        true
     }
 
     /// The density's own mask: a point outside every occupied cell (of the smallest

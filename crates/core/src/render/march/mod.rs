@@ -47,7 +47,7 @@ use super::runs::{Run, RunScratch};
 use super::splats::Splatting;
 use super::{Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
-use crate::field::{Aabb, Fragment, Occupancy, SplatPixel, Unbounded};
+use crate::field::{Aabb, Capabilities, Fragment, Occupancy, SplatPixel, Unbounded};
 use crate::image::Window;
 use crate::scene::{LocalRay, Scene};
 
@@ -67,8 +67,10 @@ pub(super) struct PixelResult {
 
 /// Per instance, what the marcher needs that does not change per ray.
 pub(super) struct InstancePlan {
+    /// What the field declares it can answer besides densities and colours.
+    capabilities: Capabilities,
     /// The occupancy grid that finds the field's occupied segments; `None` for a field that
-    /// gives its [spans](crate::field::Field::spans) or
+    /// declares [spans](crate::field::Field::spans) or
     /// [mask segments](crate::field::Field::mask_segments) instead.
     occupancy: Option<Arc<Occupancy>>,
     /// Base step in field units.
@@ -81,7 +83,7 @@ pub(super) struct InstancePlan {
     encode: bool,
     /// How the field is marched beyond its core, when it is defined on all of space.
     unbounded: Option<Unbounded>,
-    /// Whether the field bounds its density over a region
+    /// Whether the field declares bounds of its density over a region
     /// ([`Field::density_bounds`](crate::field::Field::density_bounds)): only then can a step
     /// between two empty samples be known to hold nothing, and grow.
     bounded: bool,

@@ -5,7 +5,7 @@ use glam::{DMat3, DMat4, DVec3, Vec3};
 
 use super::InstancePlan;
 use crate::camera::Ray;
-use crate::field::{Aabb, Analytic, ColorSpace, Field, Shape, Span};
+use crate::field::{Aabb, Analytic, ColorSpace, Field, Shape};
 use crate::render::MarchParams;
 use crate::scene::Scene;
 
@@ -21,18 +21,12 @@ impl InstancePlan {
             .instances
             .iter()
             .map(|inst| {
-                let spans =
-                    inst.field()
-                        .spans(Vec3::ZERO, Vec3::X, 0.0, 0.0, &mut Vec::<Span>::new());
-                let exact = spans
-                    || inst
-                        .field()
-                        .mask_segments(Vec3::ZERO, Vec3::X, 0.0, 0.0, &mut Vec::new());
+                let capabilities = inst.field().capabilities();
+                let spans = capabilities.spans;
+                let exact = spans || capabilities.mask_segments;
                 let occupancy =
                     (!exact).then(|| inst.handle().occupancy(params.occupancy_resolution));
-                let bounded = inst
-                    .field()
-                    .density_bounds(&[inst.field().bounds()], &mut [0.0]);
+                let bounded = capabilities.density_bounds;
                 // Without bounds, gaps may hide between samples: a field with spans or
                 // mask segments has none unseen; one with an occupancy grid has its steps
                 // probed for them.
@@ -50,6 +44,7 @@ impl InstancePlan {
                     _ => f64::INFINITY,
                 };
                 InstancePlan {
+                    capabilities,
                     occupancy,
                     base_step: inst.field().feature_size() as f64
                         / params.steps_per_feature.max(1e-3) as f64,

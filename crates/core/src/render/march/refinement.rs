@@ -269,13 +269,14 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         }
         s.field_out.clear();
         s.field_out.resize(s.regions.len(), 0.0);
-        if !inst.field().density_bounds(&s.regions, &mut s.field_out) {
+        if !plans[k].bounded {
             // No bound from this field: its steps cannot be searched.
             for &(u, _) in &s.owners {
                 s.unsure[u as usize].2 = f64::NEG_INFINITY;
             }
             continue;
         }
+        inst.field().density_bounds(&s.regions, &mut s.field_out);
         for (&(u, k), &bound) in s.owners.iter().zip(&s.field_out) {
             s.unsure[u as usize].2 += bound as f64 * k;
         }

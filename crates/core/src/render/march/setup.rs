@@ -83,6 +83,7 @@ pub(super) fn setup_rays(
             let inset = instance_runs(
                 &lr,
                 s.tile_fields.field(scene, i as usize),
+                plan.capabilities,
                 plan.occupancy.as_deref(),
                 plan.unbounded.as_ref(),
                 &mut s.run_scratch,

@@ -249,7 +249,8 @@ fn render_final_accuracy() {
     let (w, h) = (160, 90);
     let camera = blob_bench_camera(w, h);
     let final_params = Quality::Final.params();
-    let field_step = scene.instances[0].field().feature_size() / final_params.steps_per_feature;
+    let field_step =
+        scene.marched().next().unwrap().field().feature_size() / final_params.steps_per_feature;
     let settings = RenderSettings::new(final_params, Outputs::rgba());
     let (got, stats) =
         render_with_progress(&scene, &camera, camera.full_window(), &settings, &|_| {}).unwrap();

@@ -192,11 +192,18 @@ fn proposal_render_1080p_final() {
         stats.color_samples as f64 / n,
     );
     // The split, sampling every ray again outside the renderer.
-    let field = scene.proposal[0].field();
+    let field = scene.proposal().next().unwrap().field();
     let rays: Vec<SamplerRay> = (0..h)
         .flat_map(|y| (0..w).map(move |x| (x, y)))
         .filter_map(|(x, y)| camera.ray(f64::from(x) + 0.5, f64::from(y) + 0.5))
-        .filter_map(|r| scene.proposal[0].sampler_ray(&r).map(|(s, _)| s))
+        .filter_map(|r| {
+            scene
+                .proposal()
+                .next()
+                .unwrap()
+                .sampler_ray(&r)
+                .map(|(s, _)| s)
+        })
         .collect();
     println!("{}", sampler_split(field, &rays, n));
     let _ = std::fs::remove_dir_all(&dir);
@@ -238,7 +245,7 @@ fn nerfstudio_first_camera_final() {
             at.object_matrix(name)
         })
         .unwrap();
-    let instance = &placed.proposal[0];
+    let instance = &placed.proposal().next().unwrap();
     let rays: Vec<SamplerRay> = (0..h)
         .flat_map(|y| (0..w).map(move |x| (x, y)))
         .filter_map(|(x, y)| camera.ray(f64::from(x) + 0.5, f64::from(y) + 0.5))

@@ -643,10 +643,9 @@ fn load_and_render(dir: &Path, name: &str, bytes: &[u8]) -> Result<Verdict, Stri
 fn render_loaded(loaded: &LoadedScene) -> Result<Verdict, String> {
     let scene = attempt!(loaded.place(DMat4::IDENTITY, &|_| Ok(DMat4::IDENTITY)));
     let boxes = scene
-        .instances
-        .iter()
+        .marched()
         .map(|i| i.field().bounds())
-        .chain(scene.splats.iter().map(|s| s.splats().bounds()));
+        .chain(scene.splats().map(|s| s.splats().bounds()));
     let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
     for b in boxes {
         lo = lo.min(b.min.as_dvec3());

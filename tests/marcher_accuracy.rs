@@ -129,9 +129,8 @@ impl Field for Searched {
 
 /// The same scene with every instance's field hidden behind [`Searched`].
 fn searched(scene: &Scene) -> Scene {
-    let instances = scene
-        .instances
-        .iter()
+    let instances: Vec<Instance> = scene
+        .marched()
         .map(|inst| {
             let analytic = inst.handle().as_analytic().expect("an analytic scene");
             let field = FieldHandle::new(Arc::new(Searched(analytic.clone())));

@@ -553,7 +553,7 @@ fn placed(path: &Path) -> Vec<SplatInstance> {
         .and_then(|d| d.load())
         .and_then(|l| l.place(DMat4::IDENTITY, &|_| Ok(DMat4::IDENTITY)))
         .unwrap();
-    scene.splats
+    scene.splats().cloned().collect()
 }
 
 #[test]

@@ -132,7 +132,7 @@ fn splats_match_an_independent_numpy_rasteriser() {
             Projection::Perspective(Perspective::from_blender(&case.intrinsics).unwrap()),
         )
         .unwrap();
-        let scene = Scene::default().with_splats(vec![SplatInstance::new(
+        let scene = Scene::default().with(vec![SplatInstance::new(
             "plane",
             splats.clone(),
             case.world_from_splats,

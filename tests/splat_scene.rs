@@ -95,7 +95,7 @@ fn chord(o: DVec3, d: DVec3) -> Option<(f64, f64)> {
 fn splats_and_fields_occlude_each_other_per_pixel() {
     let camera = camera();
     let plane = Arc::new(splat_plane(0.8, 0.04));
-    let splats_alone = Scene::default().with_splats(vec![SplatInstance::new(
+    let splats_alone = Scene::default().with(vec![SplatInstance::new(
         "plane",
         plane.clone(),
         DMat4::IDENTITY,
@@ -104,7 +104,7 @@ fn splats_and_fields_occlude_each_other_per_pixel() {
     )
     .unwrap()]);
     let alone = render(&splats_alone, &camera, camera.full_window(), &settings()).unwrap();
-    let joint_scene = Scene::new(vec![red_sphere()]).with_splats(splats_alone.splats.clone());
+    let joint_scene = Scene::new(vec![red_sphere()]).with(splats_alone.splats().cloned());
     let joint = render(&joint_scene, &camera, camera.full_window(), &settings()).unwrap();
 
     let (mut max_err, mut both) = (0.0f64, 0);
@@ -187,7 +187,7 @@ fn a_crop_box_cuts_splats_by_their_means_and_fields_by_their_rays() {
         Some(crop),
     )
     .unwrap()])
-    .with_splats(vec![SplatInstance::new(
+    .with(vec![SplatInstance::new(
         "plane",
         plane.clone(),
         DMat4::IDENTITY,
@@ -339,7 +339,7 @@ fn the_command_line_renders_and_describes_a_splat_file() {
 fn a_window_or_another_tile_size_gives_the_same_pixels() {
     let ply = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/splat_plane_sh3.ply");
     let splats = Arc::new(Splats::load(&ply).unwrap());
-    let scene = Scene::default().with_splats(vec![SplatInstance::new(
+    let scene = Scene::default().with(vec![SplatInstance::new(
         "plane",
         splats,
         DMat4::IDENTITY,
@@ -396,7 +396,7 @@ fn panoramic_splats_agree_with_the_rasteriser_where_both_apply() {
     use nerfx_core::camera::{Equirect, Eye, Ods, Vr180};
     let ply = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/splat_plane_sh3.ply");
     let splats = Arc::new(Splats::load(&ply).unwrap());
-    let scene = Scene::default().with_splats(vec![SplatInstance::new(
+    let scene = Scene::default().with(vec![SplatInstance::new(
         "plane",
         splats,
         DMat4::IDENTITY,
@@ -522,7 +522,7 @@ fn splats_on_the_focus_plane_stay_sharp_through_the_aperture() {
     use nerfx_core::camera::Shot;
     use nerfx_core::composite::shutter_average;
     let plane = Arc::new(splat_plane(0.8, 0.04));
-    let scene = Scene::default().with_splats(vec![SplatInstance::new(
+    let scene = Scene::default().with(vec![SplatInstance::new(
         "plane",
         plane,
         DMat4::IDENTITY,

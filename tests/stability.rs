@@ -20,9 +20,8 @@ const H: u32 = 36;
 
 /// `world_from_scene · N` for every instance (same fields, names and crops).
 fn moved_scene(scene: &Scene, world_from_scene: DMat4) -> Scene {
-    let instances = scene
-        .instances
-        .iter()
+    let instances: Vec<Instance> = scene
+        .marched()
         .map(|inst| {
             Instance::new(
                 inst.name.clone(),
@@ -643,7 +642,7 @@ fn a_density_of_1e9_underflows_transmittance_cleanly() {
 fn a_tenth_of_a_micrometre_field_marches_with_nanometre_steps() {
     let camera = axis_camera(DVec3::new(0.0, 0.0, 5e-7), 33, 25, 40.0);
     let scene = single(prim(sphere([0.0; 3], 1e-7), 5e6, [0.8, 0.4, 0.2]));
-    let field = scene.instances[0].field();
+    let field = scene.marched().next().unwrap().field();
     let step = field.feature_size() / Quality::Final.params().steps_per_feature;
     assert!(step < 2e-9, "set-up: Final's step {step:e}");
     let want = reference_full(&scene, &camera);

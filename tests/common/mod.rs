@@ -103,7 +103,7 @@ fn random_field(rng: &mut SplitMix64) -> Analytic {
 /// origin.
 pub fn random_scene(rng: &mut SplitMix64) -> Scene {
     let n = 1 + rng.below(3);
-    let instances = (0..n)
+    let instances: Vec<Instance> = (0..n)
         .map(|i| {
             let m = DMat4::from_scale_rotation_translation(
                 rng.dvec3(0.6, 1.4),

@@ -41,7 +41,7 @@ fn settings() -> RenderSettings {
 
 fn render_splats(splats: &Splats, camera_of: &Splats) -> Planes {
     let camera = framing_camera(camera_of, 192, 128).unwrap();
-    let scene = Scene::default().with_splats(vec![SplatInstance::new(
+    let scene = Scene::default().with(vec![SplatInstance::new(
         "splats",
         Arc::new(splats.clone()),
         DMat4::IDENTITY,

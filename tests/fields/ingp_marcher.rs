@@ -47,7 +47,7 @@ fn march_rays(scene: &Scene, camera: &Camera) -> Vec<Option<NgpRay>> {
         .flat_map(|y| (0..w).map(move |x| (x, y)))
         .map(|(x, y)| {
             let ray = camera.ray(f64::from(x) + 0.5, f64::from(y) + 0.5)?;
-            scene.ngp[0].march_ray(&ray).map(|(r, _)| r)
+            scene.ngp().next().unwrap().march_ray(&ray).map(|(r, _)| r)
         })
         .collect()
 }
@@ -68,13 +68,13 @@ fn samples_of(
 fn check_against_numpy(name: &str, spec: &Spec, snapshot: &Path, camera: &Camera) -> f64 {
     let dir = snapshot.parent().unwrap();
     let scene = placed(dir, snapshot, Some("ngp")).unwrap();
-    assert_eq!((scene.instances.len(), scene.ngp.len()), (0, 1));
+    assert_eq!((scene.marched().count(), scene.ngp().count()), (0, 1));
     let mut settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
     settings.color = ColorOutput::AsTrained;
     let planes = render(&scene, camera, camera.full_window(), &settings).unwrap();
     let rays = march_rays(&scene, camera);
     let hit: Vec<NgpRay> = rays.iter().flatten().copied().collect();
-    let field = scene.ngp[0].field();
+    let field = scene.ngp().next().unwrap().field();
     let (samples, stats) = samples_of(field, &hit, NGP_MAX_STEPS);
     // Where the samples lie, in instant-ngp coordinates.
     let (mut outer, mut all) = (0usize, 0usize);
@@ -258,7 +258,7 @@ fn the_sampler_is_chosen_per_instance_and_refused_where_it_does_not_apply() {
         radius: 0.3,
     }];
     let path = snapshot(&dir, &Spec::small_8x4(), &balls, 1.0);
-    let count = |s: &Scene| (s.instances.len(), s.ngp.len(), s.proposal.len());
+    let count = |s: &Scene| (s.marched().count(), s.ngp().count(), s.proposal().count());
     assert_eq!(count(&placed(&dir, &path, Some("ngp")).unwrap()), (0, 1, 0));
     assert_eq!(
         count(&placed(&dir, &path, Some("occupancy")).unwrap()),
@@ -346,15 +346,15 @@ fn an_ngp_marched_snapshot_occludes_and_is_occluded_by_other_instances() {
     let nerf = render(&alone, &camera, camera.full_window(), &settings).unwrap();
     let rays = march_rays(&alone, &camera);
     let hit: Vec<NgpRay> = rays.iter().flatten().copied().collect();
-    let (samples, _) = samples_of(alone.ngp[0].field(), &hit, NGP_MAX_STEPS);
+    let (samples, _) = samples_of(alone.ngp().next().unwrap().field(), &hit, NGP_MAX_STEPS);
     // An opaque white slab through the middle of the blob (y = 0 in the field's frame, the
     // world's here): the blob shows only in front of it.
     let mut front = alone.clone();
-    front.instances.push(slab(0.0, 0.1, 4.0));
+    front.push(slab(0.0, 0.1, 4.0));
     let got = render(&front, &camera, camera.full_window(), &settings).unwrap();
     // A slab far behind the blob: the blob over it.
     let mut behind = alone.clone();
-    behind.instances.push(slab(30.0, 40.0, 40.0));
+    behind.push(slab(30.0, 40.0, 40.0));
     let over = render(&behind, &camera, camera.full_window(), &settings).unwrap();
     let (mut seen, mut hidden, mut worst, mut at) = (0.0f64, 0.0f64, 0.0f64, 0);
     let pixel = |planes: &nerfx_core::image::Planes, x: u32, y: u32| {
@@ -459,9 +459,9 @@ fn a_fog_takes_1024_steps_along_the_diagonal_and_a_lower_cap_is_counted() {
         near: 0.0,
         far: f64::INFINITY,
     };
-    let (ray, k) = scene.ngp[0].march_ray(&world).unwrap();
+    let (ray, k) = scene.ngp().next().unwrap().march_ray(&world).unwrap();
     assert!((k - 1.0).abs() < 1e-12);
-    let field = scene.ngp[0].field();
+    let field = scene.ngp().next().unwrap().field();
     let (full, stats) = samples_of(field, &[ray], NGP_MAX_STEPS);
     assert_eq!((stats.samples, stats.capped, stats.opaque), (1024, 0, 0));
     assert_eq!(full[0].len(), 1024);

@@ -63,7 +63,7 @@ fn naive_render_agrees_with_a_numpy_march() {
 
     // The same rays, as render_naive lays them: samples at (j + 1/2)·step past the entry
     // into the field's bounds while they stay inside.
-    let inst = &scene.instances[0];
+    let inst = &scene.marched().next().unwrap();
     let (mut rows_a, mut rows_b) = (Vec::new(), Vec::new());
     let mut pixels = Vec::new();
     for y in 0..h {

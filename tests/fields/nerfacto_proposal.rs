@@ -95,7 +95,7 @@ fn check_against_numpy(name: &str, spec: &Spec) {
         .unwrap()
         .place(DMat4::IDENTITY, &|_| Ok(DMat4::IDENTITY))
         .unwrap();
-    assert_eq!((scene.instances.len(), scene.proposal.len()), (0, 1));
+    assert_eq!((scene.marched().count(), scene.proposal().count()), (0, 1));
     let mut settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
     settings.color = ColorOutput::AsTrained;
     let planes = render(&scene, &camera, camera.full_window(), &settings).unwrap();
@@ -212,11 +212,11 @@ fn a_proposal_sampled_run_occludes_and_is_occluded_by_other_instances() {
     // An opaque white slab between the camera (y = −3) and the origin: the run shows only
     // in front of it (the run has density everywhere, near the camera too).
     let mut front = alone.clone();
-    front.instances.push(slab(-2.1, -2.0));
+    front.push(slab(-2.1, -2.0));
     let got = render(&front, &camera, camera.full_window(), &settings).unwrap();
     // A slab beyond the far plane (1000 from the camera): the run over it.
     let mut behind = alone.clone();
-    behind.instances.push(slab(1300.0, 1400.0));
+    behind.push(slab(1300.0, 1400.0));
     let over = render(&behind, &camera, camera.full_window(), &settings).unwrap();
     let (mut seen, mut hidden, mut worst) = (0.0f64, 0.0f64, 0.0f64);
     for (i, (ray, pieces)) in rays.iter().zip(pieces.chunks_exact(n)).enumerate() {
@@ -255,7 +255,7 @@ fn the_occupancy_sampler_is_chosen_per_instance_and_runs_without_proposals_are_m
     let dir = scratch("proposal-choice");
     write_run(&dir, &Spec::tcnn());
     let scene = placed(&dir, "occupancy").unwrap();
-    assert_eq!((scene.instances.len(), scene.proposal.len()), (1, 0));
+    assert_eq!((scene.marched().count(), scene.proposal().count()), (1, 0));
     let e = placed(&dir, "nearest").err().unwrap().to_string();
     assert!(e.contains("sampler") && e.contains("proposal"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
@@ -270,7 +270,7 @@ fn the_occupancy_sampler_is_chosen_per_instance_and_runs_without_proposals_are_m
         e.contains("no proposal networks") && e.contains("occupancy"),
         "{e}"
     );
-    assert_eq!(placed(&dir, "occupancy").unwrap().instances.len(), 1);
+    assert_eq!(placed(&dir, "occupancy").unwrap().marched().count(), 1);
     // Without a sampler named, such a run is marched, from a scene file or on its own.
     let scene_file = dir.join("bare.json");
     std::fs::write(
@@ -287,7 +287,7 @@ fn the_occupancy_sampler_is_chosen_per_instance_and_runs_without_proposals_are_m
             .unwrap()
             .place(DMat4::IDENTITY, &|_| Ok(DMat4::IDENTITY))
             .unwrap();
-        assert_eq!((scene.instances.len(), scene.proposal.len()), (1, 0));
+        assert_eq!((scene.marched().count(), scene.proposal().count()), (1, 0));
     }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -186,7 +186,7 @@ fn a_splatfacto_run_is_splats_everywhere_and_never_a_nerfacto_field() {
     let placed = scene
         .place(glam::DMat4::IDENTITY, &|_| unreachable!())
         .unwrap();
-    assert_eq!((placed.instances.len(), placed.splats.len()), (0, 1));
+    assert_eq!((placed.marched().count(), placed.splats().count()), (0, 1));
 
     // Another method is refused by name.
     let other = write_run(dir.path(), "instant-ngp", 1, &stored(1));

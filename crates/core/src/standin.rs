@@ -39,7 +39,7 @@ pub fn points(scene: &Scene, resolution: u32, threshold: f32, budget: usize) -> 
                 .map(|p| transformed(p, m)),
         );
     }
-    for inst in &scene.splats {
+    for inst in scene.splats() {
         let m = inst.world_from_splats();
         out.extend(
             splat_points(inst.splats(), threshold)

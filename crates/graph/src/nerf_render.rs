@@ -36,7 +36,7 @@ use nerfx_core::render::{
     average_images, conform_to, render_deep, render_with_progress, ColorOutput, DeepParams,
     Outputs, Quality, RenderSettings,
 };
-use nerfx_core::scene::{CropBox, Instance, LoadedScene, Scene};
+use nerfx_core::scene::{CropBox, LoadedScene, Scene};
 use nerfx_core::shot_render::{coverage_by_indicators, frame_views, mean_over_views};
 
 /// The Output Colour Space parameter's options: the scene file's, then every
@@ -453,35 +453,7 @@ fn placed_scene(
         scale: v3("cropSize")?,
         rotation: v3("cropRotation")?.map(f64::to_radians),
     };
-    let instances = scene
-        .instances
-        .iter()
-        .map(|i| {
-            Instance::new(
-                i.name.clone(),
-                i.handle().clone(),
-                i.world_from_field(),
-                Some(crop),
-            )
-        })
-        .collect::<Result<Vec<_>>>()?;
-    let splats = scene
-        .splats
-        .iter()
-        .map(|s| s.with_crop(Some(crop)))
-        .collect::<Result<Vec<_>>>()?;
-    let mut cropped = Scene::new(instances).with_splats(splats);
-    cropped.proposal = scene
-        .proposal
-        .iter()
-        .map(|p| p.with_crop(Some(crop)))
-        .collect::<Result<Vec<_>>>()?;
-    cropped.ngp = scene
-        .ngp
-        .iter()
-        .map(|p| p.with_crop(Some(crop)))
-        .collect::<Result<Vec<_>>>()?;
-    Ok(cropped)
+    scene.with_crop(Some(crop))
 }
 
 /// Parameters that only pick or grade the output: nodes differing only in these share one

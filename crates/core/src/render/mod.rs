@@ -16,6 +16,7 @@ mod ngp;
 mod proposal;
 mod quality;
 mod runs;
+mod samplers;
 mod splats;
 
 pub use splats::splat_stage_timings;
@@ -37,7 +38,8 @@ use crate::image::{DeepImage, Plane, Planes, Window};
 use crate::scene::Scene;
 use closed_form::ClosedScratch;
 use deep::DeepTile;
-use march::{march_tile, DeepPass, InstancePlan, PixelResult, Scratch};
+use march::{march_tile, DeepPass, PixelResult, Scratch};
+use samplers::Samplers;
 
 /// Which planes to produce. Work for planes nobody asked for is not done (no colour
 /// queries without `rgb`, no median log without `depth_median`).
@@ -255,9 +257,7 @@ fn render_planes(
     on_tile: &(dyn Fn(u64) + Sync),
 ) -> Result<(Planes, Option<DeepImage>, RenderStats)> {
     let window = camera.clamp_window(window)?;
-    let plans = InstancePlan::for_scene(scene, &settings.march);
-    let closed = closed_form::applies(scene, &settings.march);
-    let splats = splats::splat_layer(scene, camera, window, &settings.outputs)?;
+    let samplers = Samplers::for_scene(scene, camera, window, settings)?;
     let size = settings.tile_size.max(1);
     let decode =
         scene.composite_space() == ColorSpace::Srgb && settings.color == ColorOutput::Linear;
@@ -279,10 +279,9 @@ fn render_planes(
                 out.clear();
                 let mut deep_tile = DeepTile::default();
                 let deep = pass.as_ref().map(|p| (p, &mut deep_tile));
-                let stats = if closed {
+                let stats = if samplers.closed_form {
                     closed_form::integrate_tile(
-                        scene,
-                        &plans,
+                        &samplers.plans,
                         camera,
                         tile,
                         settings,
@@ -291,17 +290,7 @@ fn render_planes(
                         deep,
                     )
                 } else {
-                    march_tile(
-                        scene,
-                        &plans,
-                        splats.as_ref(),
-                        camera,
-                        tile,
-                        settings,
-                        scratch,
-                        out,
-                        deep,
-                    )
+                    march_tile(&samplers, camera, tile, settings, scratch, out, deep)
                 };
                 if pass.is_some() {
                     deep_tiles

@@ -25,7 +25,7 @@ pub fn render_naive(
     if !(step > 0.0 && step.is_finite()) {
         return Err(Error::invalid("naive step", format!("{step} is not > 0")));
     }
-    if !scene.splats.is_empty() || scene.has_sampled() {
+    if scene.splats().next().is_some() || scene.has_sampled() {
         return Err(Error::Unsupported(
             "the uniform-step baseline marches fields only; this scene holds splats or an \
              instance sampled by its trainer's own sampler"
@@ -77,8 +77,7 @@ fn naive_pixel(
         return result;
     };
     let locals: Vec<_> = scene
-        .instances
-        .iter()
+        .marched()
         .map(|inst| inst.local_ray(&ray, ray.near, ray.far))
         .collect();
     let near = locals
@@ -98,7 +97,7 @@ fn naive_pixel(
     let (mut dens, mut cols) = (Vec::new(), Vec::new());
     let (mut lit, mut lit_points) = (Vec::new(), Vec::new());
     let encode = scene.composite_space() == ColorSpace::Srgb;
-    for (inst, local) in scene.instances.iter().zip(&locals) {
+    for (inst, local) in scene.marched().zip(&locals) {
         let Some(lr) = local else { continue };
         points.clear();
         idx.clear();

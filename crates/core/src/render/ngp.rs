@@ -15,7 +15,7 @@ use crate::camera::Ray;
 use crate::field::{
     linear_to_srgb, ColorSpace, Field, Fragment, NgpRay, NgpSample, NgpScratch, NGP_MAX_STEPS,
 };
-use crate::scene::Scene;
+use crate::scene::NgpInstance;
 
 /// Per-thread buffers.
 #[derive(Default)]
@@ -27,49 +27,47 @@ pub(super) struct NgpFill {
     marcher: NgpScratch,
 }
 
-/// Appends to `out[i]` the fragments of the instant-ngp-marched instances along `rays[i]`,
-/// front to back per instance (the caller sorts when fragments of several sources meet).
+/// Appends to `out[i]` the fragments of `inst` along `rays[i]`, front to back (the caller
+/// sorts when fragments of several sources meet); `space`: the scene's composite space.
 pub(super) fn fill(
-    scene: &Scene,
+    inst: &NgpInstance,
+    space: ColorSpace,
     rays: &[Option<Ray>],
     s: &mut NgpFill,
     out: &mut [Vec<Fragment>],
     stats: &mut RenderStats,
 ) {
-    let space = scene.composite_space();
-    for inst in &scene.ngp {
-        s.rays.clear();
-        s.owners.clear();
-        for (i, ray) in rays.iter().enumerate() {
-            if let Some((r, k)) = ray.as_ref().and_then(|r| inst.march_ray(r)) {
-                s.rays.push(r);
-                s.owners.push((i as u32, k));
-            }
+    s.rays.clear();
+    s.owners.clear();
+    for (i, ray) in rays.iter().enumerate() {
+        if let Some((r, k)) = ray.as_ref().and_then(|r| inst.march_ray(r)) {
+            s.rays.push(r);
+            s.owners.push((i as u32, k));
         }
-        if s.rays.is_empty() {
-            continue;
-        }
-        if s.samples.len() < s.rays.len() {
-            s.samples.resize_with(s.rays.len(), Vec::new);
-        }
-        let field = inst.field();
-        let samples = &mut s.samples[..s.rays.len()];
-        let done = field.march_rays(&s.rays, NGP_MAX_STEPS, samples, &mut s.marcher);
-        stats.density_samples += done.samples;
-        stats.color_samples += done.color_queries;
-        stats.budget_limited_rays += done.capped;
-        stats.invalid_samples += done.invalid;
-        let encode = space == ColorSpace::Srgb && field.color_space() == ColorSpace::Linear;
-        for (&(i, k), samples) in s.owners.iter().zip(samples.iter()) {
-            out[i as usize].extend(samples.iter().filter(|f| f.alpha > 0.0).map(|f| Fragment {
-                t: f.t / k,
-                alpha: f.alpha,
-                rgb: match inst.indicator() {
-                    Some(rgb) => rgb,
-                    None if encode => f.rgb.map(linear_to_srgb),
-                    None => f.rgb,
-                },
-            }));
-        }
+    }
+    if s.rays.is_empty() {
+        return;
+    }
+    if s.samples.len() < s.rays.len() {
+        s.samples.resize_with(s.rays.len(), Vec::new);
+    }
+    let field = inst.field();
+    let samples = &mut s.samples[..s.rays.len()];
+    let done = field.march_rays(&s.rays, NGP_MAX_STEPS, samples, &mut s.marcher);
+    stats.density_samples += done.samples;
+    stats.color_samples += done.color_queries;
+    stats.budget_limited_rays += done.capped;
+    stats.invalid_samples += done.invalid;
+    let encode = space == ColorSpace::Srgb && field.color_space() == ColorSpace::Linear;
+    for (&(i, k), samples) in s.owners.iter().zip(samples.iter()) {
+        out[i as usize].extend(samples.iter().filter(|f| f.alpha > 0.0).map(|f| Fragment {
+            t: f.t / k,
+            alpha: f.alpha,
+            rgb: match inst.indicator() {
+                Some(rgb) => rgb,
+                None if encode => f.rgb.map(linear_to_srgb),
+                None => f.rgb,
+            },
+        }));
     }
 }

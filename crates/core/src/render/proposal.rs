@@ -14,7 +14,7 @@ use super::integrator::opacity;
 use super::RenderStats;
 use crate::camera::Ray;
 use crate::field::{Fragment, Piece, SamplerRay, SamplerScratch};
-use crate::scene::Scene;
+use crate::scene::ProposalInstance;
 
 /// Per-thread buffers.
 #[derive(Default)]
@@ -26,53 +26,50 @@ pub(super) struct ProposalScratch {
     sampler: SamplerScratch,
 }
 
-/// Appends to `out[i]` the fragments of the proposal-sampled instances along `rays[i]`, each
-/// instance's front to back (the marcher sorts a ray's fragments when several instances
-/// gave them).
+/// Appends to `out[i]` the fragments of `inst` along `rays[i]`, front to back (the marcher
+/// sorts a ray's fragments when several instances gave them).
 pub(super) fn fill(
-    scene: &Scene,
+    inst: &ProposalInstance,
     rays: &[Option<Ray>],
     s: &mut ProposalScratch,
     out: &mut [Vec<Fragment>],
     stats: &mut RenderStats,
 ) {
-    for inst in &scene.proposal {
-        s.rays.clear();
-        s.owners.clear();
-        for (i, ray) in rays.iter().enumerate() {
-            if let Some((r, k)) = ray.as_ref().and_then(|r| inst.sampler_ray(r)) {
-                s.rays.push(r);
-                s.owners.push((i as u32, k));
-            }
+    s.rays.clear();
+    s.owners.clear();
+    for (i, ray) in rays.iter().enumerate() {
+        if let Some((r, k)) = ray.as_ref().and_then(|r| inst.sampler_ray(r)) {
+            s.rays.push(r);
+            s.owners.push((i as u32, k));
         }
-        if s.rays.is_empty() {
-            continue;
-        }
-        s.pieces.clear();
-        let Some(done) = inst
-            .field()
-            .sample_rays(&s.rays, &mut s.pieces, &mut s.sampler)
-        else {
+    }
+    if s.rays.is_empty() {
+        return;
+    }
+    s.pieces.clear();
+    let Some(done) = inst
+        .field()
+        .sample_rays(&s.rays, &mut s.pieces, &mut s.sampler)
+    else {
+        return;
+    };
+    stats.density_samples += done.proposal_queries + done.main_queries;
+    stats.color_samples += done.color_queries;
+    stats.invalid_samples += done.invalid_samples;
+    let per_ray = s.pieces.len() / s.rays.len();
+    for (&(i, k), pieces) in s.owners.iter().zip(s.pieces.chunks_exact(per_ray)) {
+        let Some(ray) = &rays[i as usize] else {
             continue;
         };
-        stats.density_samples += done.proposal_queries + done.main_queries;
-        stats.color_samples += done.color_queries;
-        stats.invalid_samples += done.invalid_samples;
-        let per_ray = s.pieces.len() / s.rays.len();
-        for (&(i, k), pieces) in s.owners.iter().zip(s.pieces.chunks_exact(per_ray)) {
-            let Some(ray) = &rays[i as usize] else {
-                continue;
-            };
-            let fragments = &mut out[i as usize];
-            fragments.extend(pieces.iter().filter_map(|p| {
-                let t = 0.5 * (p.t0 + p.t1) / k;
-                let alpha = opacity(f64::from(p.sigma) * (p.t1 - p.t0)) as f32;
-                (alpha > 0.0 && t >= ray.near && t <= ray.far).then_some(Fragment {
-                    t,
-                    alpha,
-                    rgb: inst.indicator().unwrap_or(p.rgb),
-                })
-            }));
-        }
+        let fragments = &mut out[i as usize];
+        fragments.extend(pieces.iter().filter_map(|p| {
+            let t = 0.5 * (p.t0 + p.t1) / k;
+            let alpha = opacity(f64::from(p.sigma) * (p.t1 - p.t0)) as f32;
+            (alpha > 0.0 && t >= ray.near && t <= ray.far).then_some(Fragment {
+                t,
+                alpha,
+                rgb: inst.indicator().unwrap_or(p.rgb),
+            })
+        }));
     }
 }

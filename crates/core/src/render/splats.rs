@@ -116,7 +116,7 @@ pub(crate) fn splat_layer(
     window: Window,
     outputs: &Outputs,
 ) -> Result<Option<Splatting>> {
-    if scene.splats.is_empty() {
+    if scene.splats().next().is_none() {
         return Ok(None);
     }
     let [clip_start, clip_end] = camera.clip();
@@ -128,8 +128,7 @@ pub(crate) fn splat_layer(
     let (width, height) = perspective.resolution();
     let camera_from_world = GSPLAT_FROM_BLENDER * world_from_camera.inverse();
     let views: Vec<_> = scene
-        .splats
-        .iter()
+        .splats()
         .map(|inst| {
             let camera_from_splats = camera_from_world * inst.world_from_splats();
             let view = SplatView {
@@ -175,8 +174,7 @@ fn ray_layer(scene: &Scene, camera: &Camera, outputs: &Outputs) -> Result<RayLay
         * 1.01;
     let [clip_start, clip_end] = camera.clip();
     let views: Vec<_> = scene
-        .splats
-        .iter()
+        .splats()
         .map(|inst| {
             let world_from_splats = inst.world_from_splats();
             let view = SplatRayView {

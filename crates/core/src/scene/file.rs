@@ -467,17 +467,17 @@ impl LoadedScene {
                 (None, None) => world_from_scene,
             };
             match contents {
-                Contents::Field(field) => scene.instances.push(Instance::new(
+                Contents::Field(field) => scene.push(Instance::new(
                     inst.name.clone(),
                     field.clone(),
                     m,
                     inst.crop,
                 )?),
-                Contents::Proposal(run, indicator) => scene.proposal.push(
+                Contents::Proposal(run, indicator) => scene.push(
                     ProposalInstance::new(inst.name.clone(), run.clone(), m, inst.crop)?
                         .with_indicator(*indicator),
                 ),
-                Contents::Ngp(snapshot, indicator) => scene.ngp.push(
+                Contents::Ngp(snapshot, indicator) => scene.push(
                     NgpInstance::new(inst.name.clone(), snapshot.clone(), m, inst.crop)?
                         .with_indicator(*indicator),
                 ),
@@ -489,7 +489,7 @@ impl LoadedScene {
                         } => on,
                         _ => splats.source.antialiased,
                     };
-                    scene.splats.push(SplatInstance::new(
+                    scene.push(SplatInstance::new(
                         inst.name.clone(),
                         splats.clone(),
                         m,

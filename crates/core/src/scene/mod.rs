@@ -26,65 +26,174 @@ pub use ngp::NgpInstance;
 pub use proposal::ProposalInstance;
 pub use splats::SplatInstance;
 
+use crate::error::Result;
 use crate::field::ColorSpace;
 
-/// The fields and splats to render together.
-#[derive(Clone, Default)]
-pub struct Scene {
-    /// The field instances, marched jointly.
-    pub instances: Vec<Instance>,
-    /// The splat instances, rasterised into fragments merged with the march.
-    pub splats: Vec<SplatInstance>,
-    /// The nerfacto instances sampled by their own proposal networks, their samples merged
-    /// with the march as the splats' fragments are.
-    pub proposal: Vec<ProposalInstance>,
-    /// The instant-ngp instances marched by instant-ngp's own marcher, merged likewise.
-    pub ngp: Vec<NgpInstance>,
+/// One instance of a scene with the sampler it is rendered by, chosen when the scene is
+/// loaded (a scene file's `sampler`, or its field's default).
+#[derive(Clone)]
+pub enum SceneInstance {
+    /// Marched by nerfx's occupancy marcher jointly with the other marched instances (their
+    /// densities add), or integrated in closed form where every marched instance is analytic
+    /// and the quality preset asks for it.
+    Marched(Instance),
+    /// A nerfacto run sampled by its own proposal networks; its samples join the march as
+    /// fragments.
+    Proposal(ProposalInstance),
+    /// An instant-ngp snapshot marched by instant-ngp's own marcher; its samples join the
+    /// march as fragments.
+    Ngp(NgpInstance),
+    /// 3D Gaussian splats, rasterised into fragments that join the march.
+    Splats(SplatInstance),
 }
 
-impl Scene {
-    /// A scene of the given field instances.
-    pub fn new(instances: Vec<Instance>) -> Self {
-        Scene {
-            instances,
-            splats: Vec::new(),
-            proposal: Vec::new(),
-            ngp: Vec::new(),
+impl SceneInstance {
+    /// The instance's name (the scene file's).
+    pub fn name(&self) -> &str {
+        match self {
+            SceneInstance::Marched(i) => &i.name,
+            SceneInstance::Proposal(p) => p.name(),
+            SceneInstance::Ngp(n) => n.name(),
+            SceneInstance::Splats(s) => &s.name,
         }
     }
 
-    /// The scene with these splat instances too.
-    pub fn with_splats(mut self, splats: Vec<SplatInstance>) -> Self {
-        self.splats = splats;
+    /// The same instance with the crop box `crop` (field space) instead of its own.
+    pub fn with_crop(&self, crop: Option<CropBox>) -> Result<Self> {
+        Ok(match self {
+            SceneInstance::Marched(i) => SceneInstance::Marched(Instance::new(
+                i.name.clone(),
+                i.handle().clone(),
+                i.world_from_field(),
+                crop,
+            )?),
+            SceneInstance::Proposal(p) => SceneInstance::Proposal(p.with_crop(crop)?),
+            SceneInstance::Ngp(n) => SceneInstance::Ngp(n.with_crop(crop)?),
+            SceneInstance::Splats(s) => SceneInstance::Splats(s.with_crop(crop)?),
+        })
+    }
+}
+
+impl From<Instance> for SceneInstance {
+    fn from(instance: Instance) -> Self {
+        SceneInstance::Marched(instance)
+    }
+}
+
+impl From<ProposalInstance> for SceneInstance {
+    fn from(instance: ProposalInstance) -> Self {
+        SceneInstance::Proposal(instance)
+    }
+}
+
+impl From<NgpInstance> for SceneInstance {
+    fn from(instance: NgpInstance) -> Self {
+        SceneInstance::Ngp(instance)
+    }
+}
+
+impl From<SplatInstance> for SceneInstance {
+    fn from(instance: SplatInstance) -> Self {
+        SceneInstance::Splats(instance)
+    }
+}
+
+/// The instances to render together, in the scene's order.
+#[derive(Clone, Default)]
+pub struct Scene {
+    instances: Vec<SceneInstance>,
+}
+
+impl Scene {
+    /// A scene of the given instances.
+    pub fn new<I: Into<SceneInstance>>(instances: impl IntoIterator<Item = I>) -> Self {
+        Scene {
+            instances: instances.into_iter().map(Into::into).collect(),
+        }
+    }
+
+    /// The scene with these instances too, after its own.
+    pub fn with<I: Into<SceneInstance>>(mut self, instances: impl IntoIterator<Item = I>) -> Self {
+        self.instances.extend(instances.into_iter().map(Into::into));
         self
+    }
+
+    /// Adds an instance after the others.
+    pub fn push(&mut self, instance: impl Into<SceneInstance>) {
+        self.instances.push(instance.into());
+    }
+
+    /// The scene with every instance cropped by `crop` (field space) instead of its own box.
+    pub fn with_crop(&self, crop: Option<CropBox>) -> Result<Self> {
+        let instances = self.instances.iter().map(|i| i.with_crop(crop));
+        Ok(Scene {
+            instances: instances.collect::<Result<_>>()?,
+        })
+    }
+
+    /// Every instance, in the scene's order.
+    pub fn instances(&self) -> &[SceneInstance] {
+        &self.instances
+    }
+
+    /// The instances marched jointly by nerfx's occupancy marcher (or in closed form).
+    pub fn marched(&self) -> impl Iterator<Item = &Instance> + Clone {
+        self.instances.iter().filter_map(|i| match i {
+            SceneInstance::Marched(m) => Some(m),
+            _ => None,
+        })
+    }
+
+    /// The nerfacto instances sampled by their proposal networks.
+    pub fn proposal(&self) -> impl Iterator<Item = &ProposalInstance> + Clone {
+        self.instances.iter().filter_map(|i| match i {
+            SceneInstance::Proposal(p) => Some(p),
+            _ => None,
+        })
+    }
+
+    /// The instant-ngp instances marched by instant-ngp's marcher.
+    pub fn ngp(&self) -> impl Iterator<Item = &NgpInstance> + Clone {
+        self.instances.iter().filter_map(|i| match i {
+            SceneInstance::Ngp(n) => Some(n),
+            _ => None,
+        })
+    }
+
+    /// The splat instances.
+    pub fn splats(&self) -> impl Iterator<Item = &SplatInstance> + Clone {
+        self.instances.iter().filter_map(|i| match i {
+            SceneInstance::Splats(s) => Some(s),
+            _ => None,
+        })
     }
 
     /// Whether any instance is sampled by its trainer's own estimator (its samples merged
     /// with the march as fragments): nerfacto's proposal sampler, instant-ngp's marcher.
     pub fn has_sampled(&self) -> bool {
-        !self.proposal.is_empty() || !self.ngp.is_empty()
-    }
-
-    /// Every field instance, however it is sampled.
-    pub fn field_instances(&self) -> impl Iterator<Item = &Instance> {
         self.instances
             .iter()
-            .chain(self.proposal.iter().map(|p| p.instance()))
-            .chain(self.ngp.iter().map(|p| p.instance()))
+            .any(|i| matches!(i, SceneInstance::Proposal(_) | SceneInstance::Ngp(_)))
+    }
+
+    /// Every field instance, however it is sampled: the marched ones, then the
+    /// proposal-sampled ones, then the instant-ngp ones.
+    pub fn field_instances(&self) -> impl Iterator<Item = &Instance> {
+        self.marched()
+            .chain(self.proposal().map(|p| p.instance()))
+            .chain(self.ngp().map(|p| p.instance()))
     }
 
     /// The space colours are composited in: sRGB-encoded when any instance was trained on
     /// photographs (its trainer composited encoded colours; linear instances are encoded to
     /// join it), as splats and nerfacto runs always are, else linear.
     pub fn composite_space(&self) -> ColorSpace {
-        if !self.splats.is_empty()
-            || !self.proposal.is_empty()
-            || self
-                .instances
-                .iter()
-                .chain(self.ngp.iter().map(|n| n.instance()))
-                .any(|i| i.field().color_space() == ColorSpace::Srgb)
-        {
+        let srgb = |i: &SceneInstance| match i {
+            SceneInstance::Splats(_) | SceneInstance::Proposal(_) => true,
+            SceneInstance::Marched(m) => m.field().color_space() == ColorSpace::Srgb,
+            SceneInstance::Ngp(n) => n.instance().field().color_space() == ColorSpace::Srgb,
+        };
+        if self.instances.iter().any(srgb) {
             ColorSpace::Srgb
         } else {
             ColorSpace::Linear

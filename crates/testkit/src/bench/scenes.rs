@@ -152,7 +152,7 @@ pub fn build(
             let splats = Arc::new(splats);
             let camera = framing_camera(&splats, width, height)?;
             let instance = SplatInstance::new("splats", splats, DMat4::IDENTITY, None, false)?;
-            let scene = Scene::default().with_splats(vec![instance]);
+            let scene = Scene::default().with(vec![instance]);
             (d, scene, camera, Truth::Rasterised)
         }
     };
@@ -175,10 +175,7 @@ fn trained(dir: &Path, name: &str, spec: &SnapshotSpec) -> Result<(Scene, Scene)
     let field = Arc::new(field?);
     let handle = FieldHandle::new(field.clone());
     let scene = Scene::new(vec![Instance::new(name, handle, DMat4::IDENTITY, None)?]);
-    let native = Scene {
-        ngp: vec![NgpInstance::new(name, field, DMat4::IDENTITY, None)?],
-        ..Scene::default()
-    };
+    let native = Scene::new([NgpInstance::new(name, field, DMat4::IDENTITY, None)?]);
     Ok((scene, native))
 }
 

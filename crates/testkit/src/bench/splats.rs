@@ -210,7 +210,7 @@ pub fn time_splats(
     let camera = framing_camera(&splats, width, height)?;
     let memory_bytes = splats.memory_bytes();
     let count = splats.len();
-    let scene = Scene::default().with_splats(vec![SplatInstance::new(
+    let scene = Scene::default().with(vec![SplatInstance::new(
         "splats",
         splats,
         glam::DMat4::IDENTITY,

@@ -398,8 +398,7 @@ fn measure_scene(
         Truth::Rasterised => &[],
     };
     let diagonal = scene
-        .instances
-        .iter()
+        .marched()
         .map(|i| i.field().bounds().diagonal() as f64)
         .fold(0.0, f64::max);
     // Baselines and further references (such as instant-ngp's own marcher on trained

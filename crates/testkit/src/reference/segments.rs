@@ -90,8 +90,7 @@ impl<'a> ReferenceScene<'a> {
     /// (only analytic primitives have exact ray integrals).
     pub fn new(scene: &'a Scene) -> Result<Self> {
         let instances = scene
-            .instances
-            .iter()
+            .marched()
             .map(|instance| {
                 let analytic = instance.handle().as_analytic().ok_or_else(|| {
                     Error::Unsupported(format!(

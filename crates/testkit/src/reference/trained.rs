@@ -23,7 +23,7 @@ use super::integrator::RayResult;
 use nerfx_core::camera::Ray;
 use nerfx_core::error::{Error, Result};
 use nerfx_core::field::{linear_to_srgb, srgb_to_linear, ColorSpace};
-use nerfx_core::scene::{LocalRay, Scene};
+use nerfx_core::scene::{Instance, LocalRay, Scene, SceneInstance};
 
 /// A ray stops once its transmittance falls below this (alpha is then off by at most this).
 const STOP_TRANSMITTANCE: f64 = 1e-8;
@@ -40,7 +40,8 @@ const MAX_HALVINGS: u32 = 40;
 
 /// A scene prepared for the quadrature: its instances, each with density that a mask cuts.
 pub struct TrainedReference<'a> {
-    scene: &'a Scene,
+    /// The scene's instances, all marched.
+    instances: Vec<&'a Instance>,
     /// Per instance: whether its colours are encoded to sRGB before compositing (a linear
     /// field in a scene composited in sRGB).
     encode: Vec<bool>,
@@ -105,22 +106,28 @@ impl<'a> TrainedReference<'a> {
     pub fn new(scene: &'a Scene, tolerance: f64) -> Result<Self> {
         let srgb = scene.composite_space() == ColorSpace::Srgb;
         let mut encode = Vec::new();
-        for instance in &scene.instances {
+        let mut instances = Vec::new();
+        for entry in scene.instances() {
+            let unsupported = |why: &str| {
+                Error::Unsupported(format!(
+                    "the trained reference of instance '{}': {why}",
+                    entry.name()
+                ))
+            };
+            let SceneInstance::Marched(instance) = entry else {
+                return Err(unsupported("it is not marched by the occupancy marcher"));
+            };
             let field = instance.field();
-            if !field.capabilities().mask_segments
-                || field.smooth_length() <= 0.0
-                || !scene.splats.is_empty()
-            {
-                return Err(Error::Unsupported(format!(
-                    "the trained reference of instance '{}': its field is not a smooth \
-                     interpolant cut by a mask",
-                    instance.name
-                )));
+            if !field.capabilities().mask_segments || field.smooth_length() <= 0.0 {
+                return Err(unsupported(
+                    "its field is not a smooth interpolant cut by a mask",
+                ));
             }
             encode.push(srgb && field.color_space() == ColorSpace::Linear);
+            instances.push(instance);
         }
         Ok(TrainedReference {
-            scene,
+            instances,
             encode,
             decode: srgb,
             tolerance,
@@ -131,7 +138,7 @@ impl<'a> TrainedReference<'a> {
     pub fn integrate_with(&self, ray: &Ray, s: &mut Scratch) -> RayResult {
         s.local.clear();
         s.cuts.clear();
-        for (i, instance) in self.scene.instances.iter().enumerate() {
+        for (i, instance) in self.instances.iter().enumerate() {
             let Some(lr) = instance.local_ray(ray, ray.near, ray.far) else {
                 continue;
             };
@@ -209,7 +216,7 @@ impl<'a> TrainedReference<'a> {
         let step = (s.active.iter())
             .map(|&(j, ..)| {
                 let (i, lr) = &s.local[j];
-                let field = self.scene.instances[*i].field();
+                let field = self.instances[*i].field();
                 field.smooth_length() as f64 / (NODES_PER_SMOOTH_LENGTH * lr.units_per_world as f64)
             })
             .fold(f64::INFINITY, f64::min);
@@ -309,7 +316,7 @@ impl<'a> TrainedReference<'a> {
         for a in 0..s.active.len() {
             let (j, start, end) = s.active[a];
             let (i, lr) = s.local[j];
-            let field = self.scene.instances[i].field();
+            let field = self.instances[i].field();
             let k = lr.units_per_world as f64;
             // One unit of f32 rounding of a field-space position here, in world distance.
             let rounding = (lr.origin.abs().max_element() as f64 + (lr.t_far - lr.t_near) * k)
@@ -499,12 +506,12 @@ mod tests {
                 far: f64::INFINITY,
             };
             // The chord as the field's mask gives it along the ray the reference sees.
-            let lr = scene.instances[0]
+            let lr = reference.instances[0]
                 .local_ray(&ray, 0.0, f64::INFINITY)
                 .unwrap();
             let mut chord = Vec::new();
             let far = lr.t_far - lr.t_near;
-            (scene.instances[0].field()).mask_segments(lr.origin, lr.dir, 0.0, far, &mut chord);
+            (reference.instances[0].field()).mask_segments(lr.origin, lr.dir, 0.0, far, &mut chord);
             let length = chord.first().map_or(0.0, |c| c[1] - c[0]);
             let alpha = -(-f64::from(SIGMA) * length).exp_m1();
             let got = reference.integrate_with(&ray, &mut scratch);

@@ -42,7 +42,6 @@ use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
 use crate::field::{Anchor, Density, Profile};
 use crate::image::Window;
-use crate::scene::Scene;
 
 /// How close to it a median depth is found at the finest, relative: below the resolution of
 /// the `f32` it is written as.
@@ -55,19 +54,6 @@ const MEDIAN_RESOLUTION: f64 = 1e-9;
 /// function per profile; at Draft the demo's Gaussian medians take 1.4 steps each, not 2.1.
 fn median_resolution(error_target: f32) -> f64 {
     (piece::DEPTH_SHARE * f64::from(error_target)).max(MEDIAN_RESOLUTION)
-}
-
-/// Whether `scene` is integrated in closed form with `params`: the dial is on, every
-/// instance's field is analytic, and nothing else (splats, trainer-sampled instances) is in
-/// it.
-pub(super) fn applies(scene: &Scene, params: &MarchParams) -> bool {
-    params.closed_form
-        && scene.splats.is_empty()
-        && !scene.has_sampled()
-        && scene
-            .instances
-            .iter()
-            .all(|inst| inst.handle().as_analytic().is_some())
 }
 
 /// Per-thread scratch reused from tile to tile: no allocation per ray.
@@ -110,7 +96,6 @@ struct RayScratch {
 /// `deep`'s tile their deep samples where it is given.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn integrate_tile(
-    scene: &Scene,
     plans: &[InstancePlan],
     camera: &Camera,
     tile: Window,
@@ -126,7 +111,8 @@ pub(super) fn integrate_tile(
     s.prim_at.clear();
     s.prim_at.push(0);
     for &i in &s.insts {
-        let count = scene.instances[i as usize]
+        let count = plans[i as usize]
+            .instance
             .handle()
             .as_analytic()
             .map_or(0, |a| a.primitives.len());
@@ -139,7 +125,6 @@ pub(super) fn integrate_tile(
         ..RenderStats::default()
     };
     let ctx = Context {
-        scene,
         plans,
         insts: &s.insts,
         prims: &s.prims,
@@ -188,8 +173,7 @@ pub(super) fn integrate_tile(
 
 /// What every ray of a tile shares.
 struct Context<'a> {
-    scene: &'a Scene,
-    plans: &'a [InstancePlan],
+    plans: &'a [InstancePlan<'a>],
     insts: &'a [u32],
     prims: &'a [u32],
     prim_at: &'a [u32],
@@ -306,7 +290,7 @@ impl Context<'_> {
         s.profiles.clear();
         s.colours.clear();
         for (j, &i) in self.insts.iter().enumerate() {
-            let (inst, plan) = (&self.scene.instances[i as usize], &self.plans[i as usize]);
+            let (inst, plan) = (self.plans[i as usize].instance, &self.plans[i as usize]);
             let prims = &self.prims[self.prim_at[j] as usize..self.prim_at[j + 1] as usize];
             let Some(analytic) = inst.handle().as_analytic() else {
                 continue;

@@ -8,7 +8,7 @@ use glam::Vec3;
 use super::laying::growth;
 use super::{met_by, InstancePlan, Node, Scratch};
 use crate::field::{Aabb, Field};
-use crate::scene::{LocalRay, Scene};
+use crate::scene::LocalRay;
 
 /// A gap a step may jump over unseen changes the pixel by at most the error target over
 /// this: a ray grazing a masked fog's staircase rim crosses a few such gaps (measured: two
@@ -75,7 +75,6 @@ fn unbounded_over<'a>(
 /// Nor next to a node with density in the instance: the mask's edge is near, the box of a
 /// step ending there touches it at every bisection, and the step beyond brackets the edge.
 pub(super) fn hides_content(
-    scene: &Scene,
     plans: &[InstancePlan],
     r: usize,
     k: usize,
@@ -99,7 +98,8 @@ pub(super) fn hides_content(
             return false;
         }
         let (p, q) = (lr.at(t0), lr.at(t1));
-        scene.instances[i]
+        plans[i]
+            .instance
             .field()
             .may_be_occupied(&Aabb::new(p.min(q), p.max(q)))
     })
@@ -111,13 +111,7 @@ pub(super) fn hides_content(
 /// ([`hidden_point`]). A ray clipping the corner of an occupied cell crosses a sliver far
 /// shorter than bisection below the base step reaches ([`HIDDEN_DEPTH`]); a node placed
 /// inside it sees that content whatever its length.
-pub(super) fn split_point(
-    scene: &Scene,
-    plans: &[InstancePlan],
-    r: usize,
-    k: usize,
-    s: &Scratch,
-) -> f64 {
+pub(super) fn split_point(plans: &[InstancePlan], r: usize, k: usize, s: &Scratch) -> f64 {
     let (a, b) = (&s.nodes[r][k], &s.nodes[r][k + 1]);
     let mid = 0.5 * (a.t + b.t);
     if a.exact || a.sigma != 0.0 || b.sigma != 0.0 {
@@ -125,7 +119,7 @@ pub(super) fn split_point(
     }
     unbounded_over(plans, r, a.t, b.t, s)
         .find_map(|(i, _, lr, t0, t1)| {
-            let field = scene.instances[i].field();
+            let field = plans[i].instance.field();
             let (p, q) = (lr.at(t0), lr.at(t1));
             if !field.may_be_occupied(&Aabb::new(p.min(q), p.max(q))) {
                 return None;
@@ -185,7 +179,6 @@ pub(super) fn hidden_point(
 /// less), and never more than [`GAP_PROBES_MAX`]. So a step of any length is probed as
 /// finely as one a cell long, and steps in smooth fog may grow past a cell.
 pub(super) fn hides_gap(
-    scene: &Scene,
     plans: &[InstancePlan],
     r: usize,
     (a, b): (&Node, &Node),
@@ -214,7 +207,7 @@ pub(super) fn hides_gap(
             .ceil()
             .max(1.0) as usize;
         let (mut points, mut empty) = ([Vec3::ZERO; GAP_BATCH], [false; GAP_BATCH]);
-        let field = scene.instances[i].field();
+        let field = plans[i].instance.field();
         (1..probes).step_by(GAP_BATCH).any(|first| {
             let n = GAP_BATCH.min(probes - first);
             for (j, p) in points[..n].iter_mut().enumerate() {

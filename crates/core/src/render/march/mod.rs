@@ -41,15 +41,13 @@ use self::setup::setup_rays;
 use self::shading::{clear_colour_queries, queue_colours, shade};
 use super::deep::{finish_pixel, DeepParams, DeepScratch, DeepTile, RawPiece};
 use super::integrator::{crossing_depth, srgb_composite_to_linear, Pieces};
-use super::ngp::NgpFill;
-use super::proposal::ProposalScratch;
 use super::runs::{Run, RunScratch};
-use super::splats::Splatting;
+use super::samplers::{Samplers, VolumeScratch};
 use super::{Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
 use crate::field::{Aabb, Capabilities, Fragment, Occupancy, SplatPixel, Unbounded};
 use crate::image::Window;
-use crate::scene::{LocalRay, Scene};
+use crate::scene::{Instance, LocalRay};
 
 /// Bisections of one step at most, whatever the dials say: 52 halvings take any step below
 /// the resolution of an `f64` distance.
@@ -66,7 +64,9 @@ pub(super) struct PixelResult {
 }
 
 /// Per instance, what the marcher needs that does not change per ray.
-pub(super) struct InstancePlan {
+pub(super) struct InstancePlan<'a> {
+    /// The instance.
+    pub(in crate::render) instance: &'a Instance,
     /// What the field declares it can answer besides densities and colours.
     capabilities: Capabilities,
     /// The occupancy grid that finds the field's occupied segments; `None` for a field that
@@ -383,8 +383,7 @@ pub(super) struct Scratch {
     splat_pixels: Vec<SplatPixel>,
     /// Per pixel of the tile: its sampled instances' fragments.
     volume: Vec<Vec<Fragment>>,
-    proposal: ProposalScratch,
-    ngp: NgpFill,
+    volume_samplers: VolumeScratch,
     stats: RenderStats,
     /// A deep render's per-pixel finishing scratch, and its pieces resolved.
     deep: DeepScratch,
@@ -403,9 +402,7 @@ pub(super) struct DeepPass {
 /// deep samples where it is given.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn march_tile(
-    scene: &Scene,
-    plans: &[InstancePlan],
-    splats: Option<&Splatting>,
+    samplers: &Samplers,
     camera: &Camera,
     tile: Window,
     settings: &RenderSettings,
@@ -415,16 +412,8 @@ pub(super) fn march_tile(
 ) -> RenderStats {
     let (params, outputs) = (&settings.march, &settings.outputs);
     let n_rays = tile.area();
-    setup_rays(
-        scene,
-        plans,
-        splats,
-        camera,
-        tile,
-        outputs,
-        deep.is_some(),
-        s,
-    );
+    let plans = &samplers.plans;
+    setup_rays(samplers, camera, tile, outputs, deep.is_some(), s);
     let width = s.feature_width;
     let empty_is_known = plans.iter().all(|p| p.bounded);
 
@@ -453,9 +442,9 @@ pub(super) fn march_tile(
             }
             lay_nodes(r, plans, params, s);
         }
-        evaluate_pending(scene, plans, s);
+        evaluate_pending(plans, s);
 
-        refine(scene, plans, params, s);
+        refine(plans, params, s);
 
         // Integrate the pieces, in order, and queue colour where their weight matters.
         if outputs.rgb {
@@ -476,7 +465,7 @@ pub(super) fn march_tile(
             }
         }
         if outputs.rgb {
-            shade(scene, plans, s);
+            shade(plans, s);
         }
         let rays = &s.rays;
         s.active.retain(|&r| rays[r as usize].live);

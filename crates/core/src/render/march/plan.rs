@@ -14,12 +14,12 @@ use crate::scene::Scene;
 /// strays from the world ray by ~1e-7 of the field's coordinates.
 const SAMPLE_ROUNDING: f64 = 1e-4;
 
-impl InstancePlan {
-    pub(in crate::render) fn for_scene(scene: &Scene, params: &MarchParams) -> Vec<InstancePlan> {
+impl<'a> InstancePlan<'a> {
+    /// The plans of `scene`'s marched instances, in its order.
+    pub(in crate::render) fn for_scene(scene: &'a Scene, params: &MarchParams) -> Vec<Self> {
         let space = scene.composite_space();
         scene
-            .instances
-            .iter()
+            .marched()
             .map(|inst| {
                 let capabilities = inst.field().capabilities();
                 let spans = capabilities.spans;
@@ -44,6 +44,7 @@ impl InstancePlan {
                     _ => f64::INFINITY,
                 };
                 InstancePlan {
+                    instance: inst,
                     capabilities,
                     occupancy,
                     base_step: inst.field().feature_size() as f64
@@ -71,11 +72,11 @@ impl InstancePlan {
     /// for a box, whose placed corners are not all outside one side of its pyramid), and
     /// those without one (not finite, or a field that is not culled by primitive); without a
     /// cone, all of them.
-    pub(in crate::render) fn primitives_met<'a>(
-        &'a self,
+    pub(in crate::render) fn primitives_met<'b>(
+        &'b self,
         count: usize,
-        cone: Option<&'a RayCone>,
-    ) -> impl Iterator<Item = u32> + 'a {
+        cone: Option<&'b RayCone>,
+    ) -> impl Iterator<Item = u32> + 'b {
         (0..count as u32).filter(move |&k| {
             let sphere = self.primitive_spheres.get(k as usize).copied().flatten();
             match (cone, sphere) {
@@ -418,13 +419,7 @@ pub(super) struct TileFields {
 
 impl TileFields {
     /// Picks the fields for a tile of `cone`'s rays, whose instances `keep` lists.
-    pub(super) fn cull(
-        &mut self,
-        scene: &Scene,
-        plans: &[InstancePlan],
-        cone: Option<&RayCone>,
-        keep: &[u32],
-    ) {
+    pub(super) fn cull(&mut self, plans: &[InstancePlan], cone: Option<&RayCone>, keep: &[u32]) {
         let n_inst = plans.len();
         self.culled.resize_with(n_inst, Analytic::default);
         self.in_use.clear();
@@ -434,7 +429,7 @@ impl TileFields {
         };
         for &i in keep {
             let (i, plan) = (i as usize, &plans[i as usize]);
-            let Some(analytic) = scene.instances[i].handle().as_analytic() else {
+            let Some(analytic) = plans[i].instance.handle().as_analytic() else {
                 continue;
             };
             // A lone primitive's sphere holds the instance's, which the tile kept.
@@ -456,11 +451,11 @@ impl TileFields {
     /// The field instance `i`'s spans, densities and colours on this tile's rays are asked
     /// of. Its bounds and density bounds are not the instance's: ask the instance's own
     /// field for those.
-    pub(super) fn field<'a>(&'a self, scene: &'a Scene, i: usize) -> &'a dyn Field {
+    pub(super) fn field<'a>(&'a self, plans: &[InstancePlan<'a>], i: usize) -> &'a dyn Field {
         if self.in_use[i] {
             &self.culled[i]
         } else {
-            scene.instances[i].field()
+            plans[i].instance.field()
         }
     }
 }

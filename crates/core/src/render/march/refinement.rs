@@ -6,7 +6,7 @@ use super::sampling::evaluate_pending;
 use super::{bucket_by_instance, met_by, InstancePlan, Node, Pending, Scratch, MAX_BISECTIONS};
 use crate::field::Aabb;
 use crate::render::MarchParams;
-use crate::scene::{LocalRay, Scene};
+use crate::scene::LocalRay;
 
 /// Bisects the steps whose two ends disagree (`|σ_b − σ_a|·δ` above the tolerance) or
 /// between whose ends the fields' density bound rises well above both (a sheet thinner than
@@ -16,7 +16,7 @@ use crate::scene::{LocalRay, Scene};
 /// is the one through the node after it, which may have moved closer), so only those are
 /// looked at. Steps that cannot hold an edge of a smooth field are not bisected for their
 /// jump.
-pub(super) fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
+pub(super) fn refine(plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
     s.candidates.clear();
     for &r in &s.active {
         for i in 0..s.nodes[r as usize].len().saturating_sub(1) {
@@ -54,11 +54,11 @@ pub(super) fn refine(scene: &Scene, plans: &[InstancePlan], params: &MarchParams
                 lay_depths_and_differences(&mut s.nodes[r as usize]);
             }
         }
-        split_candidates(scene, plans, params, s);
+        split_candidates(plans, params, s);
         if s.pending.is_empty() {
             break;
         }
-        evaluate_pending(scene, plans, s);
+        evaluate_pending(plans, s);
     }
 }
 
@@ -82,7 +82,7 @@ const SMOOTH_SHARE: f64 = 0.9;
 /// smooth field is judged by its curvature ([`smooth_change`]). Pairs that pass the cheap
 /// jump test ask the fields for a density bound over the step's box, one batch per
 /// instance.
-fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
+fn split_candidates(plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
     let empty_is_known = plans.iter().all(|p| p.bounded);
     let n_inst = plans.len();
     let tolerance = params.error_target as f64;
@@ -110,15 +110,7 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         let hides = |transmittance: f64| {
             !a.exact
                 && b.t - a.t > 1.5 * base * 0.5f64.powi(HIDDEN_DEPTH)
-                && hides_content(
-                    scene,
-                    plans,
-                    r as usize,
-                    i as usize,
-                    transmittance,
-                    tolerance,
-                    s,
-                )
+                && hides_content(plans, r as usize, i as usize, transmittance, tolerance, s)
         };
         // Every test below grows with the transmittance: see [`confirmed`].
         // A step that can hold no edge is bisected below the floor: its weighted estimate
@@ -143,7 +135,7 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
             // Shorter than bisection may leave: only what the step may wholly hide is
             // searched for.
             if confirmed(hides, t_round, nodes, i as usize) {
-                let t = split_point(scene, plans, r as usize, i as usize, s);
+                let t = split_point(plans, r as usize, i as usize, s);
                 s.pending.push(Pending::between(r, t, a));
             }
             continue;
@@ -215,20 +207,11 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
             (lone && transmittance > tolerance)
                 || change((b.t - a.t) * transmittance)
                 || hides(transmittance)
-                || (!a.exact
-                    && hides_gap(
-                        scene,
-                        plans,
-                        r as usize,
-                        (a, b),
-                        transmittance,
-                        tolerance,
-                        s,
-                    ))
+                || (!a.exact && hides_gap(plans, r as usize, (a, b), transmittance, tolerance, s))
         };
         if edge || confirmed(split, t_round, nodes, i as usize) {
             s.rays[r as usize].refined = true;
-            let t = split_point(scene, plans, r as usize, i as usize, s);
+            let t = split_point(plans, r as usize, i as usize, s);
             s.pending.push(Pending::between(r, t, a));
         } else if !a.exact {
             s.unsure.push((r, i, 0.0));
@@ -244,7 +227,7 @@ fn split_candidates(scene: &Scene, plans: &[InstancePlan], params: &MarchParams,
         s.unsure.iter().enumerate().map(|(u, n)| (u as u32, n.0)),
     );
     for &k in &s.tile_insts {
-        let (inst, k) = (&scene.instances[k as usize], k as usize);
+        let (inst, k) = (&plans[k as usize].instance, k as usize);
         if s.by_inst[k].is_empty() {
             continue;
         }

@@ -1,7 +1,6 @@
 //! Density sampling: a round's pending nodes asked of each field in one batch.
 
 use super::{met_by, FieldQuery, InstancePlan, Met, Node, Scratch};
-use crate::scene::Scene;
 
 /// Evaluates every pending node's density (one batched call per instance) and inserts the
 /// nodes, in order, into their rays' node lists. A node gets a slot per instance its ray
@@ -9,7 +8,7 @@ use crate::scene::Scene;
 /// A node whose probe reads no density where [`Pending::inward`](super::Pending::inward)
 /// is elsewhere (a masked run's face, its position rounded out of the mask) is probed there
 /// instead, in a second batch.
-pub(super) fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
+pub(super) fn evaluate_pending(plans: &[InstancePlan], s: &mut Scratch) {
     let n_inst = plans.len();
     let width = s.feature_width;
     let first_slot = s.inst_sigma.len();
@@ -31,9 +30,9 @@ pub(super) fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Sc
     }
     s.inst_sigma.resize(slot, 0.0);
     s.features.resize(slot * width, 0.0);
-    ask_fields(scene, plans, s);
+    ask_fields(plans, s);
     if may_retry {
-        retry_unread(scene, plans, first_slot, s);
+        retry_unread(plans, first_slot, s);
     }
     // The nodes go in a ray at a time (a round's nodes of a ray come together, a level's
     // midpoints mostly do), each after every node at the same or a smaller distance.
@@ -71,7 +70,7 @@ pub(super) fn evaluate_pending(scene: &Scene, plans: &[InstancePlan], s: &mut Sc
 /// Probes again, at [`Pending::inward`](super::Pending::inward), each pending node from the
 /// one with slot `first_slot` on whose probe no field read any density where that is
 /// elsewhere (a masked run's face, its position rounded out of the mask), in a second batch.
-fn retry_unread(scene: &Scene, plans: &[InstancePlan], first_slot: usize, s: &mut Scratch) {
+fn retry_unread(plans: &[InstancePlan], first_slot: usize, s: &mut Scratch) {
     let mut retried = false;
     let mut slot = first_slot;
     for pending in &mut s.pending {
@@ -93,7 +92,7 @@ fn retry_unread(scene: &Scene, plans: &[InstancePlan], first_slot: usize, s: &mu
         slot += met.len();
     }
     if retried {
-        ask_fields(scene, plans, s);
+        ask_fields(plans, s);
     }
 }
 
@@ -114,7 +113,7 @@ fn queue(met: &[Met], probe: f64, slot: usize, queries: &mut [FieldQuery]) {
 
 /// Asks each instance's field for the densities and features of its query's points, into
 /// their slots.
-fn ask_fields(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
+fn ask_fields(plans: &[InstancePlan], s: &mut Scratch) {
     let width = s.feature_width;
     for &i in &s.tile_insts {
         let plan = &plans[i as usize];
@@ -127,7 +126,7 @@ fn ask_fields(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
         let f = plan.features;
         query.features.resize(query.points.len() * f, 0.0);
         s.tile_fields
-            .field(scene, i as usize)
+            .field(plans, i as usize)
             .density_with_features(&query.points, &mut s.field_out, &mut query.features);
         s.stats.density_samples += query.points.len() as u64;
         for (&(slot, _), features) in query

@@ -5,31 +5,27 @@ use glam::DVec3;
 use super::integration::{composite_fragment, composite_fragments};
 use super::plan::{cull_instances, may_meet, RayCone};
 use super::RayState;
-use super::{InstancePlan, Met, Scratch};
+use super::{Met, Scratch};
 use crate::camera::Camera;
 use crate::field::Fragment;
 use crate::image::Window;
 use crate::render::integrator::Pieces;
-use crate::render::ngp;
-use crate::render::proposal;
 use crate::render::runs::{instance_runs, merge};
-use crate::render::splats::Splatting;
+use crate::render::samplers::Samplers;
 use crate::render::Outputs;
-use crate::scene::Scene;
 
 /// Builds each pixel's world ray, its local rays, its occupied segments and its splat
 /// fragments; a pixel with fragments and no segments is composited here and done.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn setup_rays(
-    scene: &Scene,
-    plans: &[InstancePlan],
-    splats: Option<&Splatting>,
+    samplers: &Samplers,
     camera: &Camera,
     tile: Window,
     outputs: &Outputs,
     deep: bool,
     s: &mut Scratch,
 ) {
+    let (plans, splats) = (&samplers.plans, samplers.splats.as_ref());
     let n_rays = tile.area();
     s.rays.resize_with(n_rays, RayState::default);
     s.nodes.resize_with(n_rays, Vec::new);
@@ -44,8 +40,7 @@ pub(super) fn setup_rays(
         .map(|&i| plans[i as usize].features)
         .max()
         .unwrap_or(0);
-    s.tile_fields
-        .cull(scene, plans, cone.as_ref(), &s.tile_insts);
+    s.tile_fields.cull(plans, cone.as_ref(), &s.tile_insts);
     for (r, state) in s.rays.iter_mut().enumerate().take(n_rays) {
         let ray = s.world_rays[r];
         state.ray = ray;
@@ -73,7 +68,8 @@ pub(super) fn setup_rays(
         state.inset = 0.0;
         s.nodes[r].clear();
         for &i in &s.tile_insts {
-            let (inst, plan) = (&scene.instances[i as usize], &plans[i as usize]);
+            let plan = &plans[i as usize];
+            let inst = plan.instance;
             let Some(lr) = ray
                 .filter(|ray| may_meet(plan, ray))
                 .and_then(|ray| inst.local_ray(&ray, ray.near, ray.far))
@@ -82,7 +78,7 @@ pub(super) fn setup_rays(
             };
             let inset = instance_runs(
                 &lr,
-                s.tile_fields.field(scene, i as usize),
+                s.tile_fields.field(plans, i as usize),
                 plan.capabilities,
                 plan.occupancy.as_deref(),
                 plan.unbounded.as_ref(),
@@ -108,15 +104,17 @@ pub(super) fn setup_rays(
             s.active.push(r as u32);
         }
     }
-    if scene.has_sampled() {
+    let sampled = !samplers.volume.is_empty();
+    if sampled {
         s.volume.resize_with(n_rays, Vec::new);
         for f in &mut s.volume[..n_rays] {
             f.clear();
         }
         let volume = &mut s.volume[..n_rays];
-        proposal::fill(scene, &s.world_rays, &mut s.proposal, volume, &mut s.stats);
-        ngp::fill(scene, &s.world_rays, &mut s.ngp, volume, &mut s.stats);
-        if scene.proposal.len() + scene.ngp.len() > 1 {
+        for sampler in &samplers.volume {
+            sampler.fill(&s.world_rays, &mut s.volume_samplers, volume, &mut s.stats);
+        }
+        if samplers.volume.len() > 1 {
             for f in volume.iter_mut() {
                 f.sort_by(|a, b| a.t.total_cmp(&b.t));
             }
@@ -127,7 +125,7 @@ pub(super) fn setup_rays(
     }
     if let Some(layer) = splats {
         // A tile of splats alone is composited sixteen pixels at once.
-        if s.active.is_empty() && !scene.has_sampled() && !outputs.depth_median && !deep {
+        if s.active.is_empty() && !sampled && !outputs.depth_median && !deep {
             let depth = outputs.depth_z || outputs.depth_ray;
             let composited = layer.composite(
                 tile,

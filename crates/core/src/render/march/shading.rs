@@ -5,7 +5,6 @@ use glam::{DVec3, Vec3};
 use super::{FieldQuery, InstancePlan, Scratch};
 use crate::field::linear_to_srgb;
 use crate::render::MarchParams;
-use crate::scene::Scene;
 
 /// Empties each of the tile's instances' colour queries, for [`queue_colours`] to fill.
 pub(super) fn clear_colour_queries(n_inst: usize, s: &mut Scratch) {
@@ -72,7 +71,7 @@ pub(super) fn queue_colours(
 
 /// Evaluates the colours [`queue_colours`] queued, one batched call per instance, and adds
 /// them to the rays' colours.
-pub(super) fn shade(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
+pub(super) fn shade(plans: &[InstancePlan], s: &mut Scratch) {
     for &i in &s.tile_insts {
         let (plan, query) = (&plans[i as usize], &s.queries[i as usize]);
         if query.points.is_empty() {
@@ -81,7 +80,7 @@ pub(super) fn shade(scene: &Scene, plans: &[InstancePlan], s: &mut Scratch) {
         s.rgb_out.clear();
         s.rgb_out.resize(query.points.len(), Vec3::ZERO);
         s.tile_fields
-            .field(scene, i as usize)
+            .field(plans, i as usize)
             .radiance_with_features(&query.points, &query.dirs, &query.features, &mut s.rgb_out);
         s.stats.color_samples += query.points.len() as u64;
         for (k, (&(r, share), c)) in query.owners.iter().zip(&s.rgb_out).enumerate() {

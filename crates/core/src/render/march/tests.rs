@@ -131,9 +131,8 @@ impl Field for Poisoned {
 fn demo_with(object: impl Fn(Analytic) -> Arc<dyn Field>) -> (Scene, crate::camera::Camera) {
     let (plain, camera) = crate::demo::scene_and_camera(48, 27).unwrap();
     let desc = crate::demo::scene_desc();
-    let instances = plain
-        .instances
-        .iter()
+    let instances: Vec<Instance> = plain
+        .marched()
         .zip(&desc.instances)
         .map(|(inst, d)| {
             let FieldSource::Analytic(a) = &d.field else {
@@ -384,7 +383,7 @@ fn ball_grid() -> (Scene, crate::camera::Camera) {
         })
         .collect();
     at.extend([DVec3::new(0.0, -8.0, 0.0), DVec3::new(30.0, 0.0, 0.0)]);
-    let instances = at
+    let instances: Vec<Instance> = at
         .iter()
         .enumerate()
         .map(|(k, p)| {
@@ -414,7 +413,7 @@ fn tile_culling_keeps_every_instance_a_ray_of_the_tile_meets() {
             .collect();
         let cone = super::plan::RayCone::of(&rays, 16, camera.rectilinear());
         super::plan::cull_instances(&plans, cone.as_ref(), &mut keep);
-        for (i, inst) in scene.instances.iter().enumerate() {
+        for (i, inst) in scene.marched().enumerate() {
             let meets = rays
                 .iter()
                 .flatten()
@@ -439,15 +438,14 @@ fn tile_culling_keeps_every_instance_a_ray_of_the_tile_meets() {
 /// sees it (its `f32` local ray), and leaves out most primitives no ray meets: a scattered
 /// field of small balls, boxes and Gaussians, rotated, scaled and moved into the world,
 /// seen by tiles of a perspective camera.
-/// A scene of `field` placed by `world_from_field`, its instance plans at Draft, and a
-/// `width`×`height` pinhole camera with a vertical field of view of `fov` degrees at `eye`,
+/// A scene of `field` placed by `world_from_field` and a `width`×`height` pinhole camera with a vertical field of view of `fov` degrees at `eye`,
 /// looking at the origin.
 fn placed_and_seen(
     field: &Analytic,
     world_from_field: glam::DMat4,
     (width, height, fov): (u32, u32, f64),
     eye: glam::DVec3,
-) -> (Scene, Vec<super::InstancePlan>, crate::camera::Camera) {
+) -> (Scene, crate::camera::Camera) {
     use crate::camera::{Camera, Perspective, Projection};
     let scene = Scene::new(vec![Instance::new(
         "placed",
@@ -456,11 +454,10 @@ fn placed_and_seen(
         None,
     )
     .unwrap()]);
-    let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
     let p = Perspective::from_vertical_fov(width, height, fov).unwrap();
     let eye = crate::demo::look_at(eye, glam::DVec3::ZERO);
     let camera = Camera::new(eye, Projection::Perspective(p)).unwrap();
-    (scene, plans, camera)
+    (scene, camera)
 }
 
 /// A pinhole tile's pyramid culls a long thin box (a pillar, leaning, in a rotated and
@@ -487,12 +484,13 @@ fn a_tiles_pyramid_culls_a_thin_box_and_keeps_it_where_a_ray_meets_it() {
         DQuat::from_euler(glam::EulerRot::XYZ, 0.2, 0.4, -0.3),
         DVec3::new(0.3, 0.1, 0.0),
     );
-    let (scene, plans, camera) = placed_and_seen(
+    let (scene, camera) = placed_and_seen(
         &field,
         world_from_field,
         (160, 96, 60.0),
         DVec3::new(0.5, -4.0, 0.5),
     );
+    let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
     assert!(camera.rectilinear());
     let (mut pyramid_culled, mut met) = (0, 0);
     for (x0, y0) in (0..10).flat_map(|i| (0..6).map(move |j| (16 * i, 16 * j))) {
@@ -504,7 +502,8 @@ fn a_tiles_pyramid_culls_a_thin_box_and_keeps_it_where_a_ray_meets_it() {
         let cone = super::plan::RayCone::of(&rays, 16, false).expect("a narrow tile");
         let cone_kept = plans[0].primitives_met(1, Some(&cone)).count() == 1;
         let meets = rays.iter().flatten().any(|r| {
-            scene.instances[0]
+            plans[0]
+                .instance
                 .local_ray(r, r.near, r.far)
                 .is_some_and(|lr| {
                     let length = (lr.t_far - lr.t_near) * f64::from(lr.units_per_world);
@@ -565,12 +564,13 @@ fn a_tiles_culled_field_is_the_whole_field_along_its_rays() {
         DQuat::from_euler(glam::EulerRot::XYZ, 0.3, -0.5, 1.1),
         DVec3::new(0.4, 0.2, -0.3),
     );
-    let (scene, plans, camera) = placed_and_seen(
+    let (scene, camera) = placed_and_seen(
         &field,
         world_from_field,
         (96, 64, 50.0),
         DVec3::new(1.0, -7.0, 2.0),
     );
+    let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
     let (mut keep, mut tile_fields) = (Vec::new(), super::plan::TileFields::default());
     let (mut kept, mut seen, mut samples) = (0, 0, 0);
     for (x0, y0) in (0..6).flat_map(|i| (0..4).map(move |j| (16 * i, 16 * j))) {
@@ -579,12 +579,12 @@ fn a_tiles_culled_field_is_the_whole_field_along_its_rays() {
             .collect();
         let cone = super::plan::RayCone::of(&rays, 16, camera.rectilinear());
         super::plan::cull_instances(&plans, cone.as_ref(), &mut keep);
-        tile_fields.cull(&scene, &plans, cone.as_ref(), &keep);
-        let tile_field = tile_fields.field(&scene, 0);
+        tile_fields.cull(&plans, cone.as_ref(), &keep);
+        let tile_field = tile_fields.field(&plans, 0);
         for lr in rays
             .iter()
             .flatten()
-            .filter_map(|r| scene.instances[0].local_ray(r, r.near, r.far))
+            .filter_map(|r| plans[0].instance.local_ray(r, r.near, r.far))
         {
             let length = (lr.t_far - lr.t_near) * lr.units_per_world as f64;
             let (mut whole, mut culled) = (Vec::new(), Vec::new());
@@ -634,27 +634,22 @@ fn a_tiles_culled_field_is_the_whole_field_along_its_rays() {
 #[test]
 fn a_ray_lists_exactly_the_instances_it_meets() {
     let (scene, camera) = ball_grid();
-    let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
+    let settings = RenderSettings::new(Quality::Draft.params(), Outputs::rgba());
+    let window = camera.full_window();
+    let samplers =
+        crate::render::samplers::Samplers::for_scene(&scene, &camera, window, &settings).unwrap();
+    let plans = &samplers.plans;
     let mut s = super::Scratch::default();
     let (mut met, mut asked) = (0, 0);
     for (x0, y0) in (0..4).flat_map(|i| (0..3).map(move |j| (16 * i, 16 * j))) {
         let tile = crate::image::Window::new(x0, y0, x0 + 16, y0 + 16);
-        super::setup::setup_rays(
-            &scene,
-            &plans,
-            None,
-            &camera,
-            tile,
-            &Outputs::rgba(),
-            false,
-            &mut s,
-        );
+        super::setup::setup_rays(&samplers, &camera, tile, &Outputs::rgba(), false, &mut s);
         for (r, ray) in s.world_rays.clone().iter().enumerate() {
             let ray = ray.unwrap();
             let listed: Vec<u32> = super::met_by(&s, r).iter().map(|m| m.inst).collect();
-            let meets: Vec<u32> = (0..scene.instances.len() as u32)
+            let meets: Vec<u32> = (0..plans.len() as u32)
                 .filter(|&i| {
-                    let inst = &scene.instances[i as usize];
+                    let inst = plans[i as usize].instance;
                     inst.local_ray(&ray, ray.near, ray.far).is_some()
                 })
                 .collect();

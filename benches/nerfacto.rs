@@ -20,7 +20,10 @@ use common_nerfacto::{
 use glam::{DMat4, DVec3};
 use nerfx_core::camera::read_shot;
 use nerfx_core::camera::{Camera, Perspective, Projection};
-use nerfx_core::field::{NerfactoField, SamplerRay, SamplerScratch, SamplerStats};
+use nerfx_core::field::NerfactoField;
+use nerfx_core::render::{
+    proposal_ray, sample_proposals, ProposalRay, ProposalScratch, ProposalStats,
+};
 use nerfx_core::render::{render_with_progress, ColorOutput, Outputs, Quality, RenderSettings};
 use nerfx_core::shot_render::render_frame;
 use nerfx_testkit::bench::targets::{bench_size, Measurement};
@@ -192,18 +195,12 @@ fn proposal_render_1080p_final() {
         stats.color_samples as f64 / n,
     );
     // The split, sampling every ray again outside the renderer.
-    let field = scene.proposal().next().unwrap().field();
-    let rays: Vec<SamplerRay> = (0..h)
+    let instance = scene.proposal().next().unwrap();
+    let field = instance.field();
+    let rays: Vec<ProposalRay> = (0..h)
         .flat_map(|y| (0..w).map(move |x| (x, y)))
         .filter_map(|(x, y)| camera.ray(f64::from(x) + 0.5, f64::from(y) + 0.5))
-        .filter_map(|r| {
-            scene
-                .proposal()
-                .next()
-                .unwrap()
-                .sampler_ray(&r)
-                .map(|(s, _)| s)
-        })
+        .filter_map(|r| proposal_ray(instance, &r).map(|(s, _)| s))
         .collect();
     println!("{}", sampler_split(field, &rays, n));
     let _ = std::fs::remove_dir_all(&dir);
@@ -246,10 +243,10 @@ fn nerfstudio_first_camera_final() {
         })
         .unwrap();
     let instance = &placed.proposal().next().unwrap();
-    let rays: Vec<SamplerRay> = (0..h)
+    let rays: Vec<ProposalRay> = (0..h)
         .flat_map(|y| (0..w).map(move |x| (x, y)))
         .filter_map(|(x, y)| camera.ray(f64::from(x) + 0.5, f64::from(y) + 0.5))
-        .filter_map(|r| instance.sampler_ray(&r).map(|(s, _)| s))
+        .filter_map(|r| proposal_ray(instance, &r).map(|(s, _)| s))
         .collect();
     println!("{}", sampler_split(instance.field(), &rays, n));
     let _ = std::fs::remove_dir_all(&dir);
@@ -258,18 +255,18 @@ fn nerfstudio_first_camera_final() {
 /// Samples `rays` (an image's, `pixels` of them) again outside the renderer, in 256-ray
 /// batches on rayon's threads, and says where the sampler's time goes: thread-seconds in the
 /// proposal networks and in the main field, and each one's queries per pixel.
-fn sampler_split(field: &NerfactoField, rays: &[SamplerRay], pixels: f64) -> String {
+fn sampler_split(field: &NerfactoField, rays: &[ProposalRay], pixels: f64) -> String {
     let t = std::time::Instant::now();
     let split = rays
         .par_chunks(256)
         .map_init(
-            || (SamplerScratch::default(), Vec::new()),
+            || (ProposalScratch::default(), Vec::new()),
             |(s, pieces), batch| {
                 pieces.clear();
-                field.sample_rays(batch, pieces, s).unwrap()
+                sample_proposals(field, batch, pieces, s).unwrap()
             },
         )
-        .reduce(SamplerStats::default, |mut a, b| {
+        .reduce(ProposalStats::default, |mut a, b| {
             a += b;
             a
         });

@@ -12,15 +12,16 @@ use std::path::Path;
 use crate::common_nerfacto::{placed, scratch, write_run, Spec};
 use glam::{DMat4, DVec3};
 use nerfx_core::camera::{Camera, Perspective, Projection, Ray};
-use nerfx_core::field::{NerfactoField, Piece, SamplerRay, SamplerScratch};
+use nerfx_core::field::NerfactoField;
 use nerfx_core::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
+use nerfx_core::render::{sample_proposals, ProposalRay, ProposalSample, ProposalScratch};
 use nerfx_core::scene::SceneDesc;
 
 const W: u32 = 24;
 const H: u32 = 16;
 
 /// Per ray: the main samples' edges, then r, g, b, accumulation, expected depth.
-fn numpy_render(run: &Path, rays: &[SamplerRay], n_edges: usize) -> Vec<Vec<f64>> {
+fn numpy_render(run: &Path, rays: &[ProposalRay], n_edges: usize) -> Vec<Vec<f64>> {
     let rays: Vec<[f64; 8]> = rays
         .iter()
         .map(|r| {
@@ -53,12 +54,12 @@ fn camera() -> Camera {
 
 /// The camera's pixel rays as nerfstudio's sampler sees them (the field placed at the
 /// identity): from the camera, 0 to the far plane.
-fn sampler_rays(camera: &Camera, far: f64) -> Vec<SamplerRay> {
+fn sampler_rays(camera: &Camera, far: f64) -> Vec<ProposalRay> {
     (0..H)
         .flat_map(|y| (0..W).map(move |x| (x, y)))
         .map(|(x, y)| {
             let r: Ray = camera.ray(x as f64 + 0.5, y as f64 + 0.5).unwrap();
-            SamplerRay {
+            ProposalRay {
                 origin: r.origin,
                 dir: r.dir,
                 near: 0.0,
@@ -74,9 +75,8 @@ fn check_against_numpy(name: &str, spec: &Spec) {
     let field = NerfactoField::load(&run).unwrap();
     let camera = camera();
     let rays = sampler_rays(&camera, f64::from(field.far_plane()));
-    let mut pieces: Vec<Piece> = Vec::new();
-    let stats = field
-        .sample_rays(&rays, &mut pieces, &mut SamplerScratch::default())
+    let mut pieces: Vec<ProposalSample> = Vec::new();
+    let stats = sample_proposals(&field, &rays, &mut pieces, &mut ProposalScratch::default())
         .expect("the run has proposal networks");
     let n = pieces.len() / rays.len();
     assert_eq!(n, 48);
@@ -205,9 +205,7 @@ fn a_proposal_sampled_run_occludes_and_is_occluded_by_other_instances() {
     let field = NerfactoField::load(&run).unwrap();
     let rays = sampler_rays(&camera, f64::from(field.far_plane()));
     let mut pieces = Vec::new();
-    field
-        .sample_rays(&rays, &mut pieces, &mut SamplerScratch::default())
-        .unwrap();
+    sample_proposals(&field, &rays, &mut pieces, &mut ProposalScratch::default()).unwrap();
     let n = pieces.len() / rays.len();
     // An opaque white slab between the camera (y = −3) and the origin: the run shows only
     // in front of it (the run has density everywhere, near the camera too).

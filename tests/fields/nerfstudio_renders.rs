@@ -9,7 +9,8 @@ use std::path::Path;
 use crate::common_nerfacto::{copied_nerfstudio_run, nerfstudio_fixture, scratch};
 use glam::DVec3;
 use nerfx_core::camera::read_shot;
-use nerfx_core::field::{NerfactoField, SamplerRay, SamplerScratch};
+use nerfx_core::field::NerfactoField;
+use nerfx_core::render::{sample_proposals, ProposalRay, ProposalScratch};
 use nerfx_core::render::{ColorOutput, Outputs, Quality, RenderSettings};
 use nerfx_core::shot_render::render_frame;
 
@@ -95,16 +96,14 @@ fn check_centre_samples(run: &Path, k: usize) {
         |name: &str| read_npy(&nerfstudio_fixture().join(format!("render/cam{k}_{name}.npy")));
     let (ray, want) = (read("centre_ray"), read("centre_samples_2"));
     let v = |i: usize| DVec3::new(ray[i].into(), ray[i + 1].into(), ray[i + 2].into());
-    let rays = [SamplerRay {
+    let rays = [ProposalRay {
         origin: v(0),
         dir: v(3).normalize(),
         near: 0.0,
         far: f64::from(field.far_plane()),
     }];
     let mut pieces = Vec::new();
-    field
-        .sample_rays(&rays, &mut pieces, &mut SamplerScratch::default())
-        .unwrap();
+    sample_proposals(&field, &rays, &mut pieces, &mut ProposalScratch::default()).unwrap();
     assert_eq!(pieces.len() * 3, want.len());
     let (mut edge, mut weight, mut t) = (0.0f64, 0.0f64, 1.0f64);
     for (p, w) in pieces.iter().zip(want.chunks_exact(3)) {

@@ -28,10 +28,8 @@ pub use analytic::{Analytic, Primitive, ShColor, Shape};
 pub(crate) use analytic::{Anchor, Density, Line, Profile};
 pub use crop::{CropBox, CropClip};
 pub use ingp::{IngpField, NgpRay, NgpSample, NgpScratch, NgpStats, NGP_MAX_STEPS};
-pub use nerfacto::{
-    DataparserTransform, NerfactoField, Piece, SamplerRay, SamplerScratch, SamplerStats,
-    COLOR_SKIP_BUDGET, STOP_TRANSMITTANCE,
-};
+pub use nerfacto::{DataparserTransform, NerfactoField};
+pub(crate) use nerfacto::{DensityScratch, ProposalNetworks};
 pub(crate) use network::sh_basis;
 pub use network::TableStorage;
 pub use occupancy::Occupancy;

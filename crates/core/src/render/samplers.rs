@@ -11,7 +11,7 @@
 
 use super::march::InstancePlan;
 use super::ngp::{self, NgpFill};
-use super::proposal::{self, ProposalScratch};
+use super::proposal::{self, ProposalFill};
 use super::splats::{splat_layer, Splatting};
 use super::{RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
@@ -75,7 +75,7 @@ pub(super) enum VolumeSampler<'a> {
 /// Per-thread buffers of the volume samplers.
 #[derive(Default)]
 pub(super) struct VolumeScratch {
-    proposal: ProposalScratch,
+    proposal: ProposalFill,
     ngp: NgpFill,
 }
 

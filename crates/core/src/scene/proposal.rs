@@ -1,10 +1,8 @@
 //! nerfacto runs placed in the world and sampled by their own proposal networks (what
 //! nerfstudio's viewer and `ns-render` show), instead of nerfx's occupancy marcher.
 //!
-//! nerfstudio samples a ray from the camera (distance 0 at inference) to `far_plane` in its
-//! normalised frame, the field's frame here: a world ray is carried into it by `N⁻¹`, its
-//! direction renormalised, and field distances `u` convert back to world ones as `u / k`
-//! with `k = |N⁻¹ d|` (see [`super`]). A crop box clips that span, as nerfstudio's does.
+//! How a world ray becomes the ray nerfstudio's sampler sees is the renderer's
+//! ([`crate::render::proposal_ray`]).
 
 use std::sync::Arc;
 
@@ -12,9 +10,8 @@ use glam::DMat4;
 
 use super::instance::{FieldHandle, Instance};
 use super::CropBox;
-use crate::camera::Ray;
 use crate::error::{Error, Result};
-use crate::field::{NerfactoField, SamplerRay};
+use crate::field::NerfactoField;
 
 /// A nerfacto run placed in the world, sampled by its proposal networks.
 #[derive(Clone)]
@@ -86,32 +83,5 @@ impl ProposalInstance {
     /// The placement and crop (the run as a plain instance).
     pub fn instance(&self) -> &Instance {
         &self.instance
-    }
-
-    /// The world ray as nerfstudio's sampler sees it, and the field units per world unit
-    /// along it; `None` when the crop box leaves nothing of it.
-    pub fn sampler_ray(&self, ray: &Ray) -> Option<(SamplerRay, f64)> {
-        let m = self.instance.field_from_world();
-        let origin = m.transform_point3(ray.origin);
-        let d = m.transform_vector3(ray.dir);
-        let k = d.length();
-        if !(k.is_finite() && k > 0.0) {
-            return None;
-        }
-        let dir = d / k;
-        let far = f64::from(self.field.far_plane());
-        let (near, far) = match self.instance.crop_clip() {
-            Some(c) => c.clip(origin, dir, 0.0, far)?,
-            None => (0.0, far),
-        };
-        (near < far).then_some((
-            SamplerRay {
-                origin,
-                dir,
-                near,
-                far,
-            },
-            k,
-        ))
     }
 }

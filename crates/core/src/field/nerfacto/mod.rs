@@ -67,7 +67,6 @@ use density_field::DensityField;
 use occupancy::{
     cache_key, cache_paths, contract, GridSettings, OccupancyGrid, Source, CACHE_FILE,
 };
-use proposal::ProposalSampler;
 use torch::{torch_sh4, TorchHashGrid};
 
 mod config;
@@ -76,15 +75,13 @@ mod density_field;
 #[cfg(target_arch = "x86_64")]
 mod density_kernel;
 mod occupancy;
-mod proposal;
+mod proposal_networks;
 mod torch;
-mod weights;
 
 pub(crate) use config::scan;
 pub use dataparser::DataparserTransform;
-pub use proposal::{
-    Piece, SamplerRay, SamplerScratch, SamplerStats, COLOR_SKIP_BUDGET, STOP_TRANSMITTANCE,
-};
+pub(crate) use density_field::DensityScratch;
+pub(crate) use proposal_networks::ProposalNetworks;
 
 /// Points per batch (bounds the scratch memory).
 const CHUNK: usize = 512;
@@ -137,7 +134,7 @@ pub struct NerfactoField {
     n_params: usize,
     occupancy: OccupancyGrid,
     /// nerfacto's own sampler, when the checkpoint holds its proposal networks.
-    proposal: Option<ProposalSampler>,
+    proposal: Option<ProposalNetworks>,
 }
 
 impl NerfactoField {
@@ -444,7 +441,7 @@ impl NerfactoField {
 
     /// Colours from the geometry features (`n_base − 1` per point) and directions (see
     /// [`head_outputs`]).
-    fn colour(&self, geo: &[f32], dirs: &[Vec3], rgb: &mut [Vec3]) {
+    pub(crate) fn colour(&self, geo: &[f32], dirs: &[Vec3], rgb: &mut [Vec3]) {
         let n_geo = self.n_base - 1;
         let (Net::Tcnn { head, .. } | Net::Torch { head, .. }) = &self.net;
         let encoding = |d| self.direction_encoding(d);
@@ -477,7 +474,12 @@ impl NerfactoField {
 
     /// Densities and geometry features as nerfacto's own sampler sees them: on all of space
     /// (no bounds, no occupancy), zero outside the contraction's selector.
-    fn density_features_unbounded(&self, points: &[Vec3], sigma: &mut [f32], features: &mut [f32]) {
+    pub(crate) fn density_features_unbounded(
+        &self,
+        points: &[Vec3],
+        sigma: &mut [f32],
+        features: &mut [f32],
+    ) {
         let n_geo = self.n_base - 1;
         self.for_each_base(points, |i, selected, o| {
             sigma[i] = if selected {
@@ -494,9 +496,21 @@ impl NerfactoField {
         self.settings.far_plane
     }
 
-    /// Whether the run holds nerfacto's proposal networks (so [`Self::sample_rays`] works).
+    /// Whether the run holds nerfacto's proposal networks (so its proposal sampler,
+    /// [`crate::render::sample_proposals`], can sample it).
     pub fn has_proposal_sampler(&self) -> bool {
         self.proposal.is_some()
+    }
+
+    /// The proposal networks, when the checkpoint holds them.
+    pub(crate) fn proposal_networks(&self) -> Option<&ProposalNetworks> {
+        self.proposal.as_ref()
+    }
+
+    /// Floats of geometry features per point that the density pass leaves for the colour
+    /// ([`Self::density_features_unbounded`], [`Self::colour`]).
+    pub(crate) fn geometry_features(&self) -> usize {
+        self.n_base - 1
     }
 
     /// The density outputs at every point (nerfacto zeroes the position outside its
@@ -528,7 +542,7 @@ fn read_proposal(
     config_text: &str,
     config_file: &Path,
     settings: &RunSettings,
-) -> Result<Option<ProposalSampler>> {
+) -> Result<Option<ProposalNetworks>> {
     if Keys::under(ckpt, "_model.proposal_networks.").is_none() {
         return Ok(None);
     }
@@ -539,7 +553,7 @@ fn read_proposal(
         .enumerate()
         .map(|(i, net)| DensityField::read(ckpt, i, net, settings.average_init_density))
         .collect::<Result<Vec<_>>>()?;
-    Ok(Some(ProposalSampler::new(sampler, nets)))
+    Ok(Some(ProposalNetworks::new(sampler, nets)))
 }
 
 /// `nerfstudio_models/step-<n>.ckpt` with the highest `n`.

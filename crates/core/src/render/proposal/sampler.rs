@@ -35,10 +35,8 @@ use std::time::{Duration, Instant};
 
 use glam::{DVec3, Vec3};
 
-use super::config::SamplerSettings;
-use super::density_field::{DensityField, DensityScratch};
 use super::weights::{sanitised, weigh_run};
-use super::NerfactoField;
+use crate::field::{DensityScratch, NerfactoField, ProposalNetworks};
 
 /// Transmittance below which a ray's later samples are not evaluated.
 pub const STOP_TRANSMITTANCE: f64 = 1e-6;
@@ -52,7 +50,7 @@ const PDF_EPS: f64 = 1e-5;
 
 /// A ray to sample, in the field's frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SamplerRay {
+pub struct ProposalRay {
     /// Origin (the camera).
     pub origin: DVec3,
     /// Unit direction.
@@ -66,7 +64,7 @@ pub struct SamplerRay {
 /// One main-field sample of a ray: the interval `[t0, t1]` (field units from the ray's
 /// origin), its density and colour (trained space; black where not shaded).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Piece {
+pub struct ProposalSample {
     /// Interval start.
     pub t0: f64,
     /// Interval end.
@@ -79,7 +77,7 @@ pub struct Piece {
 
 /// What a batch of sampling did: queries and time in the proposal fields and the main field.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct SamplerStats {
+pub struct ProposalStats {
     /// Proposal-field density queries.
     pub proposal_queries: u64,
     /// Main-field density queries.
@@ -94,8 +92,8 @@ pub struct SamplerStats {
     pub main_time: Duration,
 }
 
-impl std::ops::AddAssign for SamplerStats {
-    fn add_assign(&mut self, o: SamplerStats) {
+impl std::ops::AddAssign for ProposalStats {
+    fn add_assign(&mut self, o: ProposalStats) {
         self.proposal_queries += o.proposal_queries;
         self.main_queries += o.main_queries;
         self.color_queries += o.color_queries;
@@ -105,9 +103,9 @@ impl std::ops::AddAssign for SamplerStats {
     }
 }
 
-/// Reusable buffers for [`NerfactoField::sample_rays`].
+/// Reusable buffers for [`sample_proposals`].
 #[derive(Clone, Debug, Default)]
-pub struct SamplerScratch {
+pub struct ProposalScratch {
     /// Spacing edges (rows of `n + 1`) of this iteration and the last, and where each
     /// ray's row starts (iteration 0 has one row for every ray).
     edges: Vec<f64>,
@@ -139,61 +137,6 @@ pub struct SamplerScratch {
     shade_features: Vec<f32>,
     dirs: Vec<Vec3>,
     rgb: Vec<Vec3>,
-}
-
-/// The proposal networks and the sampler's settings.
-#[derive(Clone, Debug)]
-pub(crate) struct ProposalSampler {
-    settings: SamplerSettings,
-    nets: Vec<DensityField>,
-}
-
-impl ProposalSampler {
-    pub(crate) fn new(settings: SamplerSettings, nets: Vec<DensityField>) -> Self {
-        ProposalSampler { settings, nets }
-    }
-
-    /// The network of proposal iteration `i`.
-    fn net(&self, i: usize) -> &DensityField {
-        &self.nets[if self.settings.same_network { 0 } else { i }]
-    }
-
-    pub(crate) fn settings(&self) -> &SamplerSettings {
-        &self.settings
-    }
-
-    /// Parameters of the proposal networks.
-    pub(crate) fn n_params(&self) -> usize {
-        self.nets.iter().map(DensityField::n_params).sum()
-    }
-
-    /// The spacing function `g`.
-    fn spacing(&self, x: f64) -> f64 {
-        if self.settings.uniform_initial {
-            x
-        } else if x < 1.0 {
-            x / 2.0
-        } else {
-            1.0 - 1.0 / (2.0 * x)
-        }
-    }
-
-    /// `g⁻¹`.
-    fn spacing_inv(&self, s: f64) -> f64 {
-        if self.settings.uniform_initial {
-            s
-        } else if s < 0.5 {
-            2.0 * s
-        } else {
-            1.0 / (2.0 - 2.0 * s)
-        }
-    }
-
-    /// Distance of spacing `s` on a ray with `span = (g(near), g(far))`.
-    #[inline]
-    fn distance(&self, s: f64, span: [f64; 2]) -> f64 {
-        self.spacing_inv(s * span[1] + (1.0 - s) * span[0])
-    }
 }
 
 /// The `B` positions `u_k = (k + ½)/B` in the CDF at which [`resample`] places its edges.
@@ -248,223 +191,219 @@ pub(crate) fn resample(
     }
 }
 
-impl NerfactoField {
-    /// Samples `rays` as nerfstudio does at inference and evaluates the main field there:
-    /// `pieces` receives `nerf_samples` pieces per ray, in order (those after a ray's
-    /// transmittance fell below [`STOP_TRANSMITTANCE`] with σ = 0). `None` when the run has
-    /// no proposal networks.
-    pub fn sample_rays(
-        &self,
-        rays: &[SamplerRay],
-        pieces: &mut Vec<Piece>,
-        s: &mut SamplerScratch,
-    ) -> Option<SamplerStats> {
-        let sampler = self.proposal.as_ref()?;
-        let mut stats = SamplerStats::default();
-        let settings = sampler.settings();
-        let iterations = settings.proposal_samples.len();
-        let start = Instant::now();
-        s.span.clear();
-        s.span.extend(
-            rays.iter()
-                .map(|r| [sampler.spacing(r.near), sampler.spacing(r.far)]),
-        );
-        // Iteration 0: uniform in spacing, the same edges for every ray.
-        let mut n = settings.proposal_samples[0];
-        s.edges.clear();
-        s.edges.extend((0..=n).map(|j| j as f64 / n as f64));
-        s.edge_rows.clear();
-        s.edge_rows.resize(rays.len(), 0);
-        for level in 0..=iterations {
-            if level > 0 {
-                let b = if level < iterations {
-                    settings.proposal_samples[level]
-                } else {
-                    settings.nerf_samples
-                } + 1;
-                std::mem::swap(&mut s.edges, &mut s.prev_edges);
-                std::mem::swap(&mut s.edge_rows, &mut s.prev_edge_rows);
-                s.edges.clear();
-                s.edge_rows.clear();
-                s.edge_rows.extend((0..rays.len()).map(|r| r * b));
-                quantiles(b, &mut s.quantiles);
-                for r in 0..rays.len() {
-                    let row = s.prev_edge_rows[r];
-                    resample(
-                        &s.prev_edges[row..row + n + 1],
-                        &s.weights[r * n..(r + 1) * n],
-                        &s.quantiles,
-                        &mut s.cdf,
-                        &mut s.edges,
-                    );
-                }
-                n = b - 1;
-            }
-            s.distances.clear();
-            s.distance_rows.clear();
-            for (r, ray) in rays.iter().enumerate() {
-                // Iteration 0's edges are the same for every ray: so are its distances on
-                // rays of the same span (most often all of them), kept once.
-                let row = s.edge_rows[r];
-                if r > 0
-                    && row == s.edge_rows[r - 1]
-                    && (ray.near, ray.far) == (rays[r - 1].near, rays[r - 1].far)
-                {
-                    s.distance_rows.push(s.distance_rows[r - 1]);
-                    continue;
-                }
-                s.distance_rows.push(s.distances.len());
-                let span = s.span[r];
-                let mut prev = ray.near;
-                for &e in &s.edges[row..row + n + 1] {
-                    // Kept within the ray's span and in order (rounding in `g⁻¹`).
-                    let t = sampler.distance(e, span).clamp(prev, ray.far);
-                    s.distances.push(t);
-                    prev = t;
-                }
-            }
-            if level < iterations {
-                stats.proposal_queries += self.weigh(sampler, level, rays, n, s);
-            }
-        }
-        stats.proposal_time = start.elapsed();
-        let start = Instant::now();
-        self.shade_main(rays, n, pieces, s, &mut stats);
-        stats.main_time = start.elapsed();
-        Some(stats)
-    }
-
-    /// Interval `j` of ray `r` of the current iteration.
-    #[inline]
-    fn interval(s: &SamplerScratch, r: usize, j: usize) -> (f64, f64) {
-        let at = s.distance_rows[r] + j;
-        (s.distances[at], s.distances[at + 1])
-    }
-
-    /// Evaluates proposal iteration `level` (`n` intervals per ray) front to back, filling
-    /// `s.weights`; returns the queries made.
-    fn weigh(
-        &self,
-        sampler: &ProposalSampler,
-        level: usize,
-        rays: &[SamplerRay],
-        n: usize,
-        s: &mut SamplerScratch,
-    ) -> u64 {
-        let net = sampler.net(level);
-        let mut queries = 0;
-        s.weights.clear();
-        s.weights.resize(rays.len() * n, 0.0);
-        s.transmittance.clear();
-        s.transmittance.resize(rays.len(), 1.0);
-        s.live.clear();
-        s.live.extend(0..rays.len() as u32);
-        let mut first = 0;
-        while !s.live.is_empty() && first < n {
-            let last = (first + ROUND).min(n);
-            s.lay_midpoints(rays, first..last);
-            s.sigma.resize(s.points.len(), 0.0);
-            net.density(&s.points, &mut s.sigma, &mut s.density);
-            queries += s.points.len() as u64;
-            for (&r, sigma) in s.live.iter().zip(s.sigma.chunks_exact(last - first)) {
-                let r = r as usize;
-                weigh_run(
-                    sigma,
-                    &s.distances[s.distance_rows[r]..][first..=last],
-                    &mut s.transmittance[r],
-                    &mut s.weights[r * n + first..r * n + last],
+/// Samples `rays` as nerfstudio does at inference and evaluates the main field there:
+/// `pieces` receives `nerf_samples` pieces per ray, in order (those after a ray's
+/// transmittance fell below [`STOP_TRANSMITTANCE`] with σ = 0). `None` when the run has
+/// no proposal networks.
+pub fn sample_proposals(
+    field: &NerfactoField,
+    rays: &[ProposalRay],
+    pieces: &mut Vec<ProposalSample>,
+    s: &mut ProposalScratch,
+) -> Option<ProposalStats> {
+    let sampler = field.proposal_networks()?;
+    let mut stats = ProposalStats::default();
+    let settings = sampler.settings();
+    let iterations = settings.proposal_samples.len();
+    let start = Instant::now();
+    s.span.clear();
+    s.span.extend(
+        rays.iter()
+            .map(|r| [sampler.spacing(r.near), sampler.spacing(r.far)]),
+    );
+    // Iteration 0: uniform in spacing, the same edges for every ray.
+    let mut n = settings.proposal_samples[0];
+    s.edges.clear();
+    s.edges.extend((0..=n).map(|j| j as f64 / n as f64));
+    s.edge_rows.clear();
+    s.edge_rows.resize(rays.len(), 0);
+    for level in 0..=iterations {
+        if level > 0 {
+            let b = if level < iterations {
+                settings.proposal_samples[level]
+            } else {
+                settings.nerf_samples
+            } + 1;
+            std::mem::swap(&mut s.edges, &mut s.prev_edges);
+            std::mem::swap(&mut s.edge_rows, &mut s.prev_edge_rows);
+            s.edges.clear();
+            s.edge_rows.clear();
+            s.edge_rows.extend((0..rays.len()).map(|r| r * b));
+            quantiles(b, &mut s.quantiles);
+            for r in 0..rays.len() {
+                let row = s.prev_edge_rows[r];
+                resample(
+                    &s.prev_edges[row..row + n + 1],
+                    &s.weights[r * n..(r + 1) * n],
+                    &s.quantiles,
+                    &mut s.cdf,
+                    &mut s.edges,
                 );
             }
-            let transmittance = &s.transmittance;
-            s.live
-                .retain(|&r| transmittance[r as usize] >= STOP_TRANSMITTANCE);
-            first = last;
+            n = b - 1;
         }
-        queries
-    }
-
-    /// Evaluates the main field on the final intervals (`n` per ray) front to back and shades
-    /// the samples whose weight matters.
-    fn shade_main(
-        &self,
-        rays: &[SamplerRay],
-        n: usize,
-        pieces: &mut Vec<Piece>,
-        s: &mut SamplerScratch,
-        stats: &mut SamplerStats,
-    ) {
-        let n_geo = self.n_base - 1;
-        let base = pieces.len();
-        pieces.resize(base + rays.len() * n, Piece::default());
-        for r in 0..rays.len() {
-            for j in 0..n {
-                let (t0, t1) = Self::interval(s, r, j);
-                pieces[base + r * n + j] = Piece {
-                    t0,
-                    t1,
-                    ..Piece::default()
-                };
+        s.distances.clear();
+        s.distance_rows.clear();
+        for (r, ray) in rays.iter().enumerate() {
+            // Iteration 0's edges are the same for every ray: so are its distances on
+            // rays of the same span (most often all of them), kept once.
+            let row = s.edge_rows[r];
+            if r > 0
+                && row == s.edge_rows[r - 1]
+                && (ray.near, ray.far) == (rays[r - 1].near, rays[r - 1].far)
+            {
+                s.distance_rows.push(s.distance_rows[r - 1]);
+                continue;
+            }
+            s.distance_rows.push(s.distances.len());
+            let span = s.span[r];
+            let mut prev = ray.near;
+            for &e in &s.edges[row..row + n + 1] {
+                // Kept within the ray's span and in order (rounding in `g⁻¹`).
+                let t = sampler.distance(e, span).clamp(prev, ray.far);
+                s.distances.push(t);
+                prev = t;
             }
         }
-        s.weights.clear();
-        s.weights.resize(rays.len() * n, 0.0);
-        s.transmittance.clear();
-        s.transmittance.resize(rays.len(), 1.0);
-        s.live.clear();
-        s.live.extend(0..rays.len() as u32);
-        s.shade.clear();
-        s.shade_features.clear();
-        s.dirs.clear();
-        let mut first = 0;
-        while !s.live.is_empty() && first < n {
-            let last = (first + ROUND).min(n);
-            s.lay_midpoints(rays, first..last);
-            s.sigma.resize(s.points.len(), 0.0);
-            s.features.resize(s.points.len() * n_geo, 0.0);
-            self.density_features_unbounded(&s.points, &mut s.sigma, &mut s.features);
-            stats.main_queries += s.points.len() as u64;
-            let runs = s.live.iter().zip(s.sigma.chunks_exact(last - first));
-            for (i, (&r, sigma)) in runs.enumerate() {
-                let r = r as usize;
-                let weights = &mut s.weights[r * n + first..r * n + last];
-                weigh_run(
-                    sigma,
-                    &s.distances[s.distance_rows[r]..][first..=last],
-                    &mut s.transmittance[r],
-                    weights,
-                );
-                for (j, (&sigma, &w)) in (first..).zip(sigma.iter().zip(weights.iter())) {
-                    stats.invalid_samples += u64::from(!sigma.is_finite());
-                    pieces[base + r * n + j].sigma = sanitised(sigma) as f32;
-                    if w > 0.0 {
-                        let k = i * (last - first) + j - first;
-                        s.shade.push((r as u32, j as u32));
-                        s.shade_features
-                            .extend_from_slice(&s.features[k * n_geo..(k + 1) * n_geo]);
-                        s.dirs.push(rays[r].dir.as_vec3());
-                    }
-                }
-            }
-            let transmittance = &s.transmittance;
-            s.live
-                .retain(|&r| transmittance[r as usize] >= STOP_TRANSMITTANCE);
-            first = last;
-        }
-        s.skip_lightest(n, n_geo);
-        s.rgb.clear();
-        s.rgb.resize(s.shade.len(), Vec3::ZERO);
-        self.colour(&s.shade_features, &s.dirs, &mut s.rgb);
-        stats.color_queries += s.shade.len() as u64;
-        for (&(r, j), c) in s.shade.iter().zip(&s.rgb) {
-            pieces[base + r as usize * n + j as usize].rgb = c.to_array();
+        if level < iterations {
+            stats.proposal_queries += weigh(sampler, level, rays, n, s);
         }
     }
+    stats.proposal_time = start.elapsed();
+    let start = Instant::now();
+    shade_main(field, rays, n, pieces, s, &mut stats);
+    stats.main_time = start.elapsed();
+    Some(stats)
 }
 
-impl SamplerScratch {
+/// Interval `j` of ray `r` of the current iteration.
+#[inline]
+fn interval(s: &ProposalScratch, r: usize, j: usize) -> (f64, f64) {
+    let at = s.distance_rows[r] + j;
+    (s.distances[at], s.distances[at + 1])
+}
+
+/// Evaluates proposal iteration `level` (`n` intervals per ray) front to back, filling
+/// `s.weights`; returns the queries made.
+fn weigh(
+    sampler: &ProposalNetworks,
+    level: usize,
+    rays: &[ProposalRay],
+    n: usize,
+    s: &mut ProposalScratch,
+) -> u64 {
+    let net = sampler.net(level);
+    let mut queries = 0;
+    s.weights.clear();
+    s.weights.resize(rays.len() * n, 0.0);
+    s.transmittance.clear();
+    s.transmittance.resize(rays.len(), 1.0);
+    s.live.clear();
+    s.live.extend(0..rays.len() as u32);
+    let mut first = 0;
+    while !s.live.is_empty() && first < n {
+        let last = (first + ROUND).min(n);
+        s.lay_midpoints(rays, first..last);
+        s.sigma.resize(s.points.len(), 0.0);
+        net.density(&s.points, &mut s.sigma, &mut s.density);
+        queries += s.points.len() as u64;
+        for (&r, sigma) in s.live.iter().zip(s.sigma.chunks_exact(last - first)) {
+            let r = r as usize;
+            weigh_run(
+                sigma,
+                &s.distances[s.distance_rows[r]..][first..=last],
+                &mut s.transmittance[r],
+                &mut s.weights[r * n + first..r * n + last],
+            );
+        }
+        let transmittance = &s.transmittance;
+        s.live
+            .retain(|&r| transmittance[r as usize] >= STOP_TRANSMITTANCE);
+        first = last;
+    }
+    queries
+}
+
+/// Evaluates the main field on the final intervals (`n` per ray) front to back and shades
+/// the samples whose weight matters.
+fn shade_main(
+    field: &NerfactoField,
+    rays: &[ProposalRay],
+    n: usize,
+    pieces: &mut Vec<ProposalSample>,
+    s: &mut ProposalScratch,
+    stats: &mut ProposalStats,
+) {
+    let n_geo = field.geometry_features();
+    let base = pieces.len();
+    pieces.resize(base + rays.len() * n, ProposalSample::default());
+    for r in 0..rays.len() {
+        for j in 0..n {
+            let (t0, t1) = interval(s, r, j);
+            pieces[base + r * n + j] = ProposalSample {
+                t0,
+                t1,
+                ..ProposalSample::default()
+            };
+        }
+    }
+    s.weights.clear();
+    s.weights.resize(rays.len() * n, 0.0);
+    s.transmittance.clear();
+    s.transmittance.resize(rays.len(), 1.0);
+    s.live.clear();
+    s.live.extend(0..rays.len() as u32);
+    s.shade.clear();
+    s.shade_features.clear();
+    s.dirs.clear();
+    let mut first = 0;
+    while !s.live.is_empty() && first < n {
+        let last = (first + ROUND).min(n);
+        s.lay_midpoints(rays, first..last);
+        s.sigma.resize(s.points.len(), 0.0);
+        s.features.resize(s.points.len() * n_geo, 0.0);
+        field.density_features_unbounded(&s.points, &mut s.sigma, &mut s.features);
+        stats.main_queries += s.points.len() as u64;
+        let runs = s.live.iter().zip(s.sigma.chunks_exact(last - first));
+        for (i, (&r, sigma)) in runs.enumerate() {
+            let r = r as usize;
+            let weights = &mut s.weights[r * n + first..r * n + last];
+            weigh_run(
+                sigma,
+                &s.distances[s.distance_rows[r]..][first..=last],
+                &mut s.transmittance[r],
+                weights,
+            );
+            for (j, (&sigma, &w)) in (first..).zip(sigma.iter().zip(weights.iter())) {
+                stats.invalid_samples += u64::from(!sigma.is_finite());
+                pieces[base + r * n + j].sigma = sanitised(sigma) as f32;
+                if w > 0.0 {
+                    let k = i * (last - first) + j - first;
+                    s.shade.push((r as u32, j as u32));
+                    s.shade_features
+                        .extend_from_slice(&s.features[k * n_geo..(k + 1) * n_geo]);
+                    s.dirs.push(rays[r].dir.as_vec3());
+                }
+            }
+        }
+        let transmittance = &s.transmittance;
+        s.live
+            .retain(|&r| transmittance[r as usize] >= STOP_TRANSMITTANCE);
+        first = last;
+    }
+    s.skip_lightest(n, n_geo);
+    s.rgb.clear();
+    s.rgb.resize(s.shade.len(), Vec3::ZERO);
+    field.colour(&s.shade_features, &s.dirs, &mut s.rgb);
+    stats.color_queries += s.shade.len() as u64;
+    for (&(r, j), c) in s.shade.iter().zip(&s.rgb) {
+        pieces[base + r as usize * n + j as usize].rgb = c.to_array();
+    }
+}
+impl ProposalScratch {
     /// The midpoints of samples `samples` of the live rays (of this iteration), ray after
     /// ray, into `points`.
-    fn lay_midpoints(&mut self, rays: &[SamplerRay], samples: Range<usize>) {
+    fn lay_midpoints(&mut self, rays: &[ProposalRay], samples: Range<usize>) {
         self.points.clear();
         for &r in &self.live {
             let ray = &rays[r as usize];
@@ -580,7 +519,7 @@ mod tests {
         // from the shading list are each ray's lightest and weigh at most the budget.
         let n = 48;
         let mut seed = 7u64;
-        let mut s = SamplerScratch::default();
+        let mut s = ProposalScratch::default();
         for _ in 0..5 * n {
             seed = seed
                 .wrapping_mul(6_364_136_223_846_793_005)

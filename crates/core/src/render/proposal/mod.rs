@@ -10,20 +10,28 @@
 //! nerfstudio's `last_sample` background (the last sample's colour filling `1 − acc`) is
 //! not added: nerfx delivers premultiplied colour with alpha = accumulation.
 
-use super::integrator::opacity;
-use super::RenderStats;
+mod sampler;
+mod weights;
+
+pub use sampler::{
+    sample_proposals, ProposalRay, ProposalSample, ProposalScratch, ProposalStats,
+    COLOR_SKIP_BUDGET, STOP_TRANSMITTANCE,
+};
+
 use crate::camera::Ray;
-use crate::field::{Fragment, Piece, SamplerRay, SamplerScratch};
+use crate::field::Fragment;
+use crate::render::integrator::opacity;
+use crate::render::RenderStats;
 use crate::scene::ProposalInstance;
 
 /// Per-thread buffers.
 #[derive(Default)]
-pub(super) struct ProposalScratch {
-    rays: Vec<SamplerRay>,
+pub(super) struct ProposalFill {
+    rays: Vec<ProposalRay>,
     /// Per sampled ray: the pixel and field units per world unit.
     owners: Vec<(u32, f64)>,
-    pieces: Vec<Piece>,
-    sampler: SamplerScratch,
+    pieces: Vec<ProposalSample>,
+    sampler: ProposalScratch,
 }
 
 /// Appends to `out[i]` the fragments of `inst` along `rays[i]`, front to back (the marcher
@@ -31,14 +39,14 @@ pub(super) struct ProposalScratch {
 pub(super) fn fill(
     inst: &ProposalInstance,
     rays: &[Option<Ray>],
-    s: &mut ProposalScratch,
+    s: &mut ProposalFill,
     out: &mut [Vec<Fragment>],
     stats: &mut RenderStats,
 ) {
     s.rays.clear();
     s.owners.clear();
     for (i, ray) in rays.iter().enumerate() {
-        if let Some((r, k)) = ray.as_ref().and_then(|r| inst.sampler_ray(r)) {
+        if let Some((r, k)) = ray.as_ref().and_then(|r| proposal_ray(inst, r)) {
             s.rays.push(r);
             s.owners.push((i as u32, k));
         }
@@ -47,10 +55,7 @@ pub(super) fn fill(
         return;
     }
     s.pieces.clear();
-    let Some(done) = inst
-        .field()
-        .sample_rays(&s.rays, &mut s.pieces, &mut s.sampler)
-    else {
+    let Some(done) = sample_proposals(inst.field(), &s.rays, &mut s.pieces, &mut s.sampler) else {
         return;
     };
     stats.density_samples += done.proposal_queries + done.main_queries;
@@ -72,4 +77,37 @@ pub(super) fn fill(
             })
         }));
     }
+}
+
+/// The world ray `ray` as nerfstudio's sampler sees it in `inst`'s field, and the field units
+/// per world unit along it; `None` when the crop box leaves nothing of it.
+///
+/// nerfstudio samples a ray from the camera (distance 0 at inference) to `far_plane` in its
+/// normalised frame, the field's frame here: a world ray is carried into it by `N⁻¹`, its
+/// direction renormalised, and field distances `u` convert back to world ones as `u / k`
+/// with `k = |N⁻¹ d|` (see [`crate::scene`]). A crop box clips that span, as nerfstudio's
+/// does.
+pub fn proposal_ray(inst: &ProposalInstance, ray: &Ray) -> Option<(ProposalRay, f64)> {
+    let m = inst.instance().field_from_world();
+    let origin = m.transform_point3(ray.origin);
+    let d = m.transform_vector3(ray.dir);
+    let k = d.length();
+    if !(k.is_finite() && k > 0.0) {
+        return None;
+    }
+    let dir = d / k;
+    let far = f64::from(inst.field().far_plane());
+    let (near, far) = match inst.instance().crop_clip() {
+        Some(c) => c.clip(origin, dir, 0.0, far)?,
+        None => (0.0, far),
+    };
+    (near < far).then_some((
+        ProposalRay {
+            origin,
+            dir,
+            near,
+            far,
+        },
+        k,
+    ))
 }

@@ -13,7 +13,10 @@ use crate::common_ingp::{
 };
 use glam::{DMat4, DVec3};
 use nerfx_core::camera::Camera;
-use nerfx_core::field::{IngpField, NgpRay, NgpSample, NgpScratch, NGP_MAX_STEPS};
+use nerfx_core::field::IngpField;
+use nerfx_core::render::{
+    march_ngp, ngp_ray, NgpRay, NgpSample, NgpScratch, NgpStats, NGP_MAX_STEPS,
+};
 use nerfx_core::render::{render, ColorOutput, Outputs, Quality, RenderSettings};
 use nerfx_core::scene::{Scene, SceneDesc};
 
@@ -47,7 +50,7 @@ fn march_rays(scene: &Scene, camera: &Camera) -> Vec<Option<NgpRay>> {
         .flat_map(|y| (0..w).map(move |x| (x, y)))
         .map(|(x, y)| {
             let ray = camera.ray(f64::from(x) + 0.5, f64::from(y) + 0.5)?;
-            scene.ngp().next().unwrap().march_ray(&ray).map(|(r, _)| r)
+            ngp_ray(scene.ngp().next().unwrap(), &ray).map(|(r, _)| r)
         })
         .collect()
 }
@@ -57,9 +60,9 @@ fn samples_of(
     field: &IngpField,
     rays: &[NgpRay],
     max_steps: usize,
-) -> (Vec<Vec<NgpSample>>, nerfx_core::field::NgpStats) {
+) -> (Vec<Vec<NgpSample>>, NgpStats) {
     let mut out = vec![Vec::new(); rays.len()];
-    let stats = field.march_rays(rays, max_steps, &mut out, &mut NgpScratch::default());
+    let stats = march_ngp(field, rays, max_steps, &mut out, &mut NgpScratch::default());
     (out, stats)
 }
 
@@ -459,7 +462,7 @@ fn a_fog_takes_1024_steps_along_the_diagonal_and_a_lower_cap_is_counted() {
         near: 0.0,
         far: f64::INFINITY,
     };
-    let (ray, k) = scene.ngp().next().unwrap().march_ray(&world).unwrap();
+    let (ray, k) = ngp_ray(scene.ngp().next().unwrap(), &world).unwrap();
     assert!((k - 1.0).abs() < 1e-12);
     let field = scene.ngp().next().unwrap().field();
     let (full, stats) = samples_of(field, &[ray], NGP_MAX_STEPS);

@@ -27,11 +27,12 @@ pub use aabb::Aabb;
 pub use analytic::{Analytic, Primitive, ShColor, Shape};
 pub(crate) use analytic::{Anchor, Density, Line, Profile};
 pub use crop::{CropBox, CropClip};
-pub use ingp::{IngpField, NgpRay, NgpSample, NgpScratch, NgpStats, NGP_MAX_STEPS};
+pub use ingp::IngpField;
+pub(crate) use ingp::{Cascades, ColourScratch, DENSITY_OUTPUTS};
 pub use nerfacto::{DataparserTransform, NerfactoField};
 pub(crate) use nerfacto::{DensityScratch, ProposalNetworks};
-pub(crate) use network::sh_basis;
 pub use network::TableStorage;
+pub(crate) use network::{exp_density, sh_basis};
 pub use occupancy::Occupancy;
 pub(crate) use splats::{
     is_splatfacto_run, Fragment, RayLayer, RayView as SplatRayView, SplatLayer, SplatPixel,

@@ -1,11 +1,8 @@
 //! instant-ngp snapshots placed in the world and marched by instant-ngp's own marcher
 //! (what its viewer shows), instead of nerfx's occupancy marcher.
 //!
-//! instant-ngp's step grows with the distance from the camera, so the march starts from the
-//! camera: a world ray is carried into the field's frame by `N⁻¹`, its direction
-//! renormalised, and field distances `u` convert back to world ones as `u / k` with
-//! `k = |N⁻¹ d|` (see [`super`]). The field's box, the crop box and the camera's clipping
-//! range bound the march.
+//! How a world ray becomes the ray instant-ngp's marcher walks is the renderer's
+//! ([`crate::render::ngp_ray`]).
 
 use std::sync::Arc;
 
@@ -13,9 +10,8 @@ use glam::DMat4;
 
 use super::instance::{FieldHandle, Instance};
 use super::CropBox;
-use crate::camera::Ray;
 use crate::error::Result;
-use crate::field::{IngpField, NgpRay};
+use crate::field::IngpField;
 
 /// An instant-ngp snapshot placed in the world, marched by instant-ngp's marcher.
 #[derive(Clone)]
@@ -79,26 +75,5 @@ impl NgpInstance {
     /// The placement and crop (the snapshot as a plain instance).
     pub fn instance(&self) -> &Instance {
         &self.instance
-    }
-
-    /// The world ray as instant-ngp's marcher sees it, from the camera, and the field units
-    /// per world unit along it; `None` when it misses the field's box or crop.
-    pub fn march_ray(&self, ray: &Ray) -> Option<(NgpRay, f64)> {
-        let lr = self.instance.local_ray(ray, ray.near, ray.far)?;
-        let m = self.instance.field_from_world();
-        let d = m.transform_vector3(ray.dir);
-        let k = d.length();
-        if !(k.is_finite() && k > 0.0) {
-            return None;
-        }
-        Some((
-            NgpRay {
-                origin: m.transform_point3(ray.origin),
-                dir: d / k,
-                near: lr.t_near * k,
-                far: lr.t_far * k,
-            },
-            k,
-        ))
     }
 }

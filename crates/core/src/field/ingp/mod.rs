@@ -22,12 +22,11 @@
 
 use std::path::{Path, PathBuf};
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use half::f16;
 use rmpv::Value;
 
 mod cascades;
-mod marcher;
 
 use super::container::{read_document, Doc, Payload, PayloadKind, Verdict};
 use super::network::{
@@ -36,13 +35,12 @@ use super::network::{
 };
 use super::{Aabb, Capabilities, ColorSpace, Field};
 use crate::error::{Error, Result};
-use cascades::Cascades;
-pub use marcher::{NgpRay, NgpSample, NgpScratch, NgpStats, NGP_MAX_STEPS};
+pub(crate) use cascades::Cascades;
 
 /// Points per batch inside one density or radiance call (bounds the scratch memory).
 const CHUNK: usize = 512;
 /// Outputs of instant-ngp's density MLP (1 density + 15 geometry features).
-const DENSITY_OUTPUTS: usize = 16;
+pub(crate) const DENSITY_OUTPUTS: usize = 16;
 
 /// An instant-ngp snapshot loaded as a field.
 #[derive(Clone, Debug)]
@@ -292,6 +290,38 @@ impl IngpField {
     fn ngp_from_field(&self, p: Vec3) -> Vec3 {
         let (s, o) = (self.scale, self.offset);
         Vec3::new(p.y * s + o.y, p.z * s + o.z, p.x * s + o.x)
+    }
+
+    /// Instant-ngp coordinates of a field-space point, in f64.
+    pub(crate) fn ngp_from_field_f64(&self, p: DVec3) -> DVec3 {
+        let (s, o) = (f64::from(self.scale), self.offset.as_dvec3());
+        DVec3::new(p.y * s + o.y, p.z * s + o.z, p.x * s + o.x)
+    }
+
+    /// The dataset scale: instant-ngp units per field unit.
+    pub(crate) fn ngp_scale(&self) -> f32 {
+        self.scale
+    }
+
+    /// The snapshot's `aabb_scale`, which sets instant-ngp's cone angle.
+    pub(crate) fn aabb_scale(&self) -> f32 {
+        self.summary.aabb_scale
+    }
+
+    /// The occupancy cascades instant-ngp's marcher walks.
+    pub(crate) fn cascades(&self) -> &Cascades {
+        &self.cascades
+    }
+
+    /// The hash grid's unit-cube point of a field-space point.
+    pub(crate) fn grid_point(&self, p: Vec3) -> Vec3 {
+        self.unit_from_ngp(self.ngp_from_field(p))
+    }
+
+    /// The density network's outputs (`DENSITY_OUTPUTS` per point, the first the raw
+    /// density) at the hash grid's unit-cube points `xs`, into `out`; `enc` is scratch.
+    pub(crate) fn density_network(&self, xs: &[Vec3], enc: &mut Vec<f32>, out: &mut Vec<f32>) {
+        self.density_outputs(&self.density_mlp, xs, enc, out)
     }
 
     /// The inverse of [`Self::ngp_from_field`].
@@ -655,7 +685,7 @@ fn render_aabb(doc: &Doc, snap: &Value) -> Result<Option<(Vec3, Vec3)>> {
 
 /// Scratch of [`IngpField::colour`].
 #[derive(Default)]
-struct ColourScratch {
+pub(crate) struct ColourScratch {
     /// The colour network's first-layer starts, one row per run of equal directions, and
     /// each sample's run.
     starts: Vec<f32>,
@@ -669,7 +699,13 @@ impl IngpField {
     /// (or instant-ngp's HDR exp). The SH part of the network's first layer is summed once
     /// per run of consecutive equal directions (a ray's samples; 1 024 of a sample's 6 400
     /// multiply-adds), each sample's layer starting from its run's sums.
-    fn colour(&self, outputs: &[f32], dirs: &[Vec3], dst: &mut [Vec3], s: &mut ColourScratch) {
+    pub(crate) fn colour(
+        &self,
+        outputs: &[f32],
+        dirs: &[Vec3],
+        dst: &mut [Vec3],
+        s: &mut ColourScratch,
+    ) {
         self.rgb_dir.starts_per_run(
             dirs,
             |d| sh4(Vec3::new(d.y, d.z, d.x)),

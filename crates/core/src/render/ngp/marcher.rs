@@ -51,8 +51,7 @@
 
 use glam::{DVec3, Vec3};
 
-use super::{ColourScratch, IngpField, DENSITY_OUTPUTS};
-use crate::field::network::exp_density;
+use crate::field::{exp_density, Cascades, ColourScratch, IngpField, DENSITY_OUTPUTS};
 
 /// `STEPSIZE()`: `√3/1024`, the finest step (`NERF_STEPS` of them span the unit cube's
 /// diagonal).
@@ -132,7 +131,7 @@ impl std::ops::AddAssign for NgpStats {
     }
 }
 
-/// Reusable buffers for [`IngpField::march_rays`].
+/// Reusable buffers for [`march_ngp`].
 #[derive(Default)]
 pub struct NgpScratch {
     rays: Vec<RayMarch>,
@@ -251,217 +250,206 @@ fn mip_from_pos(q: DVec3, max_mip: usize) -> usize {
     (e + 1).clamp(0, max_mip as i64) as usize
 }
 
-impl IngpField {
-    /// The cone angle instant-ngp marches this snapshot with: 0 for `aabb_scale ≤ 1`, else
-    /// 1/256.
-    fn cone_angle(&self) -> f64 {
-        if self.summary.aabb_scale <= 1.0 {
-            0.0
-        } else {
-            CONE_ANGLE
-        }
+/// The cone angle instant-ngp marches this snapshot with: 0 for `aabb_scale ≤ 1`, else
+/// 1/256.
+fn cone_angle(field: &IngpField) -> f64 {
+    if field.aabb_scale() <= 1.0 {
+        0.0
+    } else {
+        CONE_ANGLE
     }
+}
 
-    /// `if_unoccupied_advance_to_next_occupied_voxel`: the first occupied position at or
-    /// after `r.t`, or `None` when the ray leaves the box first.
-    fn next_occupied(&self, r: &RayMarch, stepping: &Stepping) -> Option<f64> {
-        let max_mip = self.cascades.count().saturating_sub(1);
-        let mut t = r.t;
-        loop {
-            if t >= MAX_DEPTH || t > r.far {
-                return None;
-            }
-            let pos = r.origin + r.dir * t;
-            let q = pos.to_array();
-            let mut mip = mip_from_pos(pos, max_mip);
-            if self.cascades.march_occupied(q, mip) {
-                return Some(t);
-            }
-            while mip < max_mip && !self.cascades.march_occupied(q, mip + 1) {
-                mip += 1;
-            }
-            let cell = f64::from(1u32 << mip.min(31)) / GRID;
-            t = match self.empty_until(r, t, SKIP_CELLS * cell) {
-                // Every step point before `end` is empty: the first at or past it, as
-                // instant-ngp's jumps from empty cell to empty cell would reach.
-                Some(end) => {
-                    let (n, m) = (stepping.steps(t), stepping.steps(end));
-                    stepping.distance(n + (m - n).max(0.5).ceil())
-                }
-                None => stepping.past_cell(t, pos, r.dir, mip),
-            };
+/// `if_unoccupied_advance_to_next_occupied_voxel`: the first occupied position at or
+/// after `r.t`, or `None` when the ray leaves the box first.
+fn next_occupied(cascades: &Cascades, r: &RayMarch, stepping: &Stepping) -> Option<f64> {
+    let max_mip = cascades.count().saturating_sub(1);
+    let mut t = r.t;
+    loop {
+        if t >= MAX_DEPTH || t > r.far {
+            return None;
         }
-    }
-
-    /// Where a stretch of the ray from `t` that the occupancy pyramid proves empty ends,
-    /// trying `len` first and doubling while the next stretch is empty too; `None` when the
-    /// first is not. (A speed-up only: instant-ngp walks the same stretch one coarsest empty
-    /// cell at a time, and lands on the same step.)
-    fn empty_until(&self, r: &RayMarch, t: f64, mut len: f64) -> Option<f64> {
-        let mut end = t;
-        while end <= r.far {
-            let (a, b) = (r.origin + r.dir * end, r.origin + r.dir * (end + len));
-            if self
-                .cascades
-                .may_be_occupied(a.min(b).as_vec3(), a.max(b).as_vec3())
-            {
-                break;
-            }
-            end += len;
-            len *= 2.0;
+        let pos = r.origin + r.dir * t;
+        let q = pos.to_array();
+        let mut mip = mip_from_pos(pos, max_mip);
+        if cascades.march_occupied(q, mip) {
+            return Some(t);
         }
-        (end > t).then_some(end)
-    }
-
-    /// Marches `rays` as instant-ngp's viewer does (see the module doc), each for at most
-    /// `max_steps` steps (the renderer passes [`NGP_MAX_STEPS`]): `out[i]` (cleared)
-    /// receives ray `i`'s samples front to back. Field queries are batched across the rays,
-    /// a round of steps at a time.
-    pub fn march_rays(
-        &self,
-        rays: &[NgpRay],
-        max_steps: usize,
-        out: &mut [Vec<NgpSample>],
-        s: &mut NgpScratch,
-    ) -> NgpStats {
-        let stepping = Stepping::new(self.cone_angle());
-        let scale = f64::from(self.scale);
-        let mut stats = NgpStats {
-            rays: rays.len() as u64,
-            ..NgpStats::default()
+        while mip < max_mip && !cascades.march_occupied(q, mip + 1) {
+            mip += 1;
+        }
+        let cell = f64::from(1u32 << mip.min(31)) / GRID;
+        t = match empty_until(cascades, r, t, SKIP_CELLS * cell) {
+            // Every step point before `end` is empty: the first at or past it, as
+            // instant-ngp's jumps from empty cell to empty cell would reach.
+            Some(end) => {
+                let (n, m) = (stepping.steps(t), stepping.steps(end));
+                stepping.distance(n + (m - n).max(0.5).ceil())
+            }
+            None => stepping.past_cell(t, pos, r.dir, mip),
         };
-        s.rays.clear();
-        s.live.clear();
-        for (i, (ray, o)) in rays.iter().zip(out.iter_mut()).enumerate() {
-            o.clear();
-            let origin = self.ngp_from_field_f64(ray.origin);
-            let dir = DVec3::new(ray.dir.y, ray.dir.z, ray.dir.x);
-            let near = scale * ray.near.max(0.0) + ENTRY_OFFSET;
-            let far = scale * ray.far;
-            s.rays.push(RayMarch {
-                origin,
-                dir,
-                t: near,
-                far,
-                ..RayMarch::default()
-            });
-            if near <= far && dir.is_finite() && origin.is_finite() {
-                s.live.push(i as u32);
-            }
+    }
+}
+
+/// Where a stretch of the ray from `t` that the occupancy pyramid proves empty ends,
+/// trying `len` first and doubling while the next stretch is empty too; `None` when the
+/// first is not. (A speed-up only: instant-ngp walks the same stretch one coarsest empty
+/// cell at a time, and lands on the same step.)
+fn empty_until(cascades: &Cascades, r: &RayMarch, t: f64, mut len: f64) -> Option<f64> {
+    let mut end = t;
+    while end <= r.far {
+        let (a, b) = (r.origin + r.dir * end, r.origin + r.dir * (end + len));
+        if cascades.may_be_occupied(a.min(b).as_vec3(), a.max(b).as_vec3()) {
+            break;
         }
-        while !s.live.is_empty() {
-            // Lay each live ray's next steps.
-            s.laid.clear();
-            for &i in &s.live {
-                let r = &mut s.rays[i as usize];
-                for _ in 0..ROUND {
-                    let Some(t) = self.next_occupied(r, &stepping) else {
-                        r.done = true;
-                        break;
-                    };
-                    // Capped only with a step left to take.
-                    if r.steps >= max_steps {
-                        r.done = true;
-                        stats.capped += 1;
-                        break;
-                    }
-                    let dt = stepping.dt(t);
-                    s.laid.push((i, t, dt));
-                    r.t = t + dt;
-                    r.steps += 1;
-                }
-            }
-            stats.samples += s.laid.len() as u64;
-            self.evaluate_laid(rays, s);
-            // Composite them in order, each ray to 99 %.
-            s.shade.clear();
-            s.shade_outputs.clear();
-            s.dirs.clear();
-            let mut at = 0;
-            while at < s.laid.len() {
-                let i = s.laid[at].0;
-                let end = at + s.laid[at..].iter().take_while(|l| l.0 == i).count();
-                let r = &mut s.rays[i as usize];
-                let o = &mut out[i as usize];
-                for k in at..end {
-                    if r.acc > 1.0 - MIN_TRANSMITTANCE {
-                        break;
-                    }
-                    let (_, t, dt) = s.laid[k];
-                    // A NaN density (an overflowed network) is empty, and counted.
-                    let sigma = exp_density(s.outputs[k * DENSITY_OUTPUTS]);
-                    let sigma = if sigma.is_nan() {
-                        stats.invalid += 1;
-                        0.0
-                    } else {
-                        sigma
-                    };
-                    let alpha = -(-f64::from(sigma) * dt).exp_m1();
-                    let weight = alpha * (1.0 - r.acc);
-                    r.acc += weight;
-                    if weight >= COLOR_MIN_WEIGHT {
-                        s.shade.push((i, o.len() as u32));
-                        s.shade_outputs.extend_from_slice(
-                            &s.outputs[k * DENSITY_OUTPUTS..(k + 1) * DENSITY_OUTPUTS],
-                        );
-                        s.dirs.push(rays[i as usize].dir.as_vec3());
-                    }
-                    o.push(NgpSample {
-                        t: t / scale,
-                        alpha: alpha as f32,
-                        rgb: [0.0; 3],
-                    });
-                }
-                if r.acc > 1.0 - MIN_TRANSMITTANCE {
+        end += len;
+        len *= 2.0;
+    }
+    (end > t).then_some(end)
+}
+
+/// Marches `rays` as instant-ngp's viewer does (see the module doc), each for at most
+/// `max_steps` steps (the renderer passes [`NGP_MAX_STEPS`]): `out[i]` (cleared)
+/// receives ray `i`'s samples front to back. Field queries are batched across the rays,
+/// a round of steps at a time.
+pub fn march_ngp(
+    field: &IngpField,
+    rays: &[NgpRay],
+    max_steps: usize,
+    out: &mut [Vec<NgpSample>],
+    s: &mut NgpScratch,
+) -> NgpStats {
+    let stepping = Stepping::new(cone_angle(field));
+    let scale = f64::from(field.ngp_scale());
+    let mut stats = NgpStats {
+        rays: rays.len() as u64,
+        ..NgpStats::default()
+    };
+    s.rays.clear();
+    s.live.clear();
+    for (i, (ray, o)) in rays.iter().zip(out.iter_mut()).enumerate() {
+        o.clear();
+        let origin = field.ngp_from_field_f64(ray.origin);
+        let dir = DVec3::new(ray.dir.y, ray.dir.z, ray.dir.x);
+        let near = scale * ray.near.max(0.0) + ENTRY_OFFSET;
+        let far = scale * ray.far;
+        s.rays.push(RayMarch {
+            origin,
+            dir,
+            t: near,
+            far,
+            ..RayMarch::default()
+        });
+        if near <= far && dir.is_finite() && origin.is_finite() {
+            s.live.push(i as u32);
+        }
+    }
+    while !s.live.is_empty() {
+        // Lay each live ray's next steps.
+        s.laid.clear();
+        for &i in &s.live {
+            let r = &mut s.rays[i as usize];
+            for _ in 0..ROUND {
+                let Some(t) = next_occupied(field.cascades(), r, &stepping) else {
                     r.done = true;
-                    stats.opaque += 1;
+                    break;
+                };
+                // Capped only with a step left to take.
+                if r.steps >= max_steps {
+                    r.done = true;
+                    stats.capped += 1;
+                    break;
                 }
-                at = end;
+                let dt = stepping.dt(t);
+                s.laid.push((i, t, dt));
+                r.t = t + dt;
+                r.steps += 1;
             }
-            self.shade_laid(out, s);
-            stats.color_queries += s.shade.len() as u64;
-            let done = &s.rays;
-            s.live.retain(|&i| !done[i as usize].done);
         }
-        for (r, o) in s.rays.iter().zip(out.iter_mut()) {
+        stats.samples += s.laid.len() as u64;
+        evaluate_laid(field, rays, s);
+        // Composite them in order, each ray to 99 %.
+        s.shade.clear();
+        s.shade_outputs.clear();
+        s.dirs.clear();
+        let mut at = 0;
+        while at < s.laid.len() {
+            let i = s.laid[at].0;
+            let end = at + s.laid[at..].iter().take_while(|l| l.0 == i).count();
+            let r = &mut s.rays[i as usize];
+            let o = &mut out[i as usize];
+            for k in at..end {
+                if r.acc > 1.0 - MIN_TRANSMITTANCE {
+                    break;
+                }
+                let (_, t, dt) = s.laid[k];
+                // A NaN density (an overflowed network) is empty, and counted.
+                let sigma = exp_density(s.outputs[k * DENSITY_OUTPUTS]);
+                let sigma = if sigma.is_nan() {
+                    stats.invalid += 1;
+                    0.0
+                } else {
+                    sigma
+                };
+                let alpha = -(-f64::from(sigma) * dt).exp_m1();
+                let weight = alpha * (1.0 - r.acc);
+                r.acc += weight;
+                if weight >= COLOR_MIN_WEIGHT {
+                    s.shade.push((i, o.len() as u32));
+                    s.shade_outputs.extend_from_slice(
+                        &s.outputs[k * DENSITY_OUTPUTS..(k + 1) * DENSITY_OUTPUTS],
+                    );
+                    s.dirs.push(rays[i as usize].dir.as_vec3());
+                }
+                o.push(NgpSample {
+                    t: t / scale,
+                    alpha: alpha as f32,
+                    rgb: [0.0; 3],
+                });
+            }
             if r.acc > 1.0 - MIN_TRANSMITTANCE {
-                renormalise(o, r.acc);
+                r.done = true;
+                stats.opaque += 1;
             }
+            at = end;
         }
-        stats
+        shade_laid(field, out, s);
+        stats.color_queries += s.shade.len() as u64;
+        let done = &s.rays;
+        s.live.retain(|&i| !done[i as usize].done);
     }
-
-    /// The density network's outputs at this round's samples, into `s.outputs`. The marcher
-    /// has already found each in an occupied cell: the network's density is used as it is.
-    fn evaluate_laid(&self, rays: &[NgpRay], s: &mut NgpScratch) {
-        let scale = f64::from(self.scale);
-        s.xs.clear();
-        s.xs.extend(s.laid.iter().map(|&(i, t, _)| {
-            let ray = &rays[i as usize];
-            let p = (ray.origin + ray.dir * (t / scale)).as_vec3();
-            self.unit_from_ngp(self.ngp_from_field(p))
-        }));
-        let (xs, enc, outputs) = (&s.xs, &mut s.enc, &mut s.outputs);
-        self.density_outputs(&self.density_mlp, xs, enc, outputs);
-    }
-
-    /// Colours of the samples in `s.shade`, written into their place in `out`.
-    fn shade_laid(&self, out: &mut [Vec<NgpSample>], s: &mut NgpScratch) {
-        if s.shade.is_empty() {
-            return;
-        }
-        s.rgb.clear();
-        s.rgb.resize(s.shade.len(), Vec3::ZERO);
-        self.colour(&s.shade_outputs, &s.dirs, &mut s.rgb, &mut s.colour);
-        for (&(i, k), c) in s.shade.iter().zip(&s.rgb) {
-            out[i as usize][k as usize].rgb = c.to_array();
+    for (r, o) in s.rays.iter().zip(out.iter_mut()) {
+        if r.acc > 1.0 - MIN_TRANSMITTANCE {
+            renormalise(o, r.acc);
         }
     }
+    stats
+}
 
-    /// Instant-ngp coordinates of a field-space point, in f64.
-    fn ngp_from_field_f64(&self, p: DVec3) -> DVec3 {
-        let (s, o) = (f64::from(self.scale), self.offset.as_dvec3());
-        DVec3::new(p.y * s + o.y, p.z * s + o.z, p.x * s + o.x)
+/// The density network's outputs at this round's samples, into `s.outputs`. The marcher
+/// has already found each in an occupied cell: the network's density is used as it is.
+fn evaluate_laid(field: &IngpField, rays: &[NgpRay], s: &mut NgpScratch) {
+    let scale = f64::from(field.ngp_scale());
+    s.xs.clear();
+    s.xs.extend(s.laid.iter().map(|&(i, t, _)| {
+        let ray = &rays[i as usize];
+        let p = (ray.origin + ray.dir * (t / scale)).as_vec3();
+        field.grid_point(p)
+    }));
+    let (xs, enc, outputs) = (&s.xs, &mut s.enc, &mut s.outputs);
+    field.density_network(xs, enc, outputs);
+}
+
+/// Colours of the samples in `s.shade`, written into their place in `out`.
+fn shade_laid(field: &IngpField, out: &mut [Vec<NgpSample>], s: &mut NgpScratch) {
+    if s.shade.is_empty() {
+        return;
+    }
+    s.rgb.clear();
+    s.rgb.resize(s.shade.len(), Vec3::ZERO);
+    field.colour(&s.shade_outputs, &s.dirs, &mut s.rgb, &mut s.colour);
+    for (&(i, k), c) in s.shade.iter().zip(&s.rgb) {
+        out[i as usize][k as usize].rgb = c.to_array();
     }
 }
 

@@ -5,16 +5,18 @@
 //!
 //! Each sample becomes a fragment at its position (world distance `t/k`) with the opacity
 //! and colour instant-ngp composites it with, the early stop's renormalisation folded in
-//! (see [`crate::field::NgpSample`]): composited alone they give instant-ngp's pixel. Where
+//! (see [`NgpSample`]): composited alone they give instant-ngp's pixel. Where
 //! another instance's volume overlaps a sample's step, the sample counts as all at its
 //! position. Colours are in the field's trained space, encoded to sRGB when the scene
 //! composites in sRGB and the snapshot is HDR (linear).
 
-use super::RenderStats;
+mod marcher;
+
+pub use marcher::{march_ngp, NgpRay, NgpSample, NgpScratch, NgpStats, NGP_MAX_STEPS};
+
 use crate::camera::Ray;
-use crate::field::{
-    linear_to_srgb, ColorSpace, Field, Fragment, NgpRay, NgpSample, NgpScratch, NGP_MAX_STEPS,
-};
+use crate::field::{linear_to_srgb, ColorSpace, Field, Fragment};
+use crate::render::RenderStats;
 use crate::scene::NgpInstance;
 
 /// Per-thread buffers.
@@ -40,7 +42,7 @@ pub(super) fn fill(
     s.rays.clear();
     s.owners.clear();
     for (i, ray) in rays.iter().enumerate() {
-        if let Some((r, k)) = ray.as_ref().and_then(|r| inst.march_ray(r)) {
+        if let Some((r, k)) = ray.as_ref().and_then(|r| ngp_ray(inst, r)) {
             s.rays.push(r);
             s.owners.push((i as u32, k));
         }
@@ -53,7 +55,7 @@ pub(super) fn fill(
     }
     let field = inst.field();
     let samples = &mut s.samples[..s.rays.len()];
-    let done = field.march_rays(&s.rays, NGP_MAX_STEPS, samples, &mut s.marcher);
+    let done = march_ngp(field, &s.rays, NGP_MAX_STEPS, samples, &mut s.marcher);
     stats.density_samples += done.samples;
     stats.color_samples += done.color_queries;
     stats.budget_limited_rays += done.capped;
@@ -70,4 +72,32 @@ pub(super) fn fill(
             },
         }));
     }
+}
+
+/// The world ray `ray` as instant-ngp's marcher sees it in `inst`'s snapshot, from the
+/// camera, and the field units per world unit along it; `None` when it misses the field's
+/// box or crop.
+///
+/// instant-ngp's step grows with the distance from the camera, so the march starts from the
+/// camera: a world ray is carried into the field's frame by `N⁻¹`, its direction
+/// renormalised, and field distances `u` convert back to world ones as `u / k` with
+/// `k = |N⁻¹ d|` (see [`crate::scene`]). The field's box, the crop box and the camera's
+/// clipping range bound the march.
+pub fn ngp_ray(inst: &NgpInstance, ray: &Ray) -> Option<(NgpRay, f64)> {
+    let lr = inst.instance().local_ray(ray, ray.near, ray.far)?;
+    let m = inst.instance().field_from_world();
+    let d = m.transform_vector3(ray.dir);
+    let k = d.length();
+    if !(k.is_finite() && k > 0.0) {
+        return None;
+    }
+    Some((
+        NgpRay {
+            origin: m.transform_point3(ray.origin),
+            dir: d / k,
+            near: lr.t_near * k,
+            far: lr.t_far * k,
+        },
+        k,
+    ))
 }

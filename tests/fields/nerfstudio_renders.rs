@@ -11,7 +11,7 @@ use glam::DVec3;
 use nerfx_core::camera::read_shot;
 use nerfx_core::field::{NerfactoField, SamplerRay, SamplerScratch};
 use nerfx_core::render::{ColorOutput, Outputs, Quality, RenderSettings};
-use nerfx_core::shot_render::render_frame;
+use nerfx_core::shot_render::{render_frame, FrameRequest};
 
 /// A little-endian float32 `.npy` array, flattened (C order).
 fn read_npy(path: &Path) -> Vec<f32> {
@@ -41,7 +41,8 @@ fn renders_as_nerfstudio_does() {
     let mut settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
     settings.color = ColorOutput::AsTrained;
     for (k, frame) in shot.frames.iter().enumerate() {
-        let (planes, _) = render_frame(&scene, &shot, frame.frame, &settings, &|_| {}).unwrap();
+        let request = FrameRequest::new(settings);
+        let (planes, _, _) = render_frame(&scene, &shot, frame.frame, &request, &|_| {}).unwrap();
         let ns =
             |name: &str| read_npy(&nerfstudio_fixture().join(format!("render/cam{k}_{name}.npy")));
         let (rgb, acc, depth) = (ns("rgb"), ns("accumulation"), ns("depth_expected"));

@@ -25,7 +25,7 @@ use nerfx_core::render::{
     proposal_ray, sample_proposals, ProposalRay, ProposalScratch, ProposalStats,
 };
 use nerfx_core::render::{render_with_progress, ColorOutput, Outputs, Quality, RenderSettings};
-use nerfx_core::shot_render::render_frame;
+use nerfx_core::shot_render::{render_frame, FrameRequest};
 use nerfx_testkit::bench::targets::{bench_size, Measurement};
 use rayon::prelude::*;
 
@@ -225,7 +225,8 @@ fn nerfstudio_first_camera_final() {
     let mut settings = RenderSettings::new(Quality::Final.params(), Outputs::rgba());
     settings.color = ColorOutput::AsTrained;
     let t = Instant::now();
-    let (_, stats) = render_frame(&scene, &shot, 0, &settings, &|_| {}).unwrap();
+    let request = FrameRequest::new(settings);
+    let (_, _, stats) = render_frame(&scene, &shot, 0, &request, &|_| {}).unwrap();
     let n = f64::from(w * h);
     println!(
         "{w}x{h} Final rgba, first camera, {} rayon threads: {:.0} ms/frame; per pixel {:.1} \

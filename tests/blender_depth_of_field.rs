@@ -15,7 +15,7 @@ use std::path::PathBuf;
 use nerfx_core::camera::read_shot;
 use nerfx_core::render::{ColorOutput, Outputs, Quality, RenderSettings};
 use nerfx_core::scene::SceneDesc;
-use nerfx_core::shot_render::render_frame;
+use nerfx_core::shot_render::{render_frame, FrameRequest};
 use serde_json::Value;
 
 fn rows(v: &Value) -> Vec<f64> {
@@ -105,11 +105,13 @@ fn compare(reference: &Value, dir: &std::path::Path) -> Result<(), String> {
     let render = |shot: &str, samples: u32| {
         let shot = read_shot(&dir.join(shot), "Ball").unwrap();
         let settings = RenderSettings {
-            aperture_samples: samples,
             color: ColorOutput::AsTrained,
             ..RenderSettings::new(Quality::Final.params(), Outputs::rgba())
         };
-        let (planes, _) = render_frame(&scene, &shot, frame, &settings, &|_| {}).unwrap();
+        let settings = FrameRequest::new(settings)
+            .with_aperture_samples(samples)
+            .unwrap();
+        let (planes, _, _) = render_frame(&scene, &shot, frame, &settings, &|_| {}).unwrap();
         let rgb = planes.rgb.unwrap();
         let n = rgb[0].data.len();
         (0..n)

@@ -18,7 +18,7 @@ use nerfx_core::camera::read_shot;
 use nerfx_core::camera::ShutterPosition;
 use nerfx_core::render::{Outputs, Quality, RenderSettings};
 use nerfx_core::scene::SceneDesc;
-use nerfx_core::shot_render::render_frame;
+use nerfx_core::shot_render::{render_frame, FrameRequest};
 use serde_json::Value;
 
 fn rows(v: &Value) -> Vec<f64> {
@@ -104,11 +104,13 @@ fn compare(dir: &Path) -> Result<(), String> {
     .unwrap();
     let frame = reference["frame"].as_i64().unwrap();
     let render = |samples: u32| {
-        let settings = RenderSettings {
-            shutter_samples: samples,
-            ..RenderSettings::new(Quality::Final.params(), Outputs::rgba())
-        };
-        let (planes, _) = render_frame(&scene, &shot, frame, &settings, &|_| {}).unwrap();
+        let settings = FrameRequest::new(RenderSettings::new(
+            Quality::Final.params(),
+            Outputs::rgba(),
+        ))
+        .with_shutter_samples(samples)
+        .unwrap();
+        let (planes, _, _) = render_frame(&scene, &shot, frame, &settings, &|_| {}).unwrap();
         planes
             .alpha
             .unwrap()

@@ -294,21 +294,12 @@ fn proposal_sampled_nerfacto_flattens() {
     assert!(!loaded.desc().instances.is_empty());
     let shot = nerfx_core::camera::read_shot(&data.join("camera_path.json"), "NeRF").unwrap();
     let settings = RenderSettings::new(Quality::Draft.params(), Outputs::all());
-    let deep = DeepParams {
-        max_samples: 16,
-        error_target: settings.march.error_target,
-    };
-    let camera = shot.frame(0).unwrap().camera(&shot).unwrap();
-    let (planes, image, _) = nerfx_core::shot_render::render_frame_window_deep(
-        &loaded,
-        &shot,
-        0,
-        camera.full_window(),
-        &settings,
-        &deep,
-        &|_| {},
-    )
-    .unwrap();
+    let request = nerfx_core::shot_render::FrameRequest::new(settings)
+        .with_deep(Some(16))
+        .unwrap();
+    let (planes, image, _) =
+        nerfx_core::shot_render::render_frame(&loaded, &shot, 0, &request, &|_| {}).unwrap();
+    let image = image.unwrap();
     let file = dir.path().join("nerfacto.deep.exr");
     write_deep_exr(&file, &image, &ExrHeader::default()).unwrap();
     check("nerfacto (proposal sampler)", &file, &planes, 16);

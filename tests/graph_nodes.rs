@@ -16,7 +16,7 @@ use nerfx_core::demo;
 use nerfx_core::image::{Plane, Planes, Window};
 use nerfx_core::render::{Outputs, Quality, RenderSettings};
 use nerfx_core::scene::SceneDesc;
-use nerfx_core::shot_render::render_frame;
+use nerfx_core::shot_render::{render_frame, FrameRequest};
 use nerfx_graph::{
     cached_scene, node, nodes, purge_caches, Context, ParamKind, ParamValues, RenderRequest, Value,
 };
@@ -79,7 +79,7 @@ fn nerf_values(scene: &Path, shot: &Path) -> ParamValues {
 fn direct(scene: &Path, shot: &Shot, frame: i64) -> Planes {
     let loaded = SceneDesc::read(scene).unwrap().load().unwrap();
     let settings = RenderSettings::new(Quality::Preview.params(), Outputs::rgba());
-    render_frame(&loaded, shot, frame, &settings, &|_| {})
+    render_frame(&loaded, shot, frame, &FrameRequest::new(settings), &|_| {})
         .unwrap()
         .0
 }
@@ -414,10 +414,12 @@ fn nerf_render_blurs_over_the_shots_shutter_as_the_command_line_does() {
     blurred_shot.write(&shot_path).unwrap();
     let loaded = SceneDesc::read(&scene).unwrap().load().unwrap();
     let cli = |samples: u32| {
-        let settings = RenderSettings {
-            shutter_samples: samples,
-            ..RenderSettings::new(Quality::Preview.params(), Outputs::rgba())
-        };
+        let settings = FrameRequest::new(RenderSettings::new(
+            Quality::Preview.params(),
+            Outputs::rgba(),
+        ))
+        .with_shutter_samples(samples)
+        .unwrap();
         render_frame(&loaded, &blurred_shot, frame, &settings, &|_| {})
             .unwrap()
             .0
@@ -492,10 +494,12 @@ fn nerf_render_defocuses_through_the_aperture_as_the_command_line_does() {
     shot.write(&shot_path).unwrap();
     let loaded = SceneDesc::read(&scene).unwrap().load().unwrap();
     let cli = |samples: u32| {
-        let settings = RenderSettings {
-            aperture_samples: samples,
-            ..RenderSettings::new(Quality::Preview.params(), Outputs::rgba())
-        };
+        let settings = FrameRequest::new(RenderSettings::new(
+            Quality::Preview.params(),
+            Outputs::rgba(),
+        ))
+        .with_aperture_samples(samples)
+        .unwrap();
         render_frame(&loaded, &shot, frame, &settings, &|_| {})
             .unwrap()
             .0

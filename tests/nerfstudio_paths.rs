@@ -192,8 +192,9 @@ fn a_path_written_for_a_scaled_object_renders_the_bound_field_in_blender_units()
         .unwrap();
     let settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
     let first = shot.frames[0].frame;
-    let (planes, _) =
-        nerfx_core::shot_render::render_frame(&scene, &shot, first, &settings, &|_| {}).unwrap();
+    let request = nerfx_core::shot_render::FrameRequest::new(settings);
+    let (planes, _, _) =
+        nerfx_core::shot_render::render_frame(&scene, &shot, first, &request, &|_| {}).unwrap();
     let (alpha, z) = (planes.alpha.unwrap(), planes.depth_z.unwrap());
     let f = (f64::from(h) / 2.0) / (p.frames[0].fov.to_radians() / 2.0).tan();
     let radius_px = f * (r / d).asin().tan();
@@ -281,7 +282,8 @@ fn an_unbound_instance_composes_with_a_scaled_camera_path() {
         let shot = nerfx_core::camera::read_shot(&path_file, "NeRF").unwrap();
         let settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
         let first = shot.frames[0].frame;
-        nerfx_core::shot_render::render_frame(&scene, &shot, first, &settings, &|_| {})
+        let request = nerfx_core::shot_render::FrameRequest::new(settings);
+        nerfx_core::shot_render::render_frame(&scene, &shot, first, &request, &|_| {})
             .unwrap()
             .0
     };

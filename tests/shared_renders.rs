@@ -13,7 +13,7 @@ use nerfx_core::demo;
 use nerfx_core::image::{Plane, Planes, Window};
 use nerfx_core::render::{Outputs, Quality, RenderSettings};
 use nerfx_core::scene::SceneDesc;
-use nerfx_core::shot_render::render_frame;
+use nerfx_core::shot_render::{render_frame, FrameRequest};
 use nerfx_graph::{
     node, purge_caches, shared_render_stats, ParamValues, RenderRequest, SharedRenderStats, Value,
 };
@@ -81,7 +81,7 @@ fn passes_of_one_field_share_one_march() {
         &loaded,
         &read_shot(&shot, "NeRF").unwrap(),
         frame,
-        &settings,
+        &FrameRequest::new(settings),
         &|_| {},
     )
     .unwrap()

@@ -12,7 +12,7 @@ use nerfx_core::camera::read_shot;
 use nerfx_core::field::NerfactoField;
 use nerfx_core::render::{sample_proposals, ProposalRay, ProposalScratch};
 use nerfx_core::render::{ColorOutput, Outputs, Quality, RenderSettings};
-use nerfx_core::shot_render::render_frame;
+use nerfx_core::shot_render::{render_frame, FrameRequest};
 
 /// A little-endian float32 `.npy` array, flattened (C order).
 fn read_npy(path: &Path) -> Vec<f32> {
@@ -42,7 +42,8 @@ fn renders_as_nerfstudio_does() {
     let mut settings = RenderSettings::new(Quality::Final.params(), Outputs::all());
     settings.color = ColorOutput::AsTrained;
     for (k, frame) in shot.frames.iter().enumerate() {
-        let (planes, _) = render_frame(&scene, &shot, frame.frame, &settings, &|_| {}).unwrap();
+        let request = FrameRequest::new(settings);
+        let (planes, _, _) = render_frame(&scene, &shot, frame.frame, &request, &|_| {}).unwrap();
         let ns =
             |name: &str| read_npy(&nerfstudio_fixture().join(format!("render/cam{k}_{name}.npy")));
         let (rgb, acc, depth) = (ns("rgb"), ns("accumulation"), ns("depth_expected"));

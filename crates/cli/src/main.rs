@@ -18,11 +18,10 @@ use nerfx_core::image::{
     frames_per_second, write_deep_exr, write_exr, write_exr_layers, write_png_preview,
     CameraMatrices, ExrHeader, OutputColorSpace,
 };
-use nerfx_core::render::{ColorOutput, DeepParams, Outputs, Quality, RenderSettings};
+use nerfx_core::render::{ColorOutput, Outputs, Quality, RenderSettings};
 use nerfx_core::scene::SceneDesc;
 use nerfx_core::shot_render::{
-    render_coverage, render_environment, render_frame_window, render_frame_window_deep,
-    EnvironmentOrigin,
+    render_coverage, render_environment, render_frame, EnvironmentOrigin, FrameRequest,
 };
 use nerfx_core::{demo, Error, Result};
 use nerfx_testkit::bench;
@@ -555,15 +554,16 @@ fn run(cli: Cli) -> Result<()> {
                 };
                 return graph::render(&scene, frames, &output, png, bundle, scale, mattes, &task);
             };
-            let deep_params =
-                deep_settings(deep.as_deref(), deep_samples, quality, stripe.is_some())?;
+            check_deep(deep.as_deref(), deep_samples, stripe.is_some())?;
             let outputs = passes.as_deref().map_or_else(Outputs::all, Pass::outputs);
-            if deep.is_some() && !(outputs.rgb && outputs.alpha) {
-                return Err(Error::invalid(
-                    "--deep",
-                    "deep samples carry colour and alpha: add rgba to --passes",
-                ));
-            }
+            let request = frame_request(
+                quality,
+                outputs,
+                colour,
+                shutter_samples,
+                aperture_samples,
+                deep.is_some().then_some(deep_samples),
+            )?;
             if png && !outputs.rgb {
                 return Err(Error::invalid(
                     "--png",
@@ -582,33 +582,6 @@ fn run(cli: Cli) -> Result<()> {
             let space = colorspace.unwrap_or(scene.desc().colorspace.unwrap_or_default());
             let shot = read_shot(&shot, &nerf_object)?;
             let frames = frames.unwrap_or_else(|| shot.frames.iter().map(|f| f.frame).collect());
-            let shutter_samples = match shutter_samples {
-                None => quality.shutter_samples(),
-                Some(n @ 1..=1024) => n,
-                Some(n) => {
-                    return Err(Error::invalid(
-                        "--shutter-samples",
-                        format!("{n}; expected 1 to 1024"),
-                    ))
-                }
-            };
-            let max = nerfx_core::camera::MAX_APERTURE_SAMPLES;
-            let aperture_samples = match aperture_samples {
-                None => quality.aperture_samples(),
-                Some(n) if (1..=max).contains(&n) => n,
-                Some(n) => {
-                    return Err(Error::invalid(
-                        "--aperture-samples",
-                        format!("{n}; expected 1 to {max}"),
-                    ))
-                }
-            };
-            let settings = RenderSettings {
-                color: colour,
-                shutter_samples,
-                aperture_samples,
-                ..RenderSettings::new(quality.params(), outputs)
-            };
             let bar = progress_bar(frames.len() as u64, "frames");
             for (done, &frame) in frames.iter().enumerate() {
                 let whole = frame_path(&output, frame, frames.len() > 1);
@@ -642,29 +615,13 @@ fn run(cli: Cli) -> Result<()> {
                 let window = match stripe {
                     Some(s) => {
                         let full = camera.full_window();
-                        s.window(full.width(), full.height(), settings.tile_size)?
+                        s.window(full.width(), full.height(), request.settings().tile_size)?
                     }
                     None => camera.full_window(),
                 };
-                let (mut planes, mut deep_image, stats) = match &deep_params {
-                    Some(params) => {
-                        let (planes, image, stats) = render_frame_window_deep(
-                            &scene,
-                            &shot,
-                            frame,
-                            window,
-                            &settings,
-                            params,
-                            &|_| {},
-                        )?;
-                        (planes, Some(image), stats)
-                    }
-                    None => {
-                        let (planes, stats) =
-                            render_frame_window(&scene, &shot, frame, window, &settings, &|_| {})?;
-                        (planes, None, stats)
-                    }
-                };
+                let request = request.with_window(window)?;
+                let (mut planes, mut deep_image, stats) =
+                    render_frame(&scene, &shot, frame, &request, &|_| {})?;
                 if let Some(warning) = stats.warning() {
                     bar.suspend(|| eprintln!("nerfx: warning: frame {frame}: {warning}"));
                 }
@@ -674,7 +631,7 @@ fn run(cli: Cli) -> Result<()> {
                     color_space: space,
                     camera: Some(CameraMatrices::of(&camera)),
                     frames_per_second: frames_per_second(shot.fps, shot.fps_base),
-                    entries: render_entries(&scene, &shot, quality, &settings, space),
+                    entries: render_entries(&scene, &shot, quality, &request, space),
                 };
                 // The deep file first: a flat file that reads back whole then says the frame's
                 // deep file was written too (see `deep_done`).
@@ -685,7 +642,7 @@ fn run(cli: Cli) -> Result<()> {
                     write_deep_exr(deep_path, image, &header)?;
                 }
                 let mattes = if cryptomatte {
-                    let coverage = render_coverage(&scene, &shot, frame, window, &settings)?;
+                    let coverage = render_coverage(&scene, &shot, frame, &request)?;
                     let names: Vec<&str> = scene
                         .desc()
                         .instances
@@ -1530,7 +1487,7 @@ fn render_entries(
     scene: &nerfx_core::scene::LoadedScene,
     shot: &nerfx_core::camera::Shot,
     quality: Quality,
-    settings: &RenderSettings,
+    request: &FrameRequest,
     space: OutputColorSpace,
 ) -> Vec<(String, String)> {
     let fields: Vec<String> = scene
@@ -1552,7 +1509,7 @@ fn render_entries(
         (
             "nerfx/shutterSamples",
             match shot.motion_blur {
-                Some(_) => settings.shutter_samples,
+                Some(_) => request.shutter_samples(),
                 None => 1,
             }
             .to_string(),
@@ -1561,7 +1518,7 @@ fn render_entries(
         (
             "nerfx/apertureSamples",
             match shot.frames.iter().any(|f| f.camera.dof.is_some()) {
-                true => settings.aperture_samples,
+                true => request.aperture_samples(),
                 false => 1,
             }
             .to_string(),
@@ -1573,15 +1530,9 @@ fn render_entries(
     .collect()
 }
 
-/// The deep settings `--deep` and `--deep-samples` ask for, or `None` without `--deep`:
-/// refuses a cap out of range, `--deep-samples` alone, a stripe (deep files are written
-/// with whole frames) and a build without OpenEXR, before anything renders.
-fn deep_settings(
-    deep: Option<&Path>,
-    samples: Option<u32>,
-    quality: Quality,
-    striped: bool,
-) -> Result<Option<DeepParams>> {
+/// Refuses `--deep-samples` without `--deep`, and `--deep` with a stripe (deep files are
+/// written with whole frames) or in a build without OpenEXR, before anything renders.
+fn check_deep(deep: Option<&Path>, samples: Option<u32>, striped: bool) -> Result<()> {
     let Some(_) = deep else {
         if samples.is_some() {
             return Err(Error::invalid(
@@ -1589,7 +1540,7 @@ fn deep_settings(
                 "is for --deep: add --deep PATTERN",
             ));
         }
-        return Ok(None);
+        return Ok(());
     };
     if striped {
         return Err(Error::invalid(
@@ -1605,15 +1556,48 @@ fn deep_settings(
              nerfx again",
         ));
     }
-    let params = DeepParams {
-        max_samples: samples.unwrap_or_else(|| quality.deep_samples()),
-        error_target: quality.params().error_target,
+    Ok(())
+}
+
+/// The frame request `nerfx render`'s flags ask for of a scene: `quality`'s preset with the
+/// passes `outputs` and colour `colour`, the shutter and aperture samples given (the
+/// preset's without them), and a deep pass where `deep` is given (at most its samples a
+/// pixel; the preset's cap without them). Its refusals name the flag at fault.
+fn frame_request(
+    quality: Quality,
+    outputs: Outputs,
+    colour: ColorOutput,
+    shutter_samples: Option<u32>,
+    aperture_samples: Option<u32>,
+    deep: Option<Option<u32>>,
+) -> Result<FrameRequest> {
+    let flag = |name: &'static str| {
+        move |e: Error| match e {
+            Error::Invalid { message, .. } => Error::invalid(name, message),
+            other => other,
+        }
     };
-    params.validate().map_err(|e| match e {
-        Error::Invalid { message, .. } => Error::invalid("--deep-samples", message),
-        other => other,
-    })?;
-    Ok(Some(params))
+    let mut request = FrameRequest::for_quality(quality, outputs).with_colour(colour);
+    if let Some(samples) = deep {
+        request = request.with_deep(samples).map_err(|e| match e {
+            Error::Invalid { what, .. } if what == "deep output" => Error::invalid(
+                "--deep",
+                "deep samples carry colour and alpha: add rgba to --passes",
+            ),
+            other => flag("--deep-samples")(other),
+        })?;
+    }
+    if let Some(n) = shutter_samples {
+        request = request
+            .with_shutter_samples(n)
+            .map_err(flag("--shutter-samples"))?;
+    }
+    if let Some(n) = aperture_samples {
+        request = request
+            .with_aperture_samples(n)
+            .map_err(flag("--aperture-samples"))?;
+    }
+    Ok(request)
 }
 
 /// Whether `path` exists and was written after every one of `inputs` last changed.

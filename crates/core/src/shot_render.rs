@@ -1,118 +1,213 @@
 //! The shot renderer: one frame of a scene through a shot, the mean over its views (shutter
 //! times and lens points), its Cryptomatte coverage and deep image; or an environment map of
 //! it from a point.
+//!
+//! A [`FrameRequest`] says what a frame is made of (per-view settings, shutter and aperture
+//! samples, the deep pass, the window), validated once where it is built; [`render_views`]
+//! renders it from a [`FrameViews`] (the shot's frame at a time, and each view's scene and
+//! camera). The command line, the NeRF Render node and graphs all render frames through it.
 
 use glam::DVec3;
 
-use crate::camera::{environment_camera, Shot, ShotFrame};
+use crate::camera::{
+    environment_camera, Camera, Shot, ShotFrame, MAX_APERTURE_SAMPLES, MAX_SHUTTER_SAMPLES,
+};
 use crate::composite::shutter_average;
 use crate::error::{Error, Result};
-use crate::image::{DeepImage, Planes, Window};
+use crate::image::{DeepImage, Plane, Planes, Window};
 use crate::render::{
-    average_images, render_deep, render_with_progress, DeepParams, Outputs, RenderSettings,
-    RenderStats,
+    average_images, render_deep, render_with_progress, ColorOutput, DeepParams, Outputs, Quality,
+    RenderSettings, RenderStats,
 };
-use crate::scene::LoadedScene;
+use crate::scene::{LoadedScene, Scene};
 
-/// Each instance's coverage of the pixels `window` of frame `frame` (one plane per instance
-/// of `scene`, in its order): the share of every pixel's opacity its samples and fragments
-/// hold, summing to the pixel's alpha, integrated over the shutter and the aperture as the
-/// frame's colour is. Rendered with the instances in indicator colours, three at a time
-/// ([`LoadedScene::with_indicator_colours`]), at `settings`' quality, as
-/// [`render_frame_window`] renders: a window's coverage is the whole frame's, bit for bit.
-pub fn render_coverage(
-    scene: &LoadedScene,
-    shot: &Shot,
-    frame: i64,
-    window: Window,
-    settings: &RenderSettings,
-) -> Result<Vec<crate::image::Plane>> {
-    let settings = RenderSettings {
-        outputs: Outputs {
-            rgb: true,
-            alpha: true,
-            depth_z: false,
-            depth_ray: false,
-            depth_median: false,
-        },
-        color: crate::render::ColorOutput::AsTrained,
-        ..*settings
-    };
-    coverage_by_indicators(scene, &mut |lit| {
-        Ok(render_frame_window(lit, shot, frame, window, &settings, &|_| {})?.0)
-    })
-}
-
-/// Each instance's coverage from renders of `scene` recoloured to indicator colours, three
-/// instances a render (red, green, blue; the rest black), by `render`, which must render
-/// colour as trained (no conversion) and alpha: an instance's colour channel is then the
-/// share of the pixel's opacity its samples and fragments hold. One plane per instance, in
-/// the scene's order.
-pub fn coverage_by_indicators(
-    scene: &LoadedScene,
-    render: &mut dyn FnMut(&LoadedScene) -> Result<Planes>,
-) -> Result<Vec<crate::image::Plane>> {
-    let count = scene.desc().instances.len();
-    let mut coverage = Vec::with_capacity(count);
-    for first in (0..count).step_by(3) {
-        let colours: Vec<glam::Vec3> = (0..count)
-            .map(|i| match i.checked_sub(first) {
-                Some(k @ 0..=2) => glam::Vec3::AXES[k],
-                _ => glam::Vec3::ZERO,
-            })
-            .collect();
-        let Some(rgb) = render(&scene.with_indicator_colours(&colours)?)?.rgb else {
-            return Err(Error::invalid("coverage", "the render has no colour"));
-        };
-        coverage.extend(rgb.into_iter().take(count - first));
-    }
-    Ok(coverage)
-}
-
-/// Renders `frame` of `shot`: the shot's camera at that frame, object-bound instances placed
-/// by the shot's object matrices at that frame. With the shot's motion blur on, the frame is
-/// the [`shutter_average`] of renders at `settings.shutter_samples` stratified times over the
-/// shutter, camera and objects interpolated between the shot's frames ([`Shot::frame_at`]:
-/// the shot must hold the frames around the shutter interval); a closed shutter or one
-/// sample renders the frame itself. With the camera's depth of field on, each time is the
-/// mean of renders through `settings.aperture_samples` stratified points of the aperture
-/// ([`ShotFrame::through_aperture`]: shutter × aperture, the product of both patterns); depth
-/// of field off, or one aperture sample, is the pinhole render, bit for bit. The average
-/// weighs each sample's depths by its alpha, so depths asked for without alpha are averaged
-/// with it all the same (and it is dropped after): a depth pass is the same number whichever
-/// passes come with it.
-pub fn render_frame(
-    scene: &LoadedScene,
-    shot: &Shot,
-    frame: i64,
-    settings: &RenderSettings,
-    on_tile: &(dyn Fn(u64) + Sync),
-) -> Result<(Planes, RenderStats)> {
-    let window = shot.frame(frame)?.camera(shot)?.full_window();
-    render_frame_window(scene, shot, frame, window, settings, on_tile)
-}
-
-/// The views a frame at shot time `time` is the mean of, grouped by shutter time: with the
-/// shot's motion blur, its `shutter_samples` stratified times over the shutter
-/// ([`MotionBlur::times`](crate::camera::MotionBlur::times); `time` itself with a closed
-/// shutter, one sample or no motion blur); at each time, the camera through
-/// `aperture_samples` stratified points of its aperture where it has depth of field
-/// ([`ShotFrame::through_aperture`]; that frame alone otherwise). `frame_at` gives the shot's
-/// frame at a time. Every group holds as many views. The command line, the NeRF Render node
-/// and graphs all render a frame as the mean over these views ([`mean_over_views`]).
-pub fn frame_views(
-    shot: &Shot,
-    time: f64,
+/// What one frame is rendered as: each view's settings (march, passes, tile size, colour),
+/// the shutter times and aperture points it is the mean of, its deep pass and its window.
+/// Built by [`FrameRequest::new`] or [`FrameRequest::for_quality`] and the `with_` methods,
+/// each of which refuses what a frame cannot be, so a request is valid once built.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameRequest {
+    /// The preset the defaults came from, if any.
+    quality: Option<Quality>,
+    settings: RenderSettings,
     shutter_samples: u32,
     aperture_samples: u32,
-    frame_at: &dyn Fn(f64) -> Result<ShotFrame>,
-) -> Result<Vec<Vec<ShotFrame>>> {
-    let times = shot
-        .motion_blur
-        .map_or_else(|| vec![time], |blur| blur.times(time, shutter_samples));
+    deep: Option<DeepParams>,
+    window: Option<Window>,
+}
+
+impl FrameRequest {
+    /// A frame of one view per frame (no shutter sampling, a pinhole) with `settings`, no
+    /// deep pass, the whole image.
+    pub fn new(settings: RenderSettings) -> Self {
+        FrameRequest {
+            quality: None,
+            settings,
+            shutter_samples: 1,
+            aperture_samples: 1,
+            deep: None,
+            window: None,
+        }
+    }
+
+    /// A frame at `quality`'s preset: its march ([`Quality::params`]), its shutter and
+    /// aperture samples ([`Quality::shutter_samples`], [`Quality::aperture_samples`]) and,
+    /// for a deep pass, its cap ([`Quality::deep_samples`]); the passes `outputs`, linear
+    /// colour.
+    pub fn for_quality(quality: Quality, outputs: Outputs) -> Self {
+        FrameRequest {
+            quality: Some(quality),
+            shutter_samples: quality.shutter_samples(),
+            aperture_samples: quality.aperture_samples(),
+            ..FrameRequest::new(RenderSettings::new(quality.params(), outputs))
+        }
+    }
+
+    /// The request with colour `color`.
+    pub fn with_colour(mut self, color: ColorOutput) -> Self {
+        self.settings.color = color;
+        self
+    }
+
+    /// The request rendered at `samples` times over a shot's motion-blur shutter (1: none);
+    /// refuses 0 and more than [`MAX_SHUTTER_SAMPLES`].
+    pub fn with_shutter_samples(mut self, samples: u32) -> Result<Self> {
+        self.shutter_samples = count("shutter samples", samples, MAX_SHUTTER_SAMPLES)?;
+        Ok(self)
+    }
+
+    /// The request rendered through `samples` points of the aperture per shutter time where
+    /// the camera has depth of field (1: a pinhole); refuses 0 and more than
+    /// [`MAX_APERTURE_SAMPLES`].
+    pub fn with_aperture_samples(mut self, samples: u32) -> Result<Self> {
+        self.aperture_samples = count("aperture samples", samples, MAX_APERTURE_SAMPLES)?;
+        Ok(self)
+    }
+
+    /// The request with a deep pass keeping at most `max_samples` samples a pixel (the
+    /// quality preset's cap without it), merged within the march's error target. Refuses a
+    /// cap out of range ([`DeepParams::validate`]), no cap without a preset, and passes
+    /// without colour and alpha (the deep samples flatten to them).
+    pub fn with_deep(mut self, max_samples: Option<u32>) -> Result<Self> {
+        let Some(max_samples) = max_samples.or(self.quality.map(Quality::deep_samples)) else {
+            return Err(Error::invalid(
+                "deep samples",
+                "none given, and no quality preset to take its cap from",
+            ));
+        };
+        let deep = DeepParams {
+            max_samples,
+            error_target: self.settings.march.error_target,
+        };
+        deep.validate()?;
+        if !(self.settings.outputs.rgb && self.settings.outputs.alpha) {
+            return Err(Error::invalid(
+                "deep output",
+                "needs the colour and alpha passes (the samples flatten to them)",
+            ));
+        }
+        self.deep = Some(deep);
+        Ok(self)
+    }
+
+    /// The request for the pixels of `window` only; refuses an empty window.
+    pub fn with_window(mut self, window: Window) -> Result<Self> {
+        if window.area() == 0 {
+            return Err(Error::invalid(
+                "render window",
+                format!("{window:?} holds no pixels"),
+            ));
+        }
+        self.window = Some(window);
+        Ok(self)
+    }
+
+    /// Each view's render settings, with the passes asked for.
+    pub fn settings(&self) -> &RenderSettings {
+        &self.settings
+    }
+
+    /// Times a frame is rendered at over a shot's shutter.
+    pub fn shutter_samples(&self) -> u32 {
+        self.shutter_samples
+    }
+
+    /// Points of the aperture each shutter time is rendered through.
+    pub fn aperture_samples(&self) -> u32 {
+        self.aperture_samples
+    }
+
+    /// The deep pass, if one is asked for.
+    pub fn deep(&self) -> Option<&DeepParams> {
+        self.deep.as_ref()
+    }
+
+    /// The window, if the request is for part of the image.
+    pub fn window(&self) -> Option<Window> {
+        self.window
+    }
+
+    /// The request for coverage ([`render_coverage`]): colour as trained and alpha, no deep
+    /// pass, the same views and window.
+    fn for_coverage(&self) -> Self {
+        FrameRequest {
+            settings: RenderSettings {
+                outputs: Outputs::rgba(),
+                color: ColorOutput::AsTrained,
+                ..self.settings
+            },
+            deep: None,
+            ..*self
+        }
+    }
+}
+
+/// `samples` where it is 1 to `max`.
+fn count(what: &str, samples: u32, max: u32) -> Result<u32> {
+    if !(1..=max).contains(&samples) {
+        return Err(Error::invalid(
+            what,
+            format!("{samples}; expected 1 to {max}"),
+        ));
+    }
+    Ok(samples)
+}
+
+/// How a frame's views are made: the shot, the frame's time in it, the shot's frame at a
+/// time of its shutter, and the scene and camera of each view. The shot's own
+/// ([`render_frame`]) place the scene by the shot's object matrices; the NeRF Render node's
+/// apply its camera overrides, transform, crop and render scale.
+pub trait FrameViews {
+    /// The shot the frame belongs to (its motion blur sets the shutter's times).
+    fn shot(&self) -> &Shot;
+    /// The frame's time in the shot.
+    fn time(&self) -> f64;
+    /// The shot's frame at shot time `time`, a shutter time of the frame.
+    fn frame_at(&self, time: f64) -> Result<ShotFrame>;
+    /// `scene` placed for the view `at`, and the camera it is seen through.
+    fn place(&self, scene: &LoadedScene, at: &ShotFrame) -> Result<(Scene, Camera)>;
+}
+
+/// The views a frame is the mean of, grouped by shutter time: with the shot's motion blur,
+/// `shutter_samples` stratified times over the shutter
+/// ([`MotionBlur::times`](crate::camera::MotionBlur::times); the frame's time itself with a
+/// closed shutter, one sample or no motion blur); at each time, the camera through
+/// `aperture_samples` stratified points of its aperture where it has depth of field
+/// ([`ShotFrame::through_aperture`]; that frame alone otherwise). Every group holds as many
+/// views.
+fn frame_views(views: &dyn FrameViews, request: &FrameRequest) -> Result<Vec<Vec<ShotFrame>>> {
+    let time = views.time();
+    let times = views.shot().motion_blur.map_or_else(
+        || vec![time],
+        |blur| blur.times(time, request.shutter_samples),
+    );
     times
         .into_iter()
-        .map(|t| Ok(frame_at(t)?.through_aperture(aperture_samples)))
+        .map(|t| {
+            Ok(views
+                .frame_at(t)?
+                .through_aperture(request.aperture_samples))
+        })
         .collect()
 }
 
@@ -120,7 +215,7 @@ pub fn frame_views(
 /// then the times ([`shutter_average`]: alpha-weighted depths, so with equal groups this is
 /// the mean over every view, holding one time's renders at once rather than all of them); a
 /// lone render is returned as it is. The statistics are the renders' sum.
-pub fn mean_over_views(
+fn mean_over_views(
     views: &[Vec<ShotFrame>],
     render: &mut dyn FnMut(&ShotFrame) -> Result<(Planes, RenderStats)>,
 ) -> Result<(Planes, RenderStats)> {
@@ -142,99 +237,184 @@ pub fn mean_over_views(
     Ok((mean(means)?, stats))
 }
 
-/// The views of `frame` of `shot` at `settings`' shutter and aperture samples, the shutter's
-/// times interpolated between the shot's frames ([`Shot::frame_at`]: the shot must hold the
-/// frames around the shutter interval).
-fn views_of(shot: &Shot, frame: i64, settings: &RenderSettings) -> Result<Vec<Vec<ShotFrame>>> {
-    // Without a shutter to sample, the frame is the shot's own, not one interpolated to it.
-    let still = shot
-        .motion_blur
-        .is_none_or(|blur| blur.times(frame as f64, settings.shutter_samples).len() == 1);
-    let at = |t: f64| {
-        if still {
-            return shot.frame(frame).cloned();
-        }
-        shot.frame_at(t).map_err(|e| {
-            Error::invalid(
-                format!("frame {frame}: motion blur"),
-                format!("the shutter needs the shot at frame {t}: {e}"),
-            )
-        })
-    };
-    frame_views(
-        shot,
-        frame as f64,
-        settings.shutter_samples,
-        settings.aperture_samples,
-        &at,
-    )
-}
-
-/// Renders the pixels of `window` of `frame` as [`render_frame`] renders the whole frame: each
-/// pixel is the whole frame's, bit for bit, so windows rendered apart (on several machines)
-/// join into the whole frame.
-pub fn render_frame_window(
+/// Renders the frame `request` asks for of `scene` seen through `views`: the mean over the
+/// frame's views (shutter times × aperture points) of each view's render of the request's
+/// window (each view's camera's whole image without one), and, where the request has a deep
+/// pass, the deep image: each view's deep pixels ([`render_deep`]) averaged as
+/// [`average_images`] does (cut at every depth where one of them has a sample boundary, the
+/// opacity and colour each adds in a slot averaged), which flattens to the averaged planes
+/// exactly. The mean weighs each view's depths by its alpha, so depths asked for without
+/// alpha are averaged with it all the same (and it is dropped after): a depth pass is the
+/// same number whichever passes come with it. A frame of one view is that view's render,
+/// bit for bit. The statistics are the views' sum.
+pub fn render_views(
     scene: &LoadedScene,
-    shot: &Shot,
-    frame: i64,
-    window: Window,
-    settings: &RenderSettings,
+    views: &dyn FrameViews,
+    request: &FrameRequest,
     on_tile: &(dyn Fn(u64) + Sync),
-) -> Result<(Planes, RenderStats)> {
-    let views = views_of(shot, frame, settings)?;
-    let outputs = settings.outputs;
+) -> Result<(Planes, Option<DeepImage>, RenderStats)> {
+    let frame_views = frame_views(views, request)?;
+    let outputs = request.settings.outputs;
     // A mean weighs depths by alpha: it is rendered for the mean whether asked for or not.
     let depths = outputs.depth_z || outputs.depth_ray || outputs.depth_median;
-    let weighed = match &views[..] {
-        [one] if one.len() == 1 => *settings,
+    let settings = match &frame_views[..] {
+        [one] if one.len() == 1 => request.settings,
         _ => RenderSettings {
             outputs: Outputs {
                 alpha: outputs.alpha || depths,
                 ..outputs
             },
-            ..*settings
+            ..request.settings
         },
     };
-    let (mut mean, stats) = mean_over_views(&views, &mut |at| {
-        let camera = at.camera(shot)?;
-        let placed = scene.place(at.world_from_scene(shot)?, &|name| at.object_matrix(name))?;
-        render_with_progress(&placed, &camera, window, &weighed, on_tile)
+    let mut deeps = Vec::new();
+    let (mut mean, stats) = mean_over_views(&frame_views, &mut |at| {
+        let (placed, camera) = views.place(scene, at)?;
+        let window = request.window.unwrap_or_else(|| camera.full_window());
+        match &request.deep {
+            Some(deep) => {
+                let (planes, image, stats) =
+                    render_deep(&placed, &camera, window, &settings, deep, on_tile)?;
+                deeps.push(image);
+                Ok((planes, stats))
+            }
+            None => render_with_progress(&placed, &camera, window, &settings, on_tile),
+        }
     })?;
     if !outputs.alpha {
         mean.alpha = None;
     }
-    Ok((mean, stats))
+    let deep = match (&request.deep, deeps.len()) {
+        (None, _) => None,
+        (Some(_), 1) => Some(deeps.remove(0)),
+        (Some(params), _) => Some(average_images(&deeps, params)?),
+    };
+    Ok((mean, deep, stats))
 }
 
-/// Renders the pixels of `window` of `frame` as [`render_frame_window`] does, and their deep
-/// image ([`render_deep`]): over several views (motion blur, depth of field), the deep pixels
-/// of every view averaged ([`average_images`]: cut at every depth where one of them has a
-/// sample boundary, the opacity and colour each adds in a slot averaged), which flattens to
-/// the averaged flat frame exactly. The settings must ask for colour and alpha.
-pub fn render_frame_window_deep(
+/// Each instance's coverage of the frame `request` asks for of `scene` seen through `views`
+/// (one plane per instance of `scene`, in its order): the share of every pixel's opacity its
+/// samples and fragments hold, summing to the pixel's alpha, integrated over the shutter and
+/// the aperture as the frame's colour is ([`render_views`], at the request's quality,
+/// views and window; a window's coverage is the whole frame's, bit for bit). Rendered with
+/// the instances in indicator colours, three at a time (red, green, blue; the rest black;
+/// [`LoadedScene::with_indicator_colours`]), colour as trained: an instance's colour channel
+/// is then its share of the pixel's opacity.
+pub fn coverage_of_views(
+    scene: &LoadedScene,
+    views: &dyn FrameViews,
+    request: &FrameRequest,
+) -> Result<Vec<Plane>> {
+    let request = request.for_coverage();
+    let count = scene.desc().instances.len();
+    let mut coverage = Vec::with_capacity(count);
+    for first in (0..count).step_by(3) {
+        let colours: Vec<glam::Vec3> = (0..count)
+            .map(|i| match i.checked_sub(first) {
+                Some(k @ 0..=2) => glam::Vec3::AXES[k],
+                _ => glam::Vec3::ZERO,
+            })
+            .collect();
+        let lit = scene.with_indicator_colours(&colours)?;
+        let Some(rgb) = render_views(&lit, views, &request, &|_| {})?.0.rgb else {
+            return Err(Error::invalid("coverage", "the render has no colour"));
+        };
+        coverage.extend(rgb.into_iter().take(count - first));
+    }
+    Ok(coverage)
+}
+
+/// A frame of a shot as the shot itself gives it: its camera at each time, object-bound
+/// instances placed by its object matrices.
+struct ShotViews<'a> {
+    shot: &'a Shot,
+    frame: i64,
+    /// Whether the frame has no shutter to sample: its views are then the shot's own frame,
+    /// not one interpolated to it.
+    still: bool,
+}
+
+impl<'a> ShotViews<'a> {
+    fn new(shot: &'a Shot, frame: i64, request: &FrameRequest) -> Self {
+        let still = shot
+            .motion_blur
+            .is_none_or(|blur| blur.times(frame as f64, request.shutter_samples).len() == 1);
+        ShotViews { shot, frame, still }
+    }
+}
+
+impl FrameViews for ShotViews<'_> {
+    fn shot(&self) -> &Shot {
+        self.shot
+    }
+
+    fn time(&self) -> f64 {
+        self.frame as f64
+    }
+
+    fn frame_at(&self, t: f64) -> Result<ShotFrame> {
+        if self.still {
+            return self.shot.frame(self.frame).cloned();
+        }
+        self.shot.frame_at(t).map_err(|e| {
+            Error::invalid(
+                format!("frame {}: motion blur", self.frame),
+                format!("the shutter needs the shot at frame {t}: {e}"),
+            )
+        })
+    }
+
+    fn place(&self, scene: &LoadedScene, at: &ShotFrame) -> Result<(Scene, Camera)> {
+        let camera = at.camera(self.shot)?;
+        let placed = scene.place(at.world_from_scene(self.shot)?, &|name| {
+            at.object_matrix(name)
+        })?;
+        Ok((placed, camera))
+    }
+}
+
+/// Renders `frame` of `shot` as `request` asks ([`render_views`]): the shot's camera at that
+/// frame, object-bound instances placed by the shot's object matrices at that frame. With the
+/// shot's motion blur on, the frame is the mean of renders at the request's shutter samples,
+/// stratified times over the shutter, camera and objects interpolated between the shot's
+/// frames ([`Shot::frame_at`]: the shot must hold the frames around the shutter interval); a
+/// closed shutter or one sample renders the frame itself. With the camera's depth of field
+/// on, each time is the mean of renders through the request's aperture samples
+/// ([`ShotFrame::through_aperture`]); depth of field off, or one aperture sample, is the
+/// pinhole render, bit for bit. A window's pixels are the whole frame's, bit for bit, so
+/// windows rendered apart (on several machines) join into the whole frame.
+pub fn render_frame(
     scene: &LoadedScene,
     shot: &Shot,
     frame: i64,
-    window: Window,
-    settings: &RenderSettings,
-    deep: &DeepParams,
+    request: &FrameRequest,
     on_tile: &(dyn Fn(u64) + Sync),
-) -> Result<(Planes, DeepImage, RenderStats)> {
-    let views = views_of(shot, frame, settings)?;
-    let mut deeps = Vec::new();
-    let (planes, stats) = mean_over_views(&views, &mut |at| {
-        let camera = at.camera(shot)?;
-        let placed = scene.place(at.world_from_scene(shot)?, &|name| at.object_matrix(name))?;
-        let (planes, deep_image, stats) =
-            render_deep(&placed, &camera, window, settings, deep, on_tile)?;
-        deeps.push(deep_image);
-        Ok((planes, stats))
-    })?;
-    let deep_image = match deeps.len() {
-        1 => deeps.remove(0),
-        _ => average_images(&deeps, deep)?,
+) -> Result<(Planes, Option<DeepImage>, RenderStats)> {
+    let request = match request.window {
+        Some(_) => *request,
+        None => request.with_window(shot.frame(frame)?.camera(shot)?.full_window())?,
     };
-    Ok((planes, deep_image, stats))
+    render_views(
+        scene,
+        &ShotViews::new(shot, frame, &request),
+        &request,
+        on_tile,
+    )
+}
+
+/// Each instance's coverage of `frame` of `shot` as [`render_frame`] renders it
+/// ([`coverage_of_views`]).
+pub fn render_coverage(
+    scene: &LoadedScene,
+    shot: &Shot,
+    frame: i64,
+    request: &FrameRequest,
+) -> Result<Vec<Plane>> {
+    let request = match request.window {
+        Some(_) => *request,
+        None => request.with_window(shot.frame(frame)?.camera(shot)?.full_window())?,
+    };
+    coverage_of_views(scene, &ShotViews::new(shot, frame, &request), &request)
 }
 
 /// Where an environment map is rendered from.
@@ -279,10 +459,9 @@ mod tests {
     fn a_closed_shutter_renders_the_frame_itself_bit_for_bit() {
         let scene = crate::demo::scene_desc().load().unwrap();
         let mut shot = crate::demo::shot(32, 18);
-        let settings = RenderSettings {
-            shutter_samples: 16,
-            ..RenderSettings::new(Quality::Draft.params(), Outputs::all())
-        };
+        let draft =
+            |outputs| FrameRequest::new(RenderSettings::new(Quality::Draft.params(), outputs));
+        let settings = draft(Outputs::all()).with_shutter_samples(16).unwrap();
         let frame = crate::demo::FIRST_FRAME + 3;
         let sharp = render_frame(&scene, &shot, frame, &settings, &|_| {})
             .unwrap()
@@ -304,23 +483,19 @@ mod tests {
             .unwrap()
             .0;
         assert_ne!(sharp, blurred);
-        let one = RenderSettings {
-            shutter_samples: 1,
-            ..settings
-        };
+        let one = settings.with_shutter_samples(1).unwrap();
         assert_eq!(
             sharp,
             render_frame(&scene, &shot, frame, &one, &|_| {}).unwrap().0
         );
         // A depth is the same with or without alpha asked for beside it.
-        let depth_only = RenderSettings {
-            outputs: Outputs {
-                rgb: false,
-                alpha: false,
-                ..Outputs::all()
-            },
-            ..settings
-        };
+        let depth_only = draft(Outputs {
+            rgb: false,
+            alpha: false,
+            ..Outputs::all()
+        })
+        .with_shutter_samples(16)
+        .unwrap();
         let depths = render_frame(&scene, &shot, frame, &depth_only, &|_| {})
             .unwrap()
             .0;
@@ -340,10 +515,10 @@ mod tests {
     fn depth_of_field_off_is_the_pinhole_bit_for_bit() {
         let scene = crate::demo::scene_desc().load().unwrap();
         let mut shot = crate::demo::shot(32, 18);
-        let settings = RenderSettings {
-            aperture_samples: 8,
-            ..RenderSettings::new(Quality::Draft.params(), Outputs::all())
-        };
+        let settings =
+            FrameRequest::new(RenderSettings::new(Quality::Draft.params(), Outputs::all()))
+                .with_aperture_samples(8)
+                .unwrap();
         let frame = crate::demo::FIRST_FRAME + 3;
         let pinhole = render_frame(&scene, &shot, frame, &settings, &|_| {})
             .unwrap()
@@ -356,10 +531,7 @@ mod tests {
             rotation: 0.0,
             ratio: 1.0,
         });
-        let one = RenderSettings {
-            aperture_samples: 1,
-            ..settings
-        };
+        let one = settings.with_aperture_samples(1).unwrap();
         let lens_centre = render_frame(&scene, &shot, frame, &one, &|_| {}).unwrap().0;
         assert_eq!(pinhole, lens_centre);
         let defocused = render_frame(&scene, &shot, frame, &settings, &|_| {})
@@ -367,7 +539,8 @@ mod tests {
             .0;
         assert_ne!(pinhole, defocused);
         let window = Window::new(0, 0, pinhole.width, pinhole.height);
-        let coverage = render_coverage(&scene, &shot, frame, window, &settings).unwrap();
+        let coverage =
+            render_coverage(&scene, &shot, frame, &settings.with_window(window).unwrap()).unwrap();
         let alpha = defocused.alpha.as_ref().unwrap();
         for (i, a) in alpha.data.iter().enumerate() {
             let sum: f32 = coverage.iter().map(|p| p.data[i]).sum();

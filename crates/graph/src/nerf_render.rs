@@ -25,19 +25,16 @@ use super::shared_renders::{shared_render, RenderKey};
 use super::values::ParamValues;
 use nerfx_core::camera::{
     Camera, Eye, Shot, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, DEFAULT_IPD,
-    MAX_APERTURE_SAMPLES,
+    MAX_APERTURE_SAMPLES, MAX_SHUTTER_SAMPLES,
 };
 use nerfx_core::composite::{over, rgba_pixels, rgba_planes};
 use nerfx_core::error::{number, Error, Result};
 use nerfx_core::image::{
     scaled_size, DeepImage, OutputColorSpace, Plane, Planes, BACKGROUND_DEPTH,
 };
-use nerfx_core::render::{
-    average_images, conform_to, render_deep, render_with_progress, ColorOutput, DeepParams,
-    Outputs, Quality, RenderSettings,
-};
+use nerfx_core::render::{conform_to, ColorOutput, Outputs, Quality};
 use nerfx_core::scene::{CropBox, LoadedScene, Scene};
-use nerfx_core::shot_render::{coverage_by_indicators, frame_views, mean_over_views};
+use nerfx_core::shot_render::{coverage_of_views, render_views, FrameRequest, FrameViews};
 
 /// The Output Colour Space parameter's options: the scene file's, then every
 /// [`OutputColorSpace`] by its name.
@@ -521,22 +518,21 @@ fn render_node(values: &ParamValues, request: &RenderRequest) -> Result<Rendered
     })
 }
 
-/// Every pass of the node's scene for `request`, from one march per shutter time, and the
-/// marches' statistics summed.
+/// Every pass of the node's scene for `request`, from one march per view, and the marches'
+/// statistics summed.
 fn march(values: &ParamValues, shot: &Shot, request: &RenderRequest) -> Result<Rendered> {
     let loaded = cached_scene(file(values, "file")?)?;
-    let color = match values.choice("colour")? {
-        "asTrained" => ColorOutput::AsTrained,
-        _ => ColorOutput::Linear,
-    };
-    march_scene(values, shot, request, &loaded, color, Outputs::all())
+    let frame = node_request(values, request, Outputs::all())?;
+    let views = NodeViews::new(values, shot, request)?;
+    let (planes, _, stats) = render_views(&loaded, &views, &frame, &|_| {})?;
+    Ok(Rendered { planes, stats })
 }
 
 /// Each instance of the node's scene and its coverage of `request`'s window: the share of
 /// every pixel's opacity in the node's own render (before its background and Source) that
 /// the instance's samples and fragments hold, so that a pixel's coverages add up to that
 /// render's alpha. The render is the node's own (camera, transform, crop, quality, shutter),
-/// made with the instances in indicator colours three at a time.
+/// made with the instances in indicator colours three at a time ([`coverage_of_views`]).
 pub(crate) fn node_coverage(
     values: &ParamValues,
     request: &RenderRequest,
@@ -549,73 +545,28 @@ pub(crate) fn node_coverage(
         .iter()
         .map(|i| i.name.clone())
         .collect();
-    let outputs = Outputs {
-        rgb: true,
-        alpha: true,
-        depth_z: false,
-        depth_ray: false,
-        depth_median: false,
-    };
-    let coverage = coverage_by_indicators(&loaded, &mut |lit| {
-        let rendered = march_scene(values, &shot, request, lit, ColorOutput::AsTrained, outputs)?;
-        Ok(rendered.planes)
-    })?;
+    let frame = node_request(values, request, Outputs::rgba())?;
+    let views = NodeViews::new(values, &shot, request)?;
+    let coverage = coverage_of_views(&loaded, &views, &frame)?;
     Ok(names.into_iter().zip(coverage).collect())
 }
 
-/// The passes `outputs` of the scene `loaded` for `request` as the node renders it, from one
-/// march per shutter time, and the marches' statistics summed.
-fn march_scene(
-    values: &ParamValues,
-    shot: &Shot,
-    request: &RenderRequest,
-    loaded: &LoadedScene,
-    color: ColorOutput,
-    outputs: Outputs,
-) -> Result<Rendered> {
-    let (settings, views) = node_views(values, shot, request, color, outputs)?;
-    let (planes, stats) = mean_over_views(&views, &mut |at| {
-        let (scene, camera) = view_scene(values, shot, at, request, loaded)?;
-        render_with_progress(&scene, &camera, request.window, &settings, &|_| {})
-    })?;
-    Ok(Rendered { planes, stats })
-}
-
 /// The node's render of `request`'s window (its RGBA, exposed and in its Output Colour Space,
-/// without its background and Source) and the deep image of it ([`render_deep`]; at most
-/// `deep_samples` a pixel, the quality preset's cap without it): over
-/// several views (motion blur, depth of field) the views' deep pixels averaged as
-/// [`average_images`] does, which flattens to the averaged render.
+/// without its background and Source) and the deep image of it: at most `deep_samples` a
+/// pixel (the quality preset's cap without it); over several views (motion blur, depth of
+/// field) the views' deep pixels averaged ([`render_views`]), which flattens to the averaged
+/// render.
 pub(crate) fn node_deep(
     values: &ParamValues,
     request: &RenderRequest,
     deep_samples: Option<u32>,
 ) -> Result<(Planes, DeepImage)> {
-    let quality = node_quality(values, request)?;
-    let deep = &DeepParams {
-        max_samples: deep_samples.unwrap_or_else(|| quality.deep_samples()),
-        error_target: quality.params().error_target,
-    };
-    deep.validate()?;
+    let frame = node_request(values, request, Outputs::rgba())?.with_deep(deep_samples)?;
     let shot = node_shot(values)?;
     let loaded = cached_scene(file(values, "file")?)?;
-    let color = match values.choice("colour")? {
-        "asTrained" => ColorOutput::AsTrained,
-        _ => ColorOutput::Linear,
-    };
-    let (settings, views) = node_views(values, &shot, request, color, Outputs::rgba())?;
-    let mut deeps = Vec::new();
-    let (mut planes, _) = mean_over_views(&views, &mut |at| {
-        let (scene, camera) = view_scene(values, &shot, at, request, &loaded)?;
-        let (planes, image, stats) =
-            render_deep(&scene, &camera, request.window, &settings, deep, &|_| {})?;
-        deeps.push(image);
-        Ok((planes, stats))
-    })?;
-    let mut image = match deeps.len() {
-        1 => deeps.remove(0),
-        _ => average_images(&deeps, deep)?,
-    };
+    let views = NodeViews::new(values, &shot, request)?;
+    let (mut planes, image, _) = render_views(&loaded, &views, &frame, &|_| {})?;
+    let mut image = image.ok_or_else(|| Error::invalid("deep output", "no deep image made"))?;
     // Exposed in linear light, then converted, as the node's RGBA output is.
     let gain = values.double("exposure")?.exp2() as f32;
     if gain != 1.0 {
@@ -643,58 +594,87 @@ fn node_quality(values: &ParamValues, request: &RenderRequest) -> Result<Quality
     })
 }
 
-/// The settings the node renders `request` at (its quality, the colour and passes asked for)
-/// and the views its frame is the mean of ([`frame_views`]: its shutter and aperture samples,
-/// the preset's where they are 0).
-fn node_views(
+/// The frame the node renders for `request` with the passes `outputs`: its quality preset,
+/// its colour, its shutter and aperture samples (the preset's where they are 0), the
+/// request's window.
+fn node_request(
     values: &ParamValues,
-    shot: &Shot,
     request: &RenderRequest,
-    color: ColorOutput,
     outputs: Outputs,
-) -> Result<(RenderSettings, Vec<Vec<ShotFrame>>)> {
+) -> Result<FrameRequest> {
     let quality = node_quality(values, request)?;
-    let settings = RenderSettings {
-        color,
-        ..RenderSettings::new(quality.params(), outputs)
+    let color = match values.choice("colour")? {
+        "asTrained" => ColorOutput::AsTrained,
+        _ => ColorOutput::Linear,
     };
-    let shutter = match values.int("shutterSamples")? {
-        0 => quality.shutter_samples(),
-        n => n.clamp(1, 1024) as u32,
+    // A count past its parameter's range is taken as the range's nearest end.
+    let samples = |name: &str, max: u32| -> Result<Option<u32>> {
+        Ok(match values.int(name)? {
+            0 => None,
+            n => Some(n.clamp(1, i64::from(max)) as u32),
+        })
     };
-    let aperture = match values.int("apertureSamples")? {
-        0 => quality.aperture_samples(),
-        n => n.clamp(1, i64::from(MAX_APERTURE_SAMPLES)) as u32,
-    };
-    let time = shot_time(values, request.time)?;
-    let views = frame_views(shot, time, shutter, aperture, &|t| {
-        shot_frame(values, shot, t)
-    })?;
-    Ok((settings, views))
+    let mut frame = FrameRequest::for_quality(quality, outputs)
+        .with_colour(color)
+        .with_window(request.window)?;
+    if let Some(n) = samples("shutterSamples", MAX_SHUTTER_SAMPLES)? {
+        frame = frame.with_shutter_samples(n)?;
+    }
+    if let Some(n) = samples("apertureSamples", MAX_APERTURE_SAMPLES)? {
+        frame = frame.with_aperture_samples(n)?;
+    }
+    Ok(frame)
 }
 
-/// The scene placed for the view `at` and its pinhole camera at `request`'s render scale,
-/// which must hold `request`'s window.
-fn view_scene(
-    values: &ParamValues,
-    shot: &Shot,
-    at: &ShotFrame,
-    request: &RenderRequest,
-    loaded: &LoadedScene,
-) -> Result<(Scene, Camera)> {
-    let window = request.window;
-    let camera = scaled_camera(shot, at, request.render_scale)?;
-    if camera.clamp_window(window)? != window {
-        let (w, h) = camera.resolution();
-        return Err(Error::invalid(
-            "render window",
-            format!(
-                "{window:?} is not inside the {w}×{h} image at render scale {}",
-                request.render_scale
-            ),
-        ));
+/// A frame of the node's shot as the node sees it for a render request: at the host's time
+/// plus the frame offset, its camera model and eye applied to every view, the scene placed
+/// with its transform override and crop box, seen at the request's render scale.
+struct NodeViews<'a> {
+    values: &'a ParamValues,
+    shot: &'a Shot,
+    request: &'a RenderRequest,
+    /// The shot's time of the request.
+    time: f64,
+}
+
+impl<'a> NodeViews<'a> {
+    fn new(values: &'a ParamValues, shot: &'a Shot, request: &'a RenderRequest) -> Result<Self> {
+        Ok(NodeViews {
+            values,
+            shot,
+            request,
+            time: shot_time(values, request.time)?,
+        })
     }
-    Ok((placed_scene(values, shot, at, loaded)?, camera))
+}
+
+impl FrameViews for NodeViews<'_> {
+    fn shot(&self) -> &Shot {
+        self.shot
+    }
+
+    fn time(&self) -> f64 {
+        self.time
+    }
+
+    fn frame_at(&self, time: f64) -> Result<ShotFrame> {
+        shot_frame(self.values, self.shot, time)
+    }
+
+    /// The scene placed for the view `at` and its camera at the request's render scale,
+    /// which must hold the request's window.
+    fn place(&self, loaded: &LoadedScene, at: &ShotFrame) -> Result<(Scene, Camera)> {
+        let (window, scale) = (self.request.window, self.request.render_scale);
+        let camera = scaled_camera(self.shot, at, scale)?;
+        if camera.clamp_window(window)? != window {
+            let (w, h) = camera.resolution();
+            return Err(Error::invalid(
+                "render window",
+                format!("{window:?} is not inside the {w}×{h} image at render scale {scale}"),
+            ));
+        }
+        Ok((placed_scene(self.values, self.shot, at, loaded)?, camera))
+    }
 }
 
 /// The output the node shows of `planes`: one pass, exposed and over the background.

@@ -29,7 +29,7 @@ pub use shot::{
     SceneWorld, Shot, ShotCamera, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, SHOT_VERSION,
 };
 pub use shot_file::read_shot;
-pub use shutter::{MotionBlur, ShutterPosition, MAX_SHUTTER};
+pub use shutter::{MotionBlur, ShutterPosition, MAX_SHUTTER, MAX_SHUTTER_SAMPLES};
 pub use stereo::{Eye, Ods, Vr180, DEFAULT_IPD};
 
 use glam::{DMat4, DVec3};

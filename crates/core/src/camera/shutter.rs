@@ -14,6 +14,10 @@ use crate::error::{Error, Result};
 /// The longest shutter accepted, in frames (Blender's own limit).
 pub const MAX_SHUTTER: f64 = 500.0;
 
+/// Most times a frame may be rendered at over its shutter (`--shutter-samples`, the NeRF
+/// Render node's Shutter Samples).
+pub const MAX_SHUTTER_SAMPLES: u32 = 1024;
+
 /// Where the frame sits in the shutter interval.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]

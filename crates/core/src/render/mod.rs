@@ -100,7 +100,8 @@ pub enum ColorOutput {
     AsTrained,
 }
 
-/// Everything a render needs besides the scene and camera.
+/// Everything one view's render needs besides the scene and camera (a frame of a shot, the
+/// mean over several views, is a [`FrameRequest`](crate::shot_render::FrameRequest)).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RenderSettings {
     /// The marcher's dials (usually a [`Quality`] preset's).
@@ -111,17 +112,6 @@ pub struct RenderSettings {
     pub tile_size: u32,
     /// Linear or as-trained colour.
     pub color: ColorOutput,
-    /// Times per frame a shot with motion blur is rendered at over its shutter (1: none);
-    /// see [`Quality::shutter_samples`].
-    pub shutter_samples: u32,
-    /// Points of the aperture a shot with depth of field is rendered through per shutter
-    /// time (1: a pinhole); see [`Quality::aperture_samples`].
-    #[serde(default = "one_sample")]
-    pub aperture_samples: u32,
-}
-
-fn one_sample() -> u32 {
-    1
 }
 
 /// The side of the tiles a render is cut into unless its settings say otherwise.
@@ -135,8 +125,6 @@ impl RenderSettings {
             outputs,
             tile_size: TILE_SIZE,
             color: ColorOutput::Linear,
-            shutter_samples: 1,
-            aperture_samples: 1,
         }
     }
 }

@@ -34,11 +34,7 @@ pub(crate) use nerfacto::{DensityScratch, ProposalNetworks};
 pub use network::TableStorage;
 pub(crate) use network::{exp_density, sh_basis};
 pub use occupancy::Occupancy;
-pub(crate) use splats::{
-    is_splatfacto_run, Fragment, RayLayer, RayView as SplatRayView, SplatLayer, SplatPixel,
-    View as SplatView, MIN_TRANSMITTANCE as SPLAT_MIN_TRANSMITTANCE,
-    NEAR_PLANE as SPLAT_NEAR_PLANE,
-};
+pub(crate) use splats::is_splatfacto_run;
 pub use splats::{Axes, SplatColor, SplatFormat, SplatSource, Splats};
 pub use srgb::{linear_to_srgb, srgb_to_linear};
 

@@ -9,6 +9,7 @@
 
 mod closed_form;
 mod deep;
+mod fragment;
 mod integrator;
 mod march;
 mod naive;
@@ -18,6 +19,7 @@ mod quality;
 mod runs;
 mod samplers;
 mod splats;
+mod volume;
 
 pub use splats::splat_stage_timings;
 
@@ -283,7 +285,17 @@ fn render_planes(
                         deep,
                     )
                 } else {
-                    march_tile(&samplers, camera, tile, settings, scratch, out, deep)
+                    march_tile(
+                        &samplers.plans,
+                        &samplers.volume,
+                        samplers.splats.as_ref(),
+                        camera,
+                        tile,
+                        settings,
+                        scratch,
+                        out,
+                        deep,
+                    )
                 };
                 if pass.is_some() {
                     deep_tiles

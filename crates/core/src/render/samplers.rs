@@ -10,15 +10,13 @@
 //! pieces and fragments in depth order (module `march`), whoever sampled them.
 
 use super::march::InstancePlan;
-use super::ngp::{self, NgpFill};
-use super::proposal::{self, ProposalFill};
 use super::splats::{splat_layer, Splatting};
-use super::{RenderSettings, RenderStats};
-use crate::camera::{Camera, Ray};
+use super::volume::VolumeSampler;
+use super::RenderSettings;
+use crate::camera::Camera;
 use crate::error::Result;
-use crate::field::{ColorSpace, Fragment};
 use crate::image::Window;
-use crate::scene::{NgpInstance, ProposalInstance, Scene, SceneInstance};
+use crate::scene::{Scene, SceneInstance};
 
 /// Every instance of a scene with its sampler, for one render.
 pub(super) struct Samplers<'a> {
@@ -59,40 +57,5 @@ impl<'a> Samplers<'a> {
             volume,
             splats: splat_layer(scene, camera, window, &settings.outputs)?,
         })
-    }
-}
-
-/// An instance sampled by its trainer's own estimator, whose samples join the march as
-/// fragments.
-pub(super) enum VolumeSampler<'a> {
-    /// nerfstudio's proposal sampler (module `proposal`).
-    Proposal(&'a ProposalInstance),
-    /// instant-ngp's marcher (module `ngp`), and the scene's composite space, which a linear
-    /// snapshot's colours are encoded to.
-    Ngp(&'a NgpInstance, ColorSpace),
-}
-
-/// Per-thread buffers of the volume samplers.
-#[derive(Default)]
-pub(super) struct VolumeScratch {
-    proposal: ProposalFill,
-    ngp: NgpFill,
-}
-
-impl VolumeSampler<'_> {
-    /// Appends to `out[i]` the instance's fragments along `rays[i]`, front to back.
-    pub fn fill(
-        &self,
-        rays: &[Option<Ray>],
-        s: &mut VolumeScratch,
-        out: &mut [Vec<Fragment>],
-        stats: &mut RenderStats,
-    ) {
-        match *self {
-            VolumeSampler::Proposal(inst) => {
-                proposal::fill(inst, rays, &mut s.proposal, out, stats)
-            }
-            VolumeSampler::Ngp(inst, space) => ngp::fill(inst, space, rays, &mut s.ngp, out, stats),
-        }
     }
 }

@@ -1,23 +1,18 @@
 //! 3D Gaussian splats: a set of anisotropic Gaussians with view-dependent colour.
 //!
-//! Splats are not marched: they are rasterised into depth-sorted fragments per pixel, and a
-//! pixel's fragments are merged front to back with the marcher's pieces. This module holds
+//! Splats are not marched: the renderer rasterises them into depth-sorted fragments per pixel
+//! (`render::splats`), and a pixel's fragments are merged front to back with the marcher's
+//! pieces. This module holds
 //! the splats in their *activated* form (linear scales, unit quaternions, opacities in
 //! (0, 1)), as every reader delivers them, so the rasteriser never sees a logit or a log.
 
 mod axes;
 mod formats;
 mod ply;
-mod project;
-mod raster;
-mod rays;
 mod splatfacto;
 
 pub use axes::Axes;
 pub use formats::{SplatFormat, SplatSource};
-pub(crate) use project::{View, NEAR_PLANE};
-pub(crate) use raster::{Fragment, SplatLayer, SplatPixel, MIN_TRANSMITTANCE};
-pub(crate) use rays::{RayLayer, RayView};
 pub(crate) use splatfacto::is_splatfacto_run;
 
 use std::path::Path;

@@ -4,9 +4,10 @@ use glam::Vec3;
 
 use super::refinement::{change, larger_side, step_curvature, trapezoid_bias, LastDifference};
 use super::{DeepPiece, Node, RayState, NO_NODE, PENDING_NODE};
-use crate::field::{Fragment, SPLAT_MIN_TRANSMITTANCE};
 use crate::render::deep::RawPiece;
+use crate::render::fragment::Fragment;
 use crate::render::integrator::far_share;
+use crate::render::splats::MIN_TRANSMITTANCE as SPLAT_MIN_TRANSMITTANCE;
 use crate::render::{MarchParams, Outputs};
 
 /// What the error rule aims a step's weighted error estimate at, as a fraction of the target

@@ -40,12 +40,15 @@ use self::sampling::evaluate_pending;
 use self::setup::setup_rays;
 use self::shading::{clear_colour_queries, queue_colours, shade};
 use super::deep::{finish_pixel, DeepParams, DeepScratch, DeepTile, RawPiece};
+use super::fragment::Fragment;
 use super::integrator::{crossing_depth, srgb_composite_to_linear, Pieces};
 use super::runs::{Run, RunScratch};
-use super::samplers::{Samplers, VolumeScratch};
+use super::splats::SplatPixel;
+use super::splats::Splatting;
+use super::volume::{VolumeSampler, VolumeScratch};
 use super::{Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
-use crate::field::{Aabb, Capabilities, Fragment, Occupancy, SplatPixel, Unbounded};
+use crate::field::{Aabb, Capabilities, Occupancy, Unbounded};
 use crate::image::Window;
 use crate::scene::{Instance, LocalRay};
 
@@ -402,7 +405,9 @@ pub(super) struct DeepPass {
 /// deep samples where it is given.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn march_tile(
-    samplers: &Samplers,
+    plans: &[InstancePlan],
+    volume: &[VolumeSampler],
+    splats: Option<&Splatting>,
     camera: &Camera,
     tile: Window,
     settings: &RenderSettings,
@@ -412,8 +417,16 @@ pub(super) fn march_tile(
 ) -> RenderStats {
     let (params, outputs) = (&settings.march, &settings.outputs);
     let n_rays = tile.area();
-    let plans = &samplers.plans;
-    setup_rays(samplers, camera, tile, outputs, deep.is_some(), s);
+    setup_rays(
+        plans,
+        volume,
+        splats,
+        camera,
+        tile,
+        outputs,
+        deep.is_some(),
+        s,
+    );
     let width = s.feature_width;
     let empty_is_known = plans.iter().all(|p| p.bounded);
 

@@ -5,27 +5,29 @@ use glam::DVec3;
 use super::integration::{composite_fragment, composite_fragments};
 use super::plan::{cull_instances, may_meet, RayCone};
 use super::RayState;
-use super::{Met, Scratch};
+use super::{InstancePlan, Met, Scratch};
 use crate::camera::Camera;
-use crate::field::Fragment;
 use crate::image::Window;
+use crate::render::fragment::Fragment;
 use crate::render::integrator::Pieces;
 use crate::render::runs::{instance_runs, merge};
-use crate::render::samplers::Samplers;
+use crate::render::splats::Splatting;
+use crate::render::volume::VolumeSampler;
 use crate::render::Outputs;
 
 /// Builds each pixel's world ray, its local rays, its occupied segments and its splat
 /// fragments; a pixel with fragments and no segments is composited here and done.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn setup_rays(
-    samplers: &Samplers,
+    plans: &[InstancePlan],
+    volume_samplers: &[VolumeSampler],
+    splats: Option<&Splatting>,
     camera: &Camera,
     tile: Window,
     outputs: &Outputs,
     deep: bool,
     s: &mut Scratch,
 ) {
-    let (plans, splats) = (&samplers.plans, samplers.splats.as_ref());
     let n_rays = tile.area();
     s.rays.resize_with(n_rays, RayState::default);
     s.nodes.resize_with(n_rays, Vec::new);
@@ -104,17 +106,17 @@ pub(super) fn setup_rays(
             s.active.push(r as u32);
         }
     }
-    let sampled = !samplers.volume.is_empty();
+    let sampled = !volume_samplers.is_empty();
     if sampled {
         s.volume.resize_with(n_rays, Vec::new);
         for f in &mut s.volume[..n_rays] {
             f.clear();
         }
         let volume = &mut s.volume[..n_rays];
-        for sampler in &samplers.volume {
+        for sampler in volume_samplers {
             sampler.fill(&s.world_rays, &mut s.volume_samplers, volume, &mut s.stats);
         }
-        if samplers.volume.len() > 1 {
+        if volume_samplers.len() > 1 {
             for f in volume.iter_mut() {
                 f.sort_by(|a, b| a.t.total_cmp(&b.t));
             }

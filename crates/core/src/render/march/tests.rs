@@ -643,7 +643,16 @@ fn a_ray_lists_exactly_the_instances_it_meets() {
     let (mut met, mut asked) = (0, 0);
     for (x0, y0) in (0..4).flat_map(|i| (0..3).map(move |j| (16 * i, 16 * j))) {
         let tile = crate::image::Window::new(x0, y0, x0 + 16, y0 + 16);
-        super::setup::setup_rays(&samplers, &camera, tile, &Outputs::rgba(), false, &mut s);
+        super::setup::setup_rays(
+            plans,
+            &samplers.volume,
+            None,
+            &camera,
+            tile,
+            &Outputs::rgba(),
+            false,
+            &mut s,
+        );
         for (r, ray) in s.world_rays.clone().iter().enumerate() {
             let ray = ray.unwrap();
             let listed: Vec<u32> = super::met_by(&s, r).iter().map(|m| m.inst).collect();

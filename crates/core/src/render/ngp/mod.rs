@@ -15,7 +15,8 @@ mod marcher;
 pub use marcher::{march_ngp, NgpRay, NgpSample, NgpScratch, NgpStats, NGP_MAX_STEPS};
 
 use crate::camera::Ray;
-use crate::field::{linear_to_srgb, ColorSpace, Field, Fragment};
+use crate::field::{linear_to_srgb, ColorSpace, Field};
+use crate::render::fragment::Fragment;
 use crate::render::RenderStats;
 use crate::scene::NgpInstance;
 

@@ -19,7 +19,7 @@ pub use sampler::{
 };
 
 use crate::camera::Ray;
-use crate::field::Fragment;
+use crate::render::fragment::Fragment;
 use crate::render::integrator::opacity;
 use crate::render::RenderStats;
 use crate::scene::ProposalInstance;

@@ -10,9 +10,9 @@
 
 use glam::{DMat3, DVec3, Vec3};
 
-use super::{SplatColor, Splats};
 use crate::field::sh_basis;
 use crate::field::CropClip;
+use crate::field::{SplatColor, Splats};
 
 /// Near cull of gsplat's rasteriser (camera z).
 pub(crate) const NEAR_PLANE: f64 = 0.01;

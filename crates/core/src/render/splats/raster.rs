@@ -10,8 +10,9 @@
 use rayon::prelude::*;
 
 use super::project::{project, Projected, View};
-use super::Splats;
+use crate::field::Splats;
 use crate::image::Window;
+use crate::render::fragment::Fragment;
 
 /// Side of gsplat's image tiles, in pixels.
 const TILE: u32 = 16;
@@ -54,16 +55,6 @@ fn exp_neg(s: f32) -> f32 {
     // `n` (in [−116, 0]) as the low bits of `shifted`, moved into a float's exponent.
     let n_bits = shifted.to_bits().wrapping_sub(ROUND.to_bits());
     p * f32::from_bits(n_bits.wrapping_add(127) << 23)
-}
-
-/// One splat's contribution to one pixel.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) struct Fragment {
-    /// Distance along the pixel's world ray (`z / z_per_t` of the splat's mean).
-    pub t: f64,
-    pub alpha: f32,
-    /// Colour in the trained space.
-    pub rgb: [f32; 3],
 }
 
 /// What a pixel loop reads of a splat: one per projected splat, in depth order, which the

@@ -2,14 +2,23 @@
 //! gsplat's frame, projected, sorted and binned once per render; through a panoramic camera,
 //! binned by direction for each pixel's own ray.
 
+mod project;
+mod raster;
+mod rays;
+
+pub(crate) use project::NEAR_PLANE;
+pub(crate) use raster::{SplatPixel, MIN_TRANSMITTANCE};
+
 use glam::{DMat3, DMat4, DVec4};
 
+use project::View as SplatView;
+use raster::SplatLayer;
+use rays::{RayLayer, RayView as SplatRayView};
+
+use super::fragment::Fragment;
 use super::Outputs;
 use crate::camera::{Camera, Projection, Ray};
 use crate::error::{Error, Result};
-use crate::field::{
-    Fragment, RayLayer, SplatLayer, SplatPixel, SplatRayView, SplatView, SPLAT_NEAR_PLANE,
-};
 use crate::image::Window;
 use crate::scene::{CropBox, Scene};
 
@@ -137,7 +146,7 @@ pub(crate) fn splat_layer(
                 intrinsics: perspective.intrinsics(),
                 width,
                 height,
-                depth_range: [clip_start.max(SPLAT_NEAR_PLANE), clip_end],
+                depth_range: [clip_start.max(NEAR_PLANE), clip_end],
                 eye: (inst.splats_from_world() * eye_world).truncate(),
                 antialiased: inst.antialiased(),
                 rgb: outputs.rgb,
@@ -185,7 +194,7 @@ fn ray_layer(scene: &Scene, camera: &Camera, outputs: &Outputs) -> Result<RayLay
                 eye_offset,
                 pixel_angle,
                 eye: inst.splats_from_world().transform_point3(centre),
-                depth_range: [clip_start.max(SPLAT_NEAR_PLANE), clip_end],
+                depth_range: [clip_start.max(NEAR_PLANE), clip_end],
                 rgb: outputs.rgb,
                 crop: inst.crop().map(CropBox::clipper),
             };

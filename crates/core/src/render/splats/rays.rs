@@ -18,9 +18,10 @@ use glam::{DMat3, DVec3, Vec3};
 use rayon::prelude::*;
 
 use super::project::color;
-use super::raster::{Fragment, MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
-use super::Splats;
+use super::raster::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::field::CropClip;
+use crate::field::Splats;
+use crate::render::fragment::Fragment;
 
 /// Direction cells: longitude × latitude.
 const CELLS_X: usize = 128;

@@ -42,6 +42,11 @@ pub(crate) use splats::{
 };
 pub use splats::{Axes, SplatColor, SplatFormat, SplatSource, Splats};
 pub use srgb::{linear_to_srgb, srgb_to_linear};
+// The kernels the bench targets time on seeded data (`benches/ingp.rs`, `benches/nerfacto.rs`).
+#[doc(hidden)]
+pub use nerfacto::{ColorHeadBench, ProposalDensityBench};
+#[doc(hidden)]
+pub use network::NetworksBench;
 
 use std::path::Path;
 

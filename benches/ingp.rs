@@ -4,6 +4,8 @@
 //! - `render_1080p_final`, `render_final_accuracy`: a 1080p Final render of a surface-like
 //!   snapshot (the benchmark suite's blob), and its accuracy at 160×90 against a naive march.
 //! - `ngp_sampler_against_final`: instant-ngp's own marcher against nerfx's Final march.
+//! - `networks_against_the_fma_peak`: what bounds a shaded sample: the networks' multiply-adds
+//!   against the core's peak.
 //!
 //! Timing is printed, never asserted; the assertions that remain check the renders are sane.
 
@@ -22,7 +24,7 @@ use common_ingp::{
 };
 use glam::{DMat4, DVec3, Vec3};
 use nerfx_core::camera::{Camera, Perspective, Projection};
-use nerfx_core::field::{Field, IngpField, TableStorage};
+use nerfx_core::field::{Field, IngpField, NetworksBench, TableStorage};
 use nerfx_core::render::{render_naive, render_with_progress, Outputs, Quality, RenderSettings};
 use nerfx_core::scene::{FieldHandle, Instance, Scene};
 use nerfx_testkit::bench::field::process_cpu_seconds;
@@ -53,6 +55,11 @@ fn main() {
                 "ngp_sampler_against_final",
                 "instant-ngp's own marcher against nerfx's Final march",
                 ngp_sampler_against_final,
+            ),
+            Measurement::new(
+                "networks_against_the_fma_peak",
+                "the 8x4 field's networks on an in-cache batch against the core's FMA peak",
+                networks_against_the_fma_peak,
             ),
         ],
     );
@@ -385,4 +392,94 @@ fn ngp_sampler_against_final() {
         );
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Independent chains of 256-bit fused multiply-adds, `n` rounds of ten (more than the
+/// two pipes' latency needs): the core's peak rate of `f32` multiply-adds.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn fma_chains(n: usize) -> f32 {
+    use std::arch::x86_64::{_mm256_fmadd_ps, _mm256_set1_ps, _mm256_storeu_ps};
+    let (a, b) = (_mm256_set1_ps(0.999_999), _mm256_set1_ps(1e-7));
+    let mut acc = [_mm256_set1_ps(1.0); 10];
+    for _ in 0..n {
+        for x in &mut acc {
+            *x = _mm256_fmadd_ps(*x, a, b);
+        }
+    }
+    let mut lanes = [0.0f32; 8];
+    let mut sum = 0.0;
+    for x in acc {
+        // SAFETY: `lanes` holds the eight values stored.
+        unsafe { _mm256_storeu_ps(lanes.as_mut_ptr(), x) };
+        sum += lanes.iter().sum::<f32>();
+    }
+    sum
+}
+
+/// Multiply-adds per nanosecond of a core's time of `work` (which does `macs` of them per
+/// call), on `threads` threads at once calling it for about a second each: a core's rate
+/// while the machine runs nothing else (each thread is timed by its own clock).
+fn macs_per_cpu_ns(threads: usize, macs: f64, work: &(dyn Fn() -> f32 + Sync)) -> f64 {
+    let (calls, seconds) = std::thread::scope(|scope| {
+        let runs: Vec<_> = (0..threads)
+            .map(|_| {
+                scope.spawn(|| {
+                    let t = std::time::Instant::now();
+                    let (mut calls, mut sink) = (0u64, 0.0f32);
+                    while t.elapsed().as_secs_f64() < 1.0 {
+                        sink += work();
+                        calls += 1;
+                    }
+                    std::hint::black_box(sink);
+                    (calls, t.elapsed().as_secs_f64())
+                })
+            })
+            .collect();
+        runs.into_iter()
+            .map(|r| r.join().unwrap_or((0, 0.0)))
+            .fold((0u64, 0.0), |(c, s), (dc, ds)| (c + dc, s + ds))
+    });
+    calls as f64 * macs / seconds / 1e9
+}
+
+/// What bounds a shaded instant-ngp sample (8×4 grid): the networks' multiply-adds as the
+/// kernel does them (the density network 32 → 64 → 16, the colour network's head 16 →
+/// 64 → 64 → 3 once its direction part is split off, four outputs to a tile), timed on an
+/// in-cache batch against the core's peak; the samples per second they alone allow,
+/// whatever the encoding costs.
+#[cfg(target_arch = "x86_64")]
+fn networks_against_the_fma_peak() {
+    if !(is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")) {
+        println!("no AVX2 and FMA: nothing to measure");
+        return;
+    }
+    let networks = NetworksBench::new();
+    let per_sample = NetworksBench::MACS_PER_SAMPLE;
+    let n = NetworksBench::BATCH;
+    let rounds = 1 << 20;
+    for threads in [1, 2] {
+        // SAFETY: the CPU has AVX2 and FMA (checked above).
+        let peak = macs_per_cpu_ns(threads, rounds as f64 * 80.0, &|| unsafe {
+            fma_chains(rounds)
+        });
+        let shaded = macs_per_cpu_ns(threads, n as f64 * (per_sample[0] + per_sample[1]), &|| {
+            networks.run()
+        });
+        let total = per_sample[0] + per_sample[1];
+        println!(
+            "{threads} thread(s): a core's peak {peak:.1} multiply-adds per CPU ns; the \
+             networks {shaded:.1} ({:.0} % of it), {total} per shaded sample: at most \
+             {:.2} M shaded samples per CPU second from the networks alone ({:.2} M at \
+             the peak)",
+            100.0 * shaded / peak,
+            shaded * 1e3 / total,
+            peak * 1e3 / total,
+        );
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+fn networks_against_the_fma_peak() {
+    println!("the peak is measured with AVX2 and FMA: nothing to measure on this CPU");
 }

@@ -419,7 +419,7 @@ fn fog_error_by_dial() {
 
 /// The worst pixels of each preset on the bench's dense blob at 1920×1080, over the
 /// benchmark's reference rows against the quadrature: a diagnostic for tracing misses
-/// (`cargo test --release --test marcher_accuracy -- --ignored --nocapture blob_worst`).
+/// (`cargo bench --bench march -- blob_worst_pixels`).
 fn blob_worst_pixels() {
     let dir = tempfile::tempdir().unwrap();
     let bench = build(SceneKind::Blob, 1920, 1080, dir.path(), None).expect("the blob");

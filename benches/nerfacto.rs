@@ -4,6 +4,9 @@
 //! - `proposal_render_1080p_final`: a 1080p Final render of a synthetic run of nerfacto's real
 //!   architecture sampled by its proposal networks, and where the sampler's time goes.
 //! - `nerfstudio_first_camera_final`: the real nerfstudio run's first camera at Final.
+//! - `proposal_density`: a proposal network's fused kernel against its separate stages.
+//! - `colour_by_runs`: the colour head by runs of samples sharing a direction against the
+//!   whole network.
 //!
 //! Timing is printed, never asserted.
 
@@ -20,7 +23,7 @@ use common_nerfacto::{
 use glam::{DMat4, DVec3};
 use nerfx_core::camera::read_shot;
 use nerfx_core::camera::{Camera, Perspective, Projection};
-use nerfx_core::field::NerfactoField;
+use nerfx_core::field::{ColorHeadBench, NerfactoField, ProposalDensityBench};
 use nerfx_core::render::{
     proposal_ray, sample_proposals, ProposalRay, ProposalScratch, ProposalStats,
 };
@@ -47,6 +50,16 @@ fn main() {
                 "nerfstudio_first_camera_final",
                 "the real nerfstudio run's first camera at Final, as trained",
                 nerfstudio_first_camera_final,
+            ),
+            Measurement::new(
+                "proposal_density",
+                "a proposal network on 4096 seeded points, fused kernel against separate stages",
+                proposal_density,
+            ),
+            Measurement::new(
+                "colour_by_runs",
+                "the colour head on 512 samples by runs of one direction against the whole network",
+                colour_by_runs,
             ),
         ],
     );
@@ -286,4 +299,49 @@ fn sampler_split(field: &NerfactoField, rays: &[ProposalRay], pixels: f64) -> St
         split.main_queries as f64 / pixels,
         split.color_queries as f64 / pixels,
     )
+}
+
+/// A proposal network of nerfstudio's default shape (torch layout, seeded) on 4096 seeded
+/// points (a tile's round): the fused kernel against the separate stages, nanoseconds per
+/// point, each twice.
+fn proposal_density() {
+    let mut bench = ProposalDensityBench::new();
+    if !bench.has_fused_kernel() {
+        println!("no AVX2 and FMA: both take the separate stages");
+    }
+    let points = ProposalDensityBench::POINTS;
+    for (name, fused) in [("separate", false), ("fused", true)].repeat(2) {
+        let t = Instant::now();
+        for _ in 0..300 {
+            bench.run(fused);
+        }
+        let ns = t.elapsed().as_secs_f64() * 1e9 / (300.0 * points as f64);
+        println!("{name}: {ns:.1} ns per point");
+    }
+}
+
+/// The torch colour head (seeded) on 512 samples in runs of 40 sharing a direction, by runs
+/// against the whole network on the full inputs, nanoseconds per sample, six rounds.
+fn colour_by_runs() {
+    let mut bench = ColorHeadBench::new();
+    let rounds = 2000;
+    for round in 0..6 {
+        let t = Instant::now();
+        for _ in 0..rounds {
+            bench.run_whole();
+        }
+        let a = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        for _ in 0..rounds {
+            bench.run_by_runs();
+        }
+        let b = t.elapsed().as_secs_f64();
+        let per = |s: f64| s * 1e9 / (rounds * ColorHeadBench::SAMPLES) as f64;
+        println!(
+            "round {round}: whole network {:.1} ns/sample, by runs {:.1} ns/sample ({:.2}x)",
+            per(a),
+            per(b),
+            a / b
+        );
+    }
 }

@@ -1,7 +1,7 @@
 //! Splats, checked and printed: `cargo bench --bench splats -- [NAME…]`.
 //!
 //! - `real_captures`: whole real captures, too large to keep in the repository, against
-//!   PlayCanvas splat-transform's decoding of each (the check `tests/splat_formats.rs` makes
+//!   PlayCanvas splat-transform's decoding of each (the check `tests/splats/formats.rs` makes
 //!   on 512-splat subsets): every file `NAME` in the folder `NERFX_REAL_SPLATS` names that has
 //!   a `NAME.decoded.ply` beside it. Prints each file's differences and render PSNR, and fails
 //!   where one is off by more than the test allows.

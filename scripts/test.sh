@@ -18,7 +18,7 @@
 #   bpy 4.5, 5.0   Blender as a Python module (PyPI's `bpy`, in two Python 3.11 virtual
 #                  environments under ${NERFX_BPY_DIR:-~/.cache/nerfx-bpy}): the Blender tests
 #                  run the add-on and Cycles in 3.4, 4.5 LTS and 5.0
-#   mdbook         builds the user's guide in docs/ (tests/docs.rs checks its links)
+#   mdbook         builds the user's guide in docs/ (tests/command_line/docs.rs checks its links)
 #   slurm-wlm, munge   tests/farm.rs runs a one-node Slurm cluster (slurmctld, slurmd, munged;
 #                  started and stopped by the test, as root)
 #   openjd-cli     `openjd check` and `openjd run` of the Open Job Description templates

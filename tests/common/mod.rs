@@ -11,7 +11,7 @@ use nerfx_core::render::{render, MarchParams, Outputs, RenderSettings};
 use nerfx_core::scene::{CropBox, FieldHandle, Instance, Scene};
 use nerfx_testkit::reference::metrics;
 
-mod rng;
+pub mod rng;
 pub use rng::SplitMix64;
 
 /// A primitive with a constant colour.

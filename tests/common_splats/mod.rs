@@ -1,6 +1,6 @@
 //! nerfx's reading of a compact splat file against splat-transform's decoding of it to an
 //! INRIA PLY (`NAME.decoded.ply` beside it): the largest differences splat for splat, and
-//! the PSNR of the two rendered alike. Shared by `tests/splat_formats.rs` and the whole real
+//! the PSNR of the two rendered alike. Shared by `tests/splats/formats.rs` and the whole real
 //! captures of `benches/splats.rs`.
 
 use std::path::Path;

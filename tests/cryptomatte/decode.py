@@ -1,5 +1,5 @@
 """A Cryptomatte decoder written from the specification (Psyop, Cryptomatte 1.2), reading
-with OpenEXR's own library and hashing with mmh3, for tests/cryptomatte.rs.
+with OpenEXR's own library and hashing with mmh3, for tests/outputs/cryptomatte.rs.
 
     python3 decode.py FILE.exr LAYER
 

@@ -1,4 +1,4 @@
-"""OpenColorIO's own conversion of a linear Rec.709 EXR, for tests/color_spaces.rs.
+"""OpenColorIO's own conversion of a linear Rec.709 EXR, for tests/outputs/color_spaces.rs.
 
     python3 convert.py LINEAR.exr CONVERTED.exr "OCIO colour space name"
 

@@ -1,4 +1,4 @@
-"""Reads an EXR with OpenEXR's own library (its Python bindings), for tests/exr_openexr.rs.
+"""Reads an EXR with OpenEXR's own library (its Python bindings), for tests/outputs/exr_openexr.rs.
 
     python3 read_channels.py FILE.exr OUT_DIR
 

@@ -1,5 +1,5 @@
 """Reads a deep EXR with OpenEXR's own library (its Python bindings) and flattens it, for
-tests/deep_exr.rs.
+tests/outputs/deep_exr.rs.
 
     python3 read_deep.py FILE.exr OUT_DIR
 

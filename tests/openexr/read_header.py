@@ -1,5 +1,5 @@
 """Prints an EXR's header as JSON, read by OpenEXR's own library (its Python bindings), for
-tests/exr_camera.rs.
+tests/outputs/exr_camera.rs.
 
     python3 read_header.py FILE.exr
 

@@ -37,6 +37,11 @@ pub use occupancy::Occupancy;
 pub(crate) use splats::is_splatfacto_run;
 pub use splats::{Axes, SplatColor, SplatFormat, SplatSource, Splats};
 pub use srgb::{linear_to_srgb, srgb_to_linear};
+// The kernels the bench targets time on seeded data (`benches/ingp.rs`, `benches/nerfacto.rs`).
+#[doc(hidden)]
+pub use nerfacto::{ColorHeadBench, ProposalDensityBench};
+#[doc(hidden)]
+pub use network::NetworksBench;
 
 use std::path::Path;
 

@@ -206,76 +206,128 @@ impl DensityField {
     }
 }
 
+/// A seeded proposal network of nerfstudio's default shape (5 levels × 2 features,
+/// `2^12` rows, resolutions 16 to 256, hidden layer of 16), torch layout: as read (with
+/// the fused kernel where it applies) and without the fused kernel.
+fn seeded_pair(seed: u64) -> (DensityField, DensityField) {
+    let mut s = seed;
+    let mut next = move || {
+        s = s
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (s >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+    };
+    let rows = 1usize << 12;
+    let table: Vec<f32> = (0..5 * rows * 2).map(|_| next()).collect();
+    let grid = TorchHashGrid::new(5, 2, 12, 16, 256, table).unwrap();
+    let layers: Vec<(Vec<f32>, Vec<f32>)> = [(10, 16), (16, 1)]
+        .into_iter()
+        .map(|(n_in, n_out)| {
+            let w = (0..n_in * n_out).map(|_| next()).collect();
+            let b = (0..n_out).map(|_| next()).collect();
+            (w, b)
+        })
+        .collect();
+    let head = Mlp::with_biases(10, &layers).unwrap();
+    let plain = DensityField {
+        grid: Grid::Torch(grid.clone()),
+        head: head.clone(),
+        average_init_density: 0.7,
+        n_params: 0,
+        #[cfg(target_arch = "x86_64")]
+        fused: None,
+    };
+    let read = DensityField {
+        #[cfg(target_arch = "x86_64")]
+        fused: FusedDensity::new(&grid, &layers),
+        ..plain.clone()
+    };
+    (read, plain)
+}
+
+/// Seeded field-space points: inside the unit cube, beyond it (contracted), on the
+/// cells' faces of every level, at the selector's edge and beyond, infinite and NaN.
+fn seeded_points(n: usize, seed: u64) -> Vec<Vec3> {
+    let mut s = seed;
+    let mut next = move || {
+        s = s
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (s >> 40) as f32 / (1u64 << 24) as f32 * 6.0 - 3.0
+    };
+    let special = [
+        Vec3::new(0.25, -0.5, 0.0),
+        Vec3::new(1.0, 0.5, -1.0),
+        Vec3::new(-2.0, 0.0, 0.0),
+        Vec3::new(1e30, 3.0, 0.0),
+        Vec3::new(f32::INFINITY, 0.0, 0.0),
+        Vec3::new(0.5, f32::NAN, 0.0),
+    ];
+    (0..n)
+        .map(|i| {
+            special
+                .get(i)
+                .copied()
+                .unwrap_or_else(|| Vec3::new(next(), next(), next()))
+        })
+        .collect()
+}
+
+/// A seeded proposal network of nerfstudio's default shape, torch layout, with and without the
+/// fused kernel, and [`POINTS`](Self::POINTS) seeded points (a tile's round): what
+/// `cargo bench --bench nerfacto -- proposal_density` times.
+#[doc(hidden)]
+pub struct ProposalDensityBench {
+    fused: DensityField,
+    plain: DensityField,
+    points: Vec<Vec3>,
+    sigma: Vec<f32>,
+    scratch: DensityScratch,
+}
+
+impl ProposalDensityBench {
+    /// Points per [`run`](Self::run).
+    pub const POINTS: usize = 4096;
+
+    /// The seeded network and points.
+    pub fn new() -> Self {
+        let (fused, plain) = seeded_pair(3);
+        let points = seeded_points(Self::POINTS, 11);
+        Self {
+            fused,
+            plain,
+            sigma: vec![0.0; points.len()],
+            points,
+            scratch: DensityScratch::default(),
+        }
+    }
+
+    /// Whether the fused kernel runs on this CPU (AVX2 and FMA); without it both runs take
+    /// the separate stages.
+    pub fn has_fused_kernel(&self) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        return self.fused.fused.is_some();
+        #[cfg(not(target_arch = "x86_64"))]
+        return false;
+    }
+
+    /// The density at every point, by the fused kernel or by the separate stages (the grid,
+    /// then the MLP).
+    pub fn run(&mut self, fused: bool) {
+        let field = if fused { &self.fused } else { &self.plain };
+        field.density(&self.points, &mut self.sigma, &mut self.scratch);
+    }
+}
+
+impl Default for ProposalDensityBench {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A seeded proposal network of nerfstudio's default shape (5 levels × 2 features,
-    /// `2^12` rows, resolutions 16 to 256, hidden layer of 16), torch layout: as read (with
-    /// the fused kernel where it applies) and without the fused kernel.
-    fn seeded_pair(seed: u64) -> (DensityField, DensityField) {
-        let mut s = seed;
-        let mut next = move || {
-            s = s
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (s >> 40) as f32 / (1u64 << 24) as f32 - 0.5
-        };
-        let rows = 1usize << 12;
-        let table: Vec<f32> = (0..5 * rows * 2).map(|_| next()).collect();
-        let grid = TorchHashGrid::new(5, 2, 12, 16, 256, table).unwrap();
-        let layers: Vec<(Vec<f32>, Vec<f32>)> = [(10, 16), (16, 1)]
-            .into_iter()
-            .map(|(n_in, n_out)| {
-                let w = (0..n_in * n_out).map(|_| next()).collect();
-                let b = (0..n_out).map(|_| next()).collect();
-                (w, b)
-            })
-            .collect();
-        let head = Mlp::with_biases(10, &layers).unwrap();
-        let plain = DensityField {
-            grid: Grid::Torch(grid.clone()),
-            head: head.clone(),
-            average_init_density: 0.7,
-            n_params: 0,
-            #[cfg(target_arch = "x86_64")]
-            fused: None,
-        };
-        let read = DensityField {
-            #[cfg(target_arch = "x86_64")]
-            fused: FusedDensity::new(&grid, &layers),
-            ..plain.clone()
-        };
-        (read, plain)
-    }
-
-    /// Seeded field-space points: inside the unit cube, beyond it (contracted), on the
-    /// cells' faces of every level, at the selector's edge and beyond, infinite and NaN.
-    fn seeded_points(n: usize, seed: u64) -> Vec<Vec3> {
-        let mut s = seed;
-        let mut next = move || {
-            s = s
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (s >> 40) as f32 / (1u64 << 24) as f32 * 6.0 - 3.0
-        };
-        let special = [
-            Vec3::new(0.25, -0.5, 0.0),
-            Vec3::new(1.0, 0.5, -1.0),
-            Vec3::new(-2.0, 0.0, 0.0),
-            Vec3::new(1e30, 3.0, 0.0),
-            Vec3::new(f32::INFINITY, 0.0, 0.0),
-            Vec3::new(0.5, f32::NAN, 0.0),
-        ];
-        (0..n)
-            .map(|i| {
-                special
-                    .get(i)
-                    .copied()
-                    .unwrap_or_else(|| Vec3::new(next(), next(), next()))
-            })
-            .collect()
-    }
 
     #[test]
     fn fused_kernel_gives_the_separate_stages_bits() {
@@ -303,25 +355,6 @@ mod tests {
             }
             assert!(want.iter().any(|&v| v > 0.0) || n < 8);
             assert!(n < 6 || want[4] == 0.0 && want[5] == 0.0);
-        }
-    }
-
-    /// The fused kernel against the separate stages on 4096 seeded points (a tile's round):
-    /// `cargo test --release -p nerfx-core --lib bench_proposal_density -- --ignored --nocapture`.
-    #[test]
-    #[ignore = "benchmark"]
-    fn bench_proposal_density() {
-        let (fused, plain) = seeded_pair(3);
-        let points = seeded_points(4096, 11);
-        let mut sigma = vec![0.0; points.len()];
-        let mut scratch = DensityScratch::default();
-        for (name, f) in [("separate", &plain), ("fused", &fused)].repeat(2) {
-            let t = std::time::Instant::now();
-            for _ in 0..300 {
-                f.density(&points, &mut sigma, &mut scratch);
-            }
-            let ns = t.elapsed().as_secs_f64() * 1e9 / (300.0 * points.len() as f64);
-            println!("{name}: {ns:.1} ns per point");
         }
     }
 }

@@ -81,6 +81,8 @@ mod torch;
 pub(crate) use config::scan;
 pub use dataparser::DataparserTransform;
 pub(crate) use density_field::DensityScratch;
+#[doc(hidden)]
+pub use density_field::ProposalDensityBench;
 pub(crate) use proposal_networks::ProposalNetworks;
 
 /// Points per batch (bounds the scratch memory).
@@ -1108,6 +1110,116 @@ impl Field for NerfactoField {
     }
 }
 
+/// `n` values in `[−scale, scale)` from a seeded generator: the unit tests' weights and
+/// inputs, and [`ColorHeadBench`]'s.
+fn seeded(n: usize, seed: u64, scale: f32) -> Vec<f32> {
+    let mut x = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    (0..n)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            scale * ((x >> 40) as f32 / (1u64 << 23) as f32 - 1.0)
+        })
+        .collect()
+}
+
+/// A seeded torch colour head (15 geometry features, 32 of appearance, width 64) on
+/// [`SAMPLES`](Self::SAMPLES) samples in runs of 40 sharing a direction, by runs
+/// ([`head_outputs`]) and as the whole network on the full inputs: what
+/// `cargo bench --bench nerfacto -- colour_by_runs` times.
+#[doc(hidden)]
+pub struct ColorHeadBench {
+    whole: Mlp,
+    head: Mlp,
+    dir: LastInputs,
+    dirs: Vec<Vec3>,
+    geo: Vec<f32>,
+    input: Vec<f32>,
+    out: Vec<f32>,
+    scratch: HeadScratch,
+}
+
+impl ColorHeadBench {
+    /// Samples per run.
+    pub const SAMPLES: usize = 512;
+    const N_GEO: usize = 15;
+
+    /// The seeded head, directions and geometry features.
+    pub fn new() -> Self {
+        let (n, n_geo, n_app, width) = (Self::SAMPLES, Self::N_GEO, 32, 64);
+        let n_in = SH_INPUTS + n_geo + n_app;
+        let appearance = seeded(n_app, 1, 1.0);
+        let layers = vec![
+            (seeded(width * n_in, 3, 0.3), seeded(width, 4, 0.5)),
+            (seeded(width * width, 5, 0.2), seeded(width, 6, 0.5)),
+            (seeded(3 * width, 7, 0.2), seeded(3, 8, 0.5)),
+        ];
+        let dirs: Vec<Vec3> = (0..n)
+            .map(|k| Vec3::new(1.0, (k / 40) as f32 * 0.01, 0.5).normalize())
+            .collect();
+        let geo = seeded(n * n_geo, 2, 3.0);
+        let whole = Mlp::with_biases(SH_INPUTS + n_geo, &{
+            let mut l = layers.clone();
+            l[0].0 = l[0]
+                .0
+                .chunks_exact(n_in)
+                .flat_map(|r| r[..SH_INPUTS + n_geo].to_vec())
+                .collect();
+            l
+        })
+        .unwrap();
+        let mut reordered = layers;
+        direction_after_geometry(&mut reordered[0].0, n_in, n_geo);
+        let (head, dir) =
+            split_head(&Mlp::with_biases(n_in, &reordered).unwrap(), &appearance).unwrap();
+        Self {
+            whole,
+            head,
+            dir,
+            dirs,
+            geo,
+            input: Vec::new(),
+            out: vec![0.0; n * 3],
+            scratch: HeadScratch::default(),
+        }
+    }
+
+    fn encoding(d: Vec3) -> [f32; SH_INPUTS] {
+        torch_sh4((d + Vec3::ONE) * 0.5)
+    }
+
+    /// The whole network on the full inputs, each sample's direction encoded with its
+    /// geometry features.
+    pub fn run_whole(&mut self) {
+        self.input.clear();
+        for (d, g) in self.dirs.iter().zip(self.geo.chunks_exact(Self::N_GEO)) {
+            self.input.extend_from_slice(&Self::encoding(*d));
+            self.input.extend_from_slice(g);
+        }
+        self.whole.forward(&self.input, &mut self.out);
+    }
+
+    /// The head by runs: the direction's part summed once per run of equal directions.
+    pub fn run_by_runs(&mut self) {
+        head_outputs(
+            &self.head,
+            &self.dir,
+            Self::encoding,
+            &self.geo,
+            &self.dirs,
+            &mut self.scratch,
+            &mut self.out,
+        );
+    }
+}
+
+impl Default for ColorHeadBench {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1142,19 +1254,6 @@ mod tests {
         assert!((u - (c + Vec3::splat(2.0)) / 4.0).length() < 1e-6);
         // Infinitely far: u reaches 1 and leaves the selector.
         assert!(NerfactoField::unit_from_field(Vec3::new(f32::INFINITY, 0.0, 0.0)).is_none());
-    }
-
-    /// `n` values in `[−scale, scale)` from a seeded generator.
-    fn seeded(n: usize, seed: u64, scale: f32) -> Vec<f32> {
-        let mut x = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-        (0..n)
-            .map(|_| {
-                x ^= x << 13;
-                x ^= x >> 7;
-                x ^= x << 17;
-                scale * ((x >> 40) as f32 / (1u64 << 23) as f32 - 1.0)
-            })
-            .collect()
     }
 
     /// The MLP `(W [out][in], b)` per layer on `x` in f64, ReLU between layers.
@@ -1289,69 +1388,6 @@ mod tests {
                     k % 3
                 );
             }
-        }
-    }
-
-    /// The torch colour head on 512 samples in runs of 40 sharing a direction, by runs
-    /// against the whole network on the full inputs:
-    /// `cargo test --release -p nerfx-core --lib bench_colour_by_runs -- --ignored --nocapture`.
-    #[test]
-    #[ignore = "benchmark"]
-    fn bench_colour_by_runs() {
-        use std::time::Instant;
-        let (n, n_geo, n_app, width) = (512, 15, 32, 64);
-        let n_in = SH_INPUTS + n_geo + n_app;
-        let appearance = seeded(n_app, 1, 1.0);
-        let layers = vec![
-            (seeded(width * n_in, 3, 0.3), seeded(width, 4, 0.5)),
-            (seeded(width * width, 5, 0.2), seeded(width, 6, 0.5)),
-            (seeded(3 * width, 7, 0.2), seeded(3, 8, 0.5)),
-        ];
-        let dirs: Vec<Vec3> = (0..n)
-            .map(|k| Vec3::new(1.0, (k / 40) as f32 * 0.01, 0.5).normalize())
-            .collect();
-        let geo = seeded(n * n_geo, 2, 3.0);
-        let encoding = |d: Vec3| torch_sh4((d + Vec3::ONE) * 0.5);
-        let whole = Mlp::with_biases(SH_INPUTS + n_geo, &{
-            let mut l = layers.clone();
-            l[0].0 = l[0]
-                .0
-                .chunks_exact(n_in)
-                .flat_map(|r| r[..SH_INPUTS + n_geo].to_vec())
-                .collect();
-            l
-        })
-        .unwrap();
-        let mut reordered = layers.clone();
-        direction_after_geometry(&mut reordered[0].0, n_in, n_geo);
-        let (head, dir) =
-            split_head(&Mlp::with_biases(n_in, &reordered).unwrap(), &appearance).unwrap();
-        let (mut input, mut out) = (Vec::new(), vec![0.0; n * 3]);
-        let mut scratch = HeadScratch::default();
-        let rounds = 2000;
-        for round in 0..6 {
-            let t = Instant::now();
-            for _ in 0..rounds {
-                input.clear();
-                for (d, g) in dirs.iter().zip(geo.chunks_exact(n_geo)) {
-                    input.extend_from_slice(&encoding(*d));
-                    input.extend_from_slice(g);
-                }
-                whole.forward(&input, &mut out);
-            }
-            let a = t.elapsed().as_secs_f64();
-            let t = Instant::now();
-            for _ in 0..rounds {
-                head_outputs(&head, &dir, encoding, &geo, &dirs, &mut scratch, &mut out);
-            }
-            let b = t.elapsed().as_secs_f64();
-            let per = |s: f64| s * 1e9 / (rounds * n) as f64;
-            println!(
-                "round {round}: whole network {:.1} ns/sample, by runs {:.1} ns/sample ({:.2}x)",
-                per(a),
-                per(b),
-                a / b
-            );
         }
     }
 }

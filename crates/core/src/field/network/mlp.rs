@@ -615,21 +615,81 @@ mod simd {
     }
 }
 
+/// `n` seeded values in `[−0.5, 0.5)`: weights and inputs of the unit tests and of
+/// [`NetworksBench`].
+fn seeded(n: usize, seed: u64) -> Vec<f32> {
+    let mut s = seed;
+    (0..n)
+        .map(|_| {
+            s = s
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            ((s >> 40) as f32 / (1u64 << 24) as f32) - 0.5
+        })
+        .collect()
+}
+
+/// The networks of a shaded instant-ngp sample (8×4 grid) as the kernel runs them, on an
+/// in-cache batch of [`BATCH`](Self::BATCH) seeded inputs: the density network 32 → 64 → 16
+/// and the colour network's head 16 → 64 → 64 → 3 once its direction part is split off.
+/// What `cargo bench --bench ingp -- networks_against_the_fma_peak` times.
+#[doc(hidden)]
+pub struct NetworksBench {
+    density: Mlp,
+    colour: Mlp,
+    x_density: Vec<f32>,
+    x_colour: Vec<f32>,
+}
+
+impl NetworksBench {
+    /// Samples per [`run`](Self::run).
+    pub const BATCH: usize = 256;
+    /// The multiply-adds per sample, density network then colour head (four outputs to a
+    /// tile).
+    pub const MACS_PER_SAMPLE: [f64; 2] = [
+        32.0 * 64.0 + 64.0 * 16.0,
+        16.0 * 64.0 + 64.0 * 64.0 + 64.0 * 4.0,
+    ];
+
+    /// Seeded weights and inputs.
+    pub fn new() -> Self {
+        let config = |n_inputs, n_hidden_layers, n_outputs| MlpConfig {
+            n_inputs,
+            width: 64,
+            n_hidden_layers,
+            n_outputs,
+            output_alignment: 16,
+        };
+        let [density, colour] = [config(32, 1, 16), config(16, 2, 3)]
+            .map(|c| Mlp::new(c, &seeded(c.n_params(), 5)).unwrap());
+        let n = Self::BATCH;
+        Self {
+            density,
+            colour,
+            x_density: seeded(n * 32, 6),
+            x_colour: seeded(n * 16, 7),
+        }
+    }
+
+    /// Both networks over the batch, into fresh outputs; a value of them, to keep.
+    pub fn run(&self) -> f32 {
+        let n = Self::BATCH;
+        let (mut sigma, mut rgb) = (vec![0.0; n * 16], vec![0.0; n * 3]);
+        self.density.forward(&self.x_density, &mut sigma);
+        self.colour.forward(&self.x_colour, &mut rgb);
+        sigma[0] + rgb[0]
+    }
+}
+
+impl Default for NetworksBench {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn seeded(n: usize, seed: u64) -> Vec<f32> {
-        let mut s = seed;
-        (0..n)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6_364_136_223_846_793_005)
-                    .wrapping_add(1_442_695_040_888_963_407);
-                ((s >> 40) as f32 / (1u64 << 24) as f32) - 0.5
-            })
-            .collect()
-    }
 
     #[test]
     fn parameter_counts() {
@@ -940,112 +1000,6 @@ mod tests {
             head.forward_from(&varying, &rows, &row_of, &mut got);
             assert_close(&got, &want, scale);
             assert!(mlp.split_last_inputs(33).is_none());
-        }
-    }
-
-    /// Independent chains of 256-bit fused multiply-adds, `n` rounds of ten (more than the
-    /// two pipes' latency needs): the core's peak rate of `f32` multiply-adds.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    unsafe fn fma_chains(n: usize) -> f32 {
-        use std::arch::x86_64::{_mm256_fmadd_ps, _mm256_set1_ps, _mm256_storeu_ps};
-        let (a, b) = (_mm256_set1_ps(0.999_999), _mm256_set1_ps(1e-7));
-        let mut acc = [_mm256_set1_ps(1.0); 10];
-        for _ in 0..n {
-            for x in &mut acc {
-                *x = _mm256_fmadd_ps(*x, a, b);
-            }
-        }
-        let mut lanes = [0.0f32; 8];
-        let mut sum = 0.0;
-        for x in acc {
-            // SAFETY: `lanes` holds the eight values stored.
-            unsafe { _mm256_storeu_ps(lanes.as_mut_ptr(), x) };
-            sum += lanes.iter().sum::<f32>();
-        }
-        sum
-    }
-
-    /// Multiply-adds per nanosecond of a core's time of `work` (which does `macs` of them per
-    /// call), on `threads` threads at once calling it for about a second each: a core's rate
-    /// while the machine runs nothing else (each thread is timed by its own clock).
-    fn macs_per_cpu_ns(threads: usize, macs: f64, work: &(dyn Fn() -> f32 + Sync)) -> f64 {
-        let (calls, seconds) = std::thread::scope(|scope| {
-            let runs: Vec<_> = (0..threads)
-                .map(|_| {
-                    scope.spawn(|| {
-                        let t = std::time::Instant::now();
-                        let (mut calls, mut sink) = (0u64, 0.0f32);
-                        while t.elapsed().as_secs_f64() < 1.0 {
-                            sink += work();
-                            calls += 1;
-                        }
-                        std::hint::black_box(sink);
-                        (calls, t.elapsed().as_secs_f64())
-                    })
-                })
-                .collect();
-            runs.into_iter()
-                .map(|r| r.join().unwrap_or((0, 0.0)))
-                .fold((0u64, 0.0), |(c, s), (dc, ds)| (c + dc, s + ds))
-        });
-        calls as f64 * macs / seconds / 1e9
-    }
-
-    /// What bounds a shaded instant-ngp sample (8×4 grid): the networks' multiply-adds as the
-    /// kernel does them (the density network 32 → 64 → 16, the colour network's head 16 →
-    /// 64 → 64 → 3 once its direction part is split off, four outputs to a tile), timed on an
-    /// in-cache batch against the core's peak; the samples per second they alone allow,
-    /// whatever the encoding costs:
-    /// `cargo test --release -p nerfx-core --lib bench_networks -- --ignored --nocapture`.
-    #[test]
-    #[ignore = "benchmark"]
-    #[cfg(target_arch = "x86_64")]
-    fn bench_networks_against_the_fma_peak() {
-        if !(is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")) {
-            println!("no AVX2 and FMA: nothing to measure");
-            return;
-        }
-        let config = |n_inputs, n_hidden_layers, n_outputs| MlpConfig {
-            n_inputs,
-            width: 64,
-            n_hidden_layers,
-            n_outputs,
-            output_alignment: 16,
-        };
-        let density = config(32, 1, 16);
-        let colour = config(16, 2, 3);
-        let [density, colour] =
-            [density, colour].map(|c| Mlp::new(c, &seeded(c.n_params(), 5)).unwrap());
-        let n = 256;
-        let (x_density, x_colour) = (seeded(n * 32, 6), seeded(n * 16, 7));
-        let per_sample = [
-            32.0 * 64.0 + 64.0 * 16.0,
-            16.0 * 64.0 + 64.0 * 64.0 + 64.0 * 4.0,
-        ];
-        let rounds = 1 << 20;
-        for threads in [1, 2] {
-            // SAFETY: the CPU has AVX2 and FMA (checked above).
-            let peak = macs_per_cpu_ns(threads, rounds as f64 * 80.0, &|| unsafe {
-                fma_chains(rounds)
-            });
-            let shaded =
-                macs_per_cpu_ns(threads, n as f64 * (per_sample[0] + per_sample[1]), &|| {
-                    let (mut sigma, mut rgb) = (vec![0.0; n * 16], vec![0.0; n * 3]);
-                    density.forward(&x_density, &mut sigma);
-                    colour.forward(&x_colour, &mut rgb);
-                    sigma[0] + rgb[0]
-                });
-            let total = per_sample[0] + per_sample[1];
-            println!(
-                "{threads} thread(s): a core's peak {peak:.1} multiply-adds per CPU ns; the \
-                 networks {shaded:.1} ({:.0} % of it), {total} per shaded sample: at most \
-                 {:.2} M shaded samples per CPU second from the networks alone ({:.2} M at \
-                 the peak)",
-                100.0 * shaded / peak,
-                shaded * 1e3 / total,
-                peak * 1e3 / total,
-            );
         }
     }
 

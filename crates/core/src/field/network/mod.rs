@@ -11,6 +11,8 @@ mod weights;
 pub(crate) use density::exp_density;
 pub use hashgrid::TableStorage;
 pub(crate) use hashgrid::{correctly_rounded, HashGrid, HashGridConfig};
+#[doc(hidden)]
+pub use mlp::NetworksBench;
 pub(crate) use mlp::{LastInputs, Mlp, MlpConfig};
 pub(crate) use sh4::{sh4, sh_basis};
 pub(crate) use weights::non_finite;

@@ -21,8 +21,7 @@ use nerfx_graph::{
     cached_scene, node, nodes, purge_caches, Context, ParamKind, ParamValues, RenderRequest, Value,
 };
 
-#[path = "common/rng.rs"]
-mod rng;
+use crate::rng;
 
 /// Seeded random pixels from the tests' one generator.
 struct Rng(rng::SplitMix64);

@@ -2,7 +2,7 @@
 //! points at a file that exists (and an anchor at a heading of that page), every chapter
 //! is in the table of contents, and the generated reference pages are what the code
 //! generates now (`nerfx reference nodes|cli`; rewrite them with
-//! `NERFX_BLESS=1 cargo test --test docs`).
+//! `NERFX_BLESS=1 cargo test --test command_line docs::`).
 
 use std::collections::BTreeSet;
 use std::path::PathBuf;
@@ -167,7 +167,7 @@ fn check_generated(page: &str) {
     let committed = std::fs::read_to_string(&path).unwrap_or_default();
     assert!(
         committed == generated,
-        "{} is stale: run `NERFX_BLESS=1 cargo test --test docs`",
+        "{} is stale: run `NERFX_BLESS=1 cargo test --test command_line docs::`",
         path.display()
     );
 }

@@ -5,9 +5,7 @@
 //! thick, a grazing ray, a scaled and cropped instance; and a scene with a field that is not
 //! analytic, which is still marched.
 
-// The shared harness serves the marcher's tests too; this one uses part of it.
-#[allow(dead_code)]
-mod common;
+use crate::common;
 
 use std::f64::consts::PI;
 use std::sync::Arc;

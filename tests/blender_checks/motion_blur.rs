@@ -9,8 +9,7 @@
 //!
 //! Every Blender must export the same shot file.
 
-#[path = "common_blender/mod.rs"]
-mod common_blender;
+use crate::common_blender;
 
 use std::path::{Path, PathBuf};
 

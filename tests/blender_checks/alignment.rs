@@ -14,8 +14,7 @@
 //! `NERFX_SKIP_BPY=1` skips the `bpy` runs knowingly), each of which must write the
 //! same shot files.
 
-#[path = "common_blender/mod.rs"]
-mod common_blender;
+use crate::common_blender;
 
 use std::path::PathBuf;
 use std::sync::Arc;

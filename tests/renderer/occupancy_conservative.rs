@@ -5,8 +5,7 @@
 use glam::{DVec3, Vec3};
 use nerfx_core::field::{Aabb, Analytic, Field, Occupancy, Primitive, ShColor, Shape};
 
-#[path = "common/rng.rs"]
-mod rng;
+use crate::common::rng;
 use rng::SplitMix64 as Rng;
 
 fn random_primitive(rng: &mut Rng) -> Primitive {

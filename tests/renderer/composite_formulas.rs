@@ -11,8 +11,7 @@ const W: u32 = 17;
 const H: u32 = 9;
 const N: usize = (W * H) as usize;
 
-#[path = "common/rng.rs"]
-mod rng;
+use crate::common::rng;
 
 /// Seeded random pixels from the tests' one generator.
 struct Rng(rng::SplitMix64);

@@ -6,8 +6,7 @@
 //!
 //! It runs in every Blender tested (Debian's 3.4, bpy 4.5 and 5.0; see `common_blender`).
 
-#[path = "common_blender/mod.rs"]
-mod common_blender;
+use crate::common_blender;
 
 use std::path::{Path, PathBuf};
 

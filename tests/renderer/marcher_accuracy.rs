@@ -5,7 +5,7 @@
 //!
 //! Every comparison goes through `common::assert_close`, which names the worst pixel.
 
-mod common;
+use crate::common;
 
 use std::sync::Arc;
 

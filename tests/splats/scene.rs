@@ -3,7 +3,7 @@
 //! The joint check: a translucent plane of splats cuts an analytic sphere in half. Every pixel
 //! is computed independently of the merge: the sphere by its closed form (constant density, so
 //! `α = 1 − e^{−σ·length}` for each part of its chord), the splats from a render of the splats
-//! alone (itself checked against NumPy in `splat_numpy.rs`), composited by hand in depth
+//! alone (itself checked against NumPy in `numpy.rs`), composited by hand in depth
 //! order: the sphere's part in front of the plane, the plane, the sphere's part behind it.
 
 use std::path::Path;

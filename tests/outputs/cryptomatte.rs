@@ -7,10 +7,7 @@
 //!
 //! Needs `python3` with `numpy`, `OpenEXR` and `mmh3` (`scripts/test.sh` installs them).
 
-mod common_fields;
-#[allow(dead_code)] // the writers of bytes and folders this test does not use
-mod common_ingp;
-mod common_ofx;
+use crate::{common_ingp, common_ofx};
 
 use std::path::Path;
 use std::process::Command;

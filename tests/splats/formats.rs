@@ -12,7 +12,7 @@
 //! Whole real captures, too large to keep here, are checked the same way by
 //! `NERFX_REAL_SPLATS=folder cargo bench --bench splats -- real_captures`.
 
-mod common_splats;
+use crate::common_splats;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};

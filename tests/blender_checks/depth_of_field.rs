@@ -7,8 +7,7 @@
 //! estimates: nerfx must agree with them within a small multiple of how two Cycles renders
 //! with different seeds differ, sharp renders must agree, and the blur must be real.
 
-#[path = "common_blender/mod.rs"]
-mod common_blender;
+use crate::common_blender;
 
 use std::path::PathBuf;
 

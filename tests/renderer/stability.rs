@@ -6,7 +6,7 @@
 //! finite wherever alpha > 0) and agree with the exact reference where that is meaningful;
 //! invalid input must be an error that says what is wrong, never a panic.
 
-mod common;
+use crate::common;
 
 use common::*;
 use glam::{DMat4, DVec3};

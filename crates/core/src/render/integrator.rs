@@ -12,8 +12,8 @@
 //!
 //! Worked example, three pieces of σ = 1, 2, 0 per unit and δ = 0.5:
 //! ```
-//! use nerfx_core::render::Pieces;
-//! let mut p = Pieces::new();
+//! use nerfx_core::render::RunningComposite;
+//! let mut p = RunningComposite::new();
 //! p.add(0.0, 0.5, 1.0);
 //! p.add(0.5, 0.5, 2.0);
 //! p.add(1.0, 0.5, 0.0);
@@ -249,21 +249,21 @@ pub fn srgb_composite_to_linear(rgb: [f32; 3], alpha: f32) -> [f32; 3] {
 
 /// The running composite of one ray: transmittance, accumulation and the depth moment.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Pieces {
+pub struct RunningComposite {
     transmittance: f64,
     depth_moment: f64,
 }
 
-impl Default for Pieces {
+impl Default for RunningComposite {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl Pieces {
+impl RunningComposite {
     /// Nothing composited yet: `T = 1`.
     pub fn new() -> Self {
-        Pieces {
+        RunningComposite {
             transmittance: 1.0,
             depth_moment: 0.0,
         }
@@ -271,7 +271,7 @@ impl Pieces {
 
     /// The pieces of a pixel composited elsewhere, from its transmittance `T` and `Σ w·t`.
     pub fn from_sums(transmittance: f64, depth_moment: f64) -> Self {
-        Pieces {
+        RunningComposite {
             transmittance,
             depth_moment,
         }
@@ -500,7 +500,7 @@ mod tests {
 
     #[test]
     fn one_thick_piece_is_exact() {
-        let mut p = Pieces::new();
+        let mut p = RunningComposite::new();
         let w = p.add(2.0, 3.0, 0.5);
         let alpha = 1.0 - (-1.5f64).exp();
         assert!((w - alpha).abs() < 1e-15);
@@ -512,11 +512,11 @@ mod tests {
 
     #[test]
     fn many_thin_pieces_equal_one_thick_piece() {
-        let mut thin = Pieces::new();
+        let mut thin = RunningComposite::new();
         for i in 0..1000 {
             thin.add(2.0 + i as f64 * 0.003, 0.003, 0.5);
         }
-        let mut thick = Pieces::new();
+        let mut thick = RunningComposite::new();
         thick.add(2.0, 3.0, 0.5);
         assert!((thin.accumulation() - thick.accumulation()).abs() < 1e-13);
         assert!((thin.expected_depth() - thick.expected_depth()).abs() < 1e-10);
@@ -533,7 +533,7 @@ mod tests {
             (f64::NAN, 1.0),
             (5.0, 0.0),
         ] {
-            let mut p = Pieces::new();
+            let mut p = RunningComposite::new();
             for i in 0..10 {
                 p.add(1.0 + i as f64 * delta, delta, sigma);
             }
@@ -545,7 +545,7 @@ mod tests {
                 "{d}"
             );
         }
-        let mut opaque = Pieces::new();
+        let mut opaque = RunningComposite::new();
         opaque.add(4.0, 1.0, f64::INFINITY);
         assert_eq!(opaque.accumulation(), 1.0);
         assert_eq!(opaque.expected_depth(), 4.0);
@@ -602,7 +602,7 @@ mod tests {
             (seed >> 11) as f64 / (1u64 << 53) as f64
         };
         for _ in 0..200 {
-            let (mut pieces, mut log, mut t) = (Pieces::new(), Vec::new(), 0.0);
+            let (mut pieces, mut log, mut t) = (RunningComposite::new(), Vec::new(), 0.0);
             for _ in 0..40 {
                 let delta = 0.01 + uniform();
                 let (s0, s1) = (uniform().powi(4) * 3.0, uniform().powi(4) * 3.0);
@@ -633,7 +633,7 @@ mod tests {
     #[test]
     fn fragments_composite_as_alpha_over_and_cross_where_they_are() {
         // A half-opaque fragment at t = 2, then a piece σ = 1 over [3, 13]: T = 0.5·e^{−10}.
-        let mut p = Pieces::new();
+        let mut p = RunningComposite::new();
         assert_eq!(p.add_fragment(2.0, 0.5), 0.5);
         let w = p.add(3.0, 10.0, 1.0);
         assert!((w - 0.5 * opacity(10.0)).abs() < 1e-15);

@@ -4,7 +4,7 @@
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
-use super::integrator::{crossing_depth, Pieces};
+use super::integrator::{crossing_depth, RunningComposite};
 use super::march::PixelResult;
 use super::{bands, empty_planes, Outputs, RenderStats};
 use crate::camera::Camera;
@@ -149,7 +149,7 @@ fn naive_pixel(
             }
         }
     }
-    let mut pieces = Pieces::new();
+    let mut pieces = RunningComposite::new();
     let mut color = DVec3::ZERO;
     let mut log = Vec::new();
     for j in 0..n {

@@ -325,7 +325,7 @@ fn measure_scene(
         Truth::Rasterised => (
             Reference::None,
             "none: splats are rasterised exactly as gsplat's classic mode (checked against \
-             NumPy in tests/splat_numpy.rs); presets change only marched content"
+             NumPy in tests/splats/numpy.rs); presets change only marched content"
                 .to_string(),
         ),
     };

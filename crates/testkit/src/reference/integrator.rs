@@ -137,7 +137,7 @@ pub(crate) struct Segment {
 
 /// A piece of the sweep: consecutive breakpoints with a fixed set of active segments.
 #[derive(Clone, Debug)]
-struct Piece {
+struct SweepPiece {
     a: f64,
     b: f64,
     /// Optical depth from the ray's start to `a`.
@@ -225,7 +225,7 @@ pub(crate) struct Sweep {
     /// The segments of the ray being integrated.
     pub segments: Vec<Segment>,
     breaks: Vec<f64>,
-    pieces: Vec<Piece>,
+    pieces: Vec<SweepPiece>,
     active: Vec<usize>,
     /// Per active Gaussian, `tail` at the start of the current quadrature interval.
     tails: Vec<f64>,
@@ -315,7 +315,7 @@ impl Sweep {
                 segments: &self.segments,
             };
             let tau = density.optical_depth(a, b);
-            self.pieces.push(Piece {
+            self.pieces.push(SweepPiece {
                 a,
                 b,
                 tau_a,
@@ -355,7 +355,7 @@ impl Sweep {
 }
 
 /// Colour and depth moment of a piece of constant density, in closed form.
-fn constant_piece(piece: &Piece) -> (DVec3, f64) {
+fn constant_piece(piece: &SweepPiece) -> (DVec3, f64) {
     let transmittance = (-piece.tau_a).exp();
     if transmittance < NEGLIGIBLE_TRANSMITTANCE || piece.sigma <= 0.0 {
         return (DVec3::ZERO, 0.0);
@@ -371,7 +371,7 @@ fn constant_piece(piece: &Piece) -> (DVec3, f64) {
 /// optical depth at most [`TAU_STEP`]; `alpha` is the ray's total accumulation (sub-intervals
 /// absorbing less than 1e-18 of it are skipped).
 fn gaussian_piece(
-    piece: &Piece,
+    piece: &SweepPiece,
     density: PieceDensity,
     alpha: f64,
     quadrature: &mut Quadrature,

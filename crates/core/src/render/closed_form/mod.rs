@@ -7,13 +7,13 @@
 //! same primitives are present: the ray is swept piece by piece, front to back.
 //!
 //! - A piece of constant densities (total `K`, colour `Σkᵢcᵢ/K`) is exact:
-//!   weight `T(1 − e^{−Kℓ})` and its depth moment ([`Pieces::add`]).
+//!   weight `T(1 − e^{−Kℓ})` and its depth moment ([`RunningComposite::add`]).
 //! - A piece holding a Gaussian has a closed-form optical depth (erf), so its weight
 //!   `w = T_a − T_b` is exact too, and so is its colour when it holds one primitive alone.
 //!   Where they can change the pixel by more than the error target allows
-//!   ([`Piece::integrate`]), the colour split `∫T Σσᵢcᵢ dt` between several primitives and
+//!   ([`GaussianPiece::integrate`]), the colour split `∫T Σσᵢcᵢ dt` between several primitives and
 //!   the depth moment (by parts, `∫ₐᵇ tσT dt = a·w + ∫ₐᵇ T dt − (b − a)·T_b`) come from
-//!   Gauss–Legendre panels ([`Piece::quadrature`]); the split is scaled so that its weight
+//!   Gauss–Legendre panels ([`GaussianPiece::quadrature`]); the split is scaled so that its weight
 //!   is the exact one. A piece thin enough (small optical depth `τ`), or whose total density
 //!   changes little over it, has both in closed form: the split as the profiles' optical
 //!   depths' ratio, `∫T dt` from the integral of the optical depth or the weight over the
@@ -29,14 +29,14 @@
 //! the preset's error target ([`stop_transmittance`]). Pixels are written with the marcher's
 //! conventions: premultiplied linear colour, infinite depths where nothing was accumulated.
 
-mod piece;
+mod gaussian_piece;
 
 use glam::DVec3;
 
-use self::piece::{Integral, Piece, Sums};
+use self::gaussian_piece::{GaussianPiece, Integral, Sums};
 use super::deep::{finish_pixel, DeepScratch, DeepTile, RawPiece};
 use super::integrator::srgb_composite_to_linear;
-use super::integrator::Pieces;
+use super::integrator::RunningComposite;
 use super::march::{cull_instances, may_meet, DeepPass, InstancePlan, PixelResult, RayCone};
 use super::{MarchParams, Outputs, RenderSettings, RenderStats};
 use crate::camera::{Camera, Ray};
@@ -48,12 +48,12 @@ use crate::image::Window;
 const MEDIAN_RESOLUTION: f64 = 1e-9;
 
 /// How close to it a ray's median depth is found, relative, with `error_target`: within the
-/// share of it that the expected depth is held to ([`piece::DEPTH_SHARE`]), as a depth is
+/// share of it that the expected depth is held to ([`gaussian_piece::DEPTH_SHARE`]), as a depth is
 /// judged by one measure whichever of the two it is; never finer than
 /// [`MEDIAN_RESOLUTION`]. Each Newton step of a Gaussian piece's median costs an error
 /// function per profile; at Draft the demo's Gaussian medians take 1.4 steps each, not 2.1.
 fn median_resolution(error_target: f32) -> f64 {
-    (piece::DEPTH_SHARE * f64::from(error_target)).max(MEDIAN_RESOLUTION)
+    (gaussian_piece::DEPTH_SHARE * f64::from(error_target)).max(MEDIAN_RESOLUTION)
 }
 
 /// Per-thread scratch reused from tile to tile: no allocation per ray.
@@ -144,7 +144,7 @@ pub(super) fn integrate_tile(
         }
         let px = match ray {
             Some(ray) => ctx.integrate(ray, &mut s.ray, &mut stats),
-            None => finish(&Pieces::new(), DVec3::ZERO, 1.0, f64::INFINITY),
+            None => finish(&RunningComposite::new(), DVec3::ZERO, 1.0, f64::INFINITY),
         };
         if let (Some((pass, tile_out)), Some(pieces)) = (&mut deep, &s.ray.deep) {
             let rgb = if pass.decode {
@@ -186,7 +186,7 @@ impl Context<'_> {
     fn integrate(&self, ray: &Ray, s: &mut RayScratch, stats: &mut RenderStats) -> PixelResult {
         self.gather(ray, s);
         stats.color_samples += s.profiles.len() as u64;
-        let mut pieces = Pieces::new();
+        let mut pieces = RunningComposite::new();
         let mut rgb = DVec3::ZERO;
         if s.profiles.is_empty() {
             return finish(&pieces, rgb, ray.z_per_t, f64::INFINITY);
@@ -232,7 +232,8 @@ impl Context<'_> {
                     (k * (b - a), Some(k))
                 }
                 None => {
-                    let piece = Piece::new(a, &s.profiles, &s.colours, &s.active, &mut s.anchors);
+                    let piece =
+                        GaussianPiece::new(a, &s.profiles, &s.colours, &s.active, &mut s.anchors);
                     let Integral {
                         optical_depth,
                         weight,
@@ -349,7 +350,7 @@ fn insertion_sort(v: &mut [f64]) {
 }
 
 /// The pixel of a composited ray, as the marcher writes it.
-fn finish(pieces: &Pieces, rgb: DVec3, z_per_t: f64, median: f64) -> PixelResult {
+fn finish(pieces: &RunningComposite, rgb: DVec3, z_per_t: f64, median: f64) -> PixelResult {
     let depth = pieces.expected_depth();
     PixelResult {
         rgb: rgb.as_vec3().to_array(),
@@ -419,10 +420,10 @@ fn median_depth(s: &mut RayScratch, alpha: f64, resolution: f64, budget: &mut Bu
         return (a + depth / k).min(b);
     }
     let piece = if s.anchored == Some(at) {
-        Piece::anchored(a, &s.profiles, &s.colours, &s.active, &s.anchors)
+        GaussianPiece::anchored(a, &s.profiles, &s.colours, &s.active, &s.anchors)
     } else {
         present(&s.profiles, a, b, &mut s.active);
-        Piece::new(a, &s.profiles, &s.colours, &s.active, &mut s.anchors)
+        GaussianPiece::new(a, &s.profiles, &s.colours, &s.active, &mut s.anchors)
     };
     piece.depth_reaching(depth, b, optical_depth, resolution * b, budget)
 }

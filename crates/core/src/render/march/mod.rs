@@ -41,7 +41,7 @@ use self::setup::setup_rays;
 use self::shading::{clear_colour_queries, queue_colours, shade};
 use super::deep::{finish_pixel, DeepParams, DeepScratch, DeepTile, RawPiece};
 use super::fragment::Fragment;
-use super::integrator::{crossing_depth, srgb_composite_to_linear, Pieces};
+use super::integrator::{crossing_depth, srgb_composite_to_linear, RunningComposite};
 use super::runs::{Run, RunScratch};
 use super::splats::SplatPixel;
 use super::splats::Splatting;
@@ -174,7 +174,7 @@ impl Pending {
 #[derive(Clone, Debug, Default)]
 struct RayState {
     ray: Option<Ray>,
-    pieces: Pieces,
+    pieces: RunningComposite,
     rgb: DVec3,
     /// The ray's runs (see module `runs`), and the current one.
     runs: Vec<Run>,

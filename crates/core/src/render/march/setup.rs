@@ -9,7 +9,7 @@ use super::{InstancePlan, Met, Scratch};
 use crate::camera::Camera;
 use crate::image::Window;
 use crate::render::fragment::Fragment;
-use crate::render::integrator::Pieces;
+use crate::render::integrator::RunningComposite;
 use crate::render::runs::{instance_runs, merge};
 use crate::render::splats::Splatting;
 use crate::render::volume::VolumeSampler;
@@ -46,7 +46,7 @@ pub(super) fn setup_rays(
     for (r, state) in s.rays.iter_mut().enumerate().take(n_rays) {
         let ray = s.world_rays[r];
         state.ray = ray;
-        state.pieces = Pieces::new();
+        state.pieces = RunningComposite::new();
         state.rgb = DVec3::ZERO;
         state.next_t = None;
         state.skipped_weight = 0.0;
@@ -139,7 +139,7 @@ pub(super) fn setup_rays(
             if let Some(fragments) = composited {
                 s.stats.splat_fragments += fragments;
                 for (state, px) in s.rays[..n_rays].iter_mut().zip(&s.splat_pixels) {
-                    state.pieces = Pieces::from_sums(px.transmittance, px.depth_moment);
+                    state.pieces = RunningComposite::from_sums(px.transmittance, px.depth_moment);
                     state.rgb = DVec3::from_array(px.rgb);
                 }
                 return;

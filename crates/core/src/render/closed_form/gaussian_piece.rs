@@ -36,13 +36,13 @@ const GAUSS_4: ([f64; 4], [f64; 4]) = (
 pub(super) const DEPTH_SHARE: f64 = 0.125;
 
 /// What share of the error target a piece's colour is held to where it is taken in closed
-/// form ([`Piece::integrate`]): its bound is a worst case that, held to the whole target,
+/// form ([`GaussianPiece::integrate`]): its bound is a worst case that, held to the whole target,
 /// leaves colours further from the exact ones than the marcher's (Final's largest colour
 /// error 6.2e-4 on the demo, the marcher's 3.3e-4; a quarter gives 1.6e-4).
 const COLOUR_SHARE: f64 = 0.25;
 
 /// A Gaussian piece is integrated only up to where its light has all but gone
-/// ([`Piece::integrate`]) once its optical depth is this many times what that takes.
+/// ([`GaussianPiece::integrate`]) once its optical depth is this many times what that takes.
 const OPAQUE: f64 = 4.0;
 
 /// Bisections of a Gaussian piece at most: 48 halvings take a piece of a world unit below
@@ -69,7 +69,7 @@ fn exp_above(h: f64) -> f64 {
 }
 
 /// One piece `[a, b]` of a ray: the profiles present all over it, and their anchors at `a`.
-pub(super) struct Piece<'a> {
+pub(super) struct GaussianPiece<'a> {
     a: f64,
     profiles: &'a [Profile],
     colours: &'a [DVec3],
@@ -86,7 +86,7 @@ pub(super) struct Sums {
     transmittance: f64,
 }
 
-/// A Gaussian piece integrated ([`Piece::integrate`]), relative to the transmittance it is
+/// A Gaussian piece integrated ([`GaussianPiece::integrate`]), relative to the transmittance it is
 /// entered with: its optical depth, weight `1 − e^{−τ}`, colour `∫T Σσᵢcᵢ dt` and depth
 /// moment `∫tσT dt`.
 #[derive(Clone, Copy, Debug, Default)]
@@ -111,7 +111,7 @@ struct Whole {
     greatest: f64,
 }
 
-/// What a [`Piece::quadrature`] is held to: the colour split, `∫T dt`, and whether its
+/// What a [`GaussianPiece::quadrature`] is held to: the colour split, `∫T dt`, and whether its
 /// nodes take rough error functions.
 #[derive(Clone, Copy, Debug)]
 struct Asks {
@@ -144,7 +144,7 @@ impl std::ops::Add for Sums {
     }
 }
 
-impl<'a> Piece<'a> {
+impl<'a> GaussianPiece<'a> {
     /// The piece from `a` of the profiles `active`, their anchors worked out into `anchors`.
     pub(super) fn new(
         a: f64,
@@ -170,7 +170,7 @@ impl<'a> Piece<'a> {
         active: &'a [u32],
         anchors: &'a [Anchor],
     ) -> Self {
-        Piece {
+        GaussianPiece {
             a,
             profiles,
             colours,

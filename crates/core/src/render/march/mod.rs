@@ -367,30 +367,51 @@ pub(super) struct Scratch {
     pending: Vec<Pending>,
     /// The new nodes of one ray while they are merged in among its others.
     settling: Vec<Node>,
-    /// Pairs `(ray, first node)` to test for refinement.
-    candidates: Vec<(u32, u32)>,
-    /// Candidates that passed the jump test, with their density bound.
-    unsure: Vec<(u32, u32, f64)>,
-    /// Step boxes for one batched density-bound query.
-    regions: Vec<Aabb>,
-    owners: Vec<(u32, f64)>,
+    /// What refinement's tests of a round's steps keep.
+    refine: RefineScratch,
     field_out: Vec<f32>,
     rgb_out: Vec<Vec3>,
     /// Per instance, one batched query (of [`evaluate_pending`] or [`shade`]).
     queries: Vec<FieldQuery>,
-    /// Per pixel of the tile: its world ray and camera z per unit ray distance; one ray's
-    /// splat fragments (panoramic cameras).
+    /// Per pixel of the tile: its world ray.
     world_rays: Vec<Option<Ray>>,
+    /// The tile's splat and volume fragments before they join its rays.
+    fragments: FragmentScratch,
+    stats: RenderStats,
+    /// A deep render's per-pixel buffers.
+    deep: DeepBuffers,
+}
+
+/// What refinement keeps of a round's steps.
+#[derive(Default)]
+struct RefineScratch {
+    /// Pairs `(ray, first node)` to test for refinement.
+    candidates: Vec<(u32, u32)>,
+    /// Candidates that passed the jump test, with their density bound.
+    unsure: Vec<(u32, u32, f64)>,
+    /// Step boxes for one batched density-bound query, and each one's owner.
+    regions: Vec<Aabb>,
+    owners: Vec<(u32, f64)>,
+}
+
+/// A tile's fragments before they join its rays.
+#[derive(Default)]
+struct FragmentScratch {
+    /// Per pixel, camera z per unit ray distance; one ray's splat fragments (panoramic
+    /// cameras); the splat layer's composited pixels.
     z_per_t: Vec<f64>,
     along: Vec<Fragment>,
     splat_pixels: Vec<SplatPixel>,
-    /// Per pixel of the tile: its sampled instances' fragments.
+    /// Per pixel of the tile: its sampled instances' fragments, and the samplers' buffers.
     volume: Vec<Vec<Fragment>>,
-    volume_samplers: VolumeScratch,
-    stats: RenderStats,
-    /// A deep render's per-pixel finishing scratch, and its pieces resolved.
-    deep: DeepScratch,
-    deep_raw: Vec<RawPiece>,
+    samplers: VolumeScratch,
+}
+
+/// A deep render's per-pixel buffers: the finishing scratch, and a ray's pieces resolved.
+#[derive(Default)]
+struct DeepBuffers {
+    finish: DeepScratch,
+    resolved: Vec<RawPiece>,
 }
 
 /// What a deep render asks of a tile: the samples to keep, and whether the flat colours are
@@ -489,8 +510,9 @@ pub(super) fn march_tile(
     if let Some((pass, tile_out)) = deep {
         tile_out.clear();
         for (st, px) in s.rays[..n_rays].iter().zip(out.iter()) {
-            s.deep_raw.clear();
-            s.deep_raw
+            s.deep.resolved.clear();
+            s.deep
+                .resolved
                 .extend(st.deep_pieces.iter().map(|p| p.resolved(&st.deep_nodes)));
             let rgb = if pass.decode {
                 srgb_composite_to_linear(px.rgb, px.alpha)
@@ -499,12 +521,12 @@ pub(super) fn march_tile(
             };
             let z_per_t = st.ray.map_or(1.0, |r| r.z_per_t);
             finish_pixel(
-                &s.deep_raw,
+                &s.deep.resolved,
                 z_per_t,
                 rgb,
                 pass.decode,
                 &pass.params,
-                &mut s.deep,
+                &mut s.deep.finish,
                 tile_out,
             );
         }

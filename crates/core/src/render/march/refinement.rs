@@ -17,10 +17,10 @@ use crate::scene::LocalRay;
 /// looked at. Steps that cannot hold an edge of a smooth field are not bisected for their
 /// jump.
 pub(super) fn refine(plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
-    s.candidates.clear();
+    s.refine.candidates.clear();
     for &r in &s.active {
         for i in 0..s.nodes[r as usize].len().saturating_sub(1) {
-            s.candidates.push((r, i as u32));
+            s.refine.candidates.push((r, i as u32));
         }
     }
     // A step grown by 2^k needs k more bisections to reach a base step's bracket.
@@ -31,7 +31,7 @@ pub(super) fn refine(plans: &[InstancePlan], params: &MarchParams, s: &mut Scrat
     let beyond = usize::from(plans.iter().any(|p| p.smooth > 0.0));
     for level in 0..levels {
         if level > 0 {
-            s.candidates.clear();
+            s.refine.candidates.clear();
             for added in &s.pending {
                 let nodes = &s.nodes[added.ray as usize];
                 let i = nodes.partition_point(|n| n.t < added.t);
@@ -39,16 +39,16 @@ pub(super) fn refine(plans: &[InstancePlan], params: &MarchParams, s: &mut Scrat
                 // curvature it is a neighbour of.
                 let last = nodes.len().saturating_sub(1).min(i + 1 + beyond);
                 for k in i.saturating_sub(1 + beyond)..last {
-                    s.candidates.push((added.ray, k as u32));
+                    s.refine.candidates.push((added.ray, k as u32));
                 }
             }
             if beyond > 0 {
-                s.candidates.sort_unstable();
-                s.candidates.dedup();
+                s.refine.candidates.sort_unstable();
+                s.refine.candidates.dedup();
             }
         }
         let mut last = None;
-        for &(r, _) in &s.candidates {
+        for &(r, _) in &s.refine.candidates {
             if last != Some(r) {
                 last = Some(r);
                 lay_depths_and_differences(&mut s.nodes[r as usize]);
@@ -88,12 +88,12 @@ fn split_candidates(plans: &[InstancePlan], params: &MarchParams, s: &mut Scratc
     let tolerance = params.error_target as f64;
     let any_smooth = plans.iter().any(|p| p.smooth > 0.0);
     s.pending.clear();
-    s.unsure.clear();
+    s.refine.unsure.clear();
     // Candidates come in order along their rays: most share a difference with the last.
     let mut last_difference = LastDifference::default();
     // The densest node of the ray the last candidates were on (see the shell rule below).
     let mut densest: Option<(u32, f64)> = None;
-    for &(r, i) in &s.candidates {
+    for &(r, i) in &s.refine.candidates {
         let nodes = &s.nodes[r as usize];
         let (a, b) = (&nodes[i as usize], &nodes[i as usize + 1]);
         if b.starts_run {
@@ -214,7 +214,7 @@ fn split_candidates(plans: &[InstancePlan], params: &MarchParams, s: &mut Scratc
             let t = split_point(plans, r as usize, i as usize, s);
             s.pending.push(Pending::between(r, t, a));
         } else if !a.exact {
-            s.unsure.push((r, i, 0.0));
+            s.refine.unsure.push((r, i, 0.0));
         }
     }
     // Density bounds over the unsure steps, summed over instances (per world unit).
@@ -224,17 +224,21 @@ fn split_candidates(plans: &[InstancePlan], params: &MarchParams, s: &mut Scratc
         &s.tile_insts,
         &s.met,
         &s.met_at,
-        s.unsure.iter().enumerate().map(|(u, n)| (u as u32, n.0)),
+        s.refine
+            .unsure
+            .iter()
+            .enumerate()
+            .map(|(u, n)| (u as u32, n.0)),
     );
     for &k in &s.tile_insts {
         let (inst, k) = (&plans[k as usize].instance, k as usize);
         if s.by_inst[k].is_empty() {
             continue;
         }
-        s.regions.clear();
-        s.owners.clear();
+        s.refine.regions.clear();
+        s.refine.owners.clear();
         for &(u, e) in &s.by_inst[k] {
-            let (r, i, _) = s.unsure[u as usize];
+            let (r, i, _) = s.refine.unsure[u as usize];
             let lr = &s.met[e as usize].local;
             let nodes = &s.nodes[r as usize];
             let (a, b) = (
@@ -243,28 +247,29 @@ fn split_candidates(plans: &[InstancePlan], params: &MarchParams, s: &mut Scratc
             );
             if a <= b {
                 let (pa, pb) = (lr.at(a), lr.at(b));
-                s.regions.push(Aabb::new(pa.min(pb), pa.max(pb)));
-                s.owners.push((u, lr.units_per_world as f64));
+                s.refine.regions.push(Aabb::new(pa.min(pb), pa.max(pb)));
+                s.refine.owners.push((u, lr.units_per_world as f64));
             }
         }
-        if s.regions.is_empty() {
+        if s.refine.regions.is_empty() {
             continue;
         }
         s.field_out.clear();
-        s.field_out.resize(s.regions.len(), 0.0);
+        s.field_out.resize(s.refine.regions.len(), 0.0);
         if !plans[k].bounded {
             // No bound from this field: its steps cannot be searched.
-            for &(u, _) in &s.owners {
-                s.unsure[u as usize].2 = f64::NEG_INFINITY;
+            for &(u, _) in &s.refine.owners {
+                s.refine.unsure[u as usize].2 = f64::NEG_INFINITY;
             }
             continue;
         }
-        inst.field().density_bounds(&s.regions, &mut s.field_out);
-        for (&(u, k), &bound) in s.owners.iter().zip(&s.field_out) {
-            s.unsure[u as usize].2 += bound as f64 * k;
+        inst.field()
+            .density_bounds(&s.refine.regions, &mut s.field_out);
+        for (&(u, k), &bound) in s.refine.owners.iter().zip(&s.field_out) {
+            s.refine.unsure[u as usize].2 += bound as f64 * k;
         }
     }
-    for &(r, i, bound) in &s.unsure {
+    for &(r, i, bound) in &s.refine.unsure {
         let nodes = &s.nodes[r as usize];
         let (a, b) = (&nodes[i as usize], &nodes[i as usize + 1]);
         // As above: the round's transmittance first, the step's only where that says split.

@@ -108,20 +108,25 @@ pub(super) fn setup_rays(
     }
     let sampled = !volume_samplers.is_empty();
     if sampled {
-        s.volume.resize_with(n_rays, Vec::new);
-        for f in &mut s.volume[..n_rays] {
+        s.fragments.volume.resize_with(n_rays, Vec::new);
+        for f in &mut s.fragments.volume[..n_rays] {
             f.clear();
         }
-        let volume = &mut s.volume[..n_rays];
+        let volume = &mut s.fragments.volume[..n_rays];
         for sampler in volume_samplers {
-            sampler.fill(&s.world_rays, &mut s.volume_samplers, volume, &mut s.stats);
+            sampler.fill(
+                &s.world_rays,
+                &mut s.fragments.samplers,
+                volume,
+                &mut s.stats,
+            );
         }
         if volume_samplers.len() > 1 {
             for f in volume.iter_mut() {
                 f.sort_by(|a, b| a.t.total_cmp(&b.t));
             }
         }
-        for (state, volume) in s.rays[..n_rays].iter_mut().zip(&mut s.volume) {
+        for (state, volume) in s.rays[..n_rays].iter_mut().zip(&mut s.fragments.volume) {
             std::mem::swap(&mut state.volume, volume);
         }
     }
@@ -132,13 +137,13 @@ pub(super) fn setup_rays(
             let composited = layer.composite(
                 tile,
                 &s.world_rays,
-                &mut s.z_per_t,
+                &mut s.fragments.z_per_t,
                 depth,
-                &mut s.splat_pixels,
+                &mut s.fragments.splat_pixels,
             );
             if let Some(fragments) = composited {
                 s.stats.splat_fragments += fragments;
-                for (state, px) in s.rays[..n_rays].iter_mut().zip(&s.splat_pixels) {
+                for (state, px) in s.rays[..n_rays].iter_mut().zip(&s.fragments.splat_pixels) {
                     state.pieces = RunningComposite::from_sums(px.transmittance, px.depth_moment);
                     state.rgb = DVec3::from_array(px.rgb);
                 }
@@ -158,7 +163,13 @@ pub(super) fn setup_rays(
                 composite_fragment(state, f, outputs)
             }
         };
-        layer.fill(tile, &s.world_rays, &mut s.z_per_t, &mut s.along, sink);
+        layer.fill(
+            tile,
+            &s.world_rays,
+            &mut s.fragments.z_per_t,
+            &mut s.fragments.along,
+            sink,
+        );
     }
     for state in &mut s.rays[..n_rays] {
         if !state.live {

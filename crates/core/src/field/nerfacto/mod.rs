@@ -95,8 +95,8 @@ const OCCUPANCY_CELLS: usize = 64;
 const OCCUPANCY_OPACITY: f32 = 1e-3;
 /// The marcher's finest empty-space step beyond the unit cube, in contracted units: a
 /// quarter of a cell of the occupancy grid (4/64), so that the segments it marches begin
-/// close to where the occupied cells do (with a whole cell, 30 % more samples on the far
-/// shell of `tests/fields/nerfacto_far.rs` at Final, in cells the mask empties).
+/// close to where the occupied cells do: with a whole cell, rays spend samples in cells the
+/// mask empties.
 const FAR_SKIP: f32 = 1.0 / 64.0;
 
 /// The networks, in one of the two layouts. The colour MLP (`head`) reads the geometry

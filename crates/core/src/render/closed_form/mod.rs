@@ -51,7 +51,7 @@ const MEDIAN_RESOLUTION: f64 = 1e-9;
 /// share of it that the expected depth is held to ([`gaussian_piece::DEPTH_SHARE`]), as a depth is
 /// judged by one measure whichever of the two it is; never finer than
 /// [`MEDIAN_RESOLUTION`]. Each Newton step of a Gaussian piece's median costs an error
-/// function per profile; at Draft the demo's Gaussian medians take 1.4 steps each, not 2.1.
+/// function per profile, so a coarser preset's median takes fewer.
 fn median_resolution(error_target: f32) -> f64 {
     (gaussian_piece::DEPTH_SHARE * f64::from(error_target)).max(MEDIAN_RESOLUTION)
 }

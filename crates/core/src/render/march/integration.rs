@@ -13,8 +13,8 @@ use crate::render::{MarchParams, Outputs};
 /// What the error rule aims a step's weighted error estimate at, as a fraction of the target
 /// ([`allowed_step`]): the curvature ahead is estimated from the round behind, and a step
 /// whose own estimate exceeds the target is bisected, so the curvature may double from the
-/// one to the other before a step costs a bisection (measured on the demo's Final: an
-/// eighth of the target lays 11 % more samples and costs 7 % more CPU time than a half).
+/// one to the other before a step costs a bisection (a tighter aim lays more samples for no
+/// gain the presets need; the guide's benchmark history has the measurements).
 const STEP_SAFETY: f64 = 2.0;
 
 /// Composites a ray's nodes, in order, until it is opaque enough; distributes each piece's
@@ -150,9 +150,7 @@ fn name_deep_nodes(state: &mut RayState, first: usize, [i, j]: [usize; 2], far: 
 /// mean's optical depth is the trapezoid rule's less its `bias` ([`trapezoid_bias`], where
 /// both sides give a curvature; never below zero). The trapezoid rule's error, `δ³·σ''/12`,
 /// has the sign of the curvature: over a convex stretch of a trained surface it adds up,
-/// step after step, each within its own estimate (on the dense blob at 1080p, some 150
-/// Final steps' added up to 1.05e-3 in alpha at pixel (1357, 426); the bias predicted three
-/// quarters of it). Less the bias, what is left is the change of the curvature across the
+/// step after step, each within its own estimate, past the target. Less the bias, what is left is the change of the curvature across the
 /// step, which changes sign along a bump. The bias is at most a twelfth of the step's
 /// weighted error estimate (`T·δ³·|σ''|`), so it moves a piece's weight by at most a
 /// twelfth of the target where the step meets it, and by nothing where it has no neighbour
@@ -160,12 +158,9 @@ fn name_deep_nodes(state: &mut RayState, first: usize, [i, j]: [usize; 2], far: 
 ///
 /// Only where the step and its neighbours lie within the smooth length of every field the
 /// ray meets (`RayState::smooth`): over nodes further apart a trained field's cells have
-/// kinks the cubic does not model (on the fog at 480×270, with every step corrected,
-/// Draft's worst alpha went from 6.7e-4 to 1.9e-3, and with steps up to one smooth length
-/// the blob's Draft from 4.55e-2 to 4.66e-2). An analytic field declares no such length:
-/// its exact runs are smooth, but over steps as long as its features (a Gaussian's width at
-/// Draft) the cubic fits them no better than the trapezoid (corrected, the sheets' Draft
-/// PSNR at 480×270 fell from 64.3 to 62.6 dB, though Final's rose from 87.1 to 93.5 dB).
+/// kinks the cubic does not model, and correcting there makes the error worse. An analytic
+/// field declares no such length: its exact runs are smooth, but over steps as long as its
+/// features (a Gaussian's width at Draft) the cubic fits them no better than the trapezoid.
 fn unbiased_ends(a: &Node, b: &Node, bias: Option<f64>) -> [f64; 2] {
     let ends = [a.sigma, b.sigma];
     let mean = 0.5 * (a.sigma + b.sigma);

@@ -65,12 +65,9 @@ pub(super) fn refine(plans: &[InstancePlan], params: &MarchParams, s: &mut Scrat
 /// The share of the error target a smooth step's weighted estimate ([`smooth_change`], or a
 /// bump it may straddle) may reach before the step is bisected. The estimate bounds the
 /// step's own error, not the pixel's, and a trained density has dips and bumps narrower
-/// than its smooth length that a step's nodes do not show: on the dense blob at 480×270
-/// (Final), at pixel (339, 106), two steps' errors, 0.86 and 0.88 of their estimates (7.0e-4
-/// and 4.4e-4 weighted), added with one sign, and alpha was off by 1.01e-3. A bare safety
-/// factor; of the two tried, the cheaper that keeps the blob's Final within target at
-/// 480×270 and 1080p: 9/10, the worst pixel 9.4e-4 there, for 3 % more samples (8/10:
-/// 2.9e-4, for 7 %).
+/// than its smooth length that a step's nodes do not show: two steps each within their
+/// estimate may add with one sign past the target. A bare safety factor: the largest share
+/// that keeps the dense blob's Final within its target.
 const SMOOTH_SHARE: f64 = 0.9;
 
 /// Tests each candidate pair `(ray, i)` (nodes `i` and `i + 1`) and lays the midpoints of
@@ -430,8 +427,7 @@ pub(super) fn smooth_change(nodes: &[Node], i: usize) -> f64 {
 /// (`trained`): [`unmeasured_change`]. An analytic field's spans are split at their peaks;
 /// a trained field's mask segments are not, and a step with no neighbour in its round shows
 /// nothing of what lies inside it: a mask segment one step long, or a segment's last step
-/// alone in a later round (on the dense blob at 1080p, pixel (791, 1010)'s Final step
-/// between ends of 154 and 153 held a dip to 143, and alpha was off by 1.1e-3).
+/// alone in a later round, may hold a dip its nearly equal ends do not show.
 #[inline]
 pub(super) fn exact_change(a: &Node, b: &Node, sides: [Option<f64>; 2], trained: bool) -> f64 {
     match sides {

@@ -16,16 +16,15 @@ pub use marcher::{march_ngp, NgpRay, NgpSample, NgpScratch, NgpStats, NGP_MAX_ST
 
 use crate::camera::Ray;
 use crate::field::{linear_to_srgb, ColorSpace, Field};
-use crate::render::fragment::Fragment;
+use crate::render::fragment::{Fragment, LocalRays};
 use crate::render::RenderStats;
 use crate::scene::NgpInstance;
 
 /// Per-thread buffers.
 #[derive(Default)]
 pub(super) struct NgpFill {
-    rays: Vec<NgpRay>,
-    /// Per marched ray: the pixel and field units per world unit.
-    owners: Vec<(u32, f64)>,
+    /// The tile's rays in the field's frame.
+    local: LocalRays<NgpRay>,
     samples: Vec<Vec<NgpSample>>,
     marcher: NgpScratch,
 }
@@ -40,29 +39,22 @@ pub(super) fn fill(
     out: &mut [Vec<Fragment>],
     stats: &mut RenderStats,
 ) {
-    s.rays.clear();
-    s.owners.clear();
-    for (i, ray) in rays.iter().enumerate() {
-        if let Some((r, k)) = ray.as_ref().and_then(|r| ngp_ray(inst, r)) {
-            s.rays.push(r);
-            s.owners.push((i as u32, k));
-        }
-    }
-    if s.rays.is_empty() {
+    s.local.collect(rays, |r| ngp_ray(inst, r));
+    if s.local.rays.is_empty() {
         return;
     }
-    if s.samples.len() < s.rays.len() {
-        s.samples.resize_with(s.rays.len(), Vec::new);
+    if s.samples.len() < s.local.rays.len() {
+        s.samples.resize_with(s.local.rays.len(), Vec::new);
     }
     let field = inst.field();
-    let samples = &mut s.samples[..s.rays.len()];
-    let done = march_ngp(field, &s.rays, NGP_MAX_STEPS, samples, &mut s.marcher);
+    let samples = &mut s.samples[..s.local.rays.len()];
+    let done = march_ngp(field, &s.local.rays, NGP_MAX_STEPS, samples, &mut s.marcher);
     stats.density_samples += done.samples;
     stats.color_samples += done.color_queries;
     stats.budget_limited_rays += done.capped;
     stats.invalid_samples += done.invalid;
     let encode = space == ColorSpace::Srgb && field.color_space() == ColorSpace::Linear;
-    for (&(i, k), samples) in s.owners.iter().zip(samples.iter()) {
+    for (&(i, k), samples) in s.local.owners.iter().zip(samples.iter()) {
         out[i as usize].extend(samples.iter().filter(|f| f.alpha > 0.0).map(|f| Fragment {
             t: f.t / k,
             alpha: f.alpha,

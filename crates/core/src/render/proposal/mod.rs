@@ -19,7 +19,7 @@ pub use sampler::{
 };
 
 use crate::camera::Ray;
-use crate::render::fragment::Fragment;
+use crate::render::fragment::{Fragment, LocalRays};
 use crate::render::integrator::opacity;
 use crate::render::RenderStats;
 use crate::scene::ProposalInstance;
@@ -27,9 +27,8 @@ use crate::scene::ProposalInstance;
 /// Per-thread buffers.
 #[derive(Default)]
 pub(super) struct ProposalFill {
-    rays: Vec<ProposalRay>,
-    /// Per sampled ray: the pixel and field units per world unit.
-    owners: Vec<(u32, f64)>,
+    /// The tile's rays in the field's frame.
+    local: LocalRays<ProposalRay>,
     pieces: Vec<ProposalSample>,
     sampler: ProposalScratch,
 }
@@ -43,26 +42,20 @@ pub(super) fn fill(
     out: &mut [Vec<Fragment>],
     stats: &mut RenderStats,
 ) {
-    s.rays.clear();
-    s.owners.clear();
-    for (i, ray) in rays.iter().enumerate() {
-        if let Some((r, k)) = ray.as_ref().and_then(|r| proposal_ray(inst, r)) {
-            s.rays.push(r);
-            s.owners.push((i as u32, k));
-        }
-    }
-    if s.rays.is_empty() {
+    s.local.collect(rays, |r| proposal_ray(inst, r));
+    if s.local.rays.is_empty() {
         return;
     }
     s.pieces.clear();
-    let Some(done) = sample_proposals(inst.field(), &s.rays, &mut s.pieces, &mut s.sampler) else {
+    let Some(done) = sample_proposals(inst.field(), &s.local.rays, &mut s.pieces, &mut s.sampler)
+    else {
         return;
     };
     stats.density_samples += done.proposal_queries + done.main_queries;
     stats.color_samples += done.color_queries;
     stats.invalid_samples += done.invalid_samples;
-    let per_ray = s.pieces.len() / s.rays.len();
-    for (&(i, k), pieces) in s.owners.iter().zip(s.pieces.chunks_exact(per_ray)) {
+    let per_ray = s.pieces.len() / s.local.rays.len();
+    for (&(i, k), pieces) in s.local.owners.iter().zip(s.pieces.chunks_exact(per_ray)) {
         let Some(ray) = &rays[i as usize] else {
             continue;
         };

@@ -220,7 +220,7 @@ pub fn look_at(eye: DVec3, target: DVec3) -> DMat4 {
 }
 
 /// The camera's `matrix_world` at `frame`: a slow orbit.
-pub fn camera_matrix(frame: i64) -> DMat4 {
+pub(crate) fn camera_matrix(frame: i64) -> DMat4 {
     let angle = -0.8 + 0.02 * (frame - FIRST_FRAME) as f64;
     let eye = DVec3::new(8.5 * angle.sin(), -8.5 * angle.cos(), 3.2);
     look_at(eye, DVec3::new(0.0, 0.5, 1.0))

@@ -145,7 +145,7 @@ impl<'a> Obj<'a> {
     }
 
     /// The location of the field `key` of this object: `frames[3].camera.lens`.
-    pub fn field_loc(&self, key: &str) -> String {
+    pub(crate) fn field_loc(&self, key: &str) -> String {
         if self.loc.is_empty() {
             key.to_string()
         } else {
@@ -159,7 +159,7 @@ impl<'a> Obj<'a> {
     }
 
     /// A format error at `loc` (an element inside a field) in this object's file.
-    pub fn error_at(&self, loc: String, message: impl Into<String>) -> Error {
+    pub(crate) fn error_at(&self, loc: String, message: impl Into<String>) -> Error {
         Error::format(self.path, loc, message)
     }
 

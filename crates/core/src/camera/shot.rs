@@ -51,7 +51,7 @@ use crate::error::{Error, Result};
 use crate::json::{self, short, Describe, Obj, Style};
 
 /// The shot-file schema version this code reads and writes.
-pub const SHOT_VERSION: u64 = 1;
+pub(crate) const SHOT_VERSION: u64 = 1;
 
 /// A shot: output format and, per frame, the camera and the object matrices.
 #[derive(Clone, Debug, PartialEq)]

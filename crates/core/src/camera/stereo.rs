@@ -107,7 +107,7 @@ impl Ods {
     }
 
     /// The camera-space ray through raster (`x`, `y`), `None` outside the image.
-    pub fn camera_ray(&self, x: f64, y: f64) -> Option<CameraRay> {
+    pub(crate) fn camera_ray(&self, x: f64, y: f64) -> Option<CameraRay> {
         let (w, h) = (f64::from(self.width), f64::from(self.height));
         if !(0.0..=w).contains(&x) {
             return None;
@@ -159,7 +159,7 @@ impl Vr180 {
     }
 
     /// The camera-space ray through raster (`x`, `y`), `None` outside the image.
-    pub fn camera_ray(&self, x: f64, y: f64) -> Option<CameraRay> {
+    pub(crate) fn camera_ray(&self, x: f64, y: f64) -> Option<CameraRay> {
         let (w, h) = (f64::from(self.width), f64::from(self.height));
         if !(0.0..=h).contains(&y) {
             return None;

@@ -47,7 +47,7 @@ impl CropBox {
     }
 
     /// The box ready to clip rays ([`CropClip::clip`]): its rotation worked out once.
-    pub fn clipper(&self) -> CropClip {
+    pub(crate) fn clipper(&self) -> CropClip {
         CropClip {
             crop_from_field: self.rotation_matrix().transpose(),
             center: DVec3::from(self.center),

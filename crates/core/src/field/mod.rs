@@ -84,18 +84,18 @@ pub struct Unbounded {
 
 impl Unbounded {
     /// The core cube.
-    pub fn core_box(&self) -> Aabb {
+    pub(crate) fn core_box(&self) -> Aabb {
         Aabb::new(Vec3::splat(-self.core), Vec3::splat(self.core))
     }
 
     /// The cube the marcher's occupancy grid covers.
-    pub fn grid_box(&self) -> Aabb {
+    pub(crate) fn grid_box(&self) -> Aabb {
         Aabb::new(Vec3::splat(-self.grid), Vec3::splat(self.grid))
     }
 
     /// The factor a step at field point `p` grows by: `(‖p‖∞/core)²` beyond the core, else 1.
     #[inline]
-    pub fn step_growth(&self, p: Vec3) -> f32 {
+    pub(crate) fn step_growth(&self, p: Vec3) -> f32 {
         let r = p.abs().max_element() / self.core;
         if r > 1.0 {
             r * r

@@ -62,7 +62,7 @@ impl DeepImage {
     }
 
     /// The samples of pixel `p` (row-major), to change them in place.
-    pub fn pixel_mut(&mut self, p: usize) -> &mut [DeepSample] {
+    pub(crate) fn pixel_mut(&mut self, p: usize) -> &mut [DeepSample] {
         &mut self.samples[self.offsets[p] as usize..self.offsets[p + 1] as usize]
     }
 

@@ -92,7 +92,7 @@ impl DeepTile {
     }
 
     /// Closes the pixel whose samples were just pushed.
-    pub fn end_pixel(&mut self) {
+    pub(crate) fn end_pixel(&mut self) {
         self.offsets.push(self.samples.len() as u32);
     }
 }
@@ -333,7 +333,11 @@ fn cut_into_equal_opacity(samples: &[Sample], cap: usize, out: &mut Vec<Sample>)
 /// entered with the averaged transmittance. So the result flattens exactly to the average
 /// of the lists' flattenings (the flat motion-blurred pixel), and a point at any slot
 /// boundary sees the average of what it sees in each shutter sample.
-pub fn average_pixels(lists: &[&[DeepSample]], params: &DeepParams, out: &mut Vec<DeepSample>) {
+pub(crate) fn average_pixels(
+    lists: &[&[DeepSample]],
+    params: &DeepParams,
+    out: &mut Vec<DeepSample>,
+) {
     let mut bounds: Vec<f64> = lists
         .iter()
         .flat_map(|l| {

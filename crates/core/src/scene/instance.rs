@@ -266,7 +266,7 @@ impl Instance {
     }
 
     /// The crop box ready to clip rays.
-    pub fn crop_clip(&self) -> Option<&CropClip> {
+    pub(crate) fn crop_clip(&self) -> Option<&CropClip> {
         self.crop_clip.as_ref()
     }
 

@@ -170,7 +170,7 @@ impl Scene {
 
     /// Whether any instance is sampled by its trainer's own estimator (its samples merged
     /// with the march as fragments): nerfacto's proposal sampler, instant-ngp's marcher.
-    pub fn has_sampled(&self) -> bool {
+    pub(crate) fn has_sampled(&self) -> bool {
         self.instances
             .iter()
             .any(|i| matches!(i, SceneInstance::Proposal(_) | SceneInstance::Ngp(_)))

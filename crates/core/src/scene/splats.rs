@@ -65,7 +65,7 @@ impl SplatInstance {
     }
 
     /// `N⁻¹`.
-    pub fn splats_from_world(&self) -> DMat4 {
+    pub(crate) fn splats_from_world(&self) -> DMat4 {
         self.splats_from_world
     }
 

@@ -91,7 +91,7 @@ pub(crate) struct Ply<'a> {
     pub elements: Vec<Element>,
     /// The header's `comment` lines, without the keyword (SuperSplat announces its render mode
     /// in one).
-    pub comments: Vec<String>,
+    pub(crate) comments: Vec<String>,
     body: usize,
 }
 

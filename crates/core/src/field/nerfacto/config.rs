@@ -267,7 +267,7 @@ pub(crate) struct ProposalNetSettings {
     pub max_res: u32,
     pub hidden_dim: usize,
     /// Layers of the MLP counting the output layer (nerfstudio's `num_layers`).
-    pub num_layers: usize,
+    pub(crate) num_layers: usize,
     pub use_linear: bool,
 }
 
@@ -275,15 +275,15 @@ pub(crate) struct ProposalNetSettings {
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct SamplerSettings {
     /// Samples per ray of each proposal iteration (`num_proposal_samples_per_ray`).
-    pub proposal_samples: Vec<usize>,
+    pub(crate) proposal_samples: Vec<usize>,
     /// Samples per ray of the main field (`num_nerf_samples_per_ray`).
-    pub nerf_samples: usize,
+    pub(crate) nerf_samples: usize,
     /// `use_same_proposal_network`.
-    pub same_network: bool,
+    pub(crate) same_network: bool,
     /// `proposal_initial_sampler` is `uniform` (else `piecewise`).
-    pub uniform_initial: bool,
+    pub(crate) uniform_initial: bool,
     /// The proposal networks' shapes, one per network.
-    pub nets: Vec<ProposalNetSettings>,
+    pub(crate) nets: Vec<ProposalNetSettings>,
 }
 
 impl SamplerSettings {

@@ -144,7 +144,7 @@ impl OccupancyGrid {
     }
 
     /// The grid of `cells` (`n³`, x fastest).
-    pub fn from_cells(settings: &GridSettings, cells: &[bool], source: Source) -> Self {
+    pub(crate) fn from_cells(settings: &GridSettings, cells: &[bool], source: Source) -> Self {
         let n = settings.n;
         let m = n + 1;
         let mut sums = vec![0u32; m * m * m];
@@ -169,7 +169,7 @@ impl OccupancyGrid {
     /// current for `key`, otherwise computed from `density` (the field's unmasked density at
     /// *contracted* points) and written to the first of `caches` that can be written; with
     /// no key (the checkpoint could not be examined), computed and not cached.
-    pub fn load_or_build(
+    pub(crate) fn load_or_build(
         settings: &GridSettings,
         caches: &[PathBuf],
         key: Option<&str>,
@@ -256,7 +256,7 @@ impl OccupancyGrid {
     }
 
     /// Occupied cells over all cells.
-    pub fn fill_ratio(&self) -> f64 {
+    pub(crate) fn fill_ratio(&self) -> f64 {
         let n = self.n;
         f64::from(self.count([0; 3], [n; 3])) / (n * n * n) as f64
     }

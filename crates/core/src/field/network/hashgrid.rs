@@ -31,7 +31,7 @@ pub enum TableStorage {
 
 /// The shape of a hash encoding.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct HashGridConfig {
+pub(crate) struct HashGridConfig {
     /// Number of levels `L`.
     pub n_levels: u32,
     /// Features per level `F` (1, 2, 4 or 8).
@@ -41,7 +41,7 @@ pub struct HashGridConfig {
     /// Resolution of the coarsest level `N_min`.
     pub base_resolution: u32,
     /// Growth factor between levels `b`.
-    pub per_level_scale: f32,
+    pub(crate) per_level_scale: f32,
 }
 
 /// One level's geometry.
@@ -194,12 +194,12 @@ impl HashGridConfig {
 
     /// The finest level's scale `s_{L−1}` (cells per unit of the unit cube: a point maps
     /// to `s·x + 0.5`), so its cells are `1/s` wide.
-    pub fn finest_scale(&self) -> f32 {
+    pub(crate) fn finest_scale(&self) -> f32 {
         self.levels().last().map_or(1.0, |l| l.scale)
     }
 
     /// Table entries over all levels (`Σ T_l`); the parameter count is this times `F`.
-    pub fn n_entries(&self) -> usize {
+    pub(crate) fn n_entries(&self) -> usize {
         self.levels().iter().map(|l| l.entries as usize).sum()
     }
 
@@ -214,7 +214,7 @@ impl HashGridConfig {
     }
 
     /// Output width `L·F`.
-    pub fn n_outputs(&self) -> usize {
+    pub(crate) fn n_outputs(&self) -> usize {
         (self.n_levels * self.n_features) as usize
     }
 }

@@ -41,7 +41,7 @@ use crate::field::{DensityScratch, NerfactoField, ProposalNetworks};
 /// Transmittance below which a ray's later samples are not evaluated.
 pub const STOP_TRANSMITTANCE: f64 = 1e-6;
 /// The most weight per ray that may go unshaded (its lightest main-field samples, black).
-pub const COLOR_SKIP_BUDGET: f64 = 1e-5;
+pub(crate) const COLOR_SKIP_BUDGET: f64 = 1e-5;
 /// Samples per ray evaluated per round (front to back, so rays can stop early).
 const ROUND: usize = 16;
 /// `PDFSampler`'s histogram padding and `eps`.

@@ -28,7 +28,7 @@ pub(crate) struct View {
     pub width: u32,
     pub height: u32,
     /// Camera z range kept.
-    pub depth_range: [f64; 2],
+    pub(crate) depth_range: [f64; 2],
     /// The camera centre in the splats' frame (SH directions are taken there).
     pub eye: DVec3,
     /// Mip-splatting's opacity compensation.
@@ -43,9 +43,9 @@ pub(crate) struct View {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Projected {
     /// Raster position of the mean.
-    pub xy: [f32; 2],
+    pub(crate) xy: [f32; 2],
     /// Inverse image covariance `(a, b, c)`: `σ = ½(a dx² + c dy²) + b dx dy`.
-    pub conic: [f32; 3],
+    pub(crate) conic: [f32; 3],
     /// Opacity (with the antialiasing compensation applied).
     pub opacity: f32,
     /// Camera z of the mean.

@@ -34,15 +34,15 @@ pub(crate) struct RayView {
     pub translation: DVec3,
     /// The camera centre (world) and `camera_from_world`'s rotation.
     pub centre: DVec3,
-    pub camera_from_world: DMat3,
+    pub(crate) camera_from_world: DMat3,
     /// Largest distance of a ray origin from the centre (stereo eyes).
-    pub eye_offset: f64,
+    pub(crate) eye_offset: f64,
     /// Angle between neighbouring pixels, radians.
-    pub pixel_angle: f64,
+    pub(crate) pixel_angle: f64,
     /// The camera centre in the splats' frame (SH directions).
     pub eye: DVec3,
     /// Distance range kept.
-    pub depth_range: [f64; 2],
+    pub(crate) depth_range: [f64; 2],
     pub rgb: bool,
     pub crop: Option<CropClip>,
 }

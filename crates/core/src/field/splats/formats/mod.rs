@@ -69,7 +69,7 @@ pub struct SplatSource {
     /// SPZ's flag, SOG's `model`, a PLY's `SplatRenderMode: mip` or `antialiased 1` comment.
     pub antialiased: bool,
     /// Anything else the artist should know about how the file was read.
-    pub notes: Vec<String>,
+    pub(crate) notes: Vec<String>,
 }
 
 /// Reads the splat file (or SOG folder, or splatfacto run) at `path`, whatever its format.

@@ -73,7 +73,7 @@ pub(crate) struct Record {
     pub mean: Vec3,
     pub scale: Vec3,
     /// The rotation `w x y z`, not yet normalised.
-    pub wxyz: [f32; 4],
+    pub(crate) wxyz: [f32; 4],
     pub opacity: f32,
     pub dc: [f32; 3],
 }

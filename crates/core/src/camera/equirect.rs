@@ -32,7 +32,7 @@ impl Equirect {
     }
 
     /// The image size in pixels.
-    pub fn resolution(&self) -> (u32, u32) {
+    pub(crate) fn resolution(&self) -> (u32, u32) {
         (self.width, self.height)
     }
 

@@ -58,9 +58,9 @@ pub struct CameraRay {
     /// Origin in camera space (non-zero for stereo eyes).
     pub origin: DVec3,
     /// Unit direction in camera space.
-    pub dir: DVec3,
+    pub(crate) dir: DVec3,
     /// See [`Ray::z_per_t`].
-    pub z_per_t: f64,
+    pub(crate) z_per_t: f64,
 }
 
 /// How camera-space rays leave the camera.
@@ -78,7 +78,7 @@ pub enum Projection {
 
 impl Projection {
     /// The output image size in pixels (for stereo layouts, both eyes together).
-    pub fn resolution(&self) -> (u32, u32) {
+    pub(crate) fn resolution(&self) -> (u32, u32) {
         match self {
             Projection::Perspective(p) => p.resolution(),
             Projection::Equirect(p) => p.resolution(),

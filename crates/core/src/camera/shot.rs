@@ -112,7 +112,7 @@ pub struct ShotFrame {
 #[derive(Clone, Debug, PartialEq)]
 pub struct ShotCamera {
     /// The camera object's `matrix_world` (camera to world).
-    pub world_from_camera: DMat4,
+    pub(crate) world_from_camera: DMat4,
     /// Perspective or equirectangular panorama.
     pub kind: ShotCameraKind,
     /// Focal length (mm).
@@ -296,7 +296,8 @@ impl Shot {
     }
 
     /// Frames per second: `fps / fps_base`.
-    pub fn frame_rate(&self) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn frame_rate(&self) -> f64 {
         self.fps / self.fps_base
     }
 

@@ -99,7 +99,7 @@ impl Ods {
     }
 
     /// The image size: one eye's, or `W × 2H` for [`Eye::Both`] (left on top).
-    pub fn resolution(&self) -> (u32, u32) {
+    pub(crate) fn resolution(&self) -> (u32, u32) {
         match self.eye {
             Eye::Both => (self.width, 2 * self.height),
             _ => (self.width, self.height),
@@ -151,7 +151,7 @@ impl Vr180 {
     }
 
     /// The image size: one eye's, or `2W × H` for [`Eye::Both`] (left eye on the left).
-    pub fn resolution(&self) -> (u32, u32) {
+    pub(crate) fn resolution(&self) -> (u32, u32) {
         match self.eye {
             Eye::Both => (2 * self.width, self.height),
             _ => (self.width, self.height),

@@ -63,7 +63,7 @@ impl DeepParams {
 pub(super) struct RawPiece {
     pub t0: f64,
     pub t1: f64,
-    pub weight: f64,
+    pub(crate) weight: f64,
     pub rgb: DVec3,
 }
 
@@ -80,8 +80,8 @@ struct Sample {
 /// `samples[offsets[i]..offsets[i + 1]]`.
 #[derive(Clone, Debug, Default)]
 pub(super) struct DeepTile {
-    pub offsets: Vec<u32>,
-    pub samples: Vec<DeepSample>,
+    pub(crate) offsets: Vec<u32>,
+    pub(crate) samples: Vec<DeepSample>,
 }
 
 impl DeepTile {

@@ -328,7 +328,7 @@ impl Pieces {
     }
 
     /// Expected ray distance `Σ w t / Σ w`, or `inf` when nothing was accumulated.
-    pub fn expected_depth(&self) -> f64 {
+    pub(crate) fn expected_depth(&self) -> f64 {
         let a = self.accumulation();
         if a > 0.0 {
             self.depth_moment / a

@@ -23,7 +23,7 @@ pub(super) struct Samplers<'a> {
     /// The marched instances, in the scene's order.
     pub(crate) plans: Vec<InstancePlan<'a>>,
     /// The marched instances are integrated in closed form (and there is nothing else).
-    pub closed_form: bool,
+    pub(crate) closed_form: bool,
     /// The instances sampled by their trainer's estimator: the proposal-sampled ones, then
     /// the instant-ngp ones, each kind in the scene's order.
     pub(crate) volume: Vec<VolumeSampler<'a>>,

@@ -59,7 +59,7 @@ impl SceneInstance {
     }
 
     /// The same instance with the crop box `crop` (field space) instead of its own.
-    pub fn with_crop(&self, crop: Option<CropBox>) -> Result<Self> {
+    pub(crate) fn with_crop(&self, crop: Option<CropBox>) -> Result<Self> {
         Ok(match self {
             SceneInstance::Marched(i) => SceneInstance::Marched(Instance::new(
                 i.name.clone(),

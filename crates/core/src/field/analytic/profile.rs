@@ -21,11 +21,11 @@ use super::{Analytic, Shape};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Profile {
     /// The primitive's index in [`Analytic::primitives`].
-    pub index: u32,
+    pub(crate) index: u32,
     /// Where the ray enters its support.
-    pub enter: f64,
+    pub(crate) enter: f64,
     /// Where it leaves it.
-    pub exit: f64,
+    pub(crate) exit: f64,
     /// Its density per world unit inside the support.
     pub density: Density,
 }
@@ -50,7 +50,7 @@ impl Density {
     /// What [`sample_from`](Self::sample_from) needs of the start `a` of the
     /// intervals it is asked for: one error function, so that each end `t` then costs one.
     #[inline]
-    pub fn anchor(&self, a: f64) -> Anchor {
+    pub(crate) fn anchor(&self, a: f64) -> Anchor {
         match *self {
             Density::Constant(_) => Anchor::default(),
             Density::Gaussian { centre, width, .. } => {

@@ -90,11 +90,11 @@ pub(crate) struct TensorInfo {
     /// Sizes per dimension.
     pub shape: Vec<usize>,
     /// Strides per dimension, in elements.
-    pub stride: Vec<usize>,
+    pub(crate) stride: Vec<usize>,
     /// First element in the storage.
-    pub offset: usize,
+    pub(crate) offset: usize,
     /// The storage's key (`data/<key>` in the archive).
-    pub storage: String,
+    pub(crate) storage: String,
     /// Elements in the storage.
     pub(crate) storage_numel: usize,
 }
@@ -156,7 +156,7 @@ impl Checkpoint {
     }
 
     /// The tensors by dotted name.
-    pub fn tensors(&self) -> &BTreeMap<String, TensorInfo> {
+    pub(crate) fn tensors(&self) -> &BTreeMap<String, TensorInfo> {
         &self.tensors
     }
 

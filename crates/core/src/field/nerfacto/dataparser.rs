@@ -39,7 +39,7 @@ impl DataparserTransform {
     }
 
     /// Parses the JSON; `path_for_errors` names the source in messages.
-    pub fn from_json_str(text: &str, path_for_errors: impl AsRef<Path>) -> Result<Self> {
+    pub(crate) fn from_json_str(text: &str, path_for_errors: impl AsRef<Path>) -> Result<Self> {
         let path = path_for_errors.as_ref();
         let root = json::parse(text, path)?;
         let bad = |loc: &str, msg: String| Error::format(path, loc, msg);

@@ -33,13 +33,13 @@ pub enum TableStorage {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct HashGridConfig {
     /// Number of levels `L`.
-    pub n_levels: u32,
+    pub(crate) n_levels: u32,
     /// Features per level `F` (1, 2, 4 or 8).
-    pub n_features: u32,
+    pub(crate) n_features: u32,
     /// `log2` of the largest table size.
-    pub log2_table_size: u32,
+    pub(crate) log2_table_size: u32,
     /// Resolution of the coarsest level `N_min`.
-    pub base_resolution: u32,
+    pub(crate) base_resolution: u32,
     /// Growth factor between levels `b`.
     pub(crate) per_level_scale: f32,
 }
@@ -204,7 +204,7 @@ impl HashGridConfig {
     }
 
     /// Number of parameters (`Σ T_l · F`).
-    pub fn n_params(&self) -> usize {
+    pub(crate) fn n_params(&self) -> usize {
         self.n_entries() * self.n_features as usize
     }
 
@@ -240,7 +240,7 @@ impl HashGrid {
     }
 
     /// A grid with f32 parameters (kept in f32); `None` as for [`Self::new`].
-    pub fn from_f32(config: HashGridConfig, params: Vec<f32>) -> Option<Self> {
+    pub(crate) fn from_f32(config: HashGridConfig, params: Vec<f32>) -> Option<Self> {
         let levels = config.levels();
         (params.len() == config.n_params() && config.supported()).then(|| HashGrid {
             config,
@@ -255,7 +255,7 @@ impl HashGrid {
     }
 
     /// The storage of the tables.
-    pub fn storage(&self) -> TableStorage {
+    pub(crate) fn storage(&self) -> TableStorage {
         match self.tables {
             Tables::F16(_) => TableStorage::F16,
             Tables::F32(_) => TableStorage::F32,
@@ -264,7 +264,7 @@ impl HashGrid {
 
     /// Encodes each point `xs[i]` (unit cube) into `out[i·L·F .. (i+1)·L·F]`.
     /// Level by level, so one level's table stays in cache across the batch.
-    pub fn encode(&self, xs: &[Vec3], out: &mut [f32]) {
+    pub(crate) fn encode(&self, xs: &[Vec3], out: &mut [f32]) {
         #[cfg(target_arch = "x86_64")]
         if simd::available() {
             // SAFETY: the CPU has AVX2 and F16C (checked just above).

@@ -32,7 +32,7 @@ pub(crate) struct MlpConfig {
     /// Neurons per hidden layer.
     pub width: usize,
     /// Hidden layers (≥ 1).
-    pub n_hidden_layers: usize,
+    pub(crate) n_hidden_layers: usize,
     /// Outputs used.
     pub(crate) n_outputs: usize,
     /// The last layer's output is padded to a multiple of this (16, or 8 for old CutlassMLP).
@@ -53,7 +53,7 @@ impl MlpConfig {
     }
 
     /// Number of parameters (padded, as stored).
-    pub fn n_params(&self) -> usize {
+    pub(crate) fn n_params(&self) -> usize {
         self.layers().iter().map(|(i, o)| i * o).sum()
     }
 }
@@ -231,7 +231,7 @@ impl Mlp {
 
     /// Evaluates the MLP on `n` inputs, `inputs[k·n_inputs ..][.. n_inputs]`, writing
     /// `outputs[k·n_outputs ..][.. n_outputs]`.
-    pub fn forward(&self, inputs: &[f32], outputs: &mut [f32]) {
+    pub(crate) fn forward(&self, inputs: &[f32], outputs: &mut [f32]) {
         self.forward_with(Kernel::detect(), inputs, None, outputs);
     }
 
@@ -345,14 +345,14 @@ impl LastInputs {
     /// Values per row of [`Self::starts`] (the first layer's outputs, padded): what the
     /// tests check the rows' length by.
     #[cfg(test)]
-    pub fn stride(&self) -> usize {
+    pub(crate) fn stride(&self) -> usize {
         self.stride
     }
 
     /// Appends to `rows` one row of [`Self::stride`] values: `bias[o] + Σᵢ W[i][o]·v[i]`
     /// over these inputs `v = values`, summed in input order (each product rounded, then
     /// added); the padding is zero. `values` beyond the inputs split off are ignored.
-    pub fn starts(&self, values: &[f32], rows: &mut Vec<f32>) {
+    pub(crate) fn starts(&self, values: &[f32], rows: &mut Vec<f32>) {
         let at = rows.len();
         rows.extend_from_slice(&self.bias);
         let row = &mut rows[at..];

@@ -85,7 +85,7 @@ pub struct ProposalStats {
     /// Main-field colour queries.
     pub color_queries: u64,
     /// Main-field samples whose density was NaN or infinite, taken as empty.
-    pub invalid_samples: u64,
+    pub(crate) invalid_samples: u64,
     /// Time in the proposal iterations (evaluation and resampling).
     pub proposal_time: Duration,
     /// Time in the main field (density, features, colour).

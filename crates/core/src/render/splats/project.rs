@@ -23,14 +23,14 @@ pub(crate) struct View {
     pub linear: DMat3,
     pub translation: DVec3,
     /// `[fx, fy, cx, cy]` in pixels (raster y down, pixel centres at +0.5).
-    pub intrinsics: [f64; 4],
+    pub(crate) intrinsics: [f64; 4],
     /// The whole image, in pixels.
     pub width: u32,
     pub height: u32,
     /// Camera z range kept.
     pub(crate) depth_range: [f64; 2],
     /// The camera centre in the splats' frame (SH directions are taken there).
-    pub eye: DVec3,
+    pub(crate) eye: DVec3,
     /// Mip-splatting's opacity compensation.
     pub antialiased: bool,
     /// Colours wanted.

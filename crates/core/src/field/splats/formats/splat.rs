@@ -75,7 +75,7 @@ pub(crate) struct Record {
     /// The rotation `w x y z`, not yet normalised.
     pub(crate) wxyz: [f32; 4],
     pub opacity: f32,
-    pub dc: [f32; 3],
+    pub(crate) dc: [f32; 3],
 }
 
 /// Decodes one 32-byte record.

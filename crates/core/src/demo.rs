@@ -191,7 +191,7 @@ pub fn shadow_desc() -> SceneDesc {
 }
 
 /// The NeRF object's `matrix_world` at `frame`: lifted, turning slowly, non-uniformly scaled.
-pub fn object_matrix(frame: i64) -> DMat4 {
+pub(crate) fn object_matrix(frame: i64) -> DMat4 {
     let turn = 0.5 + 0.05 * (frame - FIRST_FRAME) as f64;
     DMat4::from_scale_rotation_translation(
         DVec3::new(1.2, 1.0, 0.8),

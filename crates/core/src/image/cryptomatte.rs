@@ -55,7 +55,7 @@ pub fn object_id(name: &str) -> f32 {
 }
 
 /// The manifest: a JSON object from each name to its ID's bits (8 lowercase hex digits).
-pub fn manifest(names: &[&str]) -> String {
+pub(crate) fn manifest(names: &[&str]) -> String {
     let map: serde_json::Map<String, serde_json::Value> = names
         .iter()
         .map(|n| (n.to_string(), format!("{:08x}", id_bits(n)).into()))

@@ -64,7 +64,7 @@ enum Tables {
 
 /// A multi-resolution hash encoding with its trained tables.
 #[derive(Clone, Debug)]
-pub struct HashGrid {
+pub(crate) struct HashGrid {
     config: HashGridConfig,
     levels: Vec<Level>,
     tables: Tables,

@@ -445,7 +445,7 @@ impl ShotFrame {
     /// (unit axes: Cycles clears the camera's scale too) and its shift changed by
     /// `−l·lens / (focus_distance·sensor)` (the sensor length the fit uses), so that every point
     /// of the focus plane keeps its pixel and each pixel sees the thin-lens ray through `l`
-    /// (see the [`aperture`](super::aperture) module). Otherwise this frame alone, unchanged.
+    /// (see the `aperture` module). Otherwise this frame alone, unchanged.
     pub fn through_aperture(&self, samples: u32) -> Vec<ShotFrame> {
         let c = &self.camera;
         let dof = match (c.kind, c.dof) {

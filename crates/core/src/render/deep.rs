@@ -178,7 +178,7 @@ fn conform_samples(samples: &mut [Sample], rgb: [f32; 3]) {
 }
 
 /// Scales the colours of every pixel of `deep` so that each flattens to the colour of
-/// `planes` there (see [`conform_samples`]), after a colour-space conversion applied to both.
+/// `planes` there (see `conform_samples`), after a colour-space conversion applied to both.
 pub fn conform_to(deep: &mut DeepImage, planes: &Planes) {
     let Some([r, g, b]) = &planes.rgb else {
         return;
@@ -473,7 +473,7 @@ pub(super) fn assemble(window: Window, tiles: Vec<(Window, DeepTile)>) -> DeepIm
 }
 
 /// The deep image that `frames` (one per shutter sample, of one size) average to
-/// ([`average_pixels`] per pixel).
+/// (`average_pixels` per pixel).
 pub fn average_images(frames: &[DeepImage], params: &DeepParams) -> Result<DeepImage> {
     let Some(first) = frames.first() else {
         return Err(Error::invalid("deep motion blur", "no shutter sample"));

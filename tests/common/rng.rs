@@ -7,11 +7,11 @@ use glam::{DQuat, DVec3, Vec3};
 
 /// The library's generator (the benchmark scenes are drawn from it too), with the draws the
 /// tests need.
-pub struct SplitMix64(nerfx_core::rng::SplitMix64);
+pub struct SplitMix64(nerfx_core::SplitMix64);
 
 impl SplitMix64 {
     pub fn new(seed: u64) -> Self {
-        SplitMix64(nerfx_core::rng::SplitMix64::new(seed))
+        SplitMix64(nerfx_core::SplitMix64::new(seed))
     }
 
     pub fn next_u64(&mut self) -> u64 {

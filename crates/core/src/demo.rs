@@ -191,7 +191,7 @@ pub fn shadow_desc() -> SceneDesc {
 }
 
 /// The NeRF object's `matrix_world` at `frame`: lifted, turning slowly, non-uniformly scaled.
-pub fn object_matrix(frame: i64) -> DMat4 {
+pub(crate) fn object_matrix(frame: i64) -> DMat4 {
     let turn = 0.5 + 0.05 * (frame - FIRST_FRAME) as f64;
     DMat4::from_scale_rotation_translation(
         DVec3::new(1.2, 1.0, 0.8),
@@ -220,7 +220,7 @@ pub fn look_at(eye: DVec3, target: DVec3) -> DMat4 {
 }
 
 /// The camera's `matrix_world` at `frame`: a slow orbit.
-pub fn camera_matrix(frame: i64) -> DMat4 {
+pub(crate) fn camera_matrix(frame: i64) -> DMat4 {
     let angle = -0.8 + 0.02 * (frame - FIRST_FRAME) as f64;
     let eye = DVec3::new(8.5 * angle.sin(), -8.5 * angle.cos(), 3.2);
     look_at(eye, DVec3::new(0.0, 0.5, 1.0))

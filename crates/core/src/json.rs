@@ -100,7 +100,7 @@ pub(crate) enum Describe {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct Style {
     /// How a value that is not the object or list wanted is described.
-    pub wrong_shape: Describe,
+    pub(crate) wrong_shape: Describe,
 }
 
 impl Style {
@@ -123,7 +123,7 @@ pub(crate) struct Obj<'a> {
 
 impl<'a> Obj<'a> {
     /// The top-level object of the file `path`.
-    pub fn root(value: &'a Value, path: &'a Path, style: Style) -> Result<Self> {
+    pub(crate) fn root(value: &'a Value, path: &'a Path, style: Style) -> Result<Self> {
         Obj::new(value, path, String::new(), style)
     }
 
@@ -145,7 +145,7 @@ impl<'a> Obj<'a> {
     }
 
     /// The location of the field `key` of this object: `frames[3].camera.lens`.
-    pub fn field_loc(&self, key: &str) -> String {
+    pub(crate) fn field_loc(&self, key: &str) -> String {
         if self.loc.is_empty() {
             key.to_string()
         } else {
@@ -159,7 +159,7 @@ impl<'a> Obj<'a> {
     }
 
     /// A format error at `loc` (an element inside a field) in this object's file.
-    pub fn error_at(&self, loc: String, message: impl Into<String>) -> Error {
+    pub(crate) fn error_at(&self, loc: String, message: impl Into<String>) -> Error {
         Error::format(self.path, loc, message)
     }
 
@@ -169,18 +169,18 @@ impl<'a> Obj<'a> {
     }
 
     /// The field names, in order.
-    pub fn keys(&self) -> impl Iterator<Item = &'a String> {
+    pub(crate) fn keys(&self) -> impl Iterator<Item = &'a String> {
         self.map.keys()
     }
 
     /// The value at `key`; JSON `null` counts as absent.
-    pub fn opt(&self, key: &str) -> Option<&'a Value> {
+    pub(crate) fn opt(&self, key: &str) -> Option<&'a Value> {
         self.map.get(key).filter(|v| !v.is_null())
     }
 
     /// The value at `key`, refused when missing or `null`; `expected` describes the wanted
     /// value in the message.
-    pub fn required(&self, key: &str, expected: &str) -> Result<&'a Value> {
+    pub(crate) fn required(&self, key: &str, expected: &str) -> Result<&'a Value> {
         match self.map.get(key) {
             None => Err(self.error(key, format!("missing; expected {expected}"))),
             Some(Value::Null) => Err(self.error(
@@ -199,7 +199,7 @@ impl<'a> Obj<'a> {
     }
 
     /// A required finite number; `expected` describes it when it is missing.
-    pub fn finite(&self, key: &str, expected: &str) -> Result<f64> {
+    pub(crate) fn finite(&self, key: &str, expected: &str) -> Result<f64> {
         let v = self.required(key, expected)?;
         match v.as_f64() {
             Some(x) if x.is_finite() => Ok(x),

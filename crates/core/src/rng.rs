@@ -31,7 +31,8 @@ impl SplitMix64 {
     }
 
     /// A point uniform in the cube `[lo, hi)³`: x, then y, then z drawn by [`Self::range`].
-    pub fn in_cube(&mut self, lo: f32, hi: f32) -> glam::Vec3 {
+    #[cfg(test)]
+    pub(crate) fn in_cube(&mut self, lo: f32, hi: f32) -> glam::Vec3 {
         let x = self.range(lo, hi);
         let y = self.range(lo, hi);
         glam::Vec3::new(x, y, self.range(lo, hi))

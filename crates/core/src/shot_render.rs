@@ -137,16 +137,6 @@ impl FrameRequest {
         self.aperture_samples
     }
 
-    /// The deep pass, if one is asked for.
-    pub fn deep(&self) -> Option<&DeepParams> {
-        self.deep.as_ref()
-    }
-
-    /// The window, if the request is for part of the image.
-    pub fn window(&self) -> Option<Window> {
-        self.window
-    }
-
     /// The request for coverage ([`render_coverage`]): colour as trained and alpha, no deep
     /// pass, the same views and window.
     fn for_coverage(&self) -> Self {

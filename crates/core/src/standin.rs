@@ -189,7 +189,7 @@ fn to_u8(c: Vec3) -> [u8; 3] {
 }
 
 /// One point per splat mean whose opacity exceeds the threshold, coloured by the DC term.
-pub fn splat_points(splats: &Splats, threshold: f32) -> Vec<Point> {
+pub(crate) fn splat_points(splats: &Splats, threshold: f32) -> Vec<Point> {
     /// The degree-0 real spherical harmonic, `1 / (2√π)`.
     const SH_C0: f32 = 0.282_094_8;
     let stride = splats.color.coefficients() * 3;

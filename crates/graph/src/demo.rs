@@ -51,7 +51,7 @@ pub fn write_graph(dir: &Path, width: u32, height: u32) -> Result<PathBuf> {
     let path = dir.join("demo_comp.json");
     let text = serde_json::to_string_pretty(&graph)
         .map_err(|e| Error::invalid("demo graph", e.to_string()))?;
-    nerfx_core::output::write_file(&path, text.as_bytes())?;
+    nerfx_core::write_file(&path, text.as_bytes())?;
     Ok(path)
 }
 

@@ -89,7 +89,7 @@ impl Graph {
 
     /// Reads and checks the graph file at `path`.
     pub fn read(path: &Path) -> Result<Graph> {
-        let text = nerfx_core::input::read_text(path)?;
+        let text = nerfx_core::read_text(path)?;
         Graph::from_json_str(&text, path)
     }
 
@@ -97,7 +97,7 @@ impl Graph {
     /// parameters.
     pub fn from_json_str(text: &str, path: &Path) -> Result<Graph> {
         let bad = |location: &str, message: String| Error::format(path, location, message);
-        let json: Json = nerfx_core::json::parse_json(text, path, "a node graph")?;
+        let json: Json = nerfx_core::parse_json(text, path, "a node graph")?;
         if let Some(map) = json.as_object() {
             if let Some(key) = map.keys().find(|k| {
                 ![

@@ -248,13 +248,13 @@ pub fn frame_spec(frames: &[i64]) -> String {
 /// Writes a job file (a script, a template) as every nerfx output is written: whole or not at
 /// all, never over a device or through a link's back.
 pub fn write_job_file(path: &Path, text: &str) -> Result<()> {
-    nerfx_core::output::write_file(path, text.as_bytes())
+    nerfx_core::write_file(path, text.as_bytes())
 }
 
 /// Removes what an earlier, killed attempt at writing `path` left beside it (see
 /// [`task`]: a task alone writes the frames of its chunk).
 pub fn remove_stale_temporaries(path: &Path) -> Result<usize> {
-    nerfx_core::output::remove_stale_temporaries(path)
+    nerfx_core::remove_stale_temporaries(path)
 }
 
 /// `text` quoted for a POSIX shell (single quotes; a quote inside becomes `'\''`), bare when

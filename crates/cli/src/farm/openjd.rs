@@ -298,7 +298,7 @@ pub fn write_bundle(job: &FarmJob, dir: &Path) -> Result<()> {
         ("asset_references.yaml", asset_references(job)),
     ];
     for (name, text) in files {
-        nerfx_core::output::write_file(&dir.join(name), text.as_bytes())?;
+        nerfx_core::write_file(&dir.join(name), text.as_bytes())?;
     }
     Ok(())
 }

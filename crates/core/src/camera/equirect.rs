@@ -32,13 +32,13 @@ impl Equirect {
     }
 
     /// The image size in pixels.
-    pub fn resolution(&self) -> (u32, u32) {
+    pub(crate) fn resolution(&self) -> (u32, u32) {
         (self.width, self.height)
     }
 
     /// The camera-space ray through raster (`x`, `y`): origin 0, `z_per_t = 1` (depth of a
     /// panorama is distance). `None` outside `[0, W] × [0, H]`, where latitude has no meaning.
-    pub fn camera_ray(&self, x: f64, y: f64) -> Option<CameraRay> {
+    pub(crate) fn camera_ray(&self, x: f64, y: f64) -> Option<CameraRay> {
         let (w, h) = (f64::from(self.width), f64::from(self.height));
         if !((0.0..=w).contains(&x) && (0.0..=h).contains(&y)) {
             return None;

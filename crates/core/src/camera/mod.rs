@@ -25,9 +25,7 @@ pub use environment::environment_camera;
 pub use equirect::Equirect;
 pub use nerfstudio::{CameraPath, PathCameraType, PathCrop, PathFrame, PathKeyframe};
 pub use perspective::{BlenderIntrinsics, Perspective, SensorFit};
-pub use shot::{
-    SceneWorld, Shot, ShotCamera, ShotCameraKind, ShotFrame, ShotStereo, StereoMode, SHOT_VERSION,
-};
+pub use shot::{SceneWorld, Shot, ShotCamera, ShotCameraKind, ShotFrame, ShotStereo, StereoMode};
 pub use shot_file::read_shot;
 pub use shutter::{MotionBlur, ShutterPosition, MAX_SHUTTER, MAX_SHUTTER_SAMPLES};
 pub use stereo::{Eye, Ods, Vr180, DEFAULT_IPD};
@@ -60,9 +58,9 @@ pub struct CameraRay {
     /// Origin in camera space (non-zero for stereo eyes).
     pub origin: DVec3,
     /// Unit direction in camera space.
-    pub dir: DVec3,
+    pub(crate) dir: DVec3,
     /// See [`Ray::z_per_t`].
-    pub z_per_t: f64,
+    pub(crate) z_per_t: f64,
 }
 
 /// How camera-space rays leave the camera.
@@ -80,7 +78,7 @@ pub enum Projection {
 
 impl Projection {
     /// The output image size in pixels (for stereo layouts, both eyes together).
-    pub fn resolution(&self) -> (u32, u32) {
+    pub(crate) fn resolution(&self) -> (u32, u32) {
         match self {
             Projection::Perspective(p) => p.resolution(),
             Projection::Equirect(p) => p.resolution(),
@@ -91,7 +89,7 @@ impl Projection {
 
     /// The camera-space ray through raster position (`x`, `y`) (pixel centres at `i + 0.5`),
     /// or `None` where the projection has no ray.
-    pub fn camera_ray(&self, x: f64, y: f64) -> Option<CameraRay> {
+    pub(crate) fn camera_ray(&self, x: f64, y: f64) -> Option<CameraRay> {
         match self {
             Projection::Perspective(p) => p.camera_ray(x, y),
             Projection::Equirect(p) => p.camera_ray(x, y),
@@ -177,7 +175,7 @@ impl Camera {
     /// between the path's matrix and this camera into that object (see
     /// `CameraPath::to_shot`). The camera is the matrix's rigid part (its −Z axis kept
     /// exact); a matrix [`Camera::new`] would refuse for any other reason is refused.
-    pub fn from_affine(world_from_camera: DMat4, projection: Projection) -> Result<Self> {
+    pub(crate) fn from_affine(world_from_camera: DMat4, projection: Projection) -> Result<Self> {
         let m = world_from_camera;
         let (x, y, z) = (
             m.x_axis.truncate(),
@@ -272,7 +270,7 @@ impl Camera {
     /// Replaces `out` with the world rays through the pixel centres of `window`, row by row:
     /// the same rays as [`Self::ray`] gives, with what they share (a perspective camera's
     /// origin, its columns' and rows' slopes) worked out once.
-    pub fn window_rays(&self, window: Window, out: &mut Vec<Option<Ray>>) {
+    pub(crate) fn window_rays(&self, window: Window, out: &mut Vec<Option<Ray>>) {
         out.clear();
         match &self.projection {
             Projection::Perspective(p) => {

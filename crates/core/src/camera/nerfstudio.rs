@@ -135,7 +135,10 @@ impl CameraPath {
     }
 
     /// Parses and validates camera-path JSON; `path_for_errors` names the source in messages.
-    pub fn from_json_str(text: &str, path_for_errors: impl AsRef<Path>) -> Result<CameraPath> {
+    pub(crate) fn from_json_str(
+        text: &str,
+        path_for_errors: impl AsRef<Path>,
+    ) -> Result<CameraPath> {
         let path = path_for_errors.as_ref();
         let root = json::parse(text, path)?;
         let top = Obj::root(&root, path, PATH_STYLE)?;

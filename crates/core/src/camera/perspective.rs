@@ -218,12 +218,12 @@ impl Perspective {
     }
 
     /// The image size in pixels (after the resolution percentage).
-    pub fn resolution(&self) -> (u32, u32) {
+    pub(crate) fn resolution(&self) -> (u32, u32) {
         (self.width, self.height)
     }
 
     /// `[fx, fy, cx, cy]` in pixels: the pinhole a rasteriser projects with.
-    pub fn intrinsics(&self) -> [f64; 4] {
+    pub(crate) fn intrinsics(&self) -> [f64; 4] {
         [self.fx, self.fy, self.cx, self.cy]
     }
 

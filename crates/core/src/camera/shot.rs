@@ -51,7 +51,7 @@ use crate::error::{Error, Result};
 use crate::json::{self, short, Describe, Obj, Style};
 
 /// The shot-file schema version this code reads and writes.
-pub const SHOT_VERSION: u64 = 1;
+pub(crate) const SHOT_VERSION: u64 = 1;
 
 /// A shot: output format and, per frame, the camera and the object matrices.
 #[derive(Clone, Debug, PartialEq)]
@@ -112,7 +112,7 @@ pub struct ShotFrame {
 #[derive(Clone, Debug, PartialEq)]
 pub struct ShotCamera {
     /// The camera object's `matrix_world` (camera to world).
-    pub world_from_camera: DMat4,
+    pub(crate) world_from_camera: DMat4,
     /// Perspective or equirectangular panorama.
     pub kind: ShotCameraKind,
     /// Focal length (mm).
@@ -296,7 +296,8 @@ impl Shot {
     }
 
     /// Frames per second: `fps / fps_base`.
-    pub fn frame_rate(&self) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn frame_rate(&self) -> f64 {
         self.fps / self.fps_base
     }
 
@@ -444,7 +445,7 @@ impl ShotFrame {
     /// (unit axes: Cycles clears the camera's scale too) and its shift changed by
     /// `−l·lens / (focus_distance·sensor)` (the sensor length the fit uses), so that every point
     /// of the focus plane keeps its pixel and each pixel sees the thin-lens ray through `l`
-    /// (see the [`aperture`](super::aperture) module). Otherwise this frame alone, unchanged.
+    /// (see the `aperture` module). Otherwise this frame alone, unchanged.
     pub fn through_aperture(&self, samples: u32) -> Vec<ShotFrame> {
         let c = &self.camera;
         let dof = match (c.kind, c.dof) {

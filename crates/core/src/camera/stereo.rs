@@ -99,7 +99,7 @@ impl Ods {
     }
 
     /// The image size: one eye's, or `W × 2H` for [`Eye::Both`] (left on top).
-    pub fn resolution(&self) -> (u32, u32) {
+    pub(crate) fn resolution(&self) -> (u32, u32) {
         match self.eye {
             Eye::Both => (self.width, 2 * self.height),
             _ => (self.width, self.height),
@@ -107,7 +107,7 @@ impl Ods {
     }
 
     /// The camera-space ray through raster (`x`, `y`), `None` outside the image.
-    pub fn camera_ray(&self, x: f64, y: f64) -> Option<CameraRay> {
+    pub(crate) fn camera_ray(&self, x: f64, y: f64) -> Option<CameraRay> {
         let (w, h) = (f64::from(self.width), f64::from(self.height));
         if !(0.0..=w).contains(&x) {
             return None;
@@ -151,7 +151,7 @@ impl Vr180 {
     }
 
     /// The image size: one eye's, or `2W × H` for [`Eye::Both`] (left eye on the left).
-    pub fn resolution(&self) -> (u32, u32) {
+    pub(crate) fn resolution(&self) -> (u32, u32) {
         match self.eye {
             Eye::Both => (2 * self.width, self.height),
             _ => (self.width, self.height),
@@ -159,7 +159,7 @@ impl Vr180 {
     }
 
     /// The camera-space ray through raster (`x`, `y`), `None` outside the image.
-    pub fn camera_ray(&self, x: f64, y: f64) -> Option<CameraRay> {
+    pub(crate) fn camera_ray(&self, x: f64, y: f64) -> Option<CameraRay> {
         let (w, h) = (f64::from(self.width), f64::from(self.height));
         if !(0.0..=h).contains(&y) {
             return None;

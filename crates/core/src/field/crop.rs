@@ -47,7 +47,7 @@ impl CropBox {
     }
 
     /// The box ready to clip rays ([`CropClip::clip`]): its rotation worked out once.
-    pub fn clipper(&self) -> CropClip {
+    pub(crate) fn clipper(&self) -> CropClip {
         CropClip {
             crop_from_field: self.rotation_matrix().transpose(),
             center: DVec3::from(self.center),
@@ -69,7 +69,7 @@ pub struct CropClip {
 impl CropClip {
     /// Whether the field-space point `p` is inside the box (splats are cropped by their mean,
     /// as nerfstudio's viewer crops them).
-    pub fn contains(&self, p: DVec3) -> bool {
+    pub(crate) fn contains(&self, p: DVec3) -> bool {
         let local = self.crop_from_field * (p - self.center);
         local.abs().cmple(self.half).all()
     }

@@ -66,36 +66,36 @@ pub enum ColorSpace {
 /// step (a constant step in the contracted coordinates). The marcher's occupancy grid covers
 /// the cube `‖x‖∞ ≤ grid` (`grid ≥ core`), skipping empty space there as for a bounded
 /// field; beyond it empty space is skipped with [`Field::may_be_occupied`] in steps of
-/// [`Unbounded::skip`] contracted units. A ray is integrated from `near` to `far`: distances
+/// `skip` contracted units. A ray is integrated from `near` to `far`: distances
 /// along it from its origin, in field units (nerfstudio's near and far planes).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Unbounded {
     /// Half the side of the core cube, centred on the field's origin (field units).
-    pub core: f32,
+    pub(crate) core: f32,
     /// Half the side of the cube the marcher's occupancy grid covers.
-    pub grid: f32,
+    pub(crate) grid: f32,
     /// The empty-space test's step in contracted units (fractions of the core's half side).
-    pub skip: f32,
+    pub(crate) skip: f32,
     /// Where a ray's integration starts: distance from its origin, field units.
-    pub near: f32,
+    pub(crate) near: f32,
     /// Where it ends.
-    pub far: f32,
+    pub(crate) far: f32,
 }
 
 impl Unbounded {
     /// The core cube.
-    pub fn core_box(&self) -> Aabb {
+    pub(crate) fn core_box(&self) -> Aabb {
         Aabb::new(Vec3::splat(-self.core), Vec3::splat(self.core))
     }
 
     /// The cube the marcher's occupancy grid covers.
-    pub fn grid_box(&self) -> Aabb {
+    pub(crate) fn grid_box(&self) -> Aabb {
         Aabb::new(Vec3::splat(-self.grid), Vec3::splat(self.grid))
     }
 
     /// The factor a step at field point `p` grows by: `(‖p‖∞/core)²` beyond the core, else 1.
     #[inline]
-    pub fn step_growth(&self, p: Vec3) -> f32 {
+    pub(crate) fn step_growth(&self, p: Vec3) -> f32 {
         let r = p.abs().max_element() / self.core;
         if r > 1.0 {
             r * r
@@ -110,12 +110,12 @@ impl Unbounded {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Span {
     /// Where the ray enters the interval.
-    pub enter: f64,
+    pub(crate) enter: f64,
     /// Where it leaves it (> `enter`).
-    pub exit: f64,
+    pub(crate) exit: f64,
     /// Whether the density may change inside the interval; `false`: it is one constant
     /// throughout, so one sample gives its integral exactly.
-    pub varies: bool,
+    pub(crate) varies: bool,
 }
 
 /// What a field can tell the marcher beyond its densities and colours, declared once per

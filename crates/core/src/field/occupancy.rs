@@ -440,7 +440,8 @@ impl Occupancy {
     }
 
     /// The fraction of cells marked occupied, in `[0, 1]`.
-    pub fn fill_ratio(&self) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn fill_ratio(&self) -> f64 {
         self.occupied_cells as f64 / f64::from(self.grid.n).powi(3)
     }
 

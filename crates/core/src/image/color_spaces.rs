@@ -180,13 +180,15 @@ impl OutputColorSpace {
     }
 
     /// Whether colour is display-encoded (not scene-linear).
-    pub fn is_display_encoded(self) -> bool {
+    pub(crate) fn is_display_encoded(self) -> bool {
         self == OutputColorSpace::Srgb
     }
 
     /// The matrix taking linear Rec.709 colour to this space's primaries (column vectors:
     /// `rgb_out = M · rgb_in`), before any encoding; exactly the identity for Rec.709's own.
-    pub fn from_lin_rec709(self) -> DMat3 {
+    // Named as a matrix, to_from (`rgb_from_xyz`), not as a constructor.
+    #[allow(clippy::wrong_self_convention)]
+    pub(crate) fn from_lin_rec709(self) -> DMat3 {
         if self.chromaticities() == REC709 {
             return DMat3::IDENTITY;
         }

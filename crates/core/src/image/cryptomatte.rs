@@ -29,13 +29,13 @@ pub const DEFAULT_RANKS: usize = 6;
 pub const MAX_RANKS: usize = 64;
 
 /// The MurmurHash3 (x86, 32 bits, seed 0) of `name`'s UTF-8 bytes.
-pub fn name_hash(name: &str) -> u32 {
+pub(crate) fn name_hash(name: &str) -> u32 {
     mur3::murmurhash3_x86_32(name.as_bytes(), 0)
 }
 
 /// The bits of the ID of `name`: its hash, with the lowest exponent bit flipped where the
 /// exponent is 0 or 255 (so the float is finite and normal).
-pub fn id_bits(name: &str) -> u32 {
+pub(crate) fn id_bits(name: &str) -> u32 {
     let hash = name_hash(name);
     let exponent = (hash >> 23) & 0xff;
     if exponent == 0 || exponent == 0xff {
@@ -55,7 +55,7 @@ pub fn object_id(name: &str) -> f32 {
 }
 
 /// The manifest: a JSON object from each name to its ID's bits (8 lowercase hex digits).
-pub fn manifest(names: &[&str]) -> String {
+pub(crate) fn manifest(names: &[&str]) -> String {
     let map: serde_json::Map<String, serde_json::Value> = names
         .iter()
         .map(|n| (n.to_string(), format!("{:08x}", id_bits(n)).into()))

@@ -23,7 +23,7 @@ pub struct DeepSample {
     /// `Z`: where the sample starts.
     pub front: f32,
     /// `ZBack`: where it ends (`front` for a point sample).
-    pub back: f32,
+    pub(crate) back: f32,
     /// Premultiplied colour.
     pub rgb: [f32; 3],
     /// Opacity of the sample alone.
@@ -39,7 +39,7 @@ pub struct DeepImage {
     pub height: u32,
     /// Where each pixel's samples start in `samples`, and one past the last pixel's end
     /// (`width·height + 1` entries).
-    pub offsets: Vec<u64>,
+    pub(crate) offsets: Vec<u64>,
     /// Every pixel's samples, one pixel after the other.
     pub samples: Vec<DeepSample>,
 }
@@ -55,14 +55,8 @@ impl DeepImage {
         }
     }
 
-    /// The samples of pixel `(x, y)`.
-    pub fn pixel(&self, x: u32, y: u32) -> &[DeepSample] {
-        let p = y as usize * self.width as usize + x as usize;
-        &self.samples[self.offsets[p] as usize..self.offsets[p + 1] as usize]
-    }
-
     /// The samples of pixel `p` (row-major), to change them in place.
-    pub fn pixel_mut(&mut self, p: usize) -> &mut [DeepSample] {
+    pub(crate) fn pixel_mut(&mut self, p: usize) -> &mut [DeepSample] {
         &mut self.samples[self.offsets[p] as usize..self.offsets[p + 1] as usize]
     }
 

@@ -63,7 +63,7 @@ impl DeepParams {
 pub(super) struct RawPiece {
     pub t0: f64,
     pub t1: f64,
-    pub weight: f64,
+    pub(crate) weight: f64,
     pub rgb: DVec3,
 }
 
@@ -80,8 +80,8 @@ struct Sample {
 /// `samples[offsets[i]..offsets[i + 1]]`.
 #[derive(Clone, Debug, Default)]
 pub(super) struct DeepTile {
-    pub offsets: Vec<u32>,
-    pub samples: Vec<DeepSample>,
+    pub(crate) offsets: Vec<u32>,
+    pub(crate) samples: Vec<DeepSample>,
 }
 
 impl DeepTile {
@@ -92,7 +92,7 @@ impl DeepTile {
     }
 
     /// Closes the pixel whose samples were just pushed.
-    pub fn end_pixel(&mut self) {
+    pub(crate) fn end_pixel(&mut self) {
         self.offsets.push(self.samples.len() as u32);
     }
 }
@@ -178,7 +178,7 @@ fn conform_samples(samples: &mut [Sample], rgb: [f32; 3]) {
 }
 
 /// Scales the colours of every pixel of `deep` so that each flattens to the colour of
-/// `planes` there (see [`conform_samples`]), after a colour-space conversion applied to both.
+/// `planes` there (see `conform_samples`), after a colour-space conversion applied to both.
 pub fn conform_to(deep: &mut DeepImage, planes: &Planes) {
     let Some([r, g, b]) = &planes.rgb else {
         return;
@@ -333,7 +333,11 @@ fn cut_into_equal_opacity(samples: &[Sample], cap: usize, out: &mut Vec<Sample>)
 /// entered with the averaged transmittance. So the result flattens exactly to the average
 /// of the lists' flattenings (the flat motion-blurred pixel), and a point at any slot
 /// boundary sees the average of what it sees in each shutter sample.
-pub fn average_pixels(lists: &[&[DeepSample]], params: &DeepParams, out: &mut Vec<DeepSample>) {
+pub(crate) fn average_pixels(
+    lists: &[&[DeepSample]],
+    params: &DeepParams,
+    out: &mut Vec<DeepSample>,
+) {
     let mut bounds: Vec<f64> = lists
         .iter()
         .flat_map(|l| {
@@ -469,7 +473,7 @@ pub(super) fn assemble(window: Window, tiles: Vec<(Window, DeepTile)>) -> DeepIm
 }
 
 /// The deep image that `frames` (one per shutter sample, of one size) average to
-/// ([`average_pixels`] per pixel).
+/// (`average_pixels` per pixel).
 pub fn average_images(frames: &[DeepImage], params: &DeepParams) -> Result<DeepImage> {
     let Some(first) = frames.first() else {
         return Err(Error::invalid("deep motion blur", "no shutter sample"));

@@ -9,7 +9,7 @@ use crate::camera::Ray;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Fragment {
     /// Distance along the pixel's world ray.
-    pub t: f64,
+    pub(crate) t: f64,
     /// Opacity.
     pub alpha: f32,
     /// Colour in the trained space (encoded to the scene's composite space).

@@ -270,7 +270,7 @@ impl RunningComposite {
     }
 
     /// The pieces of a pixel composited elsewhere, from its transmittance `T` and `Σ w·t`.
-    pub fn from_sums(transmittance: f64, depth_moment: f64) -> Self {
+    pub(crate) fn from_sums(transmittance: f64, depth_moment: f64) -> Self {
         RunningComposite {
             transmittance,
             depth_moment,
@@ -300,7 +300,7 @@ impl RunningComposite {
     /// Composites a fragment of opacity `alpha` (in [0, 1]) at distance `t` (a splat's, with
     /// no extent along the ray) and returns its weight `w = T·α`.
     #[inline]
-    pub fn add_fragment(&mut self, t: f64, alpha: f64) -> f64 {
+    pub(crate) fn add_fragment(&mut self, t: f64, alpha: f64) -> f64 {
         let w = self.transmittance * alpha;
         self.depth_moment += w * t;
         self.transmittance = (self.transmittance - w).max(0.0);
@@ -328,7 +328,7 @@ impl RunningComposite {
     }
 
     /// Expected ray distance `Σ w t / Σ w`, or `inf` when nothing was accumulated.
-    pub fn expected_depth(&self) -> f64 {
+    pub(crate) fn expected_depth(&self) -> f64 {
         let a = self.accumulation();
         if a > 0.0 {
             self.depth_moment / a
@@ -350,7 +350,7 @@ impl RunningComposite {
 /// one entered clearly above `1 − target` does not cross; as transmittance only falls, those
 /// pieces are the log's first ones, passed over by bisection, their exit transmittances (an
 /// exponential each) not worked out.
-pub fn crossing_depth(pieces: &[[f64; 5]], target: f64) -> f64 {
+pub(crate) fn crossing_depth(pieces: &[[f64; 5]], target: f64) -> f64 {
     let t_star = 1.0 - target;
     // Far above the rounding of `T − T·α` against `T·e^{−x}` (~1e-16 relative) at `T ≥ ½`.
     let clearly_above = t_star * (1.0 + 1e-9);

@@ -24,12 +24,12 @@ mod volume;
 pub use splats::splat_stage_timings;
 
 pub use deep::{average_images, conform_to, DeepParams, MAX_DEEP_SAMPLES};
-pub use integrator::{crossing_depth, opacity, srgb_composite_to_linear, RunningComposite};
+pub use integrator::{opacity, srgb_composite_to_linear, RunningComposite};
 pub use naive::render_naive;
 pub use ngp::{march_ngp, ngp_ray, NgpRay, NgpSample, NgpScratch, NgpStats, NGP_MAX_STEPS};
 pub use proposal::{
     proposal_ray, sample_proposals, ProposalRay, ProposalSample, ProposalScratch, ProposalStats,
-    COLOR_SKIP_BUDGET, STOP_TRANSMITTANCE,
+    STOP_TRANSMITTANCE,
 };
 pub use quality::{MarchParams, Quality};
 

@@ -38,8 +38,8 @@ pub(super) enum RunKind {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Run {
     pub start: f64,
-    pub end: f64,
-    pub kind: RunKind,
+    pub(crate) end: f64,
+    pub(crate) kind: RunKind,
 }
 
 /// How far inside a run's end its sample is taken, across the face the ray crosses there,

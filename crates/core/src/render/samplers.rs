@@ -21,19 +21,19 @@ use crate::scene::{Scene, SceneInstance};
 /// Every instance of a scene with its sampler, for one render.
 pub(super) struct Samplers<'a> {
     /// The marched instances, in the scene's order.
-    pub plans: Vec<InstancePlan<'a>>,
+    pub(crate) plans: Vec<InstancePlan<'a>>,
     /// The marched instances are integrated in closed form (and there is nothing else).
-    pub closed_form: bool,
+    pub(crate) closed_form: bool,
     /// The instances sampled by their trainer's estimator: the proposal-sampled ones, then
     /// the instant-ngp ones, each kind in the scene's order.
-    pub volume: Vec<VolumeSampler<'a>>,
+    pub(crate) volume: Vec<VolumeSampler<'a>>,
     /// The splats' layer, when the scene holds splats.
     pub splats: Option<Splatting>,
 }
 
 impl<'a> Samplers<'a> {
     /// The samplers of `scene`'s instances for a render of `window` through `camera`.
-    pub fn for_scene(
+    pub(crate) fn for_scene(
         scene: &'a Scene,
         camera: &Camera,
         window: Window,

@@ -123,7 +123,7 @@ pub struct InstanceDesc {
     pub field: FieldSource,
     /// Fixed placement, row-major (used when `object` is absent).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub world_from_field: Option<[[f64; 4]; 4]>,
+    pub(crate) world_from_field: Option<[[f64; 4]; 4]>,
     /// Take the placement per frame from this object of the shot.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub object: Option<String>,

@@ -84,7 +84,7 @@ impl FieldHandle {
     }
 
     /// The occupancy structure at `resolution`, built on first request.
-    pub fn occupancy(&self, resolution: u32) -> Arc<Occupancy> {
+    pub(crate) fn occupancy(&self, resolution: u32) -> Arc<Occupancy> {
         // A poisoned lock only means another thread panicked while building; the list
         // itself is always valid.
         let mut built = self.0.occupancy.lock().unwrap_or_else(|e| e.into_inner());
@@ -173,15 +173,15 @@ impl LocalRay {
 pub(crate) struct LocalLine {
     /// From the field-space position of the world ray's origin, field units moved per world
     /// unit (`field_from_world · d`, unnormalised), with the reciprocals that clipped it.
-    pub line: Line,
+    pub(crate) line: Line,
     /// The velocity as a unit direction.
-    pub dir: DVec3,
+    pub(crate) dir: DVec3,
     /// `|velocity|`.
-    pub units_per_world: f64,
+    pub(crate) units_per_world: f64,
     /// World distance where the ray enters the field's bounds (and crop).
-    pub t_near: f64,
+    pub(crate) t_near: f64,
     /// World distance where it leaves them.
-    pub t_far: f64,
+    pub(crate) t_far: f64,
 }
 
 /// Checks an instance's placement and crop box; returns the placement's inverse. Refuses
@@ -266,7 +266,7 @@ impl Instance {
     }
 
     /// The crop box ready to clip rays.
-    pub fn crop_clip(&self) -> Option<&CropClip> {
+    pub(crate) fn crop_clip(&self) -> Option<&CropClip> {
         self.crop_clip.as_ref()
     }
 

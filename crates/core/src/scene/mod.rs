@@ -59,7 +59,7 @@ impl SceneInstance {
     }
 
     /// The same instance with the crop box `crop` (field space) instead of its own.
-    pub fn with_crop(&self, crop: Option<CropBox>) -> Result<Self> {
+    pub(crate) fn with_crop(&self, crop: Option<CropBox>) -> Result<Self> {
         Ok(match self {
             SceneInstance::Marched(i) => SceneInstance::Marched(Instance::new(
                 i.name.clone(),
@@ -170,7 +170,7 @@ impl Scene {
 
     /// Whether any instance is sampled by its trainer's own estimator (its samples merged
     /// with the march as fragments): nerfacto's proposal sampler, instant-ngp's marcher.
-    pub fn has_sampled(&self) -> bool {
+    pub(crate) fn has_sampled(&self) -> bool {
         self.instances
             .iter()
             .any(|i| matches!(i, SceneInstance::Proposal(_) | SceneInstance::Ngp(_)))

@@ -40,7 +40,7 @@ impl NgpInstance {
     }
 
     /// The same placement with another crop box.
-    pub fn with_crop(&self, crop: Option<CropBox>) -> Result<Self> {
+    pub(crate) fn with_crop(&self, crop: Option<CropBox>) -> Result<Self> {
         let m = self.instance.world_from_field();
         Ok(Self {
             indicator: self.indicator,
@@ -73,7 +73,7 @@ impl NgpInstance {
     }
 
     /// The placement and crop (the snapshot as a plain instance).
-    pub fn instance(&self) -> &Instance {
+    pub(crate) fn instance(&self) -> &Instance {
         &self.instance
     }
 }

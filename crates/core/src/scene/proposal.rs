@@ -48,7 +48,7 @@ impl ProposalInstance {
     }
 
     /// The same placement with another crop box.
-    pub fn with_crop(&self, crop: Option<CropBox>) -> Result<Self> {
+    pub(crate) fn with_crop(&self, crop: Option<CropBox>) -> Result<Self> {
         let m = self.instance.world_from_field();
         Ok(Self {
             indicator: self.indicator,
@@ -81,7 +81,7 @@ impl ProposalInstance {
     }
 
     /// The placement and crop (the run as a plain instance).
-    pub fn instance(&self) -> &Instance {
+    pub(crate) fn instance(&self) -> &Instance {
         &self.instance
     }
 }

@@ -49,7 +49,7 @@ impl SplatInstance {
     }
 
     /// The same placement with another crop box.
-    pub fn with_crop(&self, crop: Option<CropBox>) -> Result<Self> {
+    pub(crate) fn with_crop(&self, crop: Option<CropBox>) -> Result<Self> {
         let (name, splats) = (self.name.clone(), self.splats.clone());
         Self::new(name, splats, self.world_from_splats, crop, self.antialiased)
     }
@@ -60,12 +60,12 @@ impl SplatInstance {
     }
 
     /// `N`, the object transform.
-    pub fn world_from_splats(&self) -> DMat4 {
+    pub(crate) fn world_from_splats(&self) -> DMat4 {
         self.world_from_splats
     }
 
     /// `N⁻¹`.
-    pub fn splats_from_world(&self) -> DMat4 {
+    pub(crate) fn splats_from_world(&self) -> DMat4 {
         self.splats_from_world
     }
 

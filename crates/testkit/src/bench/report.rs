@@ -46,7 +46,7 @@ impl Report {
     /// the growth series `cost_vs_content.png` into `dir`.
     pub fn write(&self, dir: &Path) -> Result<()> {
         let md = dir.join("report.md");
-        nerfx_core::output::write_file(&md, self.markdown().as_bytes())?;
+        nerfx_core::write_file(&md, self.markdown().as_bytes())?;
         for scene in &self.scenes {
             let series = |label: &str, keep: &dyn Fn(&str) -> bool| Series {
                 label: label.into(),

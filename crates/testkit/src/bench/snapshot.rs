@@ -21,7 +21,7 @@ use half::f16;
 use rmpv::Value;
 
 use nerfx_core::error::{Error, Result};
-use nerfx_core::rng::SplitMix64;
+use nerfx_core::SplitMix64;
 
 /// Cells per side of each occupancy cascade.
 const GRID: usize = 128;
@@ -421,7 +421,7 @@ pub fn file_bytes(s: &SnapshotSpec) -> Result<Vec<u8>> {
 /// Writes the snapshot of `s` into `dir` as `name.ingp` (or `.msgpack`); returns its path.
 pub fn write_snapshot(dir: &Path, name: &str, s: &SnapshotSpec) -> Result<PathBuf> {
     let path = dir.join(format!("{name}.{}", s.extension()));
-    nerfx_core::output::write_file(&path, &file_bytes(s)?)?;
+    nerfx_core::write_file(&path, &file_bytes(s)?)?;
     Ok(path)
 }
 

@@ -16,8 +16,8 @@ use nerfx_core::field::{SplatColor, SplatFormat, Splats};
 use nerfx_core::render::{
     render_with_progress, splat_stage_timings, Outputs, Quality, RenderSettings,
 };
-use nerfx_core::rng::SplitMix64;
 use nerfx_core::scene::{Scene, SplatInstance};
+use nerfx_core::SplitMix64;
 
 /// What one splat frame cost.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -21,11 +21,11 @@ use super::{Analytic, Shape};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Profile {
     /// The primitive's index in [`Analytic::primitives`].
-    pub index: u32,
+    pub(crate) index: u32,
     /// Where the ray enters its support.
-    pub enter: f64,
+    pub(crate) enter: f64,
     /// Where it leaves it.
-    pub exit: f64,
+    pub(crate) exit: f64,
     /// Its density per world unit inside the support.
     pub density: Density,
 }
@@ -50,7 +50,7 @@ impl Density {
     /// What [`sample_from`](Self::sample_from) needs of the start `a` of the
     /// intervals it is asked for: one error function, so that each end `t` then costs one.
     #[inline]
-    pub fn anchor(&self, a: f64) -> Anchor {
+    pub(crate) fn anchor(&self, a: f64) -> Anchor {
         match *self {
             Density::Constant(_) => Anchor::default(),
             Density::Gaussian { centre, width, .. } => {
@@ -77,7 +77,13 @@ impl Density {
     /// `rough` takes `erfcx(|z_t|)` from a five-term rational fit ([`rough_erfcx`]) instead:
     /// the optical depth is then off by at most [`rough_depth_error`](Self::rough_depth_error).
     #[inline]
-    pub fn sample_from(&self, anchor: &Anchor, a: f64, t: f64, rough: bool) -> (f64, f64, f64) {
+    pub(crate) fn sample_from(
+        &self,
+        anchor: &Anchor,
+        a: f64,
+        t: f64,
+        rough: bool,
+    ) -> (f64, f64, f64) {
         match *self {
             Density::Constant(k) => (k, k * (t - a), 0.5 * k * (t - a) * (t - a)),
             Density::Gaussian {
@@ -118,7 +124,7 @@ impl Density {
     /// and optical depth at `t` that [`sample_from`](Self::sample_from) gave, and `start`
     /// what [`squared_depth_start`](Self::squared_depth_start) gave for `anchor`, which it
     /// takes rather than works out again.
-    pub fn squared_depth_integral(
+    pub(crate) fn squared_depth_integral(
         &self,
         (anchor, start): (&Anchor, f64),
         a: f64,
@@ -143,7 +149,7 @@ impl Density {
     /// The error function [`squared_depth_integral`](Self::squared_depth_integral) takes
     /// at the point `anchor` was taken at, `erf(√2·z_a)` (0 for a constant), for any number
     /// of ends.
-    pub fn squared_depth_start(&self, anchor: &Anchor) -> f64 {
+    pub(crate) fn squared_depth_start(&self, anchor: &Anchor) -> f64 {
         match *self {
             Density::Constant(_) => 0.0,
             Density::Gaussian { .. } => erf(SQRT_2 * anchor.z),
@@ -171,7 +177,7 @@ impl Density {
     /// How far the optical depth a `rough` [`sample_from`](Self::sample_from) gives can be
     /// from the exact one: its `erfc` at `t` is off by at most [`ROUGH_ERFC_ERROR`], times
     /// `peak·width·√(π/2)`; 0 for a constant.
-    pub fn rough_depth_error(&self) -> f64 {
+    pub(crate) fn rough_depth_error(&self) -> f64 {
         match *self {
             Density::Constant(_) => 0.0,
             Density::Gaussian { peak, width, .. } => {

@@ -139,12 +139,13 @@ impl ShColor {
     }
 
     /// The SH degree: 0, 1 or 2.
-    pub fn degree(&self) -> u32 {
+    #[cfg(test)]
+    pub(crate) fn degree(&self) -> u32 {
         u32::from(self.degree)
     }
 
     /// The coefficient triples `k₀ …` (1, 4 or 9 of them).
-    pub fn coefficients(&self) -> Vec<Vec3> {
+    pub(crate) fn coefficients(&self) -> Vec<Vec3> {
         let n = (usize::from(self.degree) + 1).pow(2);
         let mut k = Vec::with_capacity(n);
         k.push(self.dc / C0 as f32);

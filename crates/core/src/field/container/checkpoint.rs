@@ -31,7 +31,7 @@ use crate::error::{Error, Result};
 
 /// Element types of torch storages.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum DType {
+pub(crate) enum DType {
     /// `torch.float32` (`FloatStorage`).
     F32,
     /// `torch.float16` (`HalfStorage`).
@@ -84,31 +84,31 @@ impl DType {
 
 /// Where a tensor's elements are: a view of a storage.
 #[derive(Clone, Debug, PartialEq)]
-pub struct TensorInfo {
+pub(crate) struct TensorInfo {
     /// Element type.
-    pub dtype: DType,
+    pub(crate) dtype: DType,
     /// Sizes per dimension.
     pub shape: Vec<usize>,
     /// Strides per dimension, in elements.
-    pub stride: Vec<usize>,
+    pub(crate) stride: Vec<usize>,
     /// First element in the storage.
-    pub offset: usize,
+    pub(crate) offset: usize,
     /// The storage's key (`data/<key>` in the archive).
-    pub storage: String,
+    pub(crate) storage: String,
     /// Elements in the storage.
-    pub storage_numel: usize,
+    pub(crate) storage_numel: usize,
 }
 
 impl TensorInfo {
     /// Number of elements (`Π shape`).
-    pub fn numel(&self) -> usize {
+    pub(crate) fn numel(&self) -> usize {
         self.shape.iter().product()
     }
 }
 
 /// A torch checkpoint: its named tensors and the archive that holds their data.
 #[derive(Debug)]
-pub struct Checkpoint {
+pub(crate) struct Checkpoint {
     zip: Zip,
     prefix: String,
     tensors: BTreeMap<String, TensorInfo>,
@@ -156,7 +156,7 @@ impl Checkpoint {
     }
 
     /// The tensors by dotted name.
-    pub fn tensors(&self) -> &BTreeMap<String, TensorInfo> {
+    pub(crate) fn tensors(&self) -> &BTreeMap<String, TensorInfo> {
         &self.tensors
     }
 
@@ -167,7 +167,7 @@ impl Checkpoint {
 
     /// The elements of the float tensor `name` (f32, f16, bf16 or f64) widened or rounded to
     /// f32, in row-major order of its shape.
-    pub fn read_f32(&self, name: &str) -> Result<Vec<f32>> {
+    pub(crate) fn read_f32(&self, name: &str) -> Result<Vec<f32>> {
         let path = self.zip.path();
         let t = self
             .tensors

@@ -57,7 +57,7 @@ impl Scalar {
 #[derive(Clone, Debug)]
 pub(crate) struct Property {
     pub name: String,
-    pub kind: Scalar,
+    pub(crate) kind: Scalar,
     offset: usize,
     /// A list property: rows of its element have no fixed size.
     list: bool,
@@ -67,7 +67,7 @@ pub(crate) struct Property {
 #[derive(Clone, Debug)]
 pub(crate) struct Element {
     pub name: String,
-    pub count: u64,
+    pub(crate) count: u64,
     pub properties: Vec<Property>,
     row_bytes: usize,
 }
@@ -78,7 +78,7 @@ impl Element {
     }
 
     /// The property called `name`.
-    pub fn property(&self, name: &str) -> Option<&Property> {
+    pub(crate) fn property(&self, name: &str) -> Option<&Property> {
         self.properties.iter().find(|p| p.name == name)
     }
 }
@@ -88,10 +88,10 @@ pub(crate) struct Ply<'a> {
     path: &'a Path,
     bytes: &'a [u8],
     big_endian: bool,
-    pub elements: Vec<Element>,
+    pub(crate) elements: Vec<Element>,
     /// The header's `comment` lines, without the keyword (SuperSplat announces its render mode
     /// in one).
-    pub comments: Vec<String>,
+    pub(crate) comments: Vec<String>,
     body: usize,
 }
 
@@ -139,7 +139,7 @@ impl Rows<'_> {
     /// Property `p` of row `row` as its bits, for packed integer words (`u32`, `u8`…, read
     /// exactly; floats give their bit pattern).
     #[inline]
-    pub fn bits(&self, row: usize, p: &Property) -> u32 {
+    pub(crate) fn bits(&self, row: usize, p: &Property) -> u32 {
         let at = row * self.row_bytes + p.offset;
         let b = &self.data[at..at + p.kind.size()];
         let mut a = [0u8; 4];

@@ -21,18 +21,18 @@ use crate::error::{Error, Result};
 /// What the field needs from `config.yml`.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct RunSettings {
-    pub method_name: String,
-    pub num_levels: u32,
-    pub features_per_level: u32,
-    pub log2_hashmap_size: u32,
-    pub base_res: u32,
-    pub max_res: u32,
-    pub hidden_dim: usize,
-    pub hidden_dim_color: usize,
-    pub average_init_density: f32,
-    pub disable_scene_contraction: bool,
-    pub use_average_appearance_embedding: bool,
-    pub far_plane: f32,
+    pub(crate) method_name: String,
+    pub(crate) num_levels: u32,
+    pub(crate) features_per_level: u32,
+    pub(crate) log2_hashmap_size: u32,
+    pub(crate) base_res: u32,
+    pub(crate) max_res: u32,
+    pub(crate) hidden_dim: usize,
+    pub(crate) hidden_dim_color: usize,
+    pub(crate) average_init_density: f32,
+    pub(crate) disable_scene_contraction: bool,
+    pub(crate) use_average_appearance_embedding: bool,
+    pub(crate) far_plane: f32,
 }
 
 /// The scalar value at the dotted `path`, if present.
@@ -260,30 +260,30 @@ impl RunSettings {
 /// `HashMLPDensityField`'s defaults for the keys it leaves out).
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct ProposalNetSettings {
-    pub num_levels: u32,
-    pub features_per_level: u32,
-    pub log2_hashmap_size: u32,
-    pub base_res: u32,
-    pub max_res: u32,
-    pub hidden_dim: usize,
+    pub(crate) num_levels: u32,
+    pub(crate) features_per_level: u32,
+    pub(crate) log2_hashmap_size: u32,
+    pub(crate) base_res: u32,
+    pub(crate) max_res: u32,
+    pub(crate) hidden_dim: usize,
     /// Layers of the MLP counting the output layer (nerfstudio's `num_layers`).
-    pub num_layers: usize,
-    pub use_linear: bool,
+    pub(crate) num_layers: usize,
+    pub(crate) use_linear: bool,
 }
 
 /// How nerfacto samples a ray at inference (`ProposalNetworkSampler`'s settings).
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct SamplerSettings {
     /// Samples per ray of each proposal iteration (`num_proposal_samples_per_ray`).
-    pub proposal_samples: Vec<usize>,
+    pub(crate) proposal_samples: Vec<usize>,
     /// Samples per ray of the main field (`num_nerf_samples_per_ray`).
-    pub nerf_samples: usize,
+    pub(crate) nerf_samples: usize,
     /// `use_same_proposal_network`.
-    pub same_network: bool,
+    pub(crate) same_network: bool,
     /// `proposal_initial_sampler` is `uniform` (else `piecewise`).
-    pub uniform_initial: bool,
+    pub(crate) uniform_initial: bool,
     /// The proposal networks' shapes, one per network.
-    pub nets: Vec<ProposalNetSettings>,
+    pub(crate) nets: Vec<ProposalNetSettings>,
 }
 
 impl SamplerSettings {

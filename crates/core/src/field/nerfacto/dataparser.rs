@@ -13,7 +13,9 @@
 
 use std::path::Path;
 
-use glam::{DMat4, DVec4};
+use glam::DMat4;
+#[cfg(test)]
+use glam::DVec4;
 use serde_json::Value;
 
 use crate::error::{Error, Result};
@@ -37,7 +39,7 @@ impl DataparserTransform {
     }
 
     /// Parses the JSON; `path_for_errors` names the source in messages.
-    pub fn from_json_str(text: &str, path_for_errors: impl AsRef<Path>) -> Result<Self> {
+    pub(crate) fn from_json_str(text: &str, path_for_errors: impl AsRef<Path>) -> Result<Self> {
         let path = path_for_errors.as_ref();
         let root = json::parse(text, path)?;
         let bad = |loc: &str, msg: String| Error::format(path, loc, msg);
@@ -87,7 +89,8 @@ impl DataparserTransform {
     }
 
     /// `ns_from_data = diag(s, s, s, 1)·[T t; 0 1]`: `x_ns = s·(T·x + t)`.
-    pub fn ns_from_data(&self) -> DMat4 {
+    #[cfg(test)]
+    pub(crate) fn ns_from_data(&self) -> DMat4 {
         let s = self.scale;
         DMat4::from_cols(
             DVec4::new(s, 0.0, 0.0, 0.0),
@@ -98,7 +101,8 @@ impl DataparserTransform {
     }
 
     /// `data_from_ns`, the inverse of [`Self::ns_from_data`].
-    pub fn data_from_ns(&self) -> DMat4 {
+    #[cfg(test)]
+    pub(crate) fn data_from_ns(&self) -> DMat4 {
         self.ns_from_data().inverse()
     }
 }

@@ -500,7 +500,7 @@ impl NerfactoField {
 
     /// Whether the run holds nerfacto's proposal networks (so its proposal sampler,
     /// [`crate::render::sample_proposals`], can sample it).
-    pub fn has_proposal_sampler(&self) -> bool {
+    pub(crate) fn has_proposal_sampler(&self) -> bool {
         self.proposal.is_some()
     }
 

@@ -53,12 +53,12 @@ const CONTRACTED: f32 = 2.0;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct GridSettings {
     /// Cells per axis `N`.
-    pub n: usize,
+    pub(crate) n: usize,
     /// Opacity across a cell above which it is occupied.
     pub opacity: f32,
     /// The field radius `‖x‖∞` beyond which nothing is rendered (the far plane): caps the
     /// outermost cells' extent in the opacity rule.
-    pub far: f32,
+    pub(crate) far: f32,
 }
 
 /// nerfacto's L∞ contraction of a field point (`(x/m)·(2 − 1/m)` beyond the unit cube, in
@@ -139,12 +139,12 @@ pub(super) struct OccupancyGrid {
 
 impl OccupancyGrid {
     /// Every cell occupied (before the grid is computed).
-    pub fn full(settings: &GridSettings) -> Self {
+    pub(crate) fn full(settings: &GridSettings) -> Self {
         Self::from_cells(settings, &vec![true; settings.n.pow(3)], Source::Computed)
     }
 
     /// The grid of `cells` (`n³`, x fastest).
-    pub fn from_cells(settings: &GridSettings, cells: &[bool], source: Source) -> Self {
+    pub(crate) fn from_cells(settings: &GridSettings, cells: &[bool], source: Source) -> Self {
         let n = settings.n;
         let m = n + 1;
         let mut sums = vec![0u32; m * m * m];
@@ -169,7 +169,7 @@ impl OccupancyGrid {
     /// current for `key`, otherwise computed from `density` (the field's unmasked density at
     /// *contracted* points) and written to the first of `caches` that can be written; with
     /// no key (the checkpoint could not be examined), computed and not cached.
-    pub fn load_or_build(
+    pub(crate) fn load_or_build(
         settings: &GridSettings,
         caches: &[PathBuf],
         key: Option<&str>,
@@ -197,7 +197,7 @@ impl OccupancyGrid {
     }
 
     /// Cells per axis.
-    pub fn resolution(&self) -> usize {
+    pub(crate) fn resolution(&self) -> usize {
         self.n
     }
 
@@ -234,7 +234,7 @@ impl OccupancyGrid {
     /// Whether any cell meeting the contracted image of the field-space box `region` is
     /// occupied: the cells of its contracted box (see [`contract_box`]) that lie outside the
     /// cube its image cannot enter, as up to six boxes (one per face of that cube).
-    pub fn region(&self, region: &Aabb) -> bool {
+    pub(crate) fn region(&self, region: &Aabb) -> bool {
         let (c, inner) = contract_box(region);
         if inner <= 0.0 {
             return self.contracted_region(&c);
@@ -250,13 +250,13 @@ impl OccupancyGrid {
     }
 
     /// Whether the cell of the field point `p` is occupied.
-    pub fn point(&self, p: Vec3) -> bool {
+    pub(crate) fn point(&self, p: Vec3) -> bool {
         let c = contract(p);
         self.contracted_region(&Aabb::new(c, c))
     }
 
     /// Occupied cells over all cells.
-    pub fn fill_ratio(&self) -> f64 {
+    pub(crate) fn fill_ratio(&self) -> f64 {
         let n = self.n;
         f64::from(self.count([0; 3], [n; 3])) / (n * n * n) as f64
     }

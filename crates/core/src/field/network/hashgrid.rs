@@ -31,17 +31,17 @@ pub enum TableStorage {
 
 /// The shape of a hash encoding.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct HashGridConfig {
+pub(crate) struct HashGridConfig {
     /// Number of levels `L`.
-    pub n_levels: u32,
+    pub(crate) n_levels: u32,
     /// Features per level `F` (1, 2, 4 or 8).
-    pub n_features: u32,
+    pub(crate) n_features: u32,
     /// `log2` of the largest table size.
-    pub log2_table_size: u32,
+    pub(crate) log2_table_size: u32,
     /// Resolution of the coarsest level `N_min`.
-    pub base_resolution: u32,
+    pub(crate) base_resolution: u32,
     /// Growth factor between levels `b`.
-    pub per_level_scale: f32,
+    pub(crate) per_level_scale: f32,
 }
 
 /// One level's geometry.
@@ -64,7 +64,7 @@ enum Tables {
 
 /// A multi-resolution hash encoding with its trained tables.
 #[derive(Clone, Debug)]
-pub struct HashGrid {
+pub(crate) struct HashGrid {
     config: HashGridConfig,
     levels: Vec<Level>,
     tables: Tables,
@@ -194,17 +194,17 @@ impl HashGridConfig {
 
     /// The finest level's scale `s_{L−1}` (cells per unit of the unit cube: a point maps
     /// to `s·x + 0.5`), so its cells are `1/s` wide.
-    pub fn finest_scale(&self) -> f32 {
+    pub(crate) fn finest_scale(&self) -> f32 {
         self.levels().last().map_or(1.0, |l| l.scale)
     }
 
     /// Table entries over all levels (`Σ T_l`); the parameter count is this times `F`.
-    pub fn n_entries(&self) -> usize {
+    pub(crate) fn n_entries(&self) -> usize {
         self.levels().iter().map(|l| l.entries as usize).sum()
     }
 
     /// Number of parameters (`Σ T_l · F`).
-    pub fn n_params(&self) -> usize {
+    pub(crate) fn n_params(&self) -> usize {
         self.n_entries() * self.n_features as usize
     }
 
@@ -214,7 +214,7 @@ impl HashGridConfig {
     }
 
     /// Output width `L·F`.
-    pub fn n_outputs(&self) -> usize {
+    pub(crate) fn n_outputs(&self) -> usize {
         (self.n_levels * self.n_features) as usize
     }
 }
@@ -240,7 +240,7 @@ impl HashGrid {
     }
 
     /// A grid with f32 parameters (kept in f32); `None` as for [`Self::new`].
-    pub fn from_f32(config: HashGridConfig, params: Vec<f32>) -> Option<Self> {
+    pub(crate) fn from_f32(config: HashGridConfig, params: Vec<f32>) -> Option<Self> {
         let levels = config.levels();
         (params.len() == config.n_params() && config.supported()).then(|| HashGrid {
             config,
@@ -255,7 +255,7 @@ impl HashGrid {
     }
 
     /// The storage of the tables.
-    pub fn storage(&self) -> TableStorage {
+    pub(crate) fn storage(&self) -> TableStorage {
         match self.tables {
             Tables::F16(_) => TableStorage::F16,
             Tables::F32(_) => TableStorage::F32,
@@ -264,7 +264,7 @@ impl HashGrid {
 
     /// Encodes each point `xs[i]` (unit cube) into `out[i·L·F .. (i+1)·L·F]`.
     /// Level by level, so one level's table stays in cache across the batch.
-    pub fn encode(&self, xs: &[Vec3], out: &mut [f32]) {
+    pub(crate) fn encode(&self, xs: &[Vec3], out: &mut [f32]) {
         #[cfg(target_arch = "x86_64")]
         if simd::available() {
             // SAFETY: the CPU has AVX2 and F16C (checked just above).

@@ -26,17 +26,17 @@ use glam::Vec3;
 
 /// The shape of an MLP.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct MlpConfig {
+pub(crate) struct MlpConfig {
     /// Inputs used (the layer reads `n_inputs` rounded up to 16, the rest zero).
-    pub n_inputs: usize,
+    pub(crate) n_inputs: usize,
     /// Neurons per hidden layer.
     pub width: usize,
     /// Hidden layers (≥ 1).
-    pub n_hidden_layers: usize,
+    pub(crate) n_hidden_layers: usize,
     /// Outputs used.
-    pub n_outputs: usize,
+    pub(crate) n_outputs: usize,
     /// The last layer's output is padded to a multiple of this (16, or 8 for old CutlassMLP).
-    pub output_alignment: usize,
+    pub(crate) output_alignment: usize,
 }
 
 impl MlpConfig {
@@ -53,7 +53,7 @@ impl MlpConfig {
     }
 
     /// Number of parameters (padded, as stored).
-    pub fn n_params(&self) -> usize {
+    pub(crate) fn n_params(&self) -> usize {
         self.layers().iter().map(|(i, o)| i * o).sum()
     }
 }
@@ -98,7 +98,7 @@ impl Layer {
 
 /// An MLP with f32 weights.
 #[derive(Clone, Debug)]
-pub struct Mlp {
+pub(crate) struct Mlp {
     config: MlpConfig,
     /// The first layer reads the `n_inputs` used inputs only (the padding is zero); the last
     /// keeps the used outputs only.
@@ -158,7 +158,7 @@ impl Mlp {
     /// `n_inputs`; `None` when there is no layer or the shapes do not chain. Its
     /// configuration gives the inputs, the first layer's width, the layers after the first
     /// as hidden ones (0 for one linear layer) and the outputs, unpadded.
-    pub fn with_biases(n_inputs: usize, layers: &[(Vec<f32>, Vec<f32>)]) -> Option<Self> {
+    pub(crate) fn with_biases(n_inputs: usize, layers: &[(Vec<f32>, Vec<f32>)]) -> Option<Self> {
         let mut n_in = n_inputs;
         let mut out = Vec::with_capacity(layers.len());
         for (w, b) in layers {
@@ -185,7 +185,7 @@ impl Mlp {
     /// The MLP with its last `values.len()` inputs fixed at `values`: their products with
     /// the first layer's weights are summed (in f64) into its biases once, so that a batch
     /// carries only the inputs that vary. `None` when there are fewer inputs than values.
-    pub fn with_last_inputs(&self, values: &[f32]) -> Option<Mlp> {
+    pub(crate) fn with_last_inputs(&self, values: &[f32]) -> Option<Mlp> {
         let mut m = self.clone();
         let first = m.layers.first_mut()?;
         let keep = first.n_in.checked_sub(values.len())?;
@@ -209,7 +209,7 @@ impl Mlp {
     /// [`Self::forward_from`] starts each sample's first layer from it. `None` when there
     /// are fewer inputs than `n`. The first layer's biases go with the split-off columns
     /// (each row starts from them), so the MLP returned is for `forward_from` only.
-    pub fn split_last_inputs(&self, n: usize) -> Option<(Mlp, LastInputs)> {
+    pub(crate) fn split_last_inputs(&self, n: usize) -> Option<(Mlp, LastInputs)> {
         let mut m = self.clone();
         let first = m.layers.first_mut()?;
         let keep = first.n_in.checked_sub(n)?;
@@ -231,14 +231,20 @@ impl Mlp {
 
     /// Evaluates the MLP on `n` inputs, `inputs[k·n_inputs ..][.. n_inputs]`, writing
     /// `outputs[k·n_outputs ..][.. n_outputs]`.
-    pub fn forward(&self, inputs: &[f32], outputs: &mut [f32]) {
+    pub(crate) fn forward(&self, inputs: &[f32], outputs: &mut [f32]) {
         self.forward_with(Kernel::detect(), inputs, None, outputs);
     }
 
     /// [`Self::forward`] of an MLP from [`Self::split_last_inputs`]: sample `k`'s first
     /// layer starts from row `row_of[k]` of `starts` (rows of [`LastInputs::stride`] values,
     /// from [`LastInputs::starts`]) instead of its biases.
-    pub fn forward_from(&self, inputs: &[f32], starts: &[f32], row_of: &[u32], out: &mut [f32]) {
+    pub(crate) fn forward_from(
+        &self,
+        inputs: &[f32],
+        starts: &[f32],
+        row_of: &[u32],
+        out: &mut [f32],
+    ) {
         let starts = Starts {
             rows: starts,
             row_of,
@@ -327,7 +333,7 @@ impl Mlp {
 /// The first layer's columns of an MLP's last inputs, split off by
 /// [`Mlp::split_last_inputs`], with its biases.
 #[derive(Clone, Debug)]
-pub struct LastInputs {
+pub(crate) struct LastInputs {
     n_out: usize,
     stride: usize,
     /// `[input][stride]`, as in [`Layer`].
@@ -339,14 +345,14 @@ impl LastInputs {
     /// Values per row of [`Self::starts`] (the first layer's outputs, padded): what the
     /// tests check the rows' length by.
     #[cfg(test)]
-    pub fn stride(&self) -> usize {
+    pub(crate) fn stride(&self) -> usize {
         self.stride
     }
 
     /// Appends to `rows` one row of [`Self::stride`] values: `bias[o] + Σᵢ W[i][o]·v[i]`
     /// over these inputs `v = values`, summed in input order (each product rounded, then
     /// added); the padding is zero. `values` beyond the inputs split off are ignored.
-    pub fn starts(&self, values: &[f32], rows: &mut Vec<f32>) {
+    pub(crate) fn starts(&self, values: &[f32], rows: &mut Vec<f32>) {
         let at = rows.len();
         rows.extend_from_slice(&self.bias);
         let row = &mut rows[at..];
@@ -361,7 +367,7 @@ impl LastInputs {
     /// [`Self::starts`] (of `encode(direction)`) per run of consecutive equal directions (a
     /// ray's samples share one) into `rows`, and each sample's row into `row_of`, both
     /// cleared first.
-    pub fn starts_per_run<const N: usize>(
+    pub(crate) fn starts_per_run<const N: usize>(
         &self,
         dirs: &[Vec3],
         encode: impl Fn(Vec3) -> [f32; N],

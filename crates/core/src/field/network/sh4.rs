@@ -31,7 +31,7 @@ const K3D: f32 = 0.373_176_33;
 const K3E: f32 = 1.445_305_7;
 
 /// The 16 SH values of the unit direction `d` as tcnn computes them from `(d + 1)/2`.
-pub fn sh4(d: Vec3) -> [f32; 16] {
+pub(crate) fn sh4(d: Vec3) -> [f32; 16] {
     let u = (d + Vec3::ONE) * 0.5;
     sh_basis(u * 2.0 - Vec3::ONE)
 }

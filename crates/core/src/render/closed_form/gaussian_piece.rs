@@ -91,10 +91,10 @@ pub(super) struct Sums {
 /// moment `∫tσT dt`.
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct Integral {
-    pub optical_depth: f64,
-    pub weight: f64,
-    pub colour: DVec3,
-    pub moment: f64,
+    pub(crate) optical_depth: f64,
+    pub(crate) weight: f64,
+    pub(crate) colour: DVec3,
+    pub(crate) moment: f64,
 }
 
 /// A piece's optical depth and what bounds its integrals in closed form: over `[a, b]`, the

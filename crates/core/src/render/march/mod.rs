@@ -61,9 +61,9 @@ const MAX_BISECTIONS: u32 = 52;
 pub(super) struct PixelResult {
     pub rgb: [f32; 3],
     pub alpha: f32,
-    pub depth_ray: f32,
-    pub depth_z: f32,
-    pub depth_median: f32,
+    pub(crate) depth_ray: f32,
+    pub(crate) depth_z: f32,
+    pub(crate) depth_median: f32,
 }
 
 /// Per instance, what the marcher needs that does not change per ray.
@@ -419,7 +419,7 @@ struct DeepBuffers {
 #[derive(Clone, Copy, Debug)]
 pub(super) struct DeepPass {
     pub params: DeepParams,
-    pub decode: bool,
+    pub(crate) decode: bool,
 }
 
 /// Marches one tile. `out` receives the tile's pixels row by row, and `deep`'s tile their

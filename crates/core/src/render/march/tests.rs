@@ -678,7 +678,7 @@ fn a_ray_lists_exactly_the_instances_it_meets() {
 /// after a fragment's drop in transmittance), every share of the pixel's alpha.
 #[test]
 fn a_cut_median_log_gives_the_full_logs_depth() {
-    use crate::render::crossing_depth;
+    use crate::render::integrator::crossing_depth;
     use crate::rng::SplitMix64;
 
     let mut rng = SplitMix64::new(11);

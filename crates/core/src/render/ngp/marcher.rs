@@ -107,17 +107,17 @@ pub struct NgpSample {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct NgpStats {
     /// Rays marched.
-    pub rays: u64,
+    pub(crate) rays: u64,
     /// Samples taken (density queries).
     pub samples: u64,
     /// Colour queries.
-    pub color_queries: u64,
+    pub(crate) color_queries: u64,
     /// Rays that stopped at 99 % accumulation.
     pub opaque: u64,
     /// Rays that reached the step cap.
     pub capped: u64,
     /// Samples whose density was NaN, taken as empty.
-    pub invalid: u64,
+    pub(crate) invalid: u64,
 }
 
 impl std::ops::AddAssign for NgpStats {

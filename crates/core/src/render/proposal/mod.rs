@@ -15,7 +15,7 @@ mod weights;
 
 pub use sampler::{
     sample_proposals, ProposalRay, ProposalSample, ProposalScratch, ProposalStats,
-    COLOR_SKIP_BUDGET, STOP_TRANSMITTANCE,
+    STOP_TRANSMITTANCE,
 };
 
 use crate::camera::Ray;

@@ -41,7 +41,7 @@ use crate::field::{DensityScratch, NerfactoField, ProposalNetworks};
 /// Transmittance below which a ray's later samples are not evaluated.
 pub const STOP_TRANSMITTANCE: f64 = 1e-6;
 /// The most weight per ray that may go unshaded (its lightest main-field samples, black).
-pub const COLOR_SKIP_BUDGET: f64 = 1e-5;
+pub(crate) const COLOR_SKIP_BUDGET: f64 = 1e-5;
 /// Samples per ray evaluated per round (front to back, so rays can stop early).
 const ROUND: usize = 16;
 /// `PDFSampler`'s histogram padding and `eps`.
@@ -85,7 +85,7 @@ pub struct ProposalStats {
     /// Main-field colour queries.
     pub color_queries: u64,
     /// Main-field samples whose density was NaN or infinite, taken as empty.
-    pub invalid_samples: u64,
+    pub(crate) invalid_samples: u64,
     /// Time in the proposal iterations (evaluation and resampling).
     pub proposal_time: Duration,
     /// Time in the main field (density, features, colour).

@@ -23,14 +23,14 @@ pub(crate) struct View {
     pub linear: DMat3,
     pub translation: DVec3,
     /// `[fx, fy, cx, cy]` in pixels (raster y down, pixel centres at +0.5).
-    pub intrinsics: [f64; 4],
+    pub(crate) intrinsics: [f64; 4],
     /// The whole image, in pixels.
     pub width: u32,
     pub height: u32,
     /// Camera z range kept.
-    pub depth_range: [f64; 2],
+    pub(crate) depth_range: [f64; 2],
     /// The camera centre in the splats' frame (SH directions are taken there).
-    pub eye: DVec3,
+    pub(crate) eye: DVec3,
     /// Mip-splatting's opacity compensation.
     pub antialiased: bool,
     /// Colours wanted.
@@ -43,9 +43,9 @@ pub(crate) struct View {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Projected {
     /// Raster position of the mean.
-    pub xy: [f32; 2],
+    pub(crate) xy: [f32; 2],
     /// Inverse image covariance `(a, b, c)`: `σ = ½(a dx² + c dy²) + b dx dy`.
-    pub conic: [f32; 3],
+    pub(crate) conic: [f32; 3],
     /// Opacity (with the antialiasing compensation applied).
     pub opacity: f32,
     /// Camera z of the mean.

@@ -116,7 +116,7 @@ pub(crate) struct SplatLayer {
     /// How wide the pixel loop runs on this CPU.
     lanes: Lanes,
     /// Seconds spent projecting, and sorting and binning (for benchmarks).
-    pub timings: [f64; 2],
+    pub(crate) timings: [f64; 2],
 }
 
 impl SplatLayer {
@@ -532,7 +532,7 @@ pub(crate) struct SplatPixel {
     /// Premultiplied colour in the trained space.
     pub rgb: [f64; 3],
     /// `Σ w·t`: the weights times the fragments' ray distances.
-    pub depth_moment: f64,
+    pub(crate) depth_moment: f64,
 }
 
 impl Default for SplatPixel {

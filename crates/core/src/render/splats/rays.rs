@@ -34,15 +34,15 @@ pub(crate) struct RayView {
     pub translation: DVec3,
     /// The camera centre (world) and `camera_from_world`'s rotation.
     pub centre: DVec3,
-    pub camera_from_world: DMat3,
+    pub(crate) camera_from_world: DMat3,
     /// Largest distance of a ray origin from the centre (stereo eyes).
-    pub eye_offset: f64,
+    pub(crate) eye_offset: f64,
     /// Angle between neighbouring pixels, radians.
-    pub pixel_angle: f64,
+    pub(crate) pixel_angle: f64,
     /// The camera centre in the splats' frame (SH directions).
-    pub eye: DVec3,
+    pub(crate) eye: DVec3,
     /// Distance range kept.
-    pub depth_range: [f64; 2],
+    pub(crate) depth_range: [f64; 2],
     pub rgb: bool,
     pub crop: Option<CropClip>,
 }
@@ -130,7 +130,7 @@ impl RayLayer {
 
     /// Appends the fragments of the world ray `origin + t·dir` (`dir` unit) front to back,
     /// up to the one that brings its transmittance (from splats alone) to the floor.
-    pub fn fragments(&self, origin: DVec3, dir: DVec3, out: &mut Vec<Fragment>) {
+    pub(crate) fn fragments(&self, origin: DVec3, dir: DVec3, out: &mut Vec<Fragment>) {
         let cell = cell_of(self.camera_from_world * dir);
         let o = (origin - self.centre).as_vec3();
         let d = dir.as_vec3();

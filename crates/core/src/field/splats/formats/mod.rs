@@ -64,12 +64,12 @@ pub struct SplatSource {
     /// The format's version where it has one (SPZ 2–4, SOG 1–2).
     pub version: Option<u32>,
     /// How positions, rotations, scales, opacities and colours were stored, for people.
-    pub quantisation: String,
+    pub(crate) quantisation: String,
     /// Whether the file says the splats were trained in the antialiased (mip-splatting) mode:
     /// SPZ's flag, SOG's `model`, a PLY's `SplatRenderMode: mip` or `antialiased 1` comment.
     pub antialiased: bool,
     /// Anything else the artist should know about how the file was read.
-    pub notes: Vec<String>,
+    pub(crate) notes: Vec<String>,
 }
 
 /// Reads the splat file (or SOG folder, or splatfacto run) at `path`, whatever its format.

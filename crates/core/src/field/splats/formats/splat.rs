@@ -73,9 +73,9 @@ pub(crate) struct Record {
     pub mean: Vec3,
     pub scale: Vec3,
     /// The rotation `w x y z`, not yet normalised.
-    pub wxyz: [f32; 4],
+    pub(crate) wxyz: [f32; 4],
     pub opacity: f32,
-    pub dc: [f32; 3],
+    pub(crate) dc: [f32; 3],
 }
 
 /// Decodes one 32-byte record.

@@ -135,7 +135,8 @@ impl OfxGraph {
     }
 
     /// Renders the nodes the outputs need at `time` through the bundle (whole images at
-    /// `render_scale`), as [`evaluate`] does; `on_node` hears each finished node's name.
+    /// `render_scale`), as [`nerfx_graph::evaluate`] does; `on_node` hears each finished
+    /// node's name.
     pub fn render(
         &mut self,
         time: f64,

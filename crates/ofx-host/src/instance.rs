@@ -630,9 +630,9 @@ impl Instance {
     /// `kOfxImageEffectPropFieldToRender` is `field`, the output image is a full frame holding
     /// both fields (`kOfxImagePropField` both, as are the input images), and the plugin must
     /// write exactly the rows of `field` in the window (OFX rows counted from the bottom of
-    /// the image, [`Field::has_row`]): a row of the other field written, or one of this field
-    /// left unwritten, is a violation and an error. The other field's rows come back
-    /// transparent black.
+    /// the image, [`InterlacedField::has_row`]): a row of the other field written, or one of
+    /// this field left unwritten, is a violation and an error. The other field's rows come
+    /// back transparent black.
     pub fn render_field(
         &self,
         time: f64,

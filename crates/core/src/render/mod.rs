@@ -254,8 +254,7 @@ fn render_planes(
     let window = camera.clamp_window(window)?;
     let samplers = Samplers::for_scene(scene, camera, window, settings)?;
     let size = settings.tile_size.max(1);
-    let decode =
-        scene.composite_space() == ColorSpace::Srgb && settings.color == ColorOutput::Linear;
+    let decode = samplers.space == ColorSpace::Srgb && settings.color == ColorOutput::Linear;
     let mut planes = empty_planes(window, &settings.outputs);
     let bands: Vec<Mutex<Band>> = bands(&mut planes, size)
         .into_iter()

@@ -1,8 +1,9 @@
 //! The samplers of a scene's instances, prepared once per render.
 //!
-//! Each instance's sampler was chosen when the scene was loaded (its [`SceneInstance`]
-//! kind). The marched instances are planned together ([`InstancePlan`]): integrated in closed
-//! form where every one is analytic and the preset asks for it
+//! Each instance's sampler was chosen when the scene was loaded (its
+//! [`SceneInstance`](crate::scene::SceneInstance) kind). The marched instances are planned
+//! together ([`InstancePlan`]): integrated in closed form where every one is analytic and
+//! the preset asks for it
 //! ([`MarchParams::closed_form`](super::MarchParams::closed_form)), else marched along each
 //! ray's runs (module `runs`: a field's spans, its mask's segments or its occupied cells).
 //! The instances sampled by their trainer's own estimator ([`VolumeSampler`]) and the splats
@@ -15,11 +16,14 @@ use super::volume::VolumeSampler;
 use super::RenderSettings;
 use crate::camera::Camera;
 use crate::error::Result;
+use crate::field::ColorSpace;
 use crate::image::Window;
-use crate::scene::{Scene, SceneInstance};
+use crate::scene::Scene;
 
 /// Every instance of a scene with its sampler, for one render.
 pub(super) struct Samplers<'a> {
+    /// The space the scene's colours are composited in ([`Scene::composite_space`]).
+    pub(crate) space: ColorSpace,
     /// The marched instances, in the scene's order.
     pub(crate) plans: Vec<InstancePlan<'a>>,
     /// The marched instances are integrated in closed form (and there is nothing else).
@@ -39,23 +43,25 @@ impl<'a> Samplers<'a> {
         window: Window,
         settings: &RenderSettings,
     ) -> Result<Self> {
-        let plans = InstancePlan::for_scene(scene, &settings.march);
         let space = scene.composite_space();
+        let plans = InstancePlan::for_scene(scene, space, &settings.march);
         let volume: Vec<VolumeSampler<'a>> = (scene.proposal().map(VolumeSampler::Proposal))
             .chain(scene.ngp().map(|n| VolumeSampler::Ngp(n, space)))
             .collect();
-        let only_marched = scene
-            .instances()
-            .iter()
-            .all(|i| matches!(i, SceneInstance::Marched(_)));
+        let splats = splat_layer(scene, camera, window, &settings.outputs)?;
+        // Closed form integrates marched instances alone: no fragments to merge.
         let closed_form = settings.march.closed_form
-            && only_marched
-            && scene.marched().all(|i| i.handle().as_analytic().is_some());
+            && volume.is_empty()
+            && splats.is_none()
+            && plans
+                .iter()
+                .all(|p| p.instance.handle().as_analytic().is_some());
         Ok(Samplers {
+            space,
             plans,
             closed_form,
             volume,
-            splats: splat_layer(scene, camera, window, &settings.outputs)?,
+            splats,
         })
     }
 }

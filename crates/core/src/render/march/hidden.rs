@@ -56,7 +56,7 @@ fn unbounded_over<'a>(
 ) -> impl Iterator<Item = (usize, usize, &'a LocalRay, f64, f64)> + 'a {
     met_by(s, r).iter().enumerate().filter_map(move |(j, met)| {
         let (i, lr) = (met.inst as usize, &met.local);
-        if plans[i].bounded {
+        if plans[i].capabilities.density_bounds {
             return None;
         }
         let (a, b) = (t0.max(lr.t_near), t1.min(lr.t_far));

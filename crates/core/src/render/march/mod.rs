@@ -70,7 +70,9 @@ pub(super) struct PixelResult {
 pub(super) struct InstancePlan<'a> {
     /// The instance.
     pub(in crate::render) instance: &'a Instance,
-    /// What the field declares it can answer besides densities and colours.
+    /// What the field declares it can answer besides densities and colours. Only a field
+    /// that declares density bounds can have a step between two empty samples known to hold
+    /// nothing, and grow.
     capabilities: Capabilities,
     /// The occupancy grid that finds the field's occupied segments; `None` for a field that
     /// declares [spans](crate::field::Field::spans) or
@@ -86,10 +88,6 @@ pub(super) struct InstancePlan<'a> {
     encode: bool,
     /// How the field is marched beyond its core, when it is defined on all of space.
     unbounded: Option<Unbounded>,
-    /// Whether the field declares bounds of its density over a region
-    /// ([`Field::density_bounds`](crate::field::Field::density_bounds)): only then can a step
-    /// between two empty samples be known to hold nothing, and grow.
-    bounded: bool,
     /// The side of an occupancy cell, field units, for a field that cannot bound its
     /// density (infinite for the others): [`hides_gap`](hidden::hides_gap) probes a step
     /// with density at both ends for gaps no finer than `hidden::GAP_PROBES_PER_CELL` to a
@@ -449,7 +447,7 @@ pub(super) fn march_tile(
         s,
     );
     let width = s.feature_width;
-    let empty_is_known = plans.iter().all(|p| p.bounded);
+    let empty_is_known = plans.iter().all(|p| p.capabilities.density_bounds);
 
     while !s.active.is_empty() {
         // Each live ray keeps its last node (the start of its next piece), then lays more.

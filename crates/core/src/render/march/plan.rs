@@ -15,9 +15,13 @@ use crate::scene::Scene;
 const SAMPLE_ROUNDING: f64 = 1e-4;
 
 impl<'a> InstancePlan<'a> {
-    /// The plans of `scene`'s marched instances, in its order.
-    pub(in crate::render) fn for_scene(scene: &'a Scene, params: &MarchParams) -> Vec<Self> {
-        let space = scene.composite_space();
+    /// The plans of `scene`'s marched instances, in its order, for a scene composited in
+    /// `space` ([`Scene::composite_space`]).
+    pub(in crate::render) fn for_scene(
+        scene: &'a Scene,
+        space: ColorSpace,
+        params: &MarchParams,
+    ) -> Vec<Self> {
         scene
             .marched()
             .map(|inst| {
@@ -26,7 +30,6 @@ impl<'a> InstancePlan<'a> {
                 let exact = spans || capabilities.mask_segments;
                 let occupancy =
                     (!exact).then(|| inst.handle().occupancy(params.occupancy_resolution));
-                let bounded = capabilities.density_bounds;
                 // Without bounds, gaps may hide between samples: a field with spans or
                 // mask segments has none unseen; one with an occupancy grid has its steps
                 // probed for them.
@@ -38,7 +41,7 @@ impl<'a> InstancePlan<'a> {
                     _ => (Vec::new(), Vec::new()),
                 };
                 let cell = match &occupancy {
-                    Some(o) if !bounded => {
+                    Some(o) if !capabilities.density_bounds => {
                         o.bounds().size().min_element() as f64 / f64::from(o.resolution().max(1))
                     }
                     _ => f64::INFINITY,
@@ -54,7 +57,6 @@ impl<'a> InstancePlan<'a> {
                     encode: space == ColorSpace::Srgb
                         && inst.field().color_space() == ColorSpace::Linear,
                     unbounded: inst.field().unbounded(),
-                    bounded,
                     cell,
                     world_sphere: world_sphere(
                         inst.field().occupied_bounds(),

@@ -80,7 +80,7 @@ const SMOOTH_SHARE: f64 = 0.9;
 /// jump test ask the fields for a density bound over the step's box, one batch per
 /// instance.
 fn split_candidates(plans: &[InstancePlan], params: &MarchParams, s: &mut Scratch) {
-    let empty_is_known = plans.iter().all(|p| p.bounded);
+    let empty_is_known = plans.iter().all(|p| p.capabilities.density_bounds);
     let n_inst = plans.len();
     let tolerance = params.error_target as f64;
     let any_smooth = plans.iter().any(|p| p.smooth > 0.0);
@@ -253,7 +253,7 @@ fn split_candidates(plans: &[InstancePlan], params: &MarchParams, s: &mut Scratc
         }
         s.field_out.clear();
         s.field_out.resize(s.refine.regions.len(), 0.0);
-        if !plans[k].bounded {
+        if !plans[k].capabilities.density_bounds {
             // No bound from this field: its steps cannot be searched.
             for &(u, _) in &s.refine.owners {
                 s.refine.unsure[u as usize].2 = f64::NEG_INFINITY;

@@ -405,7 +405,8 @@ fn ball_grid() -> (Scene, crate::camera::Camera) {
 #[test]
 fn tile_culling_keeps_every_instance_a_ray_of_the_tile_meets() {
     let (scene, camera) = ball_grid();
-    let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
+    let plans =
+        super::InstancePlan::for_scene(&scene, scene.composite_space(), &Quality::Draft.params());
     let (mut keep, mut kept, mut met) = (Vec::new(), 0, 0);
     for (x0, y0) in (0..4).flat_map(|i| (0..3).map(move |j| (16 * i, 16 * j))) {
         let rays: Vec<_> = (0..256)
@@ -490,7 +491,8 @@ fn a_tiles_pyramid_culls_a_thin_box_and_keeps_it_where_a_ray_meets_it() {
         (160, 96, 60.0),
         DVec3::new(0.5, -4.0, 0.5),
     );
-    let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
+    let plans =
+        super::InstancePlan::for_scene(&scene, scene.composite_space(), &Quality::Draft.params());
     assert!(camera.rectilinear());
     let (mut pyramid_culled, mut met) = (0, 0);
     for (x0, y0) in (0..10).flat_map(|i| (0..6).map(move |j| (16 * i, 16 * j))) {
@@ -570,7 +572,8 @@ fn a_tiles_culled_field_is_the_whole_field_along_its_rays() {
         (96, 64, 50.0),
         DVec3::new(1.0, -7.0, 2.0),
     );
-    let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
+    let plans =
+        super::InstancePlan::for_scene(&scene, scene.composite_space(), &Quality::Draft.params());
     let (mut keep, mut tile_fields) = (Vec::new(), super::plan::TileFields::default());
     let (mut kept, mut seen, mut samples) = (0, 0, 0);
     for (x0, y0) in (0..6).flat_map(|i| (0..4).map(move |j| (16 * i, 16 * j))) {
@@ -842,7 +845,11 @@ fn a_primitives_world_sphere_holds_its_support_and_no_more_than_needed() {
             None,
         )
         .unwrap()]);
-        let plans = super::InstancePlan::for_scene(&scene, &Quality::Draft.params());
+        let plans = super::InstancePlan::for_scene(
+            &scene,
+            scene.composite_space(),
+            &Quality::Draft.params(),
+        );
         for (shape, sphere) in shapes.iter().zip(&plans[0].primitive_spheres) {
             let (centre, radius) = sphere.expect("a finite primitive has a sphere");
             let farthest = support(shape, &mut rng)

@@ -1,5 +1,7 @@
-//! SplitMix64 (Steele, Lea, Flood 2014): a tiny, well-mixed seeded generator, so a generated
-//! benchmark scene (and every test scene drawn from it) is the same on every run and machine.
+//! Seeded generators, so a generated benchmark scene or workload (and every test drawn from
+//! it) is the same on every run and machine: SplitMix64 (Steele, Lea, Flood 2014), tiny and
+//! well mixed, for scenes; Knuth's MMIX linear congruential generator for the trained
+//! networks' seeded weights and inputs.
 
 /// The generator's state.
 #[derive(Clone, Debug)]
@@ -36,5 +38,27 @@ impl SplitMix64 {
         let x = self.range(lo, hi);
         let y = self.range(lo, hi);
         glam::Vec3::new(x, y, self.range(lo, hi))
+    }
+}
+
+/// Knuth's MMIX linear congruential generator (`s ← 6364136223846793005·s +
+/// 1442695040888963407`), the source of the networks' seeded weights, tables and inputs in
+/// their tests and benchmark workloads.
+#[derive(Clone, Debug)]
+pub(crate) struct Mmix(u64);
+
+impl Mmix {
+    /// A generator seeded with `seed`.
+    pub(crate) fn new(seed: u64) -> Self {
+        Mmix(seed)
+    }
+
+    /// Uniform in `[0, 1)`, single precision: the top 24 bits of the next state.
+    pub(crate) fn unit(&mut self) -> f32 {
+        self.0 = self
+            .0
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (self.0 >> 40) as f32 / (1u64 << 24) as f32
     }
 }

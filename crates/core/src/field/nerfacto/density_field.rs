@@ -210,13 +210,8 @@ impl DensityField {
 /// `2^12` rows, resolutions 16 to 256, hidden layer of 16), torch layout: as read (with
 /// the fused kernel where it applies) and without the fused kernel.
 fn seeded_pair(seed: u64) -> (DensityField, DensityField) {
-    let mut s = seed;
-    let mut next = move || {
-        s = s
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (s >> 40) as f32 / (1u64 << 24) as f32 - 0.5
-    };
+    let mut rng = crate::rng::Mmix::new(seed);
+    let mut next = move || rng.unit() - 0.5;
     let rows = 1usize << 12;
     let table: Vec<f32> = (0..5 * rows * 2).map(|_| next()).collect();
     let grid = TorchHashGrid::new(5, 2, 12, 16, 256, table).unwrap();
@@ -248,13 +243,8 @@ fn seeded_pair(seed: u64) -> (DensityField, DensityField) {
 /// Seeded field-space points: inside the unit cube, beyond it (contracted), on the
 /// cells' faces of every level, at the selector's edge and beyond, infinite and NaN.
 fn seeded_points(n: usize, seed: u64) -> Vec<Vec3> {
-    let mut s = seed;
-    let mut next = move || {
-        s = s
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (s >> 40) as f32 / (1u64 << 24) as f32 * 6.0 - 3.0
-    };
+    let mut rng = crate::rng::Mmix::new(seed);
+    let mut next = move || rng.unit() * 6.0 - 3.0;
     let special = [
         Vec3::new(0.25, -0.5, 0.0),
         Vec3::new(1.0, 0.5, -1.0),

@@ -275,13 +275,8 @@ mod tests {
     fn both_kernels_give_the_same_bits() {
         // A grid of 5 levels × 2, 2^10 rows, a hidden layer of 20 (a full group of 16 and
         // a partial one); batches that are not whole blocks or whole batches of blocks.
-        let mut seed = 13u64;
-        let mut next = move || {
-            seed = seed
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (seed >> 40) as f32 / (1u64 << 24) as f32 - 0.5
-        };
+        let mut rng = crate::rng::Mmix::new(13);
+        let mut next = move || rng.unit() - 0.5;
         let table: Vec<f32> = (0..5 << 11).map(|_| next()).collect();
         let Some(grid) = TorchHashGrid::new(5, 2, 10, 16, 256, table) else {
             panic!("the table fits the grid");

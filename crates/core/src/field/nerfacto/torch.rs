@@ -476,13 +476,8 @@ mod tests {
                 .map(|i| ((i * 7919 % 1000) as f32 / 500.0) - 1.0)
                 .collect();
             let g = TorchHashGrid::new(levels, nf, log2, 3, 40, table.clone()).unwrap();
-            let mut seed = 5u64;
-            let mut next = || {
-                seed = seed
-                    .wrapping_mul(6_364_136_223_846_793_005)
-                    .wrapping_add(1_442_695_040_888_963_407);
-                (seed >> 40) as f32 / (1u64 << 24) as f32
-            };
+            let mut rng = crate::rng::Mmix::new(5);
+            let mut next = || rng.unit();
             // Random points, and one on grid lines of every level (x = 0.5·k).
             let mut xs: Vec<Vec3> = (0..50).map(|_| Vec3::new(next(), next(), next())).collect();
             xs.push(Vec3::new(0.5, 0.0, 0.25));
@@ -526,13 +521,8 @@ mod tests {
             .map(|i| ((i * 7919 % 1999) as f32 / 999.0) - 1.0)
             .collect();
         let g = TorchHashGrid::new(5, 2, 12, 16, 256, table).unwrap();
-        let mut seed = 9u64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (seed >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rng = crate::rng::Mmix::new(9);
+        let mut next = || rng.unit();
         for n in [0, 1, 8, 37] {
             let mut xs: Vec<Vec3> = (0..n).map(|_| Vec3::new(next(), next(), next())).collect();
             if n > 1 {

@@ -814,14 +814,9 @@ mod tests {
 
     /// A seeded table of values exactly representable in f16.
     fn params(n: usize, seed: u64) -> Vec<f16> {
-        let mut s = seed;
+        let mut rng = crate::rng::Mmix::new(seed);
         (0..n)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6_364_136_223_846_793_005)
-                    .wrapping_add(1_442_695_040_888_963_407);
-                f16::from_f32(((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0)
-            })
+            .map(|_| f16::from_f32(rng.unit() * 2.0 - 1.0))
             .collect()
     }
 

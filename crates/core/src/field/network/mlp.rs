@@ -624,15 +624,8 @@ mod simd {
 /// `n` seeded values in `[−0.5, 0.5)`: weights and inputs of the unit tests and of
 /// [`NetworksBench`].
 fn seeded(n: usize, seed: u64) -> Vec<f32> {
-    let mut s = seed;
-    (0..n)
-        .map(|_| {
-            s = s
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            ((s >> 40) as f32 / (1u64 << 24) as f32) - 0.5
-        })
-        .collect()
+    let mut rng = crate::rng::Mmix::new(seed);
+    (0..n).map(|_| rng.unit() - 0.5).collect()
 }
 
 /// The networks of a shaded instant-ngp sample (8×4 grid) as the kernel runs them, on an
